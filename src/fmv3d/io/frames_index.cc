@@ -1,0 +1,94 @@
+#include "fmv3d/io/frames_index.h"
+
+#include "fmv3d/core/error.h"
+#include "fmv3d/core/files.h"
+
+namespace fmv3d::io {
+
+const CameraPrior* FramesIndex::FindCamera(uint32_t id) const {
+  for (const auto& c : cameras)
+    if (c.camera.id == id) return &c;
+  return nullptr;
+}
+
+void WriteFramesIndex(const FramesIndex& index, const std::filesystem::path& path) {
+  nlohmann::json j;
+  j["version"] = 1;
+  j["cameras"] = nlohmann::json::array();
+  for (const auto& c : index.cameras) {
+    const auto& k = c.camera;
+    j["cameras"].push_back({{"id", k.id},
+                            {"width", k.width},
+                            {"height", k.height},
+                            {"prior",
+                             {{"f", k.f},
+                              {"aspect", k.aspect},
+                              {"u0", k.u0},
+                              {"v0", k.v0},
+                              {"k1", k.k1},
+                              {"k2", k.k2},
+                              {"p1", k.p1},
+                              {"p2", k.p2}}},
+                            {"prior_source", c.prior_source},
+                            {"source", c.source}});
+  }
+  j["frames"] = nlohmann::json::array();
+  for (const auto& f : index.frames) {
+    nlohmann::json fj = {{"name", f.name},
+                         {"camera_id", f.camera_id},
+                         {"source", f.source},
+                         {"frame_index", f.frame_index},
+                         {"timestamp", f.timestamp},
+                         {"sharpness", f.sharpness}};
+    if (!f.telemetry.is_null()) fj["telemetry"] = f.telemetry;
+    j["frames"].push_back(fj);
+  }
+  core::WriteJson(path, j);
+}
+
+FramesIndex ReadFramesIndex(const std::filesystem::path& path) {
+  const nlohmann::json j = core::ReadJson(path);
+  FramesIndex index;
+  try {
+    for (const auto& cj : j.at("cameras")) {
+      CameraPrior c;
+      c.camera.id = cj.at("id").get<uint32_t>();
+      c.camera.width = cj.at("width").get<int>();
+      c.camera.height = cj.at("height").get<int>();
+      const auto& p = cj.at("prior");
+      c.camera.f = p.at("f").get<double>();
+      c.camera.aspect = p.value("aspect", 1.0);
+      c.camera.u0 = p.value("u0", c.camera.width * 0.5);
+      c.camera.v0 = p.value("v0", c.camera.height * 0.5);
+      c.camera.k1 = p.value("k1", 0.0);
+      c.camera.k2 = p.value("k2", 0.0);
+      c.camera.p1 = p.value("p1", 0.0);
+      c.camera.p2 = p.value("p2", 0.0);
+      c.prior_source = cj.value("prior_source", "");
+      c.source = cj.value("source", "");
+      c.camera.Validate();
+      index.cameras.push_back(c);
+    }
+    for (const auto& fj : j.at("frames")) {
+      FrameRecord f;
+      f.name = fj.at("name").get<std::string>();
+      f.camera_id = fj.at("camera_id").get<uint32_t>();
+      f.source = fj.value("source", "");
+      f.frame_index = fj.value("frame_index", int64_t{0});
+      f.timestamp = fj.value("timestamp", 0.0);
+      f.sharpness = fj.value("sharpness", 0.0);
+      if (fj.contains("telemetry")) f.telemetry = fj["telemetry"];
+      index.frames.push_back(f);
+    }
+  } catch (const nlohmann::json::exception& e) {
+    throw Error(path.string() + ": malformed frames index (" + e.what() + ")");
+  } catch (const Error& e) {
+    throw Error(path.string() + ": " + e.what());
+  }
+  for (const auto& f : index.frames)
+    if (!index.FindCamera(f.camera_id))
+      throw Error(path.string() + ": frame " + f.name + " refers to missing camera " + std::to_string(f.camera_id));
+  return index;
+}
+
+}  // namespace fmv3d::io

@@ -1,0 +1,35 @@
+// A workspace folder: one per reconstruction (DESIGN.md "Workspace"). Only paths and staleness here; each stage
+// reads and writes its own files.
+#pragma once
+
+#include <filesystem>
+#include <vector>
+
+namespace fmv3d::pipeline {
+
+class Workspace {
+ public:
+  explicit Workspace(std::filesystem::path root) : root_(std::move(root)) {}
+  const std::filesystem::path& root() const { return root_; }
+  std::filesystem::path project_json() const { return root_ / "project.json"; }
+  std::filesystem::path frames_dir() const { return root_ / "frames"; }
+  std::filesystem::path frames_json() const { return root_ / "frames" / "frames.json"; }
+  std::filesystem::path features_dir() const { return root_ / "features"; }
+  std::filesystem::path matches_dir() const { return root_ / "matches"; }
+  std::filesystem::path sparse_dir() const { return root_ / "sparse"; }
+  std::filesystem::path dense_dir() const { return root_ / "dense"; }
+  std::filesystem::path mesh_dir() const { return root_ / "mesh"; }
+  std::filesystem::path geo_dir() const { return root_ / "geo"; }
+  std::filesystem::path report_dir() const { return root_ / "report"; }
+
+  // Throws fmv3d::Error ("WS: no frames/frames.json — run `fmv3d frames` first") when a stage's input is absent.
+  void Require(const std::filesystem::path& input, const char* producing_command) const;
+  // True when every output exists and is newer than every input (the stage can be skipped on resume).
+  static bool UpToDate(const std::vector<std::filesystem::path>& outputs,
+                       const std::vector<std::filesystem::path>& inputs);
+
+ private:
+  std::filesystem::path root_;
+};
+
+}  // namespace fmv3d::pipeline
