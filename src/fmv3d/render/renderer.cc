@@ -39,6 +39,33 @@ struct Prim {
   double A = 0, B = 0, C = 0;
 };
 
+// Per-face shading planes: for the ray d, s = m·d = 1/z, and u·s, v·s and light·s are linear in d too
+// (texture coordinates and per-vertex light interpolated with perspective-correct barycentrics).
+struct ShadePlane {
+  Eigen::Vector3d m;
+  Eigen::Vector3f pu, pv, pl;
+};
+
+// Fast log2 for mip selection (max error ~0.01).
+inline float FastLog2(float x) {
+  int e;
+  const float f = std::frexp(x, &e);  // x = f·2^e, f in [0.5, 1)
+  const float m = 2.0f * f;  // x = m·2^(e−1), m in [1, 2)
+  return static_cast<float>(e - 1) + (-0.34484843f * m + 2.02466578f) * m - 0.67487759f;
+}
+
+// Buffers reused across frames rendered by the same thread (page faults on fresh 30 MB buffers cost more
+// than clearing them).
+struct Scratch {
+  std::vector<Eigen::Vector3d> vc;
+  std::vector<Prim> prims;
+  std::vector<Eigen::Matrix3d> planes;
+  std::vector<ShadePlane> shade;
+  std::vector<float> wbuf;
+  std::vector<int32_t> ibuf;
+  std::vector<std::vector<int>> bins;
+};
+
 }  // namespace
 
 // Normalised rays for every output pixel centre and sub-sample, and the visibility raster's pinhole.
@@ -153,14 +180,24 @@ RenderResult Renderer::Render(const core::Camera& camera, const core::Pose& pose
 
   // 1. Vertices to the camera frame.
   const size_t nv = mesh_.vertices.size(), nf = mesh_.faces.size();
-  std::vector<Eigen::Vector3d> vc(nv);
+  thread_local Scratch scratch;
+  auto& vc = scratch.vc;
+  vc.resize(nv);
   tbb::parallel_for(tbb::blocked_range<size_t>(0, nv, 4096), [&](const auto& r) {
     for (size_t i = r.begin(); i < r.end(); ++i) vc[i] = R * mesh_.vertices[i] + pose.t;
   });
 
   // 2. Face set-up: cull, plane matrix, near clipping, projection to the visibility raster.
-  std::vector<Prim> prims(nf);
-  std::vector<Eigen::Matrix3d> planes(nf);
+  auto& prims = scratch.prims;
+  auto& planes = scratch.planes;
+  auto& shade_planes = scratch.shade;
+  prims.assign(nf, Prim());
+  planes.resize(nf);
+  shade_planes.resize(nf);
+  const double light_gain =
+      options.shading
+          ? 1.0 / (options.ambient + (1 - options.ambient) * std::max(sun.z(), 0.05))
+          : 1.0;
   tbb::parallel_for(tbb::blocked_range<size_t>(0, nf, 1024), [&](const auto& r) {
     for (size_t f = r.begin(); f < r.end(); ++f) {
       const io::Face& face = mesh_.faces[f];
@@ -211,12 +248,35 @@ RenderResult Renderer::Render(const core::Camera& camera, const core::Pose& pose
       pr.B = m.y() / rt.fvy;
       pr.C = m.z() - m.x() * rt.cu / rt.fvx - m.y() * rt.cv / rt.fvy;
       planes[f] = M;
+      // Shading planes: texture coordinates and per-vertex light.
+      ShadePlane& sp = shade_planes[f];
+      sp.m = m;
+      Eigen::Vector3d pu = Eigen::Vector3d::Zero(), pv = Eigen::Vector3d::Zero(), pl = Eigen::Vector3d::Zero();
+      for (int k = 0; k < 3; ++k) {
+        if (face.vt[0] >= 0) {
+          pu += mesh_.uvs[face.vt[k]].x() * M.row(k).transpose();
+          pv += mesh_.uvs[face.vt[k]].y() * M.row(k).transpose();
+        }
+        double light = 1.0;
+        if (options.shading) {
+          Eigen::Vector3d n = face.vn[k] >= 0 ? mesh_.normals[face.vn[k]].cast<double>().normalized()
+                                              : face_normals_[f];
+          if (face.vn[k] < 0 && side > 0) n = -n;  // seen from behind (culling off): light the visible side
+          light = (options.ambient + (1 - options.ambient) * std::max(0.0, n.dot(sun))) * light_gain;
+        }
+        pl += light * M.row(k).transpose();
+      }
+      sp.pu = pu.cast<float>();
+      sp.pv = pv.cast<float>();
+      sp.pl = pl.cast<float>();
     }
   });
 
   // 3. Bin faces into bands of raster rows (in face order, so the result does not depend on threads).
   const int nbands = (rt.vh + kBandRows - 1) / kBandRows;
-  std::vector<std::vector<int>> bins(nbands);
+  auto& bins = scratch.bins;
+  bins.resize(nbands);
+  for (auto& b : bins) b.clear();
   for (size_t f = 0; f < nf; ++f) {
     const Prim& p = prims[f];
     if (p.n == 0) continue;
@@ -224,8 +284,10 @@ RenderResult Renderer::Render(const core::Camera& camera, const core::Pose& pose
   }
 
   // 4. Visibility raster: nearest face per sample (largest 1/z), ties keep the lower face index.
-  std::vector<float> wbuf(size_t(rt.vw) * rt.vh, 0.0f);
-  std::vector<int32_t> ibuf(size_t(rt.vw) * rt.vh, -1);
+  auto& wbuf = scratch.wbuf;
+  auto& ibuf = scratch.ibuf;
+  wbuf.assign(size_t(rt.vw) * rt.vh, 0.0f);
+  ibuf.assign(size_t(rt.vw) * rt.vh, -1);
   tbb::parallel_for(0, nbands, [&](int band) {
     const int by0 = band * kBandRows, by1 = std::min(rt.vh - 1, by0 + kBandRows - 1);
     for (int f : bins[band]) {
@@ -284,54 +346,29 @@ RenderResult Renderer::Render(const core::Camera& camera, const core::Pose& pose
 
   // 5. Shading at exact rays.
   const double inv_fx = 1.0 / camera.fx(), inv_fy = 1.0 / camera.fy();
-  const double gain =
-      options.shading
-          ? options.exposure / (options.ambient + (1 - options.ambient) * std::max(sun.z(), 0.05))
-          : options.exposure;
+  const float exposure = static_cast<float>(options.exposure);
   auto shade = [&](int f, const Eigen::Vector3d& d) -> Eigen::Vector3f {
-    const Eigen::Matrix3d& M = planes[f];
-    const Eigen::Vector3d bm = M * d;
-    const double s = bm.sum();
-    const Eigen::Vector3d bc = bm / s;
+    const ShadePlane& sp = shade_planes[f];
+    const float s = static_cast<float>(sp.m.dot(d)), inv_s = 1.0f / s;
+    const Eigen::Vector3f df = d.cast<float>();
     const io::Face& face = mesh_.faces[f];
-    Eigen::Vector3f albedo;
     const int mat = face.material;
+    const float light = sp.pl.dot(df) * inv_s * exposure;
     const MipTexture* tex =
         (mat >= 0 && face.vt[0] >= 0 && !textures_[mat].empty()) ? &textures_[mat] : nullptr;
     if (tex) {
-      const Eigen::Vector2f& t0 = mesh_.uvs[face.vt[0]];
-      const Eigen::Vector2f& t1 = mesh_.uvs[face.vt[1]];
-      const Eigen::Vector2f& t2 = mesh_.uvs[face.vt[2]];
-      const double u = bc[0] * t0.x() + bc[1] * t1.x() + bc[2] * t2.x();
-      const double v = bc[0] * t0.y() + bc[1] * t1.y() + bc[2] * t2.y();
-      // d(barycentrics)/d(pixel) from b = M d / (1ᵀ M d); the pixel footprint picks the mip level.
-      const Eigen::Vector3d dbx = (M.col(0) - bc * M.col(0).sum()) * (inv_fx / s);
-      const Eigen::Vector3d dby = (M.col(1) - bc * M.col(1).sum()) * (inv_fy / s);
-      const double dux = (dbx[0] * t0.x() + dbx[1] * t1.x() + dbx[2] * t2.x()) * tex->width();
-      const double dvx = (dbx[0] * t0.y() + dbx[1] * t1.y() + dbx[2] * t2.y()) * tex->height();
-      const double duy = (dby[0] * t0.x() + dby[1] * t1.x() + dby[2] * t2.x()) * tex->width();
-      const double dvy = (dby[0] * t0.y() + dby[1] * t1.y() + dby[2] * t2.y()) * tex->height();
-      const double rho2 = std::max(dux * dux + dvx * dvx, duy * duy + dvy * dvy);
-      const float lod = rho2 > 1 ? static_cast<float>(0.5 * std::log2(rho2)) : 0.0f;
-      albedo = tex->Sample(static_cast<float>(u), static_cast<float>(v), lod);
-    } else if (mat >= 0) {
-      albedo = mesh_.materials[mat].diffuse_bgr * 255.0f;
-    } else {
-      albedo = Eigen::Vector3f::Constant(200.0f);
+      const float u = sp.pu.dot(df) * inv_s, v = sp.pv.dot(df) * inv_s;
+      // d(u, v)/d(pixel) from u = (pu·d)/(m·d); the pixel footprint picks the mip level.
+      const float mx = static_cast<float>(sp.m.x()), my = static_cast<float>(sp.m.y());
+      const float kx = inv_s * static_cast<float>(inv_fx), ky = inv_s * static_cast<float>(inv_fy);
+      const float dux = (sp.pu.x() - u * mx) * kx * tex->width(), dvx = (sp.pv.x() - v * mx) * kx * tex->height();
+      const float duy = (sp.pu.y() - u * my) * ky * tex->width(), dvy = (sp.pv.y() - v * my) * ky * tex->height();
+      const float rho2 = std::max(dux * dux + dvx * dvx, duy * duy + dvy * dvy);
+      const float lod = rho2 > 1 ? 0.5f * FastLog2(rho2) : 0.0f;
+      return tex->Sample(u, v, lod) * light;
     }
-    if (!options.shading) return albedo * static_cast<float>(gain);
-    Eigen::Vector3d n;
-    if (face.vn[0] >= 0) {
-      n = (bc[0] * mesh_.normals[face.vn[0]] + bc[1] * mesh_.normals[face.vn[1]] +
-           bc[2] * mesh_.normals[face.vn[2]])
-              .cast<double>()
-              .normalized();
-    } else {
-      n = face_normals_[f];
-      if (n.dot(Rt * d) > 0) n = -n;  // seen from behind (culling off): light the visible side
-    }
-    const double light = options.ambient + (1 - options.ambient) * std::max(0.0, n.dot(sun));
-    return albedo * static_cast<float>(light * gain);
+    if (mat >= 0) return mesh_.materials[mat].diffuse_bgr * (255.0f * light);
+    return Eigen::Vector3f::Constant(200.0f * light);
   };
   auto sky = [&](const Eigen::Vector3d& d) -> Eigen::Vector3f {
     const Eigen::Vector3d w = (Rt * d).normalized();
@@ -406,7 +443,7 @@ RenderResult Renderer::Render(const core::Camera& camera, const core::Pose& pose
         colour /= static_cast<float>(SS);
       }
       fid[i] = centre_face;
-      dep[i] = centre_face >= 0 ? static_cast<float>(1.0 / (planes[centre_face] * dc).sum()) : 0.0f;
+      dep[i] = centre_face >= 0 ? static_cast<float>(1.0 / shade_planes[centre_face].m.dot(dc)) : 0.0f;
       for (int c = 0; c < 3; ++c) {
         double val = colour[c];
         if (options.noise_sigma > 0) val += options.noise_sigma * Gaussian(options.noise_seed, p * 3 + c);

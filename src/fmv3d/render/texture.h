@@ -26,7 +26,8 @@ class MipTexture {
  private:
   struct Level {
     int w = 0, h = 0;
-    std::vector<uint8_t> bgr;  // row-major, 3 bytes per texel
+    float fw = 0, fh = 0;
+    std::vector<uint8_t> bgr;  // row-major, 4 bytes per texel (B, G, R, unused) for aligned loads
   };
   Eigen::Vector3f Bilinear(const Level& l, float u, float v) const;
   std::vector<Level> levels_;

@@ -42,8 +42,9 @@ FlightGeometry ResolveFlight(const Scene& scene, const core::Camera& camera, con
   const double dist = r / std::tan(half_fov) / 0.7 + r;
   const double ground = scene.ground_height ? scene.ground_height(g.look_at.x(), g.look_at.y()) : 0.0;
   if (o.path == "orbit") {
-    g.radius = o.radius ? *o.radius : dist * std::cos(M_PI / 5);
-    g.altitude = o.altitude ? *o.altitude : g.look_at.z() + dist * std::sin(M_PI / 5);
+    const double elevation = 40 * M_PI / 180;
+    g.radius = o.radius ? *o.radius : dist * std::cos(elevation);
+    g.altitude = o.altitude ? *o.altitude : g.look_at.z() + dist * std::sin(elevation);
   } else if (o.path == "grid") {
     g.radius = o.radius ? *o.radius : r * 1.2;
     g.altitude = o.altitude ? *o.altitude : ground + std::max(dist * 0.8, 2.0 * scene.characteristic_length);

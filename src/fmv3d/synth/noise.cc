@@ -67,7 +67,7 @@ Cell Voronoi(double x, double y, uint64_t seed) {
     for (int64_t i = ix - 1; i <= ix + 1; ++i) {
       const double px = i + 0.1 + 0.8 * LatticeRandom(i, j, seed);
       const double py = j + 0.1 + 0.8 * LatticeRandom(i, j, seed + 1);
-      const double d = std::hypot(px - x, py - y);
+      const double d = (px - x) * (px - x) + (py - y) * (py - y);  // squared until the end
       if (d < best.d1) {
         best.d2 = best.d1;
         best.d1 = d;
@@ -77,6 +77,8 @@ Cell Voronoi(double x, double y, uint64_t seed) {
         best.d2 = d;
       }
     }
+  best.d1 = std::sqrt(best.d1);
+  best.d2 = std::sqrt(best.d2);
   return best;
 }
 

@@ -84,6 +84,35 @@ io::TexturedMesh MakeTerrain(const Eigen::AlignedBox2d& extent, double step,
   return std::move(b.m);
 }
 
+// A coarse ring of ground from the terrain tile out to 3.5 tile widths, with a hole where the tile is,
+// 0.3 m lower so the tile always wins where they meet.
+io::TexturedMesh MakeFarGround(const Eigen::AlignedBox2d& tile, const std::function<double(double, double)>& h,
+                               double detail) {
+  const double e = tile.sizes().x(), step = e / 4;
+  const Eigen::Vector2d c = tile.center();
+  const int n = 28;  // cells per side: 7 tile widths
+  const Eigen::AlignedBox2d far(c - Eigen::Vector2d::Constant(3.5 * e), c + Eigen::Vector2d::Constant(3.5 * e));
+  const int tex = std::clamp(static_cast<int>(std::lround(1024 * detail)), 64, 2048);
+  cv::Mat texture = GroundTexture(tex, far, 77, nullptr, nullptr);
+  Builder b;
+  const int mat = b.Material("far_ground", {0.4f, 0.6f, 0.5f}, texture);
+  for (int j = 0; j <= n; ++j)
+    for (int i = 0; i <= n; ++i) {
+      const double x = far.min().x() + i * step, y = far.min().y() + j * step;
+      b.V({x, y, h(x, y) - 0.3});
+      b.T(static_cast<double>(i) / n, static_cast<double>(j) / n);
+    }
+  for (int j = 0; j < n; ++j)
+    for (int i = 0; i < n; ++i) {
+      const Eigen::Vector2d mid = far.min() + Eigen::Vector2d((i + 0.5) * step, (j + 0.5) * step);
+      if (tile.contains(mid)) continue;
+      const int a = j * (n + 1) + i, bb = a + 1, d = a + n + 1, ee = d + 1;
+      b.Tri(a, bb, ee, a, bb, ee, mat, Eigen::Vector3d::UnitZ());
+      b.Tri(a, ee, d, a, ee, d, mat, Eigen::Vector3d::UnitZ());
+    }
+  return std::move(b.m);
+}
+
 int TextureSize(double extent_m, double texels_per_metre, double detail) {
   return std::clamp(static_cast<int>(std::lround(extent_m * texels_per_metre * detail)), 64, 4096);
 }
@@ -200,6 +229,7 @@ Scene MakeBoard(const SceneOptions& o) {
   scene.target = {4 * sq, 2.5 * sq, 0};
   scene.interest_radius = 6 * sq;
   scene.characteristic_length = x1 - x0;
+  scene.bounds = scene.mesh.Bounds();
   return scene;
 }
 
@@ -220,7 +250,7 @@ Scene MakeScene(const std::string& name, const SceneOptions& o) {
     BuildingSpec spec;  // the defaults are the shipped building
     scene.buildings.push_back(spec);
     scene.target = {0, 0, 15};
-    scene.interest_radius = 25;
+    scene.interest_radius = 20;
   } else if (name == "town") {
     extent = 480, step = 2.5, ground_tpm = 9;
     scene.ground_height = [](double x, double y) {
@@ -254,7 +284,7 @@ Scene MakeScene(const std::string& name, const SceneOptions& o) {
       ++k;
     }
     scene.target = {0, 0, scene.ground_height(0, 0) + 10};
-    scene.interest_radius = 100;
+    scene.interest_radius = 75;
   } else if (name == "terrain") {
     extent = 800, step = 4, ground_tpm = 5;
     scene.ground_height = [](double x, double y) {
@@ -269,12 +299,17 @@ Scene MakeScene(const std::string& name, const SceneOptions& o) {
     throw Error("unknown scene '" + name + "' (expected building, town, terrain or board)");
   }
   scene.ground_extent = Eigen::AlignedBox2d(Eigen::Vector2d(-extent / 2, -extent / 2), Eigen::Vector2d(extent / 2, extent / 2));
-  const auto& buildings = scene.buildings;
-  auto paved = [&buildings](double x, double y) {
-    for (const auto& s : buildings) {
-      const double hd = s.heading_deg * M_PI / 180, dx = x - s.base.x(), dy = y - s.base.y();
-      const double lx = std::cos(hd) * dx + std::sin(hd) * dy, ly = -std::sin(hd) * dx + std::cos(hd) * dy;
-      if (std::abs(lx) < s.width / 2 + 4 && std::abs(ly) < s.depth / 2 + 4) return true;
+  struct Apron { double x, y, c, s, hw, hd; };  // building footprints grown by 4 m: paved
+  std::vector<Apron> aprons;
+  for (const auto& s : scene.buildings) {
+    const double hd = s.heading_deg * M_PI / 180;
+    aprons.push_back({s.base.x(), s.base.y(), std::cos(hd), std::sin(hd), s.width / 2 + 4, s.depth / 2 + 4});
+  }
+  auto paved = [aprons](double x, double y) {
+    for (const auto& a : aprons) {
+      const double dx = x - a.x, dy = y - a.y;
+      if (std::abs(dx) > a.hw + a.hd || std::abs(dy) > a.hw + a.hd) continue;
+      if (std::abs(a.c * dx + a.s * dy) < a.hw && std::abs(-a.s * dx + a.c * dy) < a.hd) return true;
     }
     return false;
   };
@@ -286,11 +321,10 @@ Scene MakeScene(const std::string& name, const SceneOptions& o) {
     scene.mesh.Append(MakeBuilding(s, facade_tpm));
     tallest = std::max(tallest, s.ridge_height);
   }
-  if (scene.buildings.empty()) {
-    const auto box = scene.mesh.Bounds();
-    tallest = box.max().z() - box.min().z();
-  }
+  scene.bounds = scene.mesh.Bounds();
+  if (scene.buildings.empty()) tallest = scene.bounds.max().z() - scene.bounds.min().z();
   scene.characteristic_length = tallest;
+  scene.mesh.Append(MakeFarGround(scene.ground_extent, scene.ground_height, o.detail));
   return scene;
 }
 

@@ -90,6 +90,10 @@ std::vector<Eigen::Vector3d> SampleSurface(const io::TexturedMesh& mesh, int n) 
   double total = 0;
   for (size_t i = 0; i < mesh.faces.size(); ++i) {
     const auto& f = mesh.faces[i];
+    if (f.material >= 0 && mesh.materials[f.material].name == "far_ground") {
+      cum[i] = total;  // only the modelled area carries truth points
+      continue;
+    }
     total += 0.5 * (mesh.vertices[f.v[1]] - mesh.vertices[f.v[0]]).cross(mesh.vertices[f.v[2]] - mesh.vertices[f.v[0]]).norm();
     cum[i] = total;
   }
@@ -221,10 +225,13 @@ SynthResult RunSynth(const SynthOptions& o) {
   if (o.write_scene) io::WriteObj(scene.mesh, o.output / "scene.obj");
 
   const auto box = scene.Bounds();
+  const auto world_box = scene.mesh.Bounds();
   nlohmann::json j;
   j["scene"] = scene.name;
   j["characteristic_length"] = scene.characteristic_length;
   j["bounds"] = {{"min", {box.min().x(), box.min().y(), box.min().z()}}, {"max", {box.max().x(), box.max().y(), box.max().z()}}};
+  j["world_bounds"] = {{"min", {world_box.min().x(), world_box.min().y(), world_box.min().z()}},
+                       {"max", {world_box.max().x(), world_box.max().y(), world_box.max().z()}}};
   j["seed"] = o.flight.seed;
   j["fps"] = o.fps;
   j["frames"] = result.frames;

@@ -34,7 +34,12 @@ struct SynthOptions {
   int width = 1280, height = 720;
   std::optional<double> focal;                // pixels; default: 60° horizontal field of view
   std::array<double, 4> distortion{0, 0, 0, 0};  // k1 k2 p1 p2
-  render::RenderOptions render;               // sun, exposure, noise, supersampling
+  // Sun, exposure, noise (default 1.5 DN), supersampling.
+  render::RenderOptions render = [] {
+    render::RenderOptions r;
+    r.noise_sigma = 1.5;
+    return r;
+  }();
   std::string format = "png";                 // png | jpg | mp4 | ts
   int jpeg_quality = 92;
   double fps = 10;

@@ -63,10 +63,33 @@ cv::Mat GroundTexture(int n, const Eigen::AlignedBox2d& extent, uint64_t seed,
   const cv::Mat patch = FractalField(n, n, px(8), 0.7, seed + 4);     // bushes, tree crowns, patches
   const cv::Mat grain = FractalField(n, n, px(1.5), 0.8, seed + 5);   // fine grain, down to the texel
   const cv::Mat rock = FractalField(n, n, px(4), 0.75, seed + 6);     // boulders and rock texture
+  std::vector<double> road_sin0(n), road_cos0(n);
+  for (int col = 0; col < n; ++col) {
+    const double x = extent.min().x() + (col + 0.5) * mpt;
+    road_sin0[col] = std::sin(x / 90.0 + 1.0);
+    road_cos0[col] = std::cos(x / 90.0 + 1.0);
+  }
+  // Slope (|grad h|) on a coarse grid, interpolated: the height function is far too slow per texel.
+  cv::Mat slope_map;
+  if (height) {
+    const int m = std::max(2, n / 8);
+    cv::Mat coarse(m, m, CV_32F);
+    const double step = ext / m;
+    tbb::parallel_for(0, m, [&](int r) {
+      const double y = extent.max().y() - (r + 0.5) * step;
+      for (int c = 0; c < m; ++c) {
+        const double x = extent.min().x() + (c + 0.5) * step;
+        const double hx = height(x + 1, y) - height(x - 1, y), hy = height(x, y + 1) - height(x, y - 1);
+        coarse.at<float>(r, c) = static_cast<float>(0.5 * std::sqrt(hx * hx + hy * hy));
+      }
+    });
+    cv::resize(coarse, slope_map, cv::Size(n, n), 0, 0, cv::INTER_LINEAR);
+  }
   cv::Mat out(n, n, CV_8UC3);
   tbb::parallel_for(0, n, [&](int row) {
     const double y = extent.max().y() - (row + 0.5) * mpt;
     cv::Vec3b* dst = out.ptr<cv::Vec3b>(row);
+    const double road_sin1 = std::sin(y / 110.0), road_cos1 = std::cos(y / 110.0);
     for (int col = 0; col < n; ++col) {
       const double x = extent.min().x() + (col + 0.5) * mpt;
       const float t = tone.at<float>(row, col), p = patch.at<float>(row, col);
@@ -80,7 +103,7 @@ cv::Mat GroundTexture(int n, const Eigen::AlignedBox2d& extent, uint64_t seed,
       Vec3 c;
       if (r0 < 0.32) {  // crop field: rows in a per-field direction, two colours
         const double ang = r1 * M_PI, spacing = 0.9 + 1.6 * r2;
-        const double s = (wx * std::cos(ang) + wy * std::sin(ang)) / spacing;
+        const double s = (x * std::cos(ang) + y * std::sin(ang)) / spacing;  // straight rows
         const float stripe = 0.5f + 0.5f * static_cast<float>(std::sin(2 * M_PI * s));
         const Vec3 crop = r2 < 0.5 ? Vec3(60, 150 + 30 * r1, 120) : Vec3(70, 165, 185 + 30 * r1);
         const Vec3 soil(70, 100, 130);
@@ -103,10 +126,10 @@ cv::Mat GroundTexture(int n, const Eigen::AlignedBox2d& extent, uint64_t seed,
       const double edge = (cell.d2 - cell.d1) * 55.0;  // ~metres from the boundary
       if (edge < 1.6) c = r1 < 0.5 ? Vec3(35, 80, 50) : Vec3(125, 165, 190);
       // Roads: two winding roads and a straight one.
-      const double road_d[3] = {
-          std::abs(y - (40.0 * std::sin(x / 90.0 + 1.0) - 25.0)) / std::hypot(1.0, 40.0 / 90.0 * std::cos(x / 90.0 + 1.0)),
-          std::abs(x - (35.0 * std::sin(y / 110.0) + 95.0)) / std::hypot(1.0, 35.0 / 110.0 * std::cos(y / 110.0)),
-          std::abs(0.6 * x + 0.8 * y - 160.0)};
+      const double d0 = 40.0 / 90.0 * road_cos0[col], d1 = 35.0 / 110.0 * road_cos1;
+      const double road_d[3] = {std::abs(y - (40.0 * road_sin0[col] - 25.0)) / std::sqrt(1.0 + d0 * d0),
+                                std::abs(x - (35.0 * road_sin1 + 95.0)) / std::sqrt(1.0 + d1 * d1),
+                                std::abs(0.6 * x + 0.8 * y - 160.0)};
       for (int k = 0; k < 3; ++k) {
         const double half = k == 2 ? 2.2 : 3.2;
         if (road_d[k] < half) {
@@ -124,9 +147,8 @@ cv::Mat GroundTexture(int n, const Eigen::AlignedBox2d& extent, uint64_t seed,
         c = (jx < 0.06 || jy < 0.06) ? Vec3(105, 110, 115) : tile;
       }
       // Steep slopes turn to rock; boulders everywhere.
-      if (height) {
-        const double hx = height(x + 1, y) - height(x - 1, y), hy = height(x, y + 1) - height(x, y - 1);
-        const float slope = static_cast<float>(std::hypot(hx, hy) * 0.5);
+      if (!slope_map.empty()) {
+        const float slope = slope_map.at<float>(row, col);
         c = Mix(c, Mix(Vec3(105, 115, 125), Vec3(165, 170, 175), rk), Smooth(0.45f, 0.8f, slope));
       }
       if (rk > 0.8f) c = Mix(c, Vec3(150, 160, 170) * (0.6f + 0.6f * rk), Smooth(0.8f, 0.86f, rk));
