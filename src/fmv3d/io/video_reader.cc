@@ -60,6 +60,7 @@ struct VideoReader::Impl {
   bool flushing = false;  // no more packets: the decoder is being drained
   bool done = false;
   bool warned = false;
+  bool duration_is_video = false;
   std::string warning;
 
   ~Impl() {
@@ -107,10 +108,15 @@ struct VideoReader::Impl {
     info.container = fmt->iformat ? fmt->iformat->name : "";
     const AVRational fr = st->avg_frame_rate.num > 0 ? st->avg_frame_rate : st->r_frame_rate;
     info.fps = fr.num > 0 && fr.den > 0 ? av_q2d(fr) : 0;
-    if (st->duration > 0 && st->duration != AV_NOPTS_VALUE)
+    if (st->duration > 0 && st->duration != AV_NOPTS_VALUE) {
       info.duration = st->duration * av_q2d(st->time_base);
-    else if (fmt->duration > 0)
+      duration_is_video = true;
+    } else if (fmt->duration > 0) {
       info.duration = fmt->duration / static_cast<double>(AV_TIME_BASE);
+      // The container's duration covers all streams; it is the video's only when there is no other.
+      // MPEG-TS durations are estimated from the bit rate, so they never prove truncation.
+      duration_is_video = fmt->nb_streams == 1 && info.container != "mpegts";
+    }
     info.frame_count_hint = st->nb_frames > 0 ? st->nb_frames
                                               : static_cast<int64_t>(std::llround(info.duration * info.fps));
     if (fmt->start_time != AV_NOPTS_VALUE)
@@ -195,6 +201,11 @@ struct VideoReader::Impl {
         next_index < fmt->streams[stream]->nb_frames)
       warning = "stream ended after " + std::to_string(next_index) + " of " +
                 std::to_string(fmt->streams[stream]->nb_frames) + " frames (truncated file?)";
+    // Containers that know their length (mkv, mp4 with index) but end early: a partial last packet is
+    // silently dropped by some demuxers, so compare the last timestamp with the declared duration.
+    if (warning.empty() && next_index > 0 && info.duration > 0 && info.fps > 0 && duration_is_video &&
+        last_timestamp + 1.0 / info.fps < info.duration - std::max(0.5, 3.0 / info.fps))
+      warning = fmt::format("stream ended at {:.2f} s of {:.2f} s (truncated file?)", last_timestamp, info.duration);
     if (!warning.empty() && next_index > 0 && !warned) {
       warned = true;
       spdlog::warn("{}: {}", path.string(), warning);
