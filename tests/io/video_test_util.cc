@@ -7,6 +7,7 @@ extern "C" {
 #include <libswscale/swscale.h>
 }
 
+#include <cmath>
 #include <fstream>
 #include <random>
 #include <stdexcept>
@@ -40,9 +41,12 @@ cv::Mat RandomTexture(int width, int height, unsigned seed) {
   return img;
 }
 
-cv::Mat ViewOf(const cv::Mat& texture, cv::Size out, double cx, double cy, double zoom) {
-  // Output pixel (x, y) samples texture at cx + (x - w/2)/zoom, cy + (y - h/2)/zoom.
-  cv::Mat M = (cv::Mat_<double>(2, 3) << zoom, 0, out.width / 2.0 - zoom * cx, 0, zoom, out.height / 2.0 - zoom * cy);
+cv::Mat ViewOf(const cv::Mat& texture, cv::Size out, double cx, double cy, double zoom, double angle) {
+  // Output pixel p samples texture at c + R(angle) (p - centre) / zoom.
+  const double c = std::cos(angle) * zoom, s = std::sin(angle) * zoom;
+  // Inverse map texture → output: p = centre + zoom R(-angle) (t - c).
+  cv::Mat M = (cv::Mat_<double>(2, 3) << c, s, out.width / 2.0 - (c * cx + s * cy), -s, c,
+               out.height / 2.0 - (-s * cx + c * cy));
   cv::Mat view;
   cv::warpAffine(texture, view, M, out, cv::INTER_LINEAR, cv::BORDER_REFLECT);
   return view;

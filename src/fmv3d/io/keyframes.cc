@@ -35,6 +35,11 @@ double Median(std::vector<double> v) {
   return v[m];
 }
 
+// KLT: frame-to-frame motion at the working scale (<= 480 px) is a few pixels, so a 15 px window on a
+// 3-level pyramid is ample and costs half of OpenCV's default 21 px window.
+const cv::Size kWin(15, 15);
+constexpr int kLevels = 2;
+
 }  // namespace
 
 void KeyframeOptions::Check() const {
@@ -98,7 +103,10 @@ void KeyframeSelector::Push(const VideoFrame& frame, std::vector<Keyframe>* out)
   const cv::Mat grey = ToGrey(frame.image);
   const double sharpness = Sharpness(grey);
   std::swap(prev_work_, work_);
+  std::swap(prev_pyr_, pyr_);
   work_ = Downscale(grey, options_.track_size).clone();
+  // Pyramids are built once per frame and reused as the "previous" one for the next frame.
+  if (!options_.all_frames) cv::buildOpticalFlowPyramid(work_, pyr_, kWin, kLevels);
 
   if (options_.all_frames) {
     Keyframe k{frame.image.clone(), frame.index, frame.timestamp, sharpness};
@@ -125,10 +133,9 @@ void KeyframeSelector::Push(const VideoFrame& frame, std::vector<Keyframe>* out)
     std::vector<cv::Point2f> next, back;
     std::vector<uchar> st, st_back;
     std::vector<float> err;
-    const cv::Size win(21, 21);
     const cv::TermCriteria term(cv::TermCriteria::COUNT | cv::TermCriteria::EPS, 20, 0.03);
-    cv::calcOpticalFlowPyrLK(prev_work_, work_, pts_, next, st, err, win, 3, term);
-    cv::calcOpticalFlowPyrLK(work_, prev_work_, next, back, st_back, err, win, 3, term);
+    cv::calcOpticalFlowPyrLK(prev_pyr_, pyr_, pts_, next, st, err, kWin, kLevels, term);
+    cv::calcOpticalFlowPyrLK(pyr_, prev_pyr_, next, back, st_back, err, kWin, kLevels, term);
     size_t n = 0;
     for (size_t i = 0; i < pts_.size(); ++i) {
       const bool inside = next[i].x >= 0 && next[i].y >= 0 && next[i].x < work_.cols && next[i].y < work_.rows;

@@ -31,7 +31,7 @@ struct KeyframeOptions {
   double blur_ratio = 0.6;    // blurred when sharpness < blur_ratio × running median
   int blur_window = 15;       // frames in the running median
   int track_size = 480;       // larger side of the KLT working image, pixels
-  int max_features = 300;
+  int max_features = 200;
   bool all_frames = false;    // keep every decoded frame (no selection, no blur rejection)
   // Throws fmv3d::Error on nonsensical values.
   void Check() const;
@@ -72,6 +72,7 @@ class KeyframeSelector {
   size_t history_pos_ = 0;
 
   cv::Mat work_, prev_work_;  // grey working images (current, previous)
+  std::vector<cv::Mat> pyr_, prev_pyr_;  // their KLT pyramids
   std::vector<cv::Point2f> key_pts_, pts_;
   size_t initial_tracks_ = 0;
   bool has_key_ = false;
