@@ -96,6 +96,23 @@ FeatureSet ExtractSift(const cv::Mat& image, const SiftOptions& options) {
     for (auto& [key, k] : unique) kps.push_back(k);
     sift->compute(grey, kps, desc);
   }
+  // OpenCV's cap keeps ties at the threshold response: enforce it exactly (strongest first, stable).
+  if (options.max_features > 0 && static_cast<int>(kps.size()) > options.max_features) {
+    std::vector<int> order(kps.size());
+    for (size_t i = 0; i < order.size(); ++i) order[i] = static_cast<int>(i);
+    std::stable_sort(order.begin(), order.end(),
+                     [&](int a, int b) { return kps[a].response > kps[b].response; });
+    order.resize(options.max_features);
+    std::sort(order.begin(), order.end());
+    std::vector<cv::KeyPoint> kept;
+    cv::Mat kept_desc(static_cast<int>(order.size()), desc.cols, desc.type());
+    for (size_t i = 0; i < order.size(); ++i) {
+      kept.push_back(kps[order[i]]);
+      desc.row(order[i]).copyTo(kept_desc.row(static_cast<int>(i)));
+    }
+    kps.swap(kept);
+    desc = kept_desc;
+  }
   QuantiseDescriptors(desc, options.root_sift, &out.descriptors);
   out.keypoints.resize(kps.size());
   out.colors.resize(kps.size());

@@ -226,8 +226,9 @@ void TwoViewOptions::Check() const {
 }
 
 double RotationAngle(const Eigen::Matrix3d& Ra, const Eigen::Matrix3d& Rb) {
-  const double c = std::clamp(((Ra.transpose() * Rb).trace() - 1) / 2, -1.0, 1.0);
-  return std::acos(c);
+  // ||Ra - Rb||_F = 2 sqrt(2) sin(θ/2): accurate for small angles, where acos((trace - 1) / 2) is not.
+  const double x = std::min(1.0, (Ra - Rb).norm() / (2 * std::sqrt(2.0)));
+  return 2 * std::asin(x);
 }
 
 TwoViewResult VerifyTwoView(const Points2& x1, const Points2& x2, const core::Camera& camera1,

@@ -69,7 +69,7 @@ struct TwoViewResult {
 TwoViewResult VerifyTwoView(const Points2& x1, const Points2& x2, const core::Camera& camera1,
                             const core::Camera& camera2, bool trust_intrinsics, const TwoViewOptions& options);
 
-// Angle (radians) of the rotation R_a^T R_b: the distance between two rotations.
+// Angle (radians) of the rotation R_a^T R_b: the distance between two rotations (both orthonormal).
 double RotationAngle(const Eigen::Matrix3d& Ra, const Eigen::Matrix3d& Rb);
 
 }  // namespace fmv3d::geometry
