@@ -145,3 +145,38 @@ TEST(Similarity, UmeyamaExactAndRansacWithOutliers) {
 
 }  // namespace
 }  // namespace fmv3d::geometry
+
+#include "fmv3d/geometry/reprojection_error.h"
+
+namespace fmv3d::geometry {
+namespace {
+
+// The hand-written Jacobian of the BA residual matches automatic differentiation.
+TEST(ReprojectionError, AnalyticJacobianMatchesAutodiff) {
+  core::Camera cam = core::Camera::Pinhole(1280, 720, 1000);
+  cam.aspect = 1.01;
+  cam.k1 = -0.08;
+  cam.k2 = 0.01;
+  cam.p1 = 0.001;
+  cam.p2 = -0.002;
+  auto intr = cam.Params();
+  const Eigen::Quaterniond q = Eigen::Quaterniond(Eigen::AngleAxisd(0.4, Eigen::Vector3d(1, -2, 0.5).normalized()));
+  double qv[4] = {q.x(), q.y(), q.z(), q.w()}, t[3] = {0.3, -0.2, 5}, X[3] = {0.4, 0.7, -1.1};
+  const double* params[4] = {intr.data(), qv, t, X};
+  std::unique_ptr<ceres::CostFunction> autodiff(ReprojectionError::Create({600, 400}));
+  AnalyticReprojectionError analytic({600, 400});
+  double ra[2], rb[2];
+  double ja[4][24], jb[4][24];
+  double* pa[4] = {ja[0], ja[1], ja[2], ja[3]};
+  double* pb[4] = {jb[0], jb[1], jb[2], jb[3]};
+  ASSERT_TRUE(autodiff->Evaluate(params, ra, pa));
+  ASSERT_TRUE(analytic.Evaluate(params, rb, pb));
+  EXPECT_NEAR(ra[0], rb[0], 1e-9);
+  EXPECT_NEAR(ra[1], rb[1], 1e-9);
+  const int sizes[4] = {core::kNumIntrinsics, 4, 3, 3};
+  for (int b = 0; b < 4; ++b)
+    for (int k = 0; k < 2 * sizes[b]; ++k) EXPECT_NEAR(ja[b][k], jb[b][k], 1e-6 * (1 + std::abs(ja[b][k]))) << b << " " << k;
+}
+
+}  // namespace
+}  // namespace fmv3d::geometry

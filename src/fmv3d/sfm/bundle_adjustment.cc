@@ -99,7 +99,7 @@ BundleAdjustmentSummary BundleAdjust(core::Reconstruction* rec, const BundleAdju
       }
       auto cit = intr.find(image.camera_id);
       if (cit == intr.end()) cit = intr.emplace(image.camera_id, rec->cameras.at(image.camera_id).Params()).first;
-      problem.AddResidualBlock(geometry::ReprojectionError::Create(image.points2d[el.point2d_idx]), loss(),
+      problem.AddResidualBlock(new geometry::AnalyticReprojectionError(image.points2d[el.point2d_idx]), loss(),
                                cit->second.data(), pit->second.q.data(), pit->second.t.data(), X.data());
       residual_obs.emplace_back(el.image_id, el.point2d_idx);
     }
