@@ -1,0 +1,208 @@
+#include "fmv3d/io/obj_io.h"
+
+#include <fmt/format.h>
+
+#include <fstream>
+#include <opencv2/imgcodecs.hpp>
+#include <sstream>
+
+#include "fmv3d/core/error.h"
+#include "fmv3d/core/files.h"
+
+namespace fmv3d::io {
+namespace fs = std::filesystem;
+namespace {
+
+// Resolves a 1-based (or negative, relative) OBJ index; returns -1 for an empty field.
+int ResolveIndex(const std::string& s, size_t count, const std::string& where) {
+  if (s.empty()) return -1;
+  long i = 0;
+  try {
+    i = std::stol(s);
+  } catch (const std::exception&) {
+    throw Error(where + ": bad index '" + s + "'");
+  }
+  const long r = i > 0 ? i - 1 : static_cast<long>(count) + i;
+  if (i == 0 || r < 0 || r >= static_cast<long>(count)) throw Error(where + ": index " + s + " out of range");
+  return static_cast<int>(r);
+}
+
+void ReadMtl(const fs::path& path, bool load_textures, TexturedMesh* mesh) {
+  std::ifstream in(path);
+  if (!in) throw Error(path.string() + ": cannot open material library");
+  std::string line;
+  Material* cur = nullptr;
+  while (std::getline(in, line)) {
+    std::istringstream ss(line);
+    std::string key;
+    if (!(ss >> key) || key[0] == '#') continue;
+    if (key == "newmtl") {
+      mesh->materials.emplace_back();
+      cur = &mesh->materials.back();
+      ss >> cur->name;
+    } else if (cur && key == "Kd") {
+      float r = 0.8f, g = 0.8f, b = 0.8f;
+      ss >> r >> g >> b;
+      cur->diffuse_bgr = {b, g, r};
+    } else if (cur && key == "map_Kd") {
+      std::string rest, last;
+      while (ss >> rest) last = rest;  // options like -s come first; the file name is last
+      cur->texture_file = last;
+      if (load_textures && !last.empty()) {
+        const fs::path tex = path.parent_path() / last;
+        if (fs::exists(tex)) {
+          cur->texture = cv::imread(tex.string(), cv::IMREAD_COLOR);
+          if (cur->texture.empty()) throw Error(tex.string() + ": cannot read texture");
+        }
+      }
+    }
+  }
+}
+
+}  // namespace
+
+TexturedMesh ReadObj(const fs::path& path, bool load_textures) {
+  std::ifstream in(path);
+  if (!in) throw Error(path.string() + ": cannot open");
+  TexturedMesh mesh;
+  std::string line;
+  int material = -1;
+  size_t line_no = 0;
+  std::vector<std::string> mtllibs;
+  std::vector<std::pair<std::string, size_t>> pending_usemtl;  // (name, first face) resolved after MTL load
+  while (std::getline(in, line)) {
+    ++line_no;
+    std::istringstream ss(line);
+    std::string key;
+    if (!(ss >> key) || key[0] == '#') continue;
+    const std::string where = path.string() + ":" + std::to_string(line_no);
+    if (key == "v") {
+      Eigen::Vector3d v;
+      if (!(ss >> v.x() >> v.y() >> v.z())) throw Error(where + ": bad vertex");
+      mesh.vertices.push_back(v);
+    } else if (key == "vt") {
+      Eigen::Vector2f t;
+      if (!(ss >> t.x() >> t.y())) throw Error(where + ": bad texture coordinate");
+      mesh.uvs.push_back(t);
+    } else if (key == "vn") {
+      Eigen::Vector3f n;
+      if (!(ss >> n.x() >> n.y() >> n.z())) throw Error(where + ": bad normal");
+      mesh.normals.push_back(n);
+    } else if (key == "f") {
+      std::vector<std::array<int, 3>> corners;
+      std::string tok;
+      while (ss >> tok) {
+        std::array<std::string, 3> parts;
+        size_t p = 0;
+        for (char c : tok) {
+          if (c == '/') {
+            if (++p > 2) throw Error(where + ": bad face corner '" + tok + "'");
+          } else {
+            parts[p] += c;
+          }
+        }
+        corners.push_back({ResolveIndex(parts[0], mesh.vertices.size(), where),
+                           ResolveIndex(parts[1], mesh.uvs.size(), where),
+                           ResolveIndex(parts[2], mesh.normals.size(), where)});
+        if (corners.back()[0] < 0) throw Error(where + ": face corner without a vertex");
+      }
+      if (corners.size() < 3) throw Error(where + ": face with fewer than 3 corners");
+      for (size_t k = 1; k + 1 < corners.size(); ++k) {
+        Face f;
+        const std::array<int, 3>* c[3] = {&corners[0], &corners[k], &corners[k + 1]};
+        for (int j = 0; j < 3; ++j) {
+          f.v[j] = (*c[j])[0];
+          f.vt[j] = (*c[j])[1];
+          f.vn[j] = (*c[j])[2];
+        }
+        f.material = material;
+        mesh.faces.push_back(f);
+      }
+    } else if (key == "mtllib") {
+      std::string name;
+      ss >> name;
+      mtllibs.push_back(name);
+    } else if (key == "usemtl") {
+      std::string name;
+      ss >> name;
+      pending_usemtl.emplace_back(name, mesh.faces.size());
+      material = static_cast<int>(pending_usemtl.size()) - 1;  // placeholder, remapped below
+    }
+  }
+  for (const auto& lib : mtllibs) ReadMtl(path.parent_path() / lib, load_textures, &mesh);
+  // Remap usemtl placeholders to material indices by name.
+  std::vector<int> remap(pending_usemtl.size(), -1);
+  for (size_t i = 0; i < pending_usemtl.size(); ++i) {
+    for (size_t m = 0; m < mesh.materials.size(); ++m)
+      if (mesh.materials[m].name == pending_usemtl[i].first) remap[i] = static_cast<int>(m);
+    if (remap[i] < 0) {
+      Material m;
+      m.name = pending_usemtl[i].first;
+      mesh.materials.push_back(m);
+      remap[i] = static_cast<int>(mesh.materials.size()) - 1;
+    }
+  }
+  for (Face& f : mesh.faces)
+    if (f.material >= 0) f.material = remap[f.material];
+  mesh.Validate();
+  return mesh;
+}
+
+void WriteObj(const TexturedMesh& mesh, const fs::path& path, int png_compression) {
+  mesh.Validate();
+  const std::string stem = path.stem().string();
+  const fs::path dir = path.parent_path();
+  if (!dir.empty()) core::EnsureDirectory(dir);
+  std::string mtl = "# fmv3d material library\n";
+  std::vector<std::string> tex_names(mesh.materials.size());
+  for (size_t m = 0; m < mesh.materials.size(); ++m) {
+    const Material& mat = mesh.materials[m];
+    const std::string name = mat.name.empty() ? fmt::format("material_{}", m) : mat.name;
+    mtl += fmt::format("newmtl {}\nKa 0 0 0\nKd {:.6g} {:.6g} {:.6g}\nKs 0 0 0\nd 1\nillum 1\n", name,
+                       mat.diffuse_bgr.z(), mat.diffuse_bgr.y(), mat.diffuse_bgr.x());
+    if (!mat.texture.empty()) {
+      tex_names[m] = mat.texture_file.empty() ? stem + "_" + name + ".png" : mat.texture_file;
+      mtl += "map_Kd " + tex_names[m] + "\n";
+      const fs::path tex = dir / tex_names[m];
+      core::WriteAtomically(tex, [&](const fs::path& tmp) {
+        if (!cv::imwrite(tmp.string(), mat.texture, {cv::IMWRITE_PNG_COMPRESSION, png_compression}))
+          throw Error(tex.string() + ": cannot write texture");
+      });
+    } else if (!mat.texture_file.empty()) {
+      mtl += "map_Kd " + mat.texture_file + "\n";
+    }
+    mtl += "\n";
+  }
+  fmt::memory_buffer out;
+  fmt::format_to(std::back_inserter(out), "# fmv3d mesh: {} vertices, {} faces, metres\nmtllib {}.mtl\n",
+                 mesh.vertices.size(), mesh.faces.size(), stem);
+  for (const auto& v : mesh.vertices) fmt::format_to(std::back_inserter(out), "v {:.17g} {:.17g} {:.17g}\n", v.x(), v.y(), v.z());
+  for (const auto& t : mesh.uvs) fmt::format_to(std::back_inserter(out), "vt {:.9g} {:.9g}\n", t.x(), t.y());
+  for (const auto& n : mesh.normals)
+    fmt::format_to(std::back_inserter(out), "vn {:.9g} {:.9g} {:.9g}\n", n.x(), n.y(), n.z());
+  int cur_material = -2;
+  for (const Face& f : mesh.faces) {
+    if (f.material != cur_material) {
+      cur_material = f.material;
+      if (f.material >= 0) {
+        const auto& name = mesh.materials[f.material].name;
+        fmt::format_to(std::back_inserter(out), "usemtl {}\n",
+                       name.empty() ? fmt::format("material_{}", f.material) : name);
+      }
+    }
+    out.push_back('f');
+    for (int k = 0; k < 3; ++k) {
+      fmt::format_to(std::back_inserter(out), " {}", f.v[k] + 1);
+      if (f.vt[k] >= 0 || f.vn[k] >= 0) {
+        out.push_back('/');
+        if (f.vt[k] >= 0) fmt::format_to(std::back_inserter(out), "{}", f.vt[k] + 1);
+        if (f.vn[k] >= 0) fmt::format_to(std::back_inserter(out), "/{}", f.vn[k] + 1);
+      }
+    }
+    out.push_back('\n');
+  }
+  core::WriteTextFile(dir / (stem + ".mtl"), mtl);
+  core::WriteTextFile(path, fmt::to_string(out));
+}
+
+}  // namespace fmv3d::io

@@ -1,0 +1,20 @@
+// Wavefront OBJ/MTL with texture coordinates, normals and diffuse texture maps (map_Kd).
+// Reading: v, vt, vn, f (polygons are fan-triangulated, negative indices allowed), usemtl, mtllib; MTL:
+// newmtl, Kd, map_Kd (textures are loaded with OpenCV when `load_textures` and the file exists). Other
+// statements are ignored. Writing: `<stem>.obj`, `<stem>.mtl`, and every in-memory texture as a PNG beside
+// them (named by the material's texture_file, or `<stem>_<material>.png`). Coordinates are written with 17
+// significant digits, so write → read reproduces vertices exactly.
+#pragma once
+
+#include <filesystem>
+
+#include "fmv3d/io/mesh.h"
+
+namespace fmv3d::io {
+
+TexturedMesh ReadObj(const std::filesystem::path& path, bool load_textures = true);
+// png_compression: 0..9 (OpenCV IMWRITE_PNG_COMPRESSION); large noise textures compress poorly, so the
+// default favours speed.
+void WriteObj(const TexturedMesh& mesh, const std::filesystem::path& path, int png_compression = 1);
+
+}  // namespace fmv3d::io

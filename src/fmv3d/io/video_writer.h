@@ -1,0 +1,41 @@
+// Video encoding with FFmpeg (libavformat/libavcodec): BGR frames → H.264 (libx264) in MP4 or MPEG-TS,
+// yuv420p. The container follows the extension (.mp4, .ts, .mkv). When libx264 is missing, it falls back to
+// MPEG-4 part 2 (mp4/mkv) or MPEG-2 (ts). Encoding is single-threaded with bit-exact flags, so the same
+// frames give a byte-identical file. yuv420p needs even width and height (an odd size is an error).
+#pragma once
+
+#include <filesystem>
+#include <memory>
+#include <opencv2/core.hpp>
+#include <string>
+
+namespace fmv3d::io {
+
+struct VideoWriterOptions {
+  double fps = 25;
+  int crf = 18;         // x264 quality (lower = better); other codecs get a matching bit rate
+  int gop = 25;         // key-frame interval, frames
+  std::string preset = "medium";
+  void Check() const;
+};
+
+class VideoWriter {
+ public:
+  VideoWriter(const std::filesystem::path& path, int width, int height, const VideoWriterOptions& options = {});
+  ~VideoWriter();
+  VideoWriter(const VideoWriter&) = delete;
+  VideoWriter& operator=(const VideoWriter&) = delete;
+
+  // bgr: CV_8UC3 of the writer's size.
+  void Write(const cv::Mat& bgr);
+  // Flushes the encoder and finishes the file (also done by the destructor, which swallows errors).
+  void Close();
+  const std::string& codec_name() const;
+  int frames_written() const;
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace fmv3d::io

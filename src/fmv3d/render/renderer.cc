@@ -1,0 +1,420 @@
+#include "fmv3d/render/renderer.h"
+
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+
+#include <Eigen/LU>
+#include <algorithm>
+#include <array>
+#include <cmath>
+
+#include "fmv3d/core/error.h"
+
+namespace fmv3d::render {
+namespace {
+
+constexpr int kBandRows = 16;  // visibility-raster rows per work item
+
+// Counter-based random numbers: the noise of a pixel depends only on (seed, index), so it is identical for
+// any thread count or schedule.
+inline uint64_t SplitMix(uint64_t x) {
+  x += 0x9E3779B97F4A7C15ull;
+  x = (x ^ (x >> 30)) * 0xBF58476D1CE4E5B9ull;
+  x = (x ^ (x >> 27)) * 0x94D049BB133111EBull;
+  return x ^ (x >> 31);
+}
+inline double Gaussian(uint64_t seed, uint64_t index) {
+  const uint64_t h1 = SplitMix(seed ^ SplitMix(index * 2 + 1)), h2 = SplitMix(h1 + 0x632BE59BD9B4E019ull);
+  const double u1 = (static_cast<double>(h1 >> 11) + 0.5) * (1.0 / 9007199254740992.0);
+  const double u2 = static_cast<double>(h2 >> 11) * (1.0 / 9007199254740992.0);
+  return std::sqrt(-2.0 * std::log(u1)) * std::cos(2.0 * M_PI * u2);
+}
+
+// A face prepared for rasterisation: its (near-clipped) outline in visibility-raster coordinates, the
+// sample box it covers and its inverse depth w = 1/z = A·X + B·Y + C over the raster.
+struct Prim {
+  std::array<Eigen::Vector2d, 4> p;
+  int n = 0;  // 0 = not drawn
+  int x0 = 0, x1 = -1, y0 = 0, y1 = -1;
+  double A = 0, B = 0, C = 0;
+};
+
+}  // namespace
+
+// Normalised rays for every output pixel centre and sub-sample, and the visibility raster's pinhole.
+// Without distortion the raster is exactly the S×S supersampled output grid and rays are computed on the
+// fly; with distortion the rays come from Camera::Unproject and are tabulated once per camera.
+struct Renderer::RayTable {
+  std::array<double, core::kNumIntrinsics> params{};
+  int width = 0, height = 0, S = 1;
+  bool distorted = false;
+  int vw = 0, vh = 0;
+  double fvx = 0, fvy = 0, cu = 0, cv = 0;
+  std::vector<Eigen::Vector2d> centre;  // W·H (distorted only)
+  std::vector<Eigen::Vector2f> sub;     // W·H·S² (distorted only), sample (a, b) of pixel at [S·S·p + b·S + a]
+  std::vector<int32_t> sub_cell;        // raster cell of each sub-sample, -1 outside (distorted only)
+};
+
+void RenderOptions::Check() const {
+  if (supersample < 1 || supersample > 4) throw Error("render: supersample must be 1..4");
+  if (!(exposure > 0) || !std::isfinite(exposure)) throw Error("render: exposure must be positive");
+  if (!(ambient >= 0 && ambient <= 1)) throw Error("render: ambient must be in [0, 1]");
+  if (!(noise_sigma >= 0) || !std::isfinite(noise_sigma)) throw Error("render: noise sigma must be >= 0");
+  if (!(sun_elevation_deg > -90 && sun_elevation_deg <= 90)) throw Error("render: sun elevation must be in (-90, 90]");
+  if (!std::isfinite(sun_azimuth_deg)) throw Error("render: sun azimuth must be finite");
+  if (!(near_plane > 0)) throw Error("render: near plane must be positive");
+}
+
+Eigen::Vector3d RenderOptions::SunDirection() const {
+  const double az = sun_azimuth_deg * M_PI / 180, el = sun_elevation_deg * M_PI / 180;
+  return {std::cos(el) * std::sin(az), std::cos(el) * std::cos(az), std::sin(el)};
+}
+
+Renderer::Renderer(const io::TexturedMesh& mesh) : mesh_(mesh) {
+  mesh_.Validate();
+  textures_.resize(mesh_.materials.size());
+  tbb::parallel_for(size_t(0), mesh_.materials.size(), [&](size_t m) {
+    if (!mesh_.materials[m].texture.empty()) textures_[m] = MipTexture(mesh_.materials[m].texture);
+  });
+  face_normals_.resize(mesh_.faces.size());
+  for (size_t i = 0; i < mesh_.faces.size(); ++i) face_normals_[i] = mesh_.FaceNormal(i);
+}
+
+Renderer::~Renderer() = default;
+
+std::shared_ptr<const Renderer::RayTable> Renderer::Rays(const core::Camera& camera, int S) const {
+  const auto params = camera.Params();
+  {
+    std::lock_guard<std::mutex> lock(cache_mutex_);
+    if (ray_cache_ && ray_cache_->params == params && ray_cache_->width == camera.width &&
+        ray_cache_->height == camera.height && ray_cache_->S == S)
+      return ray_cache_;
+  }
+  auto t = std::make_shared<RayTable>();
+  t->params = params;
+  t->width = camera.width;
+  t->height = camera.height;
+  t->S = S;
+  t->distorted = camera.HasDistortion();
+  t->fvx = S * camera.fx();
+  t->fvy = S * camera.fy();
+  const int W = camera.width, H = camera.height;
+  if (!t->distorted) {
+    t->vw = W * S;
+    t->vh = H * S;
+    t->cu = S * camera.u0;
+    t->cv = S * camera.v0;
+  } else {
+    t->centre.resize(size_t(W) * H);
+    t->sub.resize(size_t(W) * H * S * S);
+    tbb::parallel_for(0, H, [&](int j) {
+      for (int i = 0; i < W; ++i) {
+        const size_t p = size_t(j) * W + i;
+        t->centre[p] = camera.Unproject({i + 0.5, j + 0.5}).head<2>();
+        for (int b = 0; b < S; ++b)
+          for (int a = 0; a < S; ++a)
+            t->sub[p * S * S + b * S + a] =
+                camera.Unproject({i + (a + 0.5) / S, j + (b + 0.5) / S}).head<2>().cast<float>();
+      }
+    });
+    Eigen::AlignedBox2f box;
+    for (const auto& s : t->sub) box.extend(s);
+    const double vw = (box.max().x() - box.min().x()) * t->fvx + 2;
+    const double vh = (box.max().y() - box.min().y()) * t->fvy + 2;
+    if (!(vw * vh < 16.0 * W * H * S * S))
+      throw Error("render: the lens distortion is too strong to render (the undistorted field is huge)");
+    t->vw = static_cast<int>(std::ceil(vw));
+    t->vh = static_cast<int>(std::ceil(vh));
+    t->cu = -box.min().x() * t->fvx + 1;
+    t->cv = -box.min().y() * t->fvy + 1;
+    t->sub_cell.resize(t->sub.size());
+    for (size_t k = 0; k < t->sub.size(); ++k) {
+      const int X = static_cast<int>(std::floor(t->sub[k].x() * t->fvx + t->cu));
+      const int Y = static_cast<int>(std::floor(t->sub[k].y() * t->fvy + t->cv));
+      t->sub_cell[k] = (X >= 0 && Y >= 0 && X < t->vw && Y < t->vh) ? Y * t->vw + X : -1;
+    }
+  }
+  std::lock_guard<std::mutex> lock(cache_mutex_);
+  ray_cache_ = t;
+  return t;
+}
+
+RenderResult Renderer::Render(const core::Camera& camera, const core::Pose& pose,
+                              const RenderOptions& options) const {
+  camera.Validate();
+  options.Check();
+  const int S = options.supersample, W = camera.width, H = camera.height;
+  const auto rays = Rays(camera, S);
+  const RayTable& rt = *rays;
+  const Eigen::Matrix3d R = pose.R();
+  const Eigen::Matrix3d Rt = R.transpose();
+  const Eigen::Vector3d sun = options.SunDirection();
+  const double near = options.near_plane;
+
+  // 1. Vertices to the camera frame.
+  const size_t nv = mesh_.vertices.size(), nf = mesh_.faces.size();
+  std::vector<Eigen::Vector3d> vc(nv);
+  tbb::parallel_for(tbb::blocked_range<size_t>(0, nv, 4096), [&](const auto& r) {
+    for (size_t i = r.begin(); i < r.end(); ++i) vc[i] = R * mesh_.vertices[i] + pose.t;
+  });
+
+  // 2. Face set-up: cull, plane matrix, near clipping, projection to the visibility raster.
+  std::vector<Prim> prims(nf);
+  std::vector<Eigen::Matrix3d> planes(nf);
+  tbb::parallel_for(tbb::blocked_range<size_t>(0, nf, 1024), [&](const auto& r) {
+    for (size_t f = r.begin(); f < r.end(); ++f) {
+      const io::Face& face = mesh_.faces[f];
+      const Eigen::Vector3d& a = vc[face.v[0]];
+      const Eigen::Vector3d& b = vc[face.v[1]];
+      const Eigen::Vector3d& c = vc[face.v[2]];
+      if (a.z() < near && b.z() < near && c.z() < near) continue;
+      const Eigen::Vector3d n = (b - a).cross(c - a);
+      const double side = n.dot(a);  // < 0: front face (camera on the outer side of the plane)
+      if (options.cull_backfaces && side >= 0) continue;
+      // Edge-on faces (plane through the camera centre) cover no area.
+      if (std::abs(side) <= 1e-12 * n.norm() * a.norm()) continue;
+      Eigen::Matrix3d V;
+      V << a, b, c;
+      Eigen::Matrix3d M = V.inverse();
+      if (!M.allFinite()) continue;
+      // Near clipping (Sutherland–Hodgman against z = near); the plane matrix stays that of the full face.
+      std::array<Eigen::Vector3d, 4> poly;
+      int np = 0;
+      const Eigen::Vector3d* in[3] = {&a, &b, &c};
+      for (int k = 0; k < 3; ++k) {
+        const Eigen::Vector3d& p = *in[k];
+        const Eigen::Vector3d& q = *in[(k + 1) % 3];
+        const bool pin = p.z() >= near, qin = q.z() >= near;
+        if (pin) poly[np++] = p;
+        if (pin != qin) poly[np++] = p + (q - p) * ((near - p.z()) / (q.z() - p.z()));
+      }
+      Prim& pr = prims[f];
+      double xmin = 1e300, xmax = -1e300, ymin = 1e300, ymax = -1e300;
+      for (int k = 0; k < np; ++k) {
+        pr.p[k] = {rt.fvx * poly[k].x() / poly[k].z() + rt.cu, rt.fvy * poly[k].y() / poly[k].z() + rt.cv};
+        xmin = std::min(xmin, pr.p[k].x());
+        xmax = std::max(xmax, pr.p[k].x());
+        ymin = std::min(ymin, pr.p[k].y());
+        ymax = std::max(ymax, pr.p[k].y());
+      }
+      // Sample (I, J) has its centre at (I + 0.5, J + 0.5).
+      const double x0 = std::max(std::ceil(xmin - 0.5), 0.0), x1 = std::min(std::floor(xmax - 0.5), rt.vw - 1.0);
+      const double y0 = std::max(std::ceil(ymin - 0.5), 0.0), y1 = std::min(std::floor(ymax - 0.5), rt.vh - 1.0);
+      if (x0 > x1 || y0 > y1) continue;
+      pr.n = np;
+      pr.x0 = static_cast<int>(x0);
+      pr.x1 = static_cast<int>(x1);
+      pr.y0 = static_cast<int>(y0);
+      pr.y1 = static_cast<int>(y1);
+      const Eigen::Vector3d m = M.colwise().sum().transpose();  // 1/z = m · d
+      pr.A = m.x() / rt.fvx;
+      pr.B = m.y() / rt.fvy;
+      pr.C = m.z() - m.x() * rt.cu / rt.fvx - m.y() * rt.cv / rt.fvy;
+      planes[f] = M;
+    }
+  });
+
+  // 3. Bin faces into bands of raster rows (in face order, so the result does not depend on threads).
+  const int nbands = (rt.vh + kBandRows - 1) / kBandRows;
+  std::vector<std::vector<int>> bins(nbands);
+  for (size_t f = 0; f < nf; ++f) {
+    const Prim& p = prims[f];
+    if (p.n == 0) continue;
+    for (int b = p.y0 / kBandRows; b <= p.y1 / kBandRows; ++b) bins[b].push_back(static_cast<int>(f));
+  }
+
+  // 4. Visibility raster: nearest face per sample (largest 1/z), ties keep the lower face index.
+  std::vector<float> wbuf(size_t(rt.vw) * rt.vh, 0.0f);
+  std::vector<int32_t> ibuf(size_t(rt.vw) * rt.vh, -1);
+  tbb::parallel_for(0, nbands, [&](int band) {
+    const int by0 = band * kBandRows, by1 = std::min(rt.vh - 1, by0 + kBandRows - 1);
+    for (int f : bins[band]) {
+      const Prim& pr = prims[f];
+      for (int k = 1; k + 1 < pr.n; ++k) {
+        Eigen::Vector2d v[3] = {pr.p[0], pr.p[k], pr.p[k + 1]};
+        const double area = (v[1] - v[0]).x() * (v[2] - v[0]).y() - (v[1] - v[0]).y() * (v[2] - v[0]).x();
+        if (area == 0 || !std::isfinite(area)) continue;
+        if (area < 0) std::swap(v[1], v[2]);
+        double ex[3], ey[3], ec[3];
+        bool tie[3];
+        for (int e = 0; e < 3; ++e) {
+          const Eigen::Vector2d& a = v[e];
+          const Eigen::Vector2d& b = v[(e + 1) % 3];
+          const double dx = b.x() - a.x(), dy = b.y() - a.y();
+          // E(p) = dx·(p.y − a.y) − dy·(p.x − a.x) > 0 inside; shared edges go to exactly one side.
+          ex[e] = -dy;
+          ey[e] = dx;
+          ec[e] = dy * a.x() - dx * a.y();
+          tie[e] = dy > 0 || (dy == 0 && dx < 0);
+        }
+        const double txmin = std::min({v[0].x(), v[1].x(), v[2].x()});
+        const double txmax = std::max({v[0].x(), v[1].x(), v[2].x()});
+        const double tymin = std::min({v[0].y(), v[1].y(), v[2].y()});
+        const double tymax = std::max({v[0].y(), v[1].y(), v[2].y()});
+        const int X0 = std::max(pr.x0, static_cast<int>(std::ceil(txmin - 0.5)));
+        const int X1 = std::min(pr.x1, static_cast<int>(std::floor(txmax - 0.5)));
+        const int Y0 = std::max({pr.y0, by0, static_cast<int>(std::ceil(tymin - 0.5))});
+        const int Y1 = std::min({pr.y1, by1, static_cast<int>(std::floor(tymax - 0.5))});
+        for (int Y = Y0; Y <= Y1; ++Y) {
+          const double py = Y + 0.5, px0 = X0 + 0.5;
+          double e0 = ex[0] * px0 + ey[0] * py + ec[0];
+          double e1 = ex[1] * px0 + ey[1] * py + ec[1];
+          double e2 = ex[2] * px0 + ey[2] * py + ec[2];
+          double w = pr.A * px0 + pr.B * py + pr.C;
+          float* wrow = &wbuf[size_t(Y) * rt.vw];
+          int32_t* irow = &ibuf[size_t(Y) * rt.vw];
+          for (int X = X0; X <= X1; ++X) {
+            if ((e0 > 0 || (e0 == 0 && tie[0])) && (e1 > 0 || (e1 == 0 && tie[1])) &&
+                (e2 > 0 || (e2 == 0 && tie[2]))) {
+              const float wf = static_cast<float>(w);
+              if (wf > wrow[X] || (wf == wrow[X] && f < irow[X])) {
+                wrow[X] = wf;
+                irow[X] = f;
+              }
+            }
+            e0 += ex[0];
+            e1 += ex[1];
+            e2 += ex[2];
+            w += pr.A;
+          }
+        }
+      }
+    }
+  });
+
+  // 5. Shading at exact rays.
+  const double inv_fx = 1.0 / camera.fx(), inv_fy = 1.0 / camera.fy();
+  const double gain =
+      options.shading
+          ? options.exposure / (options.ambient + (1 - options.ambient) * std::max(sun.z(), 0.05))
+          : options.exposure;
+  auto shade = [&](int f, const Eigen::Vector3d& d) -> Eigen::Vector3f {
+    const Eigen::Matrix3d& M = planes[f];
+    const Eigen::Vector3d bm = M * d;
+    const double s = bm.sum();
+    const Eigen::Vector3d bc = bm / s;
+    const io::Face& face = mesh_.faces[f];
+    Eigen::Vector3f albedo;
+    const int mat = face.material;
+    const MipTexture* tex =
+        (mat >= 0 && face.vt[0] >= 0 && !textures_[mat].empty()) ? &textures_[mat] : nullptr;
+    if (tex) {
+      const Eigen::Vector2f& t0 = mesh_.uvs[face.vt[0]];
+      const Eigen::Vector2f& t1 = mesh_.uvs[face.vt[1]];
+      const Eigen::Vector2f& t2 = mesh_.uvs[face.vt[2]];
+      const double u = bc[0] * t0.x() + bc[1] * t1.x() + bc[2] * t2.x();
+      const double v = bc[0] * t0.y() + bc[1] * t1.y() + bc[2] * t2.y();
+      // d(barycentrics)/d(pixel) from b = M d / (1ᵀ M d); the pixel footprint picks the mip level.
+      const Eigen::Vector3d dbx = (M.col(0) - bc * M.col(0).sum()) * (inv_fx / s);
+      const Eigen::Vector3d dby = (M.col(1) - bc * M.col(1).sum()) * (inv_fy / s);
+      const double dux = (dbx[0] * t0.x() + dbx[1] * t1.x() + dbx[2] * t2.x()) * tex->width();
+      const double dvx = (dbx[0] * t0.y() + dbx[1] * t1.y() + dbx[2] * t2.y()) * tex->height();
+      const double duy = (dby[0] * t0.x() + dby[1] * t1.x() + dby[2] * t2.x()) * tex->width();
+      const double dvy = (dby[0] * t0.y() + dby[1] * t1.y() + dby[2] * t2.y()) * tex->height();
+      const double rho2 = std::max(dux * dux + dvx * dvx, duy * duy + dvy * dvy);
+      const float lod = rho2 > 1 ? static_cast<float>(0.5 * std::log2(rho2)) : 0.0f;
+      albedo = tex->Sample(static_cast<float>(u), static_cast<float>(v), lod);
+    } else if (mat >= 0) {
+      albedo = mesh_.materials[mat].diffuse_bgr * 255.0f;
+    } else {
+      albedo = Eigen::Vector3f::Constant(200.0f);
+    }
+    if (!options.shading) return albedo * static_cast<float>(gain);
+    Eigen::Vector3d n;
+    if (face.vn[0] >= 0) {
+      n = (bc[0] * mesh_.normals[face.vn[0]] + bc[1] * mesh_.normals[face.vn[1]] +
+           bc[2] * mesh_.normals[face.vn[2]])
+              .cast<double>()
+              .normalized();
+    } else {
+      n = face_normals_[f];
+      if (n.dot(Rt * d) > 0) n = -n;  // seen from behind (culling off): light the visible side
+    }
+    const double light = options.ambient + (1 - options.ambient) * std::max(0.0, n.dot(sun));
+    return albedo * static_cast<float>(light * gain);
+  };
+  auto sky = [&](const Eigen::Vector3d& d) -> Eigen::Vector3f {
+    const Eigen::Vector3d w = (Rt * d).normalized();
+    const float e = static_cast<float>(w.z());
+    if (e < 0) return {150.0f, 160.0f, 165.0f};  // beyond the edge of the world: haze
+    const Eigen::Vector3f horizon(235, 225, 212), zenith(205, 150, 100);  // BGR
+    const float a = std::min(1.0f, std::sqrt(e));
+    return (1 - a) * horizon + a * zenith;
+  };
+
+  RenderResult out;
+  out.image.create(H, W, CV_8UC3);
+  out.depth.create(H, W, CV_32F);
+  out.face.create(H, W, CV_32S);
+  const int SS = S * S;
+  tbb::parallel_for(0, H, [&](int j) {
+    uint8_t* img = out.image.ptr<uint8_t>(j);
+    float* dep = out.depth.ptr<float>(j);
+    int32_t* fid = out.face.ptr<int32_t>(j);
+    std::array<int32_t, 16> ids;
+    for (int i = 0; i < W; ++i) {
+      const size_t p = size_t(j) * W + i;
+      for (int b = 0; b < S; ++b)
+        for (int a = 0; a < S; ++a) {
+          int32_t id = -1;
+          if (!rt.distorted) {
+            id = ibuf[size_t(S * j + b) * rt.vw + S * i + a];
+          } else {
+            const int32_t cell = rt.sub_cell[p * SS + b * S + a];
+            id = cell >= 0 ? ibuf[cell] : -1;
+          }
+          ids[b * S + a] = id;
+        }
+      const Eigen::Vector3d dc = rt.distorted ? Eigen::Vector3d(rt.centre[p].x(), rt.centre[p].y(), 1.0)
+                                              : Eigen::Vector3d((i + 0.5 - camera.u0) * inv_fx,
+                                                                (j + 0.5 - camera.v0) * inv_fy, 1.0);
+      bool uniform = true;
+      for (int k = 1; k < SS; ++k) uniform &= ids[k] == ids[0];
+      Eigen::Vector3f colour;
+      int centre_face = -1;
+      if (uniform) {
+        centre_face = ids[0];
+        colour = centre_face >= 0 ? shade(centre_face, dc) : sky(dc);
+      } else {
+        // The face through the exact pixel centre: the nearest of the sampled faces that contains it.
+        double best_w = 0;
+        for (int k = 0; k < SS; ++k) {
+          const int f = ids[k];
+          if (f < 0 || f == centre_face) continue;
+          const Eigen::Vector3d bm = planes[f] * dc;
+          const double s = bm.sum();
+          if (!(s > 0)) continue;
+          const double tol = -1e-9 * std::abs(s);
+          if (bm[0] < tol || bm[1] < tol || bm[2] < tol) continue;
+          if (s > best_w || (s == best_w && f < centre_face)) {
+            best_w = s;
+            centre_face = f;
+          }
+        }
+        colour.setZero();
+        for (int b = 0; b < S; ++b)
+          for (int a = 0; a < S; ++a) {
+            Eigen::Vector3d ds;
+            if (rt.distorted) {
+              ds << rt.sub[p * SS + b * S + a].cast<double>(), 1.0;
+            } else {
+              ds << (i + (a + 0.5) / S - camera.u0) * inv_fx, (j + (b + 0.5) / S - camera.v0) * inv_fy, 1.0;
+            }
+            const int f = ids[b * S + a];
+            colour += f >= 0 ? shade(f, ds) : sky(ds);
+          }
+        colour /= static_cast<float>(SS);
+      }
+      fid[i] = centre_face;
+      dep[i] = centre_face >= 0 ? static_cast<float>(1.0 / (planes[centre_face] * dc).sum()) : 0.0f;
+      for (int c = 0; c < 3; ++c) {
+        double val = colour[c];
+        if (options.noise_sigma > 0) val += options.noise_sigma * Gaussian(options.noise_seed, p * 3 + c);
+        img[3 * i + c] = static_cast<uint8_t>(std::clamp(std::lround(val), 0l, 255l));
+      }
+    }
+  });
+  return out;
+}
+
+}  // namespace fmv3d::render

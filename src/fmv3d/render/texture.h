@@ -1,0 +1,35 @@
+// Mip-mapped texture with trilinear filtering, for the rasteriser.
+#pragma once
+
+#include <Eigen/Core>
+#include <cstdint>
+#include <opencv2/core.hpp>
+#include <vector>
+
+namespace fmv3d::render {
+
+class MipTexture {
+ public:
+  MipTexture() = default;
+  // bgr: CV_8UC3. Builds the pyramid by 2x2 box filtering (odd sizes round up, the last row/column repeat).
+  explicit MipTexture(const cv::Mat& bgr);
+
+  bool empty() const { return levels_.empty(); }
+  int width() const { return levels_.empty() ? 0 : levels_[0].w; }
+  int height() const { return levels_.empty() ? 0 : levels_[0].h; }
+  int num_levels() const { return static_cast<int>(levels_.size()); }
+
+  // Colour (BGR, 0..255) at OBJ texture coordinates (u, v) (v = 0 at the bottom row), trilinear between
+  // mip levels floor(lod) and floor(lod)+1; lod = log2(texels per pixel). Coordinates outside [0, 1] wrap.
+  Eigen::Vector3f Sample(float u, float v, float lod) const;
+
+ private:
+  struct Level {
+    int w = 0, h = 0;
+    std::vector<uint8_t> bgr;  // row-major, 3 bytes per texel
+  };
+  Eigen::Vector3f Bilinear(const Level& l, float u, float v) const;
+  std::vector<Level> levels_;
+};
+
+}  // namespace fmv3d::render

@@ -1,0 +1,43 @@
+// Flight paths for synthetic vision: camera poses (world-to-camera) for each frame.
+//   orbit  a circle of `radius` around the look-at point at `altitude` (world z), looking at it.
+//   grid   a lawn-mower pattern of nadir views at `altitude`: parallel strips ~65% side overlap,
+//          alternating direction, camera x across track.
+//   pass   a straight oblique pass at `altitude` beside the target, looking at it at ~45° depression.
+// Each frame gets gimbal-like attitude jitter (smooth wander plus a little shake) and position jitter,
+// drawn from `seed` only, so the same seed gives the same flight.
+#pragma once
+
+#include <Eigen/Core>
+#include <cstdint>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "fmv3d/core/camera.h"
+#include "fmv3d/core/pose.h"
+#include "fmv3d/synth/scene.h"
+
+namespace fmv3d::synth {
+
+struct FlightOptions {
+  std::string path = "orbit";                // orbit | grid | pass
+  int frames = 48;
+  std::optional<double> altitude;            // metres (world z); default per scene
+  std::optional<double> radius;              // orbit radius / grid half-size / pass stand-off, metres
+  std::optional<Eigen::Vector3d> look_at;    // default: the scene's target
+  double jitter_deg = 0.4;                   // attitude jitter (1 sigma), degrees
+  double position_jitter = 0.3;              // metres (1 sigma)
+  uint64_t seed = 1;
+  void Check() const;
+};
+
+// Resolved defaults for a scene (what the flight will actually use).
+struct FlightGeometry {
+  double altitude = 0, radius = 0;
+  Eigen::Vector3d look_at = Eigen::Vector3d::Zero();
+};
+FlightGeometry ResolveFlight(const Scene& scene, const core::Camera& camera, const FlightOptions& options);
+
+std::vector<core::Pose> MakeFlight(const Scene& scene, const core::Camera& camera, const FlightOptions& options);
+
+}  // namespace fmv3d::synth

@@ -1,0 +1,297 @@
+#include "fmv3d/synth/scene.h"
+
+#include <fmt/format.h>
+
+#include <algorithm>
+#include <cmath>
+
+#include "fmv3d/core/error.h"
+#include "fmv3d/synth/noise.h"
+#include "fmv3d/synth/textures.h"
+
+namespace fmv3d::synth {
+namespace {
+
+// Small helper to assemble meshes with outward-wound faces.
+struct Builder {
+  io::TexturedMesh m;
+  int V(const Eigen::Vector3d& p) {
+    m.vertices.push_back(p);
+    return static_cast<int>(m.vertices.size()) - 1;
+  }
+  int T(double u, double v) {
+    m.uvs.emplace_back(static_cast<float>(u), static_cast<float>(v));
+    return static_cast<int>(m.uvs.size()) - 1;
+  }
+  // Adds triangle (a, b, c), flipped if needed so that its normal points along `outward`.
+  void Tri(int a, int b, int c, int ta, int tb, int tc, int mat, const Eigen::Vector3d& outward) {
+    io::Face f;
+    const Eigen::Vector3d n = (m.vertices[b] - m.vertices[a]).cross(m.vertices[c] - m.vertices[a]);
+    if (n.dot(outward) < 0) {
+      std::swap(b, c);
+      std::swap(tb, tc);
+    }
+    f.v[0] = a, f.v[1] = b, f.v[2] = c;
+    f.vt[0] = ta, f.vt[1] = tb, f.vt[2] = tc;
+    f.material = mat;
+    m.faces.push_back(f);
+  }
+  void Quad(const int v[4], const int t[4], int mat, const Eigen::Vector3d& outward) {
+    Tri(v[0], v[1], v[2], t[0], t[1], t[2], mat, outward);
+    Tri(v[0], v[2], v[3], t[0], t[2], t[3], mat, outward);
+  }
+  int Material(const std::string& name, const Eigen::Vector3f& kd_bgr, cv::Mat texture) {
+    io::Material mat;
+    mat.name = name;
+    mat.diffuse_bgr = kd_bgr;
+    if (!texture.empty()) mat.texture_file = name + ".png";
+    mat.texture = std::move(texture);
+    m.materials.push_back(std::move(mat));
+    return static_cast<int>(m.materials.size()) - 1;
+  }
+};
+
+double SmoothStep(double e0, double e1, double x) {
+  const double t = std::clamp((x - e0) / (e1 - e0), 0.0, 1.0);
+  return t * t * (3 - 2 * t);
+}
+
+// Terrain grid over `extent` with `step` metres spacing, smooth normals and a single ground texture.
+io::TexturedMesh MakeTerrain(const Eigen::AlignedBox2d& extent, double step,
+                             const std::function<double(double, double)>& h, cv::Mat texture) {
+  Builder b;
+  const int mat = b.Material("ground", {0.4f, 0.6f, 0.5f}, std::move(texture));
+  const int nx = static_cast<int>(std::lround(extent.sizes().x() / step)) + 1;
+  const int ny = static_cast<int>(std::lround(extent.sizes().y() / step)) + 1;
+  const double sx = extent.sizes().x() / (nx - 1), sy = extent.sizes().y() / (ny - 1);
+  for (int j = 0; j < ny; ++j)
+    for (int i = 0; i < nx; ++i) {
+      const double x = extent.min().x() + i * sx, y = extent.min().y() + j * sy;
+      b.V({x, y, h(x, y)});
+      b.T(static_cast<double>(i) / (nx - 1), static_cast<double>(j) / (ny - 1));
+      const double e = 0.5;
+      const Eigen::Vector3d n(-(h(x + e, y) - h(x - e, y)) / (2 * e), -(h(x, y + e) - h(x, y - e)) / (2 * e), 1);
+      b.m.normals.push_back(n.normalized().cast<float>());
+    }
+  for (int j = 0; j + 1 < ny; ++j)
+    for (int i = 0; i + 1 < nx; ++i) {
+      const int a = j * nx + i, c = a + 1, d = a + nx, e = d + 1;
+      b.Tri(a, c, e, a, c, e, mat, Eigen::Vector3d::UnitZ());
+      b.Tri(a, e, d, a, e, d, mat, Eigen::Vector3d::UnitZ());
+    }
+  for (auto& f : b.m.faces)
+    for (int k = 0; k < 3; ++k) f.vn[k] = f.v[k];
+  return std::move(b.m);
+}
+
+int TextureSize(double extent_m, double texels_per_metre, double detail) {
+  return std::clamp(static_cast<int>(std::lround(extent_m * texels_per_metre * detail)), 64, 4096);
+}
+
+}  // namespace
+
+io::TexturedMesh MakeBuilding(const BuildingSpec& s, double tpm) {
+  if (!(s.width > 0 && s.depth > 0 && s.eave_height > 0 && s.ridge_height >= s.eave_height && s.sink >= 0))
+    throw Error("building '" + s.name + "': dimensions must be positive and the ridge not below the eaves");
+  Builder b;
+  const bool pitched = s.ridge_height > s.eave_height + 1e-9;
+  const double hd = s.heading_deg * M_PI / 180, ch = std::cos(hd), sh = std::sin(hd);
+  auto world = [&](double x, double y, double z) {
+    return Eigen::Vector3d(s.base.x() + ch * x - sh * y, s.base.y() + sh * x + ch * y, s.base.z() + z);
+  };
+  const double w2 = s.width / 2, d2 = s.depth / 2, zb = -s.sink, ze = s.eave_height, zr = s.ridge_height;
+  const double cx[4] = {-w2, w2, w2, -w2}, cy[4] = {-d2, -d2, d2, d2};  // counter-clockwise from above
+  int bot[4], eave[4];
+  for (int k = 0; k < 4; ++k) bot[k] = b.V(world(cx[k], cy[k], zb));
+  for (int k = 0; k < 4; ++k) eave[k] = b.V(world(cx[k], cy[k], ze));
+  const double lens[4] = {s.width, s.depth, s.width, s.depth};
+  const double perimeter = 2 * (s.width + s.depth), total = zr - zb;
+
+  FacadeSpec fs;
+  fs.wall_lengths = {lens[0], lens[1], lens[2], lens[3]};
+  fs.total_height = total;
+  fs.ground_offset = s.sink;
+  fs.eave_height = s.eave_height;
+  fs.floor_height = s.floor_height;
+  fs.texels_per_metre = tpm;
+  fs.seed = s.style_seed;
+  const int facade = b.Material(s.name + "_facade", {0.7f, 0.75f, 0.8f}, tpm > 0 ? FacadeTexture(fs) : cv::Mat());
+  const double slope_len = std::hypot(d2, zr - ze);
+  const int roof = b.Material(s.name + "_roof", {0.3f, 0.3f, 0.55f},
+                              tpm > 0 ? RoofTexture(s.width, pitched ? 2 * slope_len : s.depth, pitched, tpm,
+                                                    s.style_seed + 101)
+                                      : cv::Mat());
+  const int base_mat = b.Material(s.name + "_base", {0.4f, 0.4f, 0.4f}, cv::Mat());
+  if (tpm <= 0) {
+    b.m.materials[facade].texture_file = s.name + "_facade.png";
+    b.m.materials[roof].texture_file = s.name + "_roof.png";
+  }
+  const Eigen::Vector3d centre = world(0, 0, (zb + zr) / 2);
+  auto outward = [&](const Eigen::Vector3d& p) { return Eigen::Vector3d(p - centre); };
+
+  double u = 0;
+  for (int k = 0; k < 4; ++k) {
+    const int k1 = (k + 1) % 4;
+    const double u0 = u / perimeter, u1 = (u + lens[k]) / perimeter, ve = (ze - zb) / total;
+    const int v[4] = {bot[k], bot[k1], eave[k1], eave[k]};
+    const int t[4] = {b.T(u0, 0), b.T(u1, 0), b.T(u1, ve), b.T(u0, ve)};
+    Eigen::Vector3d out = world((cx[k] + cx[k1]) / 2, (cy[k] + cy[k1]) / 2, 0) - world(0, 0, 0);
+    b.Quad(v, t, facade, out);
+    u += lens[k];
+  }
+  if (pitched) {
+    // Ridge along the building's x axis; gables on the short (x = ±w/2) walls 1 and 3.
+    const int re = b.V(world(w2, 0, zr)), rw = b.V(world(-w2, 0, zr));
+    const double ve = (ze - zb) / total;
+    const double ug1 = (lens[0] + lens[1] / 2) / perimeter, ug3 = (lens[0] + lens[1] + lens[2] + lens[3] / 2) / perimeter;
+    b.Tri(eave[1], eave[2], re, b.T(lens[0] / perimeter, ve), b.T((lens[0] + lens[1]) / perimeter, ve), b.T(ug1, 1),
+          facade, world(1, 0, 0) - world(0, 0, 0));
+    b.Tri(eave[3], eave[0], rw, b.T((perimeter - lens[3]) / perimeter, ve), b.T(1.0, ve), b.T(ug3, 1), facade,
+          world(-1, 0, 0) - world(0, 0, 0));
+    const int south[4] = {eave[0], eave[1], re, rw};
+    const int ts[4] = {b.T(0, 0), b.T(1, 0), b.T(1, 0.5), b.T(0, 0.5)};
+    b.Quad(south, ts, roof, outward(world(0, -d2 / 2, (ze + zr) / 2)));
+    const int north[4] = {eave[2], eave[3], rw, re};
+    const int tn[4] = {b.T(1, 1), b.T(0, 1), b.T(0, 0.5), b.T(1, 0.5)};
+    b.Quad(north, tn, roof, outward(world(0, d2 / 2, (ze + zr) / 2)));
+  } else {
+    const int t[4] = {b.T(0, 0), b.T(1, 0), b.T(1, 1), b.T(0, 1)};
+    b.Quad(eave, t, roof, Eigen::Vector3d::UnitZ());
+  }
+  const int tb[4] = {-1, -1, -1, -1};
+  b.Quad(bot, tb, base_mat, -Eigen::Vector3d::UnitZ());
+  return std::move(b.m);
+}
+
+void SceneOptions::Check() const {
+  if (!(detail > 0 && detail <= 4)) throw Error("scene: detail must be in (0, 4]");
+  if (!(board_square > 0)) throw Error("scene: board square size must be positive");
+}
+
+const std::vector<std::string>& SceneNames() {
+  static const std::vector<std::string> names = {"building", "town", "terrain", "board"};
+  return names;
+}
+
+namespace {
+
+Scene MakeBoard(const SceneOptions& o) {
+  Scene scene;
+  scene.name = "board";
+  const double sq = o.board_square;
+  // 10 × 7 squares (9 × 6 inner corners at (i·sq, j·sq), i = 0..8, j = 0..5) and a one-square white margin.
+  const int ppsq = 64;
+  const int cols = 12 * ppsq, rows = 9 * ppsq;
+  cv::Mat tex(rows, cols, CV_8UC3, cv::Scalar(235, 235, 235));
+  for (int r = 0; r < rows; ++r)
+    for (int c = 0; c < cols; ++c) {
+      const int sx = c / ppsq - 1, sy = (rows - 1 - r) / ppsq - 1;  // square indices, y up
+      if (sx >= 0 && sx < 10 && sy >= 0 && sy < 7 && ((sx + sy) % 2 == 0)) tex.at<cv::Vec3b>(r, c) = {25, 25, 25};
+    }
+  Builder b;
+  const int mat = b.Material("board", {0.9f, 0.9f, 0.9f}, tex);
+  const double x0 = -2 * sq, x1 = 10 * sq, y0 = -2 * sq, y1 = 7 * sq;
+  const int v[4] = {b.V({x0, y0, 0}), b.V({x1, y0, 0}), b.V({x1, y1, 0}), b.V({x0, y1, 0})};
+  const int t[4] = {b.T(0, 0), b.T(1, 0), b.T(1, 1), b.T(0, 1)};
+  b.Quad(v, t, mat, Eigen::Vector3d::UnitZ());
+  scene.mesh = std::move(b.m);
+  scene.ground_height = [](double, double) { return 0.0; };
+  scene.ground_extent = Eigen::AlignedBox2d(Eigen::Vector2d(x0, y0), Eigen::Vector2d(x1, y1));
+  scene.target = {4 * sq, 2.5 * sq, 0};
+  scene.interest_radius = 6 * sq;
+  scene.characteristic_length = x1 - x0;
+  return scene;
+}
+
+}  // namespace
+
+Scene MakeScene(const std::string& name, const SceneOptions& o) {
+  o.Check();
+  if (name == "board") return MakeBoard(o);
+  Scene scene;
+  scene.name = name;
+  double extent = 0, step = 0, ground_tpm = 0;
+  const double facade_tpm = 30 * o.detail;
+  if (name == "building") {
+    extent = 260, step = 2, ground_tpm = 13;
+    scene.ground_height = [](double x, double y) {
+      return 3.0 * (Fbm(x / 90, y / 90, 11, 4) - 0.5) * SmoothStep(30, 70, std::hypot(x, y));
+    };
+    BuildingSpec spec;  // the defaults are the shipped building
+    scene.buildings.push_back(spec);
+    scene.target = {0, 0, 15};
+    scene.interest_radius = 25;
+  } else if (name == "town") {
+    extent = 480, step = 2.5, ground_tpm = 9;
+    scene.ground_height = [](double x, double y) {
+      const double r = std::hypot(x, y);
+      return 14.0 * (Fbm(x / 160, y / 160, 21, 5) - 0.5) * (0.35 + 0.65 * SmoothStep(60, 160, r));
+    };
+    struct Lot { double x, y, w, d, eave, ridge, heading; };
+    const Lot lots[] = {{0, 0, 20, 12, 24, 30, 0},         {-58, 38, 30, 18, 15, 15, 12},
+                        {52, -36, 16, 16, 12, 16, -20},    {-46, -52, 40, 14, 9, 9, 35},
+                        {62, 48, 12, 10, 8, 11, 70},       {4, 74, 22, 22, 42, 42, 5},
+                        {-88, -6, 14, 24, 18, 23, -8},     {30, 20, 10, 8, 6, 9, 50},
+                        {96, -8, 26, 12, 20, 20, 95},      {-20, -92, 18, 10, 11, 14, 15}};
+    int k = 0;
+    for (const Lot& l : lots) {
+      BuildingSpec s;
+      s.name = fmt::format("building_{}", k);
+      s.width = l.w, s.depth = l.d, s.eave_height = l.eave, s.ridge_height = l.ridge, s.heading_deg = l.heading;
+      const double z = scene.ground_height(l.x, l.y);
+      double zmin = z;
+      for (double fx : {-0.5, 0.0, 0.5})
+        for (double fy : {-0.5, 0.0, 0.5}) {
+          const double hd = l.heading * M_PI / 180;
+          const double px = l.x + std::cos(hd) * fx * l.w - std::sin(hd) * fy * l.d;
+          const double py = l.y + std::sin(hd) * fx * l.w + std::cos(hd) * fy * l.d;
+          zmin = std::min(zmin, scene.ground_height(px, py));
+        }
+      s.base = {l.x, l.y, z};
+      s.sink = z - zmin + 0.3;
+      s.style_seed = 1000 + k;
+      scene.buildings.push_back(s);
+      ++k;
+    }
+    scene.target = {0, 0, scene.ground_height(0, 0) + 10};
+    scene.interest_radius = 100;
+  } else if (name == "terrain") {
+    extent = 800, step = 4, ground_tpm = 5;
+    scene.ground_height = [](double x, double y) {
+      const double hills = 30.0 * Fbm(x / 220, y / 220, 31, 6);
+      const double d = (0.8 * x - 0.6 * y + 40) / 70.0;  // distance to the ridge line, in widths
+      const double ridge = 55.0 * std::exp(-0.5 * d * d) * (0.6 + 0.4 * RidgedFbm(x / 120, y / 120, 32, 4));
+      return hills + ridge - 10.0;
+    };
+    scene.target = {0, 0, scene.ground_height(0, 0)};
+    scene.interest_radius = 200;
+  } else {
+    throw Error("unknown scene '" + name + "' (expected building, town, terrain or board)");
+  }
+  scene.ground_extent = Eigen::AlignedBox2d(Eigen::Vector2d(-extent / 2, -extent / 2), Eigen::Vector2d(extent / 2, extent / 2));
+  const auto& buildings = scene.buildings;
+  auto paved = [&buildings](double x, double y) {
+    for (const auto& s : buildings) {
+      const double hd = s.heading_deg * M_PI / 180, dx = x - s.base.x(), dy = y - s.base.y();
+      const double lx = std::cos(hd) * dx + std::sin(hd) * dy, ly = -std::sin(hd) * dx + std::cos(hd) * dy;
+      if (std::abs(lx) < s.width / 2 + 4 && std::abs(ly) < s.depth / 2 + 4) return true;
+    }
+    return false;
+  };
+  const int tex = TextureSize(extent, ground_tpm, o.detail);
+  scene.mesh = MakeTerrain(scene.ground_extent, step, scene.ground_height,
+                           GroundTexture(tex, scene.ground_extent, 7, scene.ground_height, paved));
+  double tallest = 0;
+  for (const auto& s : scene.buildings) {
+    scene.mesh.Append(MakeBuilding(s, facade_tpm));
+    tallest = std::max(tallest, s.ridge_height);
+  }
+  if (scene.buildings.empty()) {
+    const auto box = scene.mesh.Bounds();
+    tallest = box.max().z() - box.min().z();
+  }
+  scene.characteristic_length = tallest;
+  return scene;
+}
+
+}  // namespace fmv3d::synth

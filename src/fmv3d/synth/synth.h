@@ -1,0 +1,68 @@
+// Synthetic vision: renders a flight over a fixed scene and writes the frames (or a video) together with the
+// exact ground truth. This is what `fmv3d synth` runs; later stages are measured against its output.
+//
+// Output layout in `output`:
+//   frames/flight-000000.png ...   the frames (png or jpg formats), 6-digit index from 0
+//   flight.mp4 | flight.ts         the video instead (mp4/ts formats); the frame extractor names its frames
+//                                  flight-000000.png ..., the names used in truth/images.txt
+//   truth/cameras.txt              COLMAP text model: one OPENCV camera with the exact intrinsics
+//   truth/images.txt               one image per frame (world-to-camera pose, name flight-NNNNNN.png) with
+//   truth/points3D.txt             the projections of a sample of visible surface points (tracks)
+//   depth/flight-NNNNNN.tiff       (with write_depth) 32-bit float depth maps: camera z in metres, 0 = sky
+//   scene.obj, scene.mtl, *.png    the scene mesh in world metres (z up) with its textures
+//   truth.json                     characteristic_length (tallest building, m), scene bounds, seed, frame
+//                                  rate, flight geometry, camera and every option
+#pragma once
+
+#include <array>
+#include <filesystem>
+#include <nlohmann/json.hpp>
+#include <optional>
+#include <string>
+
+#include "fmv3d/core/camera.h"
+#include "fmv3d/core/reconstruction.h"
+#include "fmv3d/render/renderer.h"
+#include "fmv3d/synth/flight.h"
+#include "fmv3d/synth/scene.h"
+
+namespace fmv3d::synth {
+
+struct SynthOptions {
+  std::string scene = "building";
+  FlightOptions flight;
+  int width = 1280, height = 720;
+  std::optional<double> focal;                // pixels; default: 60° horizontal field of view
+  std::array<double, 4> distortion{0, 0, 0, 0};  // k1 k2 p1 p2
+  render::RenderOptions render;               // sun, exposure, noise, supersampling
+  std::string format = "png";                 // png | jpg | mp4 | ts
+  int jpeg_quality = 92;
+  double fps = 10;
+  double detail = 1.0;                        // scene texture resolution multiplier
+  int truth_points = 3000;                    // surface points sampled for points3D.txt (0: none)
+  bool write_scene = true;                    // scene.obj + textures
+  bool write_depth = false;
+  std::filesystem::path output;
+
+  void Check() const;
+  nlohmann::json ToJson() const;
+  bool IsVideo() const { return format == "mp4" || format == "ts"; }
+};
+
+// The camera the flight uses: focal from options or a 60° horizontal field of view, principal point at the
+// image centre, the given distortion.
+core::Camera SynthCamera(const SynthOptions& options);
+
+// Frame file name for index i: flight-000042.png (always .png for video, as the frame extractor names them).
+std::string FrameName(int index, const std::string& extension = "png");
+
+struct SynthResult {
+  core::Reconstruction truth;
+  double characteristic_length = 0;
+  int frames = 0;
+};
+
+// Renders and writes everything (see the layout above). Throws fmv3d::Error on bad options or I/O errors.
+SynthResult RunSynth(const SynthOptions& options);
+
+}  // namespace fmv3d::synth
