@@ -3,11 +3,11 @@
 #include <algorithm>
 #include <cmath>
 #include <filesystem>
-#include <fstream>
 
 #include "fmv3d/core/error.h"
 #include "fmv3d/geometry/similarity.h"
 #include "fmv3d/io/colmap_model.h"
+#include "fmv3d/io/ground_truth.h"
 
 namespace fmv3d::sfm {
 
@@ -87,40 +87,9 @@ core::Reconstruction LoadTruth(const std::string& dir_str) {
   const fs::path dir(dir_str);
   if (!fs::is_directory(dir)) throw Error(dir_str + ": ground-truth folder not found");
   if (fs::exists(dir / "images.txt")) return io::ReadColmapText(dir);
-  std::vector<fs::path> files;
   for (const auto& e : fs::directory_iterator(dir))
-    if (e.path().extension() == ".camera") files.push_back(e.path());
-  std::sort(files.begin(), files.end());
-  if (files.empty())
-    throw Error(dir_str + ": no ground truth (neither a COLMAP text model nor NAME.camera files)");
-  core::Reconstruction rec;
-  uint32_t id = 1;
-  for (const auto& f : files) {
-    std::ifstream in(f);
-    double v[26];
-    for (double& x : v)
-      if (!(in >> x)) throw Error(f.string() + ": expected 26 numbers (K, distortion, R, C, width height)");
-    core::Camera cam;
-    cam.id = id;
-    cam.f = v[4];
-    cam.aspect = v[0] / v[4];
-    cam.u0 = v[2];
-    cam.v0 = v[5];
-    cam.width = static_cast<int>(v[24]);
-    cam.height = static_cast<int>(v[25]);
-    Eigen::Matrix3d Rc2w;
-    Rc2w << v[12], v[13], v[14], v[15], v[16], v[17], v[18], v[19], v[20];
-    const Eigen::Vector3d C(v[21], v[22], v[23]);
-    core::Image im;
-    im.id = id;
-    im.camera_id = id;
-    im.name = f.stem().string();  // "0000.jpg.camera" → "0000.jpg"
-    im.pose = core::Pose::FromRotationAndCentre(Rc2w.transpose(), C);
-    rec.cameras[id] = cam;
-    rec.images[id] = im;
-    ++id;
-  }
-  return rec;
+    if (e.path().extension() == ".camera") return io::ReadStrechaCameras(dir);
+  throw Error(dir_str + ": no ground truth (neither a COLMAP text model nor Strecha NAME.camera files)");
 }
 
 }  // namespace fmv3d::sfm

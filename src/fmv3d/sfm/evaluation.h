@@ -36,8 +36,8 @@ SparseEvaluation EvaluateSparse(const core::Reconstruction& estimate, const core
 // Median relative-rotation error (degrees) over all pairs of corresponding poses (same order in both lists).
 double MedianRelativeRotationErrorDeg(const std::vector<core::Pose>& estimate, const std::vector<core::Pose>& truth);
 
-// Loads ground truth from a COLMAP text model folder, or from a Strecha-style folder of NAME.camera files
-// (K 3 rows, distortion row, R camera-to-world 3 rows, centre C, width height; see shared data README).
+// Loads ground truth from a COLMAP text model folder, or from a Strecha folder of NAME.camera files
+// (io::ReadStrechaCameras).
 core::Reconstruction LoadTruth(const std::string& dir);
 
 }  // namespace fmv3d::sfm
