@@ -1,6 +1,6 @@
 # Every dependency is a Debian 12 package installed by scripts/install-deps.sh.
 find_package(Eigen3 REQUIRED NO_MODULE)
-find_package(OpenCV REQUIRED COMPONENTS core imgproc imgcodecs videoio features2d calib3d flann)
+find_package(OpenCV REQUIRED COMPONENTS core imgproc imgcodecs videoio video features2d calib3d flann)
 find_package(Ceres REQUIRED)
 find_package(TBB REQUIRED)
 find_package(spdlog REQUIRED)

@@ -47,6 +47,14 @@ struct VerifiedPair {
   Eigen::Matrix3d H = Eigen::Matrix3d::Zero();
   uint32_t num_putative = 0, num_inliers_F = 0, num_inliers_E = 0, num_inliers_H = 0;
   PairGeometry geometry = PairGeometry::kUndefined;
+  // Added by features/ (additive): the relative pose from E with the prior intrinsics, x_cam2 = R * x_cam1 + t
+  // (|t| = 1), valid when has_pose; the median triangulation angle (degrees) of the E inliers that pass the
+  // cheirality test — a baseline measure for the initial-pair choice. For "guess" priors the pose is only as good
+  // as the guessed focal length.
+  bool has_pose = false;
+  Eigen::Matrix3d R = Eigen::Matrix3d::Identity();
+  Eigen::Vector3d t = Eigen::Vector3d::Zero();
+  double median_triangulation_angle_deg = 0;
 };
 
 }  // namespace fmv3d::features

@@ -1,0 +1,47 @@
+// `fmv3d sparse WS`: incremental structure-from-motion + bundle adjustment → WS/sparse/, WS/report/sparse.json.
+#include <spdlog/spdlog.h>
+
+#include "command.h"
+#include "fmv3d/sfm/sparse_stage.h"
+
+namespace fmv3d::app {
+namespace {
+
+void Add(CLI::App& app) {
+  auto* cmd = app.add_subcommand("sparse", "Incremental SfM + bundle adjustment (WS/sparse/, report/sparse.json)");
+  struct Args {
+    std::string ws;
+    sfm::SparseStageOptions opt;
+  };
+  auto a = std::make_shared<Args>();
+  auto& m = a->opt.mapper;
+  cmd->add_option("WS", a->ws, "Workspace folder (with frames/, features/, matches/)")->required();
+  cmd->add_option("--init-min-inliers", m.init_min_inliers, "Initial pair: minimum verified matches")
+      ->capture_default_str();
+  cmd->add_option("--init-min-angle", m.init_min_tri_angle_deg,
+                  "Initial pair: median triangulation angle wanted, degrees (relaxed when no pair has it)")
+      ->capture_default_str();
+  cmd->add_option("--max-error", m.abs_pose_max_error_px, "Absolute pose RANSAC threshold, pixels")
+      ->capture_default_str();
+  cmd->add_option("--min-angle", m.tri_min_angle_deg, "Minimum triangulation angle, degrees")
+      ->capture_default_str();
+  cmd->add_option("--filter-angle", m.filter_min_angle_deg, "Points below this angle are removed, degrees")
+      ->capture_default_str();
+  cmd->add_option("--tri-max-error", m.tri_max_error_px, "Triangulation / filter reprojection error, pixels")
+      ->capture_default_str();
+  cmd->add_option("--pp-min-images", m.refine_principal_point_min_images,
+                  "Test freeing the principal point from this model size on")
+      ->capture_default_str();
+  cmd->add_flag("--tangential", m.refine_tangential, "Also refine p1, p2");
+  cmd->add_option("--max-models", m.max_models, "Maximum number of disconnected models")->capture_default_str();
+  cmd->add_option("--seed", m.seed, "Random seed")->capture_default_str();
+  cmd->callback([a] {
+    a->opt.mapper.filter_max_error_px = a->opt.mapper.tri_max_error_px;
+    sfm::RunSparseStage(a->ws, a->opt);
+  });
+}
+
+const RegisterCommand reg(400, Add);
+
+}  // namespace
+}  // namespace fmv3d::app

@@ -1,0 +1,255 @@
+#include "fmv3d/features/feature_io.h"
+
+#include <cstring>
+#include <fstream>
+#include <iterator>
+
+#include "fmv3d/core/error.h"
+#include "fmv3d/core/files.h"
+
+namespace fmv3d::features {
+namespace fs = std::filesystem;
+
+namespace {
+
+constexpr char kFeatMagic[8] = {'F', 'M', 'V', '3', 'D', 'F', 'E', 'A'};
+constexpr char kFeatEnd[8] = {'F', 'E', 'A', '-', 'E', 'N', 'D', '.'};
+constexpr char kMatMagic[8] = {'F', 'M', 'V', '3', 'D', 'M', 'A', 'T'};
+constexpr char kMatEnd[8] = {'M', 'A', 'T', '-', 'E', 'N', 'D', '.'};
+
+class Writer {
+ public:
+  void Bytes(const void* p, size_t n) {
+    const char* c = static_cast<const char*>(p);
+    buf_.insert(buf_.end(), c, c + n);
+  }
+  template <typename T>
+  void Put(const T& v) {
+    Bytes(&v, sizeof(T));
+  }
+  void Mat(const Eigen::Matrix3d& m) {
+    for (int r = 0; r < 3; ++r)
+      for (int c = 0; c < 3; ++c) Put<double>(m(r, c));
+  }
+  void Save(const fs::path& path) {
+    core::WriteAtomically(path, [&](const fs::path& tmp) {
+      std::ofstream out(tmp, std::ios::binary);
+      out.write(buf_.data(), static_cast<std::streamsize>(buf_.size()));
+      if (!out) throw Error(path.string() + ": cannot write");
+    });
+  }
+  std::vector<char> buf_;
+};
+
+class Reader {
+ public:
+  explicit Reader(const fs::path& path) : path_(path) {
+    std::ifstream in(path, std::ios::binary);
+    if (!in) throw Error(path.string() + ": cannot open (missing file?)");
+    buf_.assign(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
+  }
+  size_t Remaining() const { return buf_.size() - pos_; }
+  void Bytes(void* p, size_t n, const char* what) {
+    if (n > Remaining())
+      throw Error(path_.string() + ": truncated file (" + what + " needs " + std::to_string(n) + " bytes, " +
+                  std::to_string(Remaining()) + " left)");
+    std::memcpy(p, buf_.data() + pos_, n);
+    pos_ += n;
+  }
+  template <typename T>
+  T Get(const char* what) {
+    T v;
+    Bytes(&v, sizeof(T), what);
+    return v;
+  }
+  Eigen::Matrix3d Mat(const char* what) {
+    Eigen::Matrix3d m;
+    for (int r = 0; r < 3; ++r)
+      for (int c = 0; c < 3; ++c) m(r, c) = Get<double>(what);
+    return m;
+  }
+  void Magic(const char (&magic)[8], const char* kind) {
+    char m[8];
+    if (Remaining() < 8) throw Error(path_.string() + ": too short to be " + kind);
+    Bytes(m, 8, "magic");
+    if (std::memcmp(m, magic, 8) != 0) throw Error(path_.string() + ": not " + kind + " (wrong magic)");
+  }
+  void End(const char (&end)[8]) {
+    char m[8];
+    Bytes(m, 8, "end marker");
+    if (std::memcmp(m, end, 8) != 0) throw Error(path_.string() + ": corrupt file (bad end marker)");
+    if (Remaining() != 0) throw Error(path_.string() + ": corrupt file (trailing bytes after end marker)");
+  }
+  // Fails early with a clear message when a count cannot fit in the rest of the file (instead of trying to
+  // allocate gigabytes for a corrupt count).
+  void CheckFits(uint64_t count, uint64_t bytes_each, const char* what) {
+    if (bytes_each > 0 && count > Remaining() / bytes_each)
+      throw Error(path_.string() + ": truncated or corrupt file (" + std::to_string(count) + " " + what +
+                  " do not fit in the remaining " + std::to_string(Remaining()) + " bytes)");
+  }
+  const fs::path& path() const { return path_; }
+
+ private:
+  fs::path path_;
+  std::vector<char> buf_;
+  size_t pos_ = 0;
+};
+
+}  // namespace
+
+void WriteFeatures(const FeatureSet& f, const fs::path& path) {
+  const size_t n = f.keypoints.size();
+  if (static_cast<size_t>(f.descriptors.rows()) != n || f.colors.size() != n)
+    throw Error(path.string() + ": inconsistent feature set (" + std::to_string(n) + " keypoints, " +
+                std::to_string(f.descriptors.rows()) + " descriptors, " + std::to_string(f.colors.size()) +
+                " colours)");
+  Writer w;
+  w.Bytes(kFeatMagic, 8);
+  w.Put<uint32_t>(kFeatureFileVersion);
+  w.Put<int32_t>(f.width);
+  w.Put<int32_t>(f.height);
+  w.Put<uint32_t>(static_cast<uint32_t>(n));
+  w.Put<uint32_t>(static_cast<uint32_t>(f.image_name.size()));
+  w.Bytes(f.image_name.data(), f.image_name.size());
+  for (const auto& k : f.keypoints) {
+    w.Put<float>(k.x);
+    w.Put<float>(k.y);
+    w.Put<float>(k.scale);
+    w.Put<float>(k.orientation);
+  }
+  if (n > 0) w.Bytes(f.descriptors.data(), n * 128);
+  for (const auto& c : f.colors) w.Bytes(c.data(), 3);
+  w.Bytes(kFeatEnd, 8);
+  w.Save(path);
+}
+
+FeatureSet ReadFeatures(const fs::path& path) {
+  Reader r(path);
+  r.Magic(kFeatMagic, "an fmv3d feature file");
+  const auto version = r.Get<uint32_t>("version");
+  if (version != kFeatureFileVersion)
+    throw Error(path.string() + ": feature file version " + std::to_string(version) + " not supported (expected " +
+                std::to_string(kFeatureFileVersion) + "; re-run `fmv3d features`)");
+  FeatureSet f;
+  f.width = r.Get<int32_t>("width");
+  f.height = r.Get<int32_t>("height");
+  if (f.width <= 0 || f.height <= 0)
+    throw Error(path.string() + ": corrupt file (image size " + std::to_string(f.width) + "x" +
+                std::to_string(f.height) + ")");
+  const uint32_t n = r.Get<uint32_t>("keypoint count");
+  const uint32_t name_len = r.Get<uint32_t>("name length");
+  r.CheckFits(name_len, 1, "name bytes");
+  f.image_name.resize(name_len);
+  r.Bytes(f.image_name.data(), name_len, "image name");
+  r.CheckFits(n, 16 + 128 + 3, "keypoints");
+  f.keypoints.resize(n);
+  for (auto& k : f.keypoints) {
+    k.x = r.Get<float>("keypoint");
+    k.y = r.Get<float>("keypoint");
+    k.scale = r.Get<float>("keypoint");
+    k.orientation = r.Get<float>("keypoint");
+  }
+  f.descriptors.resize(n, 128);
+  if (n > 0) r.Bytes(f.descriptors.data(), size_t{n} * 128, "descriptors");
+  f.colors.resize(n);
+  for (auto& c : f.colors) r.Bytes(c.data(), 3, "colours");
+  r.End(kFeatEnd);
+  return f;
+}
+
+void WriteMatches(const std::vector<VerifiedPair>& pairs, const fs::path& path) {
+  Writer w;
+  w.Bytes(kMatMagic, 8);
+  w.Put<uint32_t>(kMatchFileVersion);
+  w.Put<uint32_t>(static_cast<uint32_t>(pairs.size()));
+  for (const auto& p : pairs) {
+    w.Put<uint32_t>(p.image_id1);
+    w.Put<uint32_t>(p.image_id2);
+    w.Put<uint8_t>(static_cast<uint8_t>(p.geometry));
+    w.Put<uint8_t>(p.has_pose ? 1 : 0);
+    w.Put<uint32_t>(p.num_putative);
+    w.Put<uint32_t>(p.num_inliers_F);
+    w.Put<uint32_t>(p.num_inliers_E);
+    w.Put<uint32_t>(p.num_inliers_H);
+    w.Mat(p.F);
+    w.Mat(p.E);
+    w.Mat(p.H);
+    w.Mat(p.R);
+    for (int i = 0; i < 3; ++i) w.Put<double>(p.t[i]);
+    w.Put<double>(p.median_triangulation_angle_deg);
+    w.Put<uint32_t>(static_cast<uint32_t>(p.inliers.size()));
+    for (const auto& m : p.inliers) {
+      w.Put<uint32_t>(m.idx1);
+      w.Put<uint32_t>(m.idx2);
+    }
+  }
+  w.Bytes(kMatEnd, 8);
+  w.Save(path);
+}
+
+std::vector<VerifiedPair> ReadMatches(const fs::path& path) {
+  Reader r(path);
+  r.Magic(kMatMagic, "an fmv3d match file");
+  const auto version = r.Get<uint32_t>("version");
+  if (version != kMatchFileVersion)
+    throw Error(path.string() + ": match file version " + std::to_string(version) + " not supported (expected " +
+                std::to_string(kMatchFileVersion) + "; re-run `fmv3d match`)");
+  const uint32_t num_pairs = r.Get<uint32_t>("pair count");
+  constexpr uint64_t kPairHeader = 4 * 2 + 2 + 4 * 4 + 8 * (9 * 4 + 3 + 1) + 4;
+  r.CheckFits(num_pairs, kPairHeader, "pairs");
+  std::vector<VerifiedPair> pairs(num_pairs);
+  for (auto& p : pairs) {
+    p.image_id1 = r.Get<uint32_t>("pair");
+    p.image_id2 = r.Get<uint32_t>("pair");
+    const auto geometry = r.Get<uint8_t>("pair");
+    if (geometry > static_cast<uint8_t>(PairGeometry::kPlanarOrRotation))
+      throw Error(path.string() + ": corrupt file (pair geometry code " + std::to_string(geometry) + ")");
+    p.geometry = static_cast<PairGeometry>(geometry);
+    p.has_pose = r.Get<uint8_t>("pair") != 0;
+    p.num_putative = r.Get<uint32_t>("pair");
+    p.num_inliers_F = r.Get<uint32_t>("pair");
+    p.num_inliers_E = r.Get<uint32_t>("pair");
+    p.num_inliers_H = r.Get<uint32_t>("pair");
+    p.F = r.Mat("pair");
+    p.E = r.Mat("pair");
+    p.H = r.Mat("pair");
+    p.R = r.Mat("pair");
+    for (int i = 0; i < 3; ++i) p.t[i] = r.Get<double>("pair");
+    p.median_triangulation_angle_deg = r.Get<double>("pair");
+    const uint32_t m = r.Get<uint32_t>("inlier count");
+    r.CheckFits(m, 8, "inlier matches");
+    p.inliers.resize(m);
+    for (auto& fm : p.inliers) {
+      fm.idx1 = r.Get<uint32_t>("inlier");
+      fm.idx2 = r.Get<uint32_t>("inlier");
+    }
+    if (p.image_id1 == 0 || p.image_id1 >= p.image_id2)
+      throw Error(path.string() + ": corrupt file (pair " + std::to_string(p.image_id1) + "-" +
+                  std::to_string(p.image_id2) + " violates 0 < image_id1 < image_id2)");
+  }
+  r.End(kMatEnd);
+  return pairs;
+}
+
+fs::path FeaturePath(const fs::path& features_dir, const std::string& frame_name) {
+  return features_dir / (fs::path(frame_name).stem().string() + ".feat");
+}
+fs::path MatchesPath(const fs::path& matches_dir) { return matches_dir / "matches.bin"; }
+fs::path MatchesSummaryPath(const fs::path& matches_dir) { return matches_dir / "matches.json"; }
+
+void ValidateMatches(const std::vector<VerifiedPair>& pairs, const std::vector<size_t>& num_keypoints,
+                     const std::string& what) {
+  for (const auto& p : pairs) {
+    if (p.image_id2 > num_keypoints.size())
+      throw Error(what + ": pair " + std::to_string(p.image_id1) + "-" + std::to_string(p.image_id2) +
+                  " refers to an image beyond the " + std::to_string(num_keypoints.size()) +
+                  " frames (matches from another workspace? re-run `fmv3d match`)");
+    const size_t n1 = num_keypoints[p.image_id1 - 1], n2 = num_keypoints[p.image_id2 - 1];
+    for (const auto& m : p.inliers)
+      if (m.idx1 >= n1 || m.idx2 >= n2)
+        throw Error(what + ": pair " + std::to_string(p.image_id1) + "-" + std::to_string(p.image_id2) +
+                    " refers to a keypoint beyond the feature files (stale matches? re-run `fmv3d match`)");
+  }
+}
+
+}  // namespace fmv3d::features

@@ -1,0 +1,51 @@
+// Binary files of the features and match stages (DESIGN.md: our own binary files carry a magic, a version and
+// sizes, and are checked on read). Both formats are little-endian, fixed-width, no padding.
+//
+// features/<frame-stem>.feat
+//   char[8] "FMV3DFEA", uint32 version (1), int32 width, int32 height, uint32 num_keypoints N,
+//   uint32 name_length L, char[L] image_name,
+//   N x {float x, y, scale, orientation}          (pixels, fmv3d convention: pixel centres at +0.5)
+//   N x 128 uint8 descriptors (row-major),  N x 3 uint8 RGB,  char[8] "FEA-END."
+//
+// matches/matches.bin
+//   char[8] "FMV3DMAT", uint32 version (1), uint32 num_pairs P, then P x {
+//     uint32 image_id1, image_id2, uint8 geometry, uint8 has_pose, uint32 num_putative, num_inliers_F,
+//     num_inliers_E, num_inliers_H, float64 F[9], E[9], H[9], R[9] (row-major), t[3],
+//     float64 median_triangulation_angle_deg, uint32 num_inliers M, M x {uint32 idx1, idx2} }
+//   char[8] "MAT-END."
+//
+// Readers throw fmv3d::Error("<file>: <what is wrong>") on a missing, truncated, foreign or inconsistent file
+// (wrong magic, unknown version, counts that do not fit the file size, keypoint indices out of range are the
+// reader's caller's business — see ValidateMatches).
+#pragma once
+
+#include <filesystem>
+#include <string>
+#include <vector>
+
+#include "fmv3d/features/types.h"
+
+namespace fmv3d::features {
+
+inline constexpr uint32_t kFeatureFileVersion = 1;
+inline constexpr uint32_t kMatchFileVersion = 1;
+
+// Written atomically (temporary + rename).
+void WriteFeatures(const FeatureSet& features, const std::filesystem::path& path);
+FeatureSet ReadFeatures(const std::filesystem::path& path);
+
+void WriteMatches(const std::vector<VerifiedPair>& pairs, const std::filesystem::path& path);
+std::vector<VerifiedPair> ReadMatches(const std::filesystem::path& path);
+
+// features/<frame-stem>.feat for a frame named e.g. "clip-000012.png".
+std::filesystem::path FeaturePath(const std::filesystem::path& features_dir, const std::string& frame_name);
+// matches/matches.bin and matches/matches.json.
+std::filesystem::path MatchesPath(const std::filesystem::path& matches_dir);
+std::filesystem::path MatchesSummaryPath(const std::filesystem::path& matches_dir);
+
+// Throws fmv3d::Error when a pair refers to an image id outside [1, num_keypoints.size()] or a keypoint index
+// outside that image's keypoints (num_keypoints[id - 1]); `what` names the file in the message.
+void ValidateMatches(const std::vector<VerifiedPair>& pairs, const std::vector<size_t>& num_keypoints,
+                     const std::string& what);
+
+}  // namespace fmv3d::features

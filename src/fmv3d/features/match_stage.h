@@ -1,0 +1,40 @@
+// The `fmv3d match` stage: pair selection, descriptor matching and geometric verification of every pair.
+// Reads WS/frames/frames.json and WS/features/*.feat; writes WS/matches/matches.bin (all verified pairs,
+// see feature_io.h) and WS/matches/matches.json (pairs tried / verified, inlier counts per pair, timing).
+//
+// Calibrated vs uncalibrated: E is estimated with each camera's prior intrinsics from frames.json. When the
+// prior is trusted (prior_source is not "guess"), a pair whose E explains ≥ 95% of the F inliers is
+// kCalibrated and keeps E's inliers. With a guessed prior the pair keeps F's inliers (F does not depend on the
+// guess) and is only labelled kCalibrated when the guessed E still explains ≥ 95% of them (the guess is then
+// good enough for this pair); its relative pose (R, t) is filled in either case when E gives one.
+#pragma once
+
+#include <filesystem>
+
+#include "fmv3d/features/matcher.h"
+#include "fmv3d/features/pairs.h"
+#include "fmv3d/geometry/two_view.h"
+
+namespace fmv3d::features {
+
+struct MatchStageOptions {
+  PairOptions pairs;
+  MatchOptions match;
+  geometry::TwoViewOptions verify;
+  void Check() const {
+    pairs.Check();
+    match.Check();
+    verify.Check();
+  }
+};
+
+struct MatchStageStats {
+  size_t images = 0, pairs_tried = 0, pairs_verified = 0, loop_closure_pairs = 0;
+  size_t calibrated = 0, uncalibrated = 0, planar_or_rotation = 0;
+  double seconds_total = 0, seconds_load = 0, seconds_pairs = 0;
+  double cpu_seconds_match = 0, cpu_seconds_verify = 0;  // summed over threads
+};
+
+MatchStageStats RunMatchStage(const std::filesystem::path& workspace, const MatchStageOptions& options);
+
+}  // namespace fmv3d::features

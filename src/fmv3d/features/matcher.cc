@@ -1,0 +1,221 @@
+#include "fmv3d/features/matcher.h"
+
+#include <immintrin.h>
+
+#include <algorithm>
+#include <cstring>
+#include <cstdlib>
+#include <limits>
+#include <opencv2/core.hpp>
+#include <opencv2/flann.hpp>
+
+#include "fmv3d/core/error.h"
+
+namespace fmv3d::features {
+
+void MatchOptions::Check() const {
+  if (!(ratio > 0 && ratio <= 1)) throw Error("match: --ratio must be in (0, 1]");
+  if (flann_trees < 1 || flann_trees > 32) throw Error("match: FLANN trees must be in [1, 32]");
+  if (flann_checks < 1) throw Error("match: FLANN checks must be >= 1");
+}
+
+ImageDescriptors::ImageDescriptors(const Descriptors& d, uint32_t id) : u8_(&d), id_(id) {}
+
+ImageDescriptors::~ImageDescriptors() = default;
+
+const cv::Mat& ImageDescriptors::data() {
+  std::call_once(once_float_, [&] {
+    cv::Mat u8(size(), 128, CV_8U, const_cast<uint8_t*>(u8_->data()));
+    u8.convertTo(data_, CV_32F);
+  });
+  return data_;
+}
+
+void ImageDescriptors::BuildInt16() {
+  std::call_once(once_int16_, [&] {
+    const int n = size();
+    const int n4 = (n + 3) / 4 * 4, n16 = (n + 15) / 16 * 16;
+    rows16_.assign(size_t(n4) * 128, 0);
+    blocks16_.assign(size_t(n16) * 128, 0);
+    norms_.assign(n16, 0);
+    for (int i = 0; i < n; ++i) {
+      int32_t norm = 0;
+      for (int k = 0; k < 128; ++k) {
+        const int16_t v = (*u8_)(i, k);
+        rows16_[size_t(i) * 128 + k] = v;
+        norm += int32_t(v) * v;
+        const int b = i / 16, m = i % 16, pair = k / 2;
+        blocks16_[((size_t(b) * 64 + pair) * 16 + m) * 2 + (k & 1)] = v;
+      }
+      norms_[i] = norm;
+    }
+  });
+}
+
+cv::flann::Index& ImageDescriptors::Index(const MatchOptions& options) {
+  data();
+  std::call_once(once_index_, [&] {
+    static std::mutex rand_mutex;  // FLANN uses the process-wide std::rand state
+    std::lock_guard<std::mutex> lock(rand_mutex);
+    std::srand(static_cast<unsigned>(options.seed ^ (0x9e3779b9u * (id_ + 1))));
+    index_ = std::make_unique<cv::flann::Index>(data_, cv::flann::KDTreeIndexParams(options.flann_trees),
+                                                cvflann::FLANN_DIST_L2);
+  });
+  return *index_;
+}
+
+MatcherType ChooseMatcher(int n1, int n2, const MatchOptions& options) {
+  if (options.type != MatcherType::kAuto) return options.type;
+  return double(n1) * n2 <= options.brute_force_max_product ? MatcherType::kBruteForce : MatcherType::kFlann;
+}
+
+namespace {
+
+struct Best2 {
+  float d1 = std::numeric_limits<float>::max(), d2 = std::numeric_limits<float>::max();
+  int i1 = -1;
+  void Add(float d, int i) {
+    if (d < d1) {
+      d2 = d1;
+      d1 = d;
+      i1 = i;
+    } else if (d < d2) {
+      d2 = d;
+    }
+  }
+  // Squared distances: d1 < ratio² d2.
+  bool Passes(double ratio_sq) const { return i1 >= 0 && d1 < ratio_sq * d2; }
+};
+
+}  // namespace
+
+// Exact 2-NN both ways from one pass over all descriptor pairs. Squared distances |a|² + |b|² − 2 a·b in exact
+// int32 arithmetic; the dot products come from an AVX2 kernel (16-bit multiply-add over pairs of dimensions,
+// 4 query rows x 16 candidates per step) when the CPU has it, else from the same loop in scalar code.
+struct BruteForceAccess {
+  static void Dots4x16Scalar(const int16_t* a_rows, const int16_t* block, int32_t* dots /*4 x 16*/) {
+    for (int r = 0; r < 4; ++r)
+      for (int m = 0; m < 16; ++m) {
+        int32_t s = 0;
+        for (int pair = 0; pair < 64; ++pair)
+          s += int32_t(a_rows[r * 128 + 2 * pair]) * block[(pair * 16 + m) * 2] +
+               int32_t(a_rows[r * 128 + 2 * pair + 1]) * block[(pair * 16 + m) * 2 + 1];
+        dots[r * 16 + m] = s;
+      }
+  }
+
+  __attribute__((target("avx2"))) static void Dots4x16Avx2(const int16_t* a_rows, const int16_t* block,
+                                                            int32_t* dots) {
+    __m256i acc[4][2];
+    for (auto& r : acc) r[0] = r[1] = _mm256_setzero_si256();
+    for (int pair = 0; pair < 64; ++pair) {
+      const __m256i b0 = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(block + pair * 32));
+      const __m256i b1 = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(block + pair * 32 + 16));
+      for (int r = 0; r < 4; ++r) {
+        int32_t packed;
+        std::memcpy(&packed, a_rows + r * 128 + 2 * pair, 4);
+        const __m256i a = _mm256_set1_epi32(packed);
+        acc[r][0] = _mm256_add_epi32(acc[r][0], _mm256_madd_epi16(a, b0));
+        acc[r][1] = _mm256_add_epi32(acc[r][1], _mm256_madd_epi16(a, b1));
+      }
+    }
+    for (int r = 0; r < 4; ++r) {
+      _mm256_storeu_si256(reinterpret_cast<__m256i*>(dots + r * 16), acc[r][0]);
+      _mm256_storeu_si256(reinterpret_cast<__m256i*>(dots + r * 16 + 8), acc[r][1]);
+    }
+  }
+
+  static std::vector<FeatureMatch> Run(ImageDescriptors& A, ImageDescriptors& B, const MatchOptions& o) {
+    A.BuildInt16();
+    B.BuildInt16();
+    const int n1 = A.size(), n2 = B.size();
+    const double r2 = o.ratio * o.ratio;
+    static const bool avx2 = __builtin_cpu_supports("avx2");
+    auto* kernel = avx2 ? &Dots4x16Avx2 : &Dots4x16Scalar;
+    std::vector<Best2> rows(n1), cols(n2);
+    alignas(32) int32_t dots[64];
+    const int num_blocks = (n2 + 15) / 16;
+    for (int i0 = 0; i0 < n1; i0 += 4) {
+      const int16_t* a_rows = A.rows16_.data() + size_t(i0) * 128;
+      const int rmax = std::min(4, n1 - i0);
+      for (int b = 0; b < num_blocks; ++b) {
+        kernel(a_rows, B.blocks16_.data() + size_t(b) * 64 * 32, dots);
+        const int mmax = std::min(16, n2 - b * 16);
+        for (int r = 0; r < rmax; ++r) {
+          const int i = i0 + r;
+          const int32_t na = A.norms_[i];
+          Best2& row = rows[i];
+          for (int m = 0; m < mmax; ++m) {
+            const int j = b * 16 + m;
+            const float d = static_cast<float>(na + B.norms_[j] - 2 * dots[r * 16 + m]);
+            if (d < row.d2) row.Add(d, j);
+            if (d < cols[j].d2) cols[j].Add(d, i);
+          }
+        }
+      }
+    }
+    std::vector<FeatureMatch> out;
+    for (int r = 0; r < n1; ++r) {
+      if (!rows[r].Passes(r2)) continue;
+      const int c = rows[r].i1;
+      if (o.mutual && !(cols[c].Passes(r2) && cols[c].i1 == r)) continue;
+      out.push_back({static_cast<uint32_t>(r), static_cast<uint32_t>(c)});
+    }
+    return out;
+  }
+};
+
+namespace {
+
+std::vector<FeatureMatch> Flann(ImageDescriptors& A, ImageDescriptors& B, const MatchOptions& o) {
+  const double r2 = o.ratio * o.ratio;
+  const cv::flann::SearchParams search(o.flann_checks);
+  cv::Mat idx, dist;
+  B.Index(o).knnSearch(A.data(), idx, dist, 2, search);
+  std::vector<int> candidate(A.size(), -1);
+  std::vector<int> targets;
+  for (int r = 0; r < A.size(); ++r) {
+    const int* ii = idx.ptr<int>(r);
+    const float* dd = dist.ptr<float>(r);
+    if (ii[0] < 0 || ii[1] < 0) continue;
+    if (dd[0] < r2 * dd[1]) {
+      candidate[r] = ii[0];
+      targets.push_back(ii[0]);
+    }
+  }
+  std::vector<FeatureMatch> out;
+  if (!o.mutual) {
+    for (int r = 0; r < A.size(); ++r)
+      if (candidate[r] >= 0) out.push_back({uint32_t(r), uint32_t(candidate[r])});
+    return out;
+  }
+  // Reverse check only for the images-2 features that some feature chose.
+  std::sort(targets.begin(), targets.end());
+  targets.erase(std::unique(targets.begin(), targets.end()), targets.end());
+  if (targets.empty()) return out;
+  cv::Mat queries(static_cast<int>(targets.size()), 128, CV_32F);
+  for (size_t k = 0; k < targets.size(); ++k) B.data().row(targets[k]).copyTo(queries.row(static_cast<int>(k)));
+  cv::Mat ridx, rdist;
+  A.Index(o).knnSearch(queries, ridx, rdist, 2, search);
+  std::vector<int> back(B.size(), -2);
+  for (size_t k = 0; k < targets.size(); ++k) {
+    const int* ii = ridx.ptr<int>(static_cast<int>(k));
+    const float* dd = rdist.ptr<float>(static_cast<int>(k));
+    if (ii[0] >= 0 && ii[1] >= 0 && dd[0] < r2 * dd[1]) back[targets[k]] = ii[0];
+  }
+  for (int r = 0; r < A.size(); ++r)
+    if (candidate[r] >= 0 && back[candidate[r]] == r) out.push_back({uint32_t(r), uint32_t(candidate[r])});
+  return out;
+}
+
+}  // namespace
+
+std::vector<FeatureMatch> MatchDescriptors(ImageDescriptors& image1, ImageDescriptors& image2,
+                                           const MatchOptions& options) {
+  if (image1.size() < 2 || image2.size() < 2) return {};
+  if (ChooseMatcher(image1.size(), image2.size(), options) == MatcherType::kBruteForce)
+    return BruteForceAccess::Run(image1, image2, options);
+  return Flann(image1, image2, options);
+}
+
+}  // namespace fmv3d::features

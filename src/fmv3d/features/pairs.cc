@@ -1,0 +1,165 @@
+#include "fmv3d/features/pairs.h"
+
+#include <tbb/parallel_for.h>
+
+#include <algorithm>
+#include <cmath>
+#include <numeric>
+#include <opencv2/core.hpp>
+#include <set>
+
+#include "fmv3d/core/error.h"
+
+namespace fmv3d::features {
+
+PairMode ParsePairMode(const std::string& name) {
+  if (name == "auto") return PairMode::kAuto;
+  if (name == "exhaustive") return PairMode::kExhaustive;
+  if (name == "sequential") return PairMode::kSequential;
+  if (name == "spatial") return PairMode::kSpatial;
+  throw Error("match: unknown pair mode '" + name + "' (auto, exhaustive, sequential, spatial)");
+}
+
+const char* PairModeName(PairMode mode) {
+  switch (mode) {
+    case PairMode::kAuto: return "auto";
+    case PairMode::kExhaustive: return "exhaustive";
+    case PairMode::kSequential: return "sequential";
+    case PairMode::kSpatial: return "spatial";
+  }
+  return "?";
+}
+
+void PairOptions::Check() const {
+  if (overlap < 1) throw Error("match: --overlap must be >= 1");
+  if (loop_closure_candidates < 0) throw Error("match: --loop-closure must be >= 0");
+  if (vocabulary_size < 2) throw Error("match: vocabulary size must be >= 2");
+  if (vocabulary_samples_per_image < 1) throw Error("match: vocabulary samples must be >= 1");
+}
+
+std::vector<ImagePair> ExhaustivePairs(size_t n) {
+  std::vector<ImagePair> out;
+  for (uint32_t i = 0; i < n; ++i)
+    for (uint32_t j = i + 1; j < n; ++j) out.emplace_back(i, j);
+  return out;
+}
+
+std::vector<ImagePair> SequentialPairs(size_t n, int overlap, bool quadratic) {
+  std::set<ImagePair> s;
+  for (uint32_t i = 0; i < n; ++i) {
+    for (uint32_t d = 1; d <= static_cast<uint32_t>(overlap) && i + d < n; ++d) s.emplace(i, i + d);
+    if (quadratic)
+      for (uint64_t d = 1; i + d < n; d *= 2)
+        if (d > static_cast<uint64_t>(overlap)) s.emplace(i, static_cast<uint32_t>(i + d));
+  }
+  return {s.begin(), s.end()};
+}
+
+std::vector<std::vector<float>> GlobalDescriptors(const std::vector<const Descriptors*>& images,
+                                                  const PairOptions& o) {
+  const size_t n = images.size();
+  // Deterministic strided sample of every image's descriptors for the vocabulary.
+  std::vector<cv::Mat> samples;
+  int total = 0;
+  for (const auto* d : images) {
+    const int rows = static_cast<int>(d->rows());
+    const int take = std::min(rows, o.vocabulary_samples_per_image);
+    if (take == 0) continue;
+    cv::Mat m(take, 128, CV_32F);
+    for (int k = 0; k < take; ++k) {
+      const int r = static_cast<int>(int64_t(k) * rows / take);
+      for (int c = 0; c < 128; ++c) m.at<float>(k, c) = (*d)(r, c);
+    }
+    samples.push_back(m);
+    total += take;
+  }
+  std::vector<std::vector<float>> out(n);
+  const int k = std::min(o.vocabulary_size, total);
+  if (k < 2) {
+    for (auto& v : out) v.assign(1, 0.f);
+    return out;
+  }
+  cv::Mat all, labels, centres;
+  cv::vconcat(samples, all);
+  cv::theRNG().state = o.seed * 6364136223846793005ULL + 1442695040888963407ULL;
+  cv::kmeans(all, k, labels, cv::TermCriteria(cv::TermCriteria::COUNT | cv::TermCriteria::EPS, 10, 1e-3), 1,
+             cv::KMEANS_PP_CENTERS, centres);
+
+  // Word histograms (every descriptor votes for its nearest centre), then tf-idf and unit norm.
+  std::vector<std::vector<float>> hist(n, std::vector<float>(k, 0.f));
+  tbb::parallel_for(size_t{0}, n, [&](size_t i) {
+    const auto& d = *images[i];
+    if (d.rows() == 0) return;
+    cv::Mat u8(static_cast<int>(d.rows()), 128, CV_8U, const_cast<uint8_t*>(d.data())), f;
+    u8.convertTo(f, CV_32F);
+    cv::Mat dist, nidx;
+    cv::batchDistance(f, centres, dist, CV_32F, nidx, cv::NORM_L2SQR, 1);
+    for (int r = 0; r < nidx.rows; ++r) hist[i][nidx.at<int>(r, 0)] += 1.f;
+  });
+  std::vector<double> df(k, 0);
+  for (const auto& h : hist)
+    for (int w = 0; w < k; ++w) df[w] += h[w] > 0;
+  for (size_t i = 0; i < n; ++i) {
+    const double count = std::accumulate(hist[i].begin(), hist[i].end(), 0.0);
+    double norm = 0;
+    out[i].assign(k, 0.f);
+    for (int w = 0; w < k; ++w) {
+      if (hist[i][w] == 0) continue;
+      const double v = (hist[i][w] / count) * std::log(double(n) / df[w]);
+      out[i][w] = static_cast<float>(v);
+      norm += v * v;
+    }
+    if (norm > 0)
+      for (auto& v : out[i]) v = static_cast<float>(v / std::sqrt(norm));
+  }
+  return out;
+}
+
+std::vector<ImagePair> LoopClosurePairs(const std::vector<std::vector<float>>& g, int k, int min_gap) {
+  const size_t n = g.size();
+  std::set<ImagePair> s;
+  if (k <= 0) return {};
+  for (size_t i = 0; i < n; ++i) {
+    std::vector<std::pair<float, uint32_t>> sims;
+    for (size_t j = 0; j < n; ++j) {
+      if (std::abs(static_cast<long>(i) - static_cast<long>(j)) <= min_gap) continue;
+      float dot = 0;
+      for (size_t w = 0; w < g[i].size(); ++w) dot += g[i][w] * g[j][w];
+      sims.emplace_back(-dot, static_cast<uint32_t>(j));  // ascending = most similar first; ties by index
+    }
+    const size_t take = std::min<size_t>(k, sims.size());
+    std::partial_sort(sims.begin(), sims.begin() + take, sims.end());
+    for (size_t m = 0; m < take; ++m) {
+      if (-sims[m].first <= 0) break;
+      const uint32_t a = static_cast<uint32_t>(i), b = sims[m].second;
+      s.emplace(std::min(a, b), std::max(a, b));
+    }
+  }
+  return {s.begin(), s.end()};
+}
+
+std::vector<ImagePair> SelectPairs(const std::vector<const Descriptors*>& images, const PairOptions& o,
+                                   PairMode* used_mode, size_t* num_loop_closure_pairs) {
+  o.Check();
+  PairMode mode = o.mode;
+  if (mode == PairMode::kAuto)
+    mode = images.size() <= static_cast<size_t>(o.auto_exhaustive_max_images) ? PairMode::kExhaustive
+                                                                              : PairMode::kSequential;
+  if (used_mode) *used_mode = mode;
+  if (num_loop_closure_pairs) *num_loop_closure_pairs = 0;
+  if (mode == PairMode::kSpatial)
+    throw Error("match: --pairs spatial (telemetry priors) is not implemented yet; use sequential or exhaustive");
+  if (mode == PairMode::kExhaustive) return ExhaustivePairs(images.size());
+  auto seq = SequentialPairs(images.size(), o.overlap, o.quadratic);
+  if (o.loop_closure_candidates > 0 && images.size() > static_cast<size_t>(o.overlap) + 1) {
+    const auto loops = LoopClosurePairs(GlobalDescriptors(images, o), o.loop_closure_candidates, o.overlap);
+    std::set<ImagePair> s(seq.begin(), seq.end());
+    size_t added = 0;
+    for (const auto& p : loops) added += s.insert(p).second;
+    if (num_loop_closure_pairs) *num_loop_closure_pairs = added;
+    seq.assign(s.begin(), s.end());
+  }
+  return seq;
+}
+
+}  // namespace fmv3d::features

@@ -1,0 +1,49 @@
+// SIFT keypoints + descriptors (OpenCV's SIFT) and the `fmv3d features` stage.
+//
+// OpenCV's default contrast threshold (0.04) keeps several times fewer keypoints than COLMAP/VLFeat on the same
+// frames: OpenCV's final test is |D| < contrast_threshold / n_octave_layers, VLFeat's (COLMAP's peak_threshold
+// 0.02 / 3 octave layers) is half of that. Our default 0.01 is looser still, so textured 720p frames give
+// thousands of keypoints; the per-image cap then keeps the strongest responses.
+#pragma once
+
+#include <filesystem>
+#include <opencv2/core.hpp>
+#include <string>
+#include <vector>
+
+#include "fmv3d/features/types.h"
+
+namespace fmv3d::features {
+
+struct SiftOptions {
+  int max_features = 8000;         // per image; the strongest responses are kept (0 = no cap)
+  int max_image_size = 3200;       // larger images are downscaled for extraction; coordinates are rescaled
+  double contrast_threshold = 0.01;
+  double edge_threshold = 10;
+  int octave_layers = 3;
+  bool root_sift = true;  // RootSIFT (L1-normalise, sqrt): better matching under Euclidean distance
+  bool upright = false;   // one orientation (0) per keypoint: for nadir / no-roll imagery
+  void Check() const;
+};
+
+// Extracts from an 8-bit image (grey or BGR as cv::imread gives). Keypoints in fmv3d pixels (centres at +0.5) of
+// the full-size image. Colours are sampled from the image (grey replicated). Deterministic. Single-threaded
+// in OpenCV when called from the stage (parallelism is over images).
+FeatureSet ExtractSift(const cv::Mat& image, const SiftOptions& options);
+
+// Quantises a float SIFT descriptor row (OpenCV scale, ~0..255) to uint8 as COLMAP does: L2 (or RootSIFT)
+// normalised, times 512, clamped.
+void QuantiseDescriptors(const cv::Mat& descriptors_f32, bool root_sift, Descriptors* out);
+
+struct FeaturesStageStats {
+  size_t images = 0, total_keypoints = 0, min_keypoints = 0, max_keypoints = 0;
+  double seconds = 0;
+};
+
+// The `fmv3d features` stage: reads WS/frames/frames.json, writes WS/features/<stem>.feat for every frame
+// (parallel over images), and WS/features/features.json (counts, timing). Skips frames whose .feat is newer
+// than the image unless `force`. Throws fmv3d::Error for a missing workspace or an unreadable image.
+FeaturesStageStats RunFeaturesStage(const std::filesystem::path& workspace, const SiftOptions& options,
+                                    bool force = false);
+
+}  // namespace fmv3d::features

@@ -1,0 +1,376 @@
+#include "fmv3d/geometry/two_view.h"
+
+#include <ceres/ceres.h>
+
+#include <Eigen/Dense>
+#include <Eigen/Geometry>
+#include <algorithm>
+#include <cmath>
+#include <opencv2/calib3d.hpp>
+#include <opencv2/core/eigen.hpp>
+
+#include "fmv3d/core/error.h"
+
+namespace fmv3d::geometry {
+namespace {
+
+template <typename T>
+T SampsonResidual(const Eigen::Matrix<T, 3, 3>& M, const Eigen::Vector2d& a, const Eigen::Vector2d& b) {
+  const Eigen::Matrix<T, 3, 1> x1(T(a.x()), T(a.y()), T(1)), x2(T(b.x()), T(b.y()), T(1));
+  const Eigen::Matrix<T, 3, 1> Mx1 = M * x1;
+  const Eigen::Matrix<T, 3, 1> Mtx2 = M.transpose() * x2;
+  const T num = x2.dot(Mx1);
+  const T den = Mx1(0) * Mx1(0) + Mx1(1) * Mx1(1) + Mtx2(0) * Mtx2(0) + Mtx2(1) * Mtx2(1);
+  // den > 0 for any non-degenerate F; guard against a division by zero at a degenerate start.
+  return num / ceres::sqrt(den + T(1e-30));
+}
+
+// Hartley normalisation: centroid to the origin, mean distance sqrt(2).
+Eigen::Matrix3d NormalisingTransform(const Points2& x) {
+  Eigen::Vector2d c = Eigen::Vector2d::Zero();
+  for (const auto& p : x) c += p;
+  c /= static_cast<double>(x.size());
+  double d = 0;
+  for (const auto& p : x) d += (p - c).norm();
+  d /= static_cast<double>(x.size());
+  const double s = d > 0 ? std::sqrt(2.0) / d : 1.0;
+  Eigen::Matrix3d T;
+  T << s, 0, -s * c.x(), 0, s, -s * c.y(), 0, 0, 1;
+  return T;
+}
+
+Eigen::Vector2d Apply(const Eigen::Matrix3d& T, const Eigen::Vector2d& p) {
+  return (T * p.homogeneous()).hnormalized();
+}
+
+// Fn (normalised coordinates) = U diag(1, s, 0) V^T; F in pixels = T2^T Fn T1.
+struct SampsonFCost {
+  Eigen::Vector2d x1, x2;
+  Eigen::Matrix3d T1, T2t;
+  template <typename T>
+  bool operator()(const T* qu, const T* qv, const T* s, T* residual) const {
+    const Eigen::Quaternion<T> QU(qu[3], qu[0], qu[1], qu[2]), QV(qv[3], qv[0], qv[1], qv[2]);
+    const Eigen::Matrix<T, 3, 3> U = QU.toRotationMatrix(), V = QV.toRotationMatrix();
+    const Eigen::Matrix<T, 3, 3> Fn = U.col(0) * V.col(0).transpose() + s[0] * U.col(1) * V.col(1).transpose();
+    const Eigen::Matrix<T, 3, 3> F = T2t.cast<T>() * Fn * T1.cast<T>();
+    residual[0] = SampsonResidual<T>(F, x1, x2);
+    return true;
+  }
+};
+
+struct SampsonECost {
+  Eigen::Vector2d n1, n2;
+  double focal;
+  template <typename T>
+  bool operator()(const T* q, const T* t, T* residual) const {
+    const Eigen::Quaternion<T> Q(q[3], q[0], q[1], q[2]);
+    Eigen::Matrix<T, 3, 3> tx;
+    tx << T(0), -t[2], t[1], t[2], T(0), -t[0], -t[1], t[0], T(0);
+    const Eigen::Matrix<T, 3, 3> E = tx * Q.toRotationMatrix();
+    residual[0] = T(focal) * SampsonResidual<T>(E, n1, n2);
+    return true;
+  }
+};
+
+ceres::Solver::Options SmallSolverOptions() {
+  ceres::Solver::Options o;
+  o.linear_solver_type = ceres::DENSE_QR;
+  o.max_num_iterations = 50;
+  o.num_threads = 1;
+  o.logging_type = ceres::SILENT;
+  o.minimizer_progress_to_stdout = false;
+  o.function_tolerance = 1e-10;
+  o.parameter_tolerance = 1e-10;
+  return o;
+}
+
+std::vector<cv::Point2d> ToCv(const Points2& x) {
+  std::vector<cv::Point2d> out(x.size());
+  for (size_t i = 0; i < x.size(); ++i) out[i] = {x[i].x(), x[i].y()};
+  return out;
+}
+
+Eigen::Matrix3d Skew(const Eigen::Vector3d& t) {
+  Eigen::Matrix3d m;
+  m << 0, -t.z(), t.y(), t.z(), 0, -t.x(), -t.y(), t.x(), 0;
+  return m;
+}
+
+int CountInliers(const Eigen::Matrix3d& M, const Points2& x1, const Points2& x2, double thr_sq, double scale_sq,
+                 std::vector<char>* mask) {
+  mask->assign(x1.size(), 0);
+  int n = 0;
+  for (size_t i = 0; i < x1.size(); ++i) {
+    if (SampsonErrorSq(M, x1[i], x2[i]) * scale_sq <= thr_sq) {
+      (*mask)[i] = 1;
+      ++n;
+    }
+  }
+  return n;
+}
+
+void Select(const Points2& x1, const Points2& x2, const std::vector<char>& mask, Points2* y1, Points2* y2) {
+  y1->clear();
+  y2->clear();
+  for (size_t i = 0; i < mask.size(); ++i)
+    if (mask[i]) {
+      y1->push_back(x1[i]);
+      y2->push_back(x2[i]);
+    }
+}
+
+}  // namespace
+
+double SampsonErrorSq(const Eigen::Matrix3d& M, const Eigen::Vector2d& x1, const Eigen::Vector2d& x2) {
+  const double r = SampsonResidual<double>(M, x1, x2);
+  return r * r;
+}
+
+bool EightPointFundamental(const Points2& x1, const Points2& x2, Eigen::Matrix3d* F) {
+  if (x1.size() < 8 || x1.size() != x2.size()) return false;
+  const Eigen::Matrix3d T1 = NormalisingTransform(x1), T2 = NormalisingTransform(x2);
+  // Accumulate A^T A (9x9) rather than A (n x 9): the same null vector, constant memory.
+  Eigen::Matrix<double, 9, 9> AtA = Eigen::Matrix<double, 9, 9>::Zero();
+  for (size_t i = 0; i < x1.size(); ++i) {
+    const Eigen::Vector2d a = Apply(T1, x1[i]), b = Apply(T2, x2[i]);
+    Eigen::Matrix<double, 9, 1> row;
+    row << b.x() * a.x(), b.x() * a.y(), b.x(), b.y() * a.x(), b.y() * a.y(), b.y(), a.x(), a.y(), 1;
+    AtA.noalias() += row * row.transpose();
+  }
+  Eigen::SelfAdjointEigenSolver<Eigen::Matrix<double, 9, 9>> eig(AtA);
+  if (eig.info() != Eigen::Success) return false;
+  // Degenerate when the null space is not one-dimensional.
+  if (eig.eigenvalues()(1) <= 1e-12 * std::max(1.0, eig.eigenvalues()(8))) return false;
+  const Eigen::Matrix<double, 9, 1> f = eig.eigenvectors().col(0);
+  Eigen::Matrix3d Fn;
+  Fn << f(0), f(1), f(2), f(3), f(4), f(5), f(6), f(7), f(8);
+  Eigen::JacobiSVD<Eigen::Matrix3d> svd(Fn, Eigen::ComputeFullU | Eigen::ComputeFullV);
+  Eigen::Vector3d s = svd.singularValues();
+  s(2) = 0;
+  Fn = svd.matrixU() * s.asDiagonal() * svd.matrixV().transpose();
+  *F = T2.transpose() * Fn * T1;
+  const double norm = F->norm();
+  if (!(norm > 0) || !F->allFinite()) return false;
+  *F /= norm;
+  return true;
+}
+
+bool RefineFundamental(const Points2& x1, const Points2& x2, Eigen::Matrix3d* F) {
+  if (x1.size() < 9 || x1.size() != x2.size()) return false;
+  const Eigen::Matrix3d T1 = NormalisingTransform(x1), T2 = NormalisingTransform(x2);
+  // F in the normalised frames, then its SVD as the starting point on the rank-2 manifold.
+  Eigen::Matrix3d Fn = T2.transpose().inverse() * (*F) * T1.inverse();
+  Eigen::JacobiSVD<Eigen::Matrix3d> svd(Fn, Eigen::ComputeFullU | Eigen::ComputeFullV);
+  Eigen::Matrix3d U = svd.matrixU(), V = svd.matrixV();
+  if (U.determinant() < 0) U = -U;  // F's overall sign is irrelevant: flip both to stay in SO(3)
+  if (V.determinant() < 0) V = -V;
+  const Eigen::Vector3d sv = svd.singularValues();
+  if (!(sv(0) > 0)) return false;
+  double s = sv(1) / sv(0);
+  Eigen::Quaterniond qu(U), qv(V);
+  double pu[4] = {qu.x(), qu.y(), qu.z(), qu.w()}, pv[4] = {qv.x(), qv.y(), qv.z(), qv.w()};
+
+  ceres::Problem problem;
+  for (size_t i = 0; i < x1.size(); ++i) {
+    auto* cost = new ceres::AutoDiffCostFunction<SampsonFCost, 1, 4, 4, 1>(
+        new SampsonFCost{x1[i], x2[i], T1, T2.transpose()});
+    problem.AddResidualBlock(cost, nullptr, pu, pv, &s);
+  }
+  problem.SetManifold(pu, new ceres::EigenQuaternionManifold);
+  problem.SetManifold(pv, new ceres::EigenQuaternionManifold);
+  ceres::Solver::Summary summary;
+  ceres::Solve(SmallSolverOptions(), &problem, &summary);
+  if (!summary.IsSolutionUsable() || summary.final_cost > summary.initial_cost) return false;
+  const Eigen::Matrix3d Ur = Eigen::Quaterniond(pu[3], pu[0], pu[1], pu[2]).normalized().toRotationMatrix();
+  const Eigen::Matrix3d Vr = Eigen::Quaterniond(pv[3], pv[0], pv[1], pv[2]).normalized().toRotationMatrix();
+  const Eigen::Matrix3d Fr =
+      T2.transpose() * (Ur.col(0) * Vr.col(0).transpose() + s * Ur.col(1) * Vr.col(1).transpose()) * T1;
+  if (!Fr.allFinite() || !(Fr.norm() > 0)) return false;
+  *F = Fr / Fr.norm();
+  return true;
+}
+
+bool RefineRelativePose(const Points2& n1, const Points2& n2, double focal, Eigen::Matrix3d* R,
+                        Eigen::Vector3d* t) {
+  if (n1.size() < 6 || n1.size() != n2.size() || !(t->norm() > 0)) return false;
+  Eigen::Quaterniond q(*R);
+  double pq[4] = {q.x(), q.y(), q.z(), q.w()};
+  Eigen::Vector3d tn = t->normalized();
+  double pt[3] = {tn.x(), tn.y(), tn.z()};
+  ceres::Problem problem;
+  for (size_t i = 0; i < n1.size(); ++i) {
+    auto* cost =
+        new ceres::AutoDiffCostFunction<SampsonECost, 1, 4, 3>(new SampsonECost{n1[i], n2[i], focal});
+    // Soft outlier down-weighting: the inliers come from a threshold of a few pixels.
+    problem.AddResidualBlock(cost, new ceres::CauchyLoss(2.0), pq, pt);
+  }
+  problem.SetManifold(pq, new ceres::EigenQuaternionManifold);
+  problem.SetManifold(pt, new ceres::SphereManifold<3>);
+  ceres::Solver::Summary summary;
+  ceres::Solve(SmallSolverOptions(), &problem, &summary);
+  if (!summary.IsSolutionUsable() || summary.final_cost > summary.initial_cost) return false;
+  *R = Eigen::Quaterniond(pq[3], pq[0], pq[1], pq[2]).normalized().toRotationMatrix();
+  *t = Eigen::Vector3d(pt[0], pt[1], pt[2]).normalized();
+  return true;
+}
+
+void TwoViewOptions::Check() const {
+  if (max_error_px < 0) throw Error("two-view: max error must be >= 0 (0 = auto)");
+  if (!(confidence > 0 && confidence < 1)) throw Error("two-view: confidence must be in (0, 1)");
+  if (max_iterations < 1) throw Error("two-view: max iterations must be >= 1");
+  if (min_inliers < 8) throw Error("two-view: min inliers must be >= 8");
+  if (!(min_E_F_inlier_ratio > 0 && min_E_F_inlier_ratio <= 1))
+    throw Error("two-view: min E/F inlier ratio must be in (0, 1]");
+  if (!(max_H_inlier_ratio > 0 && max_H_inlier_ratio <= 1))
+    throw Error("two-view: max H/F inlier ratio must be in (0, 1]");
+}
+
+double RotationAngle(const Eigen::Matrix3d& Ra, const Eigen::Matrix3d& Rb) {
+  // ||Ra - Rb||_F = 2 sqrt(2) sin(θ/2): accurate for small angles, where acos((trace - 1) / 2) is not.
+  const double x = std::min(1.0, (Ra - Rb).norm() / (2 * std::sqrt(2.0)));
+  return 2 * std::asin(x);
+}
+
+TwoViewResult VerifyTwoView(const Points2& x1, const Points2& x2, const core::Camera& camera1,
+                            const core::Camera& camera2, bool trust_intrinsics, const TwoViewOptions& options) {
+  TwoViewResult res;
+  const size_t n = x1.size();
+  if (n != x2.size()) throw Error("two-view: correspondence lists differ in length");
+  if (n < static_cast<size_t>(std::max(options.min_inliers, 8))) return res;
+  const double thr =
+      options.max_error_px > 0
+          ? options.max_error_px
+          : std::max(1.5, std::max({camera1.width, camera1.height, camera2.width, camera2.height}) / 2000.0);
+  const double thr_sq = thr * thr;
+  const auto p1 = ToCv(x1), p2 = ToCv(x2);
+  // OpenCV's RANSAC and USAC draw from fixed-seed generators: deterministic. (options.seed is kept for our own
+  // sampling; OpenCV 4.6 exposes no seed through these entry points.)
+
+  // --- F: 8-point in USAC (OpenCV), then our normalised 8-point on all inliers + Sampson refinement.
+  {
+    cv::Mat mask;
+    cv::Mat Fcv;
+    try {
+      Fcv = cv::findFundamentalMat(p1, p2, cv::USAC_FM_8PTS, thr, options.confidence, options.max_iterations,
+                                   mask);
+    } catch (const cv::Exception&) {
+      Fcv.release();
+    }
+    if (Fcv.rows == 3 && Fcv.cols == 3) {
+      Eigen::Matrix3d F;
+      cv::cv2eigen(Fcv, F);
+      std::vector<char> m(n, 0);
+      for (size_t i = 0; i < n; ++i) m[i] = mask.at<uchar>(static_cast<int>(i)) != 0;
+      Points2 y1, y2;
+      // Two rounds: fit on the inliers, re-select with the refined model.
+      for (int round = 0; round < 2; ++round) {
+        Select(x1, x2, m, &y1, &y2);
+        Eigen::Matrix3d F8;
+        if (!EightPointFundamental(y1, y2, &F8)) break;
+        if (options.refine) RefineFundamental(y1, y2, &F8);
+        std::vector<char> m2;
+        const int count = CountInliers(F8, x1, x2, thr_sq, 1.0, &m2);
+        if (count < std::count(m.begin(), m.end(), 1) * 0.9 && round == 0) break;  // refit made it worse
+        F = F8;
+        m = m2;
+      }
+      res.F = F / F.norm();
+      res.num_inliers_F = CountInliers(res.F, x1, x2, thr_sq, 1.0, &res.inliers_F);
+    }
+  }
+
+  // --- H (planar scene or pure rotation test).
+  {
+    cv::Mat mask;
+    cv::Mat Hcv = cv::findHomography(p1, p2, cv::RANSAC, thr, mask, options.max_iterations, options.confidence);
+    if (Hcv.rows == 3 && Hcv.cols == 3) {
+      cv::cv2eigen(Hcv, res.H);
+      res.inliers_H.assign(n, 0);
+      for (size_t i = 0; i < n; ++i) {
+        const Eigen::Vector3d h = res.H * x1[i].homogeneous();
+        if (h.z() != 0 && (h.hnormalized() - x2[i]).squaredNorm() <= thr_sq) {
+          res.inliers_H[i] = 1;
+          ++res.num_inliers_H;
+        }
+      }
+    }
+  }
+
+  // --- E with the (prior) intrinsics: 5-point in RANSAC on normalised coordinates, pose refinement.
+  const double focal = 0.5 * (camera1.fx() + camera1.fy() + camera2.fx() + camera2.fy()) / 2;
+  // E only for pairs F supports: the 5-point RANSAC is the costly part on hopeless pairs.
+  if (res.num_inliers_F >= options.min_inliers) {
+    Points2 n1(n), n2(n);
+    for (size_t i = 0; i < n; ++i) {
+      n1[i] = camera1.Unproject(x1[i]).hnormalized();
+      n2[i] = camera2.Unproject(x2[i]).hnormalized();
+    }
+    const auto c1 = ToCv(n1), c2 = ToCv(n2);
+    cv::Mat mask;
+    cv::Mat Ecv;
+    try {
+      Ecv = cv::findEssentialMat(c1, c2, cv::Mat::eye(3, 3, CV_64F), cv::RANSAC, options.confidence, thr / focal,
+                                 options.max_iterations, mask);
+    } catch (const cv::Exception&) {
+      Ecv.release();
+    }
+    if (Ecv.rows == 3 && Ecv.cols == 3 && cv::countNonZero(mask) >= 6) {
+      cv::Mat Rcv, tcv, pose_mask = mask.clone();
+      const int in_front =
+          cv::recoverPose(Ecv, c1, c2, cv::Mat::eye(3, 3, CV_64F), Rcv, tcv, pose_mask);
+      Eigen::Matrix3d R;
+      Eigen::Vector3d t;
+      cv::cv2eigen(Rcv, R);
+      cv::cv2eigen(tcv, t);
+      std::vector<char> m(n, 0);
+      for (size_t i = 0; i < n; ++i) m[i] = mask.at<uchar>(static_cast<int>(i)) != 0;
+      if (options.refine && in_front > 0) {
+        Points2 y1, y2;
+        Select(n1, n2, m, &y1, &y2);
+        RefineRelativePose(y1, y2, focal, &R, &t);
+      }
+      res.E = Skew(t) * R;
+      res.num_inliers_E = CountInliers(res.E, n1, n2, thr_sq, focal * focal, &res.inliers_E);
+      // Cheirality + triangulation angle: rays d1 (cam-1 frame) and R^T n2 from C2 = -R^T t.
+      std::vector<double> angles;
+      const Eigen::Vector3d C2 = -R.transpose() * t;
+      for (size_t i = 0; i < n; ++i) {
+        if (!res.inliers_E[i]) continue;
+        const Eigen::Vector3d d1 = n1[i].homogeneous().normalized();
+        const Eigen::Vector3d d2 = (R.transpose() * n2[i].homogeneous()).normalized();
+        // Closest points of the two rays: X = λ1 d1 = C2 + λ2 d2.
+        Eigen::Matrix<double, 3, 2> A;
+        A << d1, -d2;
+        const Eigen::Vector2d lam = (A.transpose() * A).ldlt().solve(A.transpose() * C2);
+        if (lam(0) > 0 && lam(1) > 0) angles.push_back(std::acos(std::clamp(d1.dot(d2), -1.0, 1.0)));
+      }
+      if (angles.size() * 2 >= static_cast<size_t>(res.num_inliers_E) && res.num_inliers_E >= options.min_inliers) {
+        res.has_pose = true;
+        res.R = R;
+        res.t = t;
+        std::nth_element(angles.begin(), angles.begin() + angles.size() / 2, angles.end());
+        res.median_triangulation_angle_deg = angles[angles.size() / 2] * 180.0 / M_PI;
+      }
+    }
+  }
+
+  // --- Classification.
+  const int nF = res.num_inliers_F, nE = res.num_inliers_E, nH = res.num_inliers_H;
+  if (std::max(nF, nH) < options.min_inliers) return res;  // rejected
+  const bool e_consistent = nE >= options.min_E_F_inlier_ratio * nF && nE >= options.min_inliers;
+  if (nF < options.min_inliers || nH > options.max_H_inlier_ratio * nF) {
+    res.geometry = TwoViewClass::kPlanarOrRotation;
+  } else {
+    res.geometry = e_consistent ? TwoViewClass::kCalibrated : TwoViewClass::kUncalibrated;
+  }
+  // Inliers of the chosen model: E's when the intrinsics are trusted and E explains the data, else F's (which
+  // do not depend on the intrinsics); H's when F failed (pure rotation may starve F).
+  const std::vector<char>* chosen = &res.inliers_F;
+  if (trust_intrinsics && e_consistent) chosen = &res.inliers_E;
+  if (nF < options.min_inliers) chosen = &res.inliers_H;
+  for (size_t i = 0; i < n; ++i)
+    if ((*chosen)[i]) res.inliers.push_back(static_cast<int>(i));
+  return res;
+}
+
+}  // namespace fmv3d::geometry

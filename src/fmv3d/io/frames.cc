@@ -1,0 +1,304 @@
+#include "fmv3d/io/frames.h"
+
+#include <spdlog/spdlog.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <map>
+#include <set>
+#include <tuple>
+
+#include "fmv3d/core/error.h"
+#include "fmv3d/core/files.h"
+#include "fmv3d/core/logging.h"
+#include "fmv3d/io/video_reader.h"
+
+namespace fmv3d::io {
+namespace fs = std::filesystem;
+
+namespace {
+
+std::string LowerExt(const fs::path& p) {
+  std::string e = p.extension().string();
+  std::transform(e.begin(), e.end(), e.begin(), [](unsigned char c) { return std::tolower(c); });
+  return e;
+}
+
+// Removes the staging folder unless released (the stage failed half-way).
+struct StagingGuard {
+  fs::path dir;
+  bool released = false;
+  ~StagingGuard() {
+    if (!released) {
+      std::error_code ec;
+      fs::remove_all(dir, ec);
+    }
+  }
+};
+
+// Frame names must be unique inside frames/: a clash (same file name in two folders, same video stem) gets
+// the parent folder's name as a prefix, then a counter.
+class NameRegistry {
+ public:
+  std::string Unique(const fs::path& source, const std::string& stem) {
+    std::string s = stem;
+    if (used_.count(s)) {
+      const std::string parent = source.parent_path().filename().string();
+      if (!parent.empty()) s = parent + "-" + stem;
+      for (int k = 2; used_.count(s); ++k) s = stem + "-" + std::to_string(k);
+      spdlog::warn("{}: name '{}' is already taken by another input; using '{}'", source.string(), stem, s);
+    }
+    used_.insert(s);
+    return s;
+  }
+
+ private:
+  std::set<std::string> used_;
+};
+
+struct ImageCameraKey {
+  int w, h;
+  std::string make, model;
+  long focal_centi_mm;
+  bool operator<(const ImageCameraKey& o) const {
+    return std::tie(w, h, make, model, focal_centi_mm) < std::tie(o.w, o.h, o.make, o.model, o.focal_centi_mm);
+  }
+};
+
+}  // namespace
+
+core::Camera GuessPrior(int width, int height) {
+  return core::Camera::Pinhole(width, height, 1.2 * std::max(width, height));
+}
+
+void IngestOptions::Check() const {
+  if (workspace.empty()) throw Error("frames: no workspace folder given (-o WS)");
+  if (max_frames < 0) throw Error("frames: --max-frames must be >= 0");
+  keyframes.Check();
+}
+
+std::vector<fs::path> ExpandInputs(const std::vector<fs::path>& inputs) {
+  std::vector<fs::path> files;
+  for (const auto& in : inputs) {
+    std::error_code ec;
+    if (fs::is_directory(in, ec)) {
+      std::vector<fs::path> found;
+      for (const auto& e : fs::directory_iterator(in, ec)) {
+        if (!e.is_regular_file()) continue;
+        if (HasImageExtension(e.path()) || HasVideoExtension(e.path())) found.push_back(e.path());
+      }
+      if (ec) throw Error(in.string() + ": cannot list folder (" + ec.message() + ")");
+      if (found.empty()) throw Error(in.string() + ": folder holds no images or videos");
+      std::sort(found.begin(), found.end());
+      files.insert(files.end(), found.begin(), found.end());
+    } else if (fs::exists(in, ec)) {
+      files.push_back(in);
+    } else {
+      throw Error(in.string() + ": no such file or folder");
+    }
+  }
+  if (files.empty()) throw Error("frames: no input given");
+  return files;
+}
+
+FramesIndex IngestFrames(const std::vector<fs::path>& inputs, const IngestOptions& options) {
+  options.Check();
+  const std::vector<fs::path> files = ExpandInputs(inputs);
+  const fs::path frames_dir = options.workspace / "frames";
+  core::EnsureDirectory(options.workspace);
+  StagingGuard staging{options.workspace / (".frames-staging-" + std::to_string(getpid()))};
+  {
+    std::error_code ec;
+    fs::remove_all(staging.dir, ec);
+  }
+  core::EnsureDirectory(staging.dir);
+
+  FramesIndex index;
+  std::vector<CameraGroup> groups;  // parallel to index.cameras
+  std::map<ImageCameraKey, uint32_t> image_cameras;
+  NameRegistry names;
+
+  auto add_camera = [&](CameraGroup g) {
+    CameraPrior c;
+    c.camera = GuessPrior(g.width, g.height);
+    c.camera.id = static_cast<uint32_t>(index.cameras.size() + 1);
+    c.prior_source = "guess";
+    c.source = g.source;
+    index.cameras.push_back(c);
+    groups.push_back(std::move(g));
+    return index.cameras.back().camera.id;
+  };
+
+  for (const fs::path& file : files) {
+    const bool is_image = HasImageExtension(file);
+    if (is_image) {
+      const cv::Mat img = ReadImage(file);
+      const ExifInfo exif = ReadExif(file);
+      const ImageCameraKey key{img.cols, img.rows, exif.make, exif.model, std::lround(exif.focal_mm * 100)};
+      auto it = image_cameras.find(key);
+      uint32_t cam_id;
+      if (it == image_cameras.end()) {
+        CameraGroup g;
+        g.width = img.cols;
+        g.height = img.rows;
+        g.source = file.parent_path().string();
+        g.exif = exif;
+        cam_id = add_camera(g);
+        image_cameras[key] = cam_id;
+      } else {
+        cam_id = it->second;
+      }
+      const bool convert = LowerExt(file) == ".gif";
+      const std::string stem = names.Unique(file, file.stem().string());
+      const std::string name = stem + (convert ? std::string(".png") : file.extension().string());
+      if (convert) {
+        WriteImage(staging.dir / name, img);
+      } else {
+        std::error_code ec;
+        fs::copy_file(file, staging.dir / name, fs::copy_options::overwrite_existing, ec);
+        if (ec) throw Error(file.string() + ": cannot copy into the workspace (" + ec.message() + ")");
+      }
+      FrameRecord r;
+      r.name = name;
+      r.camera_id = cam_id;
+      r.source = file.string();
+      r.sharpness = Sharpness(img);
+      index.frames.push_back(r);
+      continue;
+    }
+
+    // A video (or an unknown extension, which FFmpeg gets to try).
+    std::unique_ptr<VideoReader> reader;
+    try {
+      reader = std::make_unique<VideoReader>(file);
+    } catch (const Error& e) {
+      if (HasVideoExtension(file)) throw;
+      throw Error(file.string() + ": unsupported or unreadable file (neither an image nor a video FFmpeg can read)");
+    }
+    const VideoInfo& info = reader->info();
+    CameraGroup g;
+    g.width = info.width;
+    g.height = info.height;
+    g.source = file.string();
+    g.is_video = true;
+    const uint32_t cam_id = add_camera(g);
+    const std::string stem = names.Unique(file, file.stem().string());
+    KeyframeSelector selector(options.keyframes, info.fps);
+    spdlog::info("{}: {}x{} {} {:.2f} fps, ~{} frames; keyframe gap {}..{} frames", file.string(), info.width,
+                 info.height, info.codec, info.fps, info.frame_count_hint, selector.min_gap(), selector.max_gap());
+    core::Progress progress("decode " + stem, static_cast<size_t>(std::max<int64_t>(info.frame_count_hint, 0)));
+    std::vector<Keyframe> kept;
+    auto flush = [&] {
+      for (const Keyframe& k : kept) {
+        char idx[32];
+        std::snprintf(idx, sizeof(idx), "%06lld", static_cast<long long>(k.index));
+        FrameRecord r;
+        r.name = stem + "-" + idx + ".png";
+        r.camera_id = cam_id;
+        r.source = file.string();
+        r.frame_index = k.index;
+        r.timestamp = k.timestamp;
+        r.sharpness = k.sharpness;
+        WriteImage(staging.dir / r.name, k.image);
+        index.frames.push_back(r);
+      }
+      kept.clear();
+    };
+    VideoFrame frame;
+    size_t n_video_frames = 0;
+    const size_t first = index.frames.size();
+    while (reader->Read(&frame)) {
+      selector.Push(frame, &kept);
+      flush();
+      progress.Add();
+      ++n_video_frames;
+    }
+    selector.Finish(&kept);
+    flush();
+    progress.Finish();
+    if (reader->frames_read() == 0)
+      throw Error(file.string() + ": no decodable video frame" +
+                  (reader->warning().empty() ? std::string() : " (" + reader->warning() + ")"));
+    spdlog::info("{}: {} frames decoded, {} blurred, {} keyframes", file.string(), n_video_frames,
+                 selector.blurred_frames(), index.frames.size() - first);
+  }
+
+  // --max-frames: an even subsample of everything kept.
+  if (options.max_frames > 0 && static_cast<int>(index.frames.size()) > options.max_frames) {
+    const size_t n = index.frames.size(), m = static_cast<size_t>(options.max_frames);
+    std::vector<FrameRecord> chosen;
+    std::vector<bool> keep(n, false);
+    for (size_t i = 0; i < m; ++i) {
+      const size_t j = m == 1 ? 0 : static_cast<size_t>(std::llround(double(i) * (n - 1) / (m - 1)));
+      keep[j] = true;
+    }
+    for (size_t i = 0; i < n; ++i) {
+      if (keep[i]) {
+        chosen.push_back(index.frames[i]);
+      } else {
+        std::error_code ec;
+        fs::remove(staging.dir / index.frames[i].name, ec);
+      }
+    }
+    spdlog::info("--max-frames {}: kept {} of {} frames", options.max_frames, chosen.size(), n);
+    index.frames = std::move(chosen);
+  }
+
+  // Cameras no frame refers to any more are dropped and the ids renumbered 1..n.
+  {
+    std::vector<uint32_t> remap(index.cameras.size() + 1, 0);
+    for (const auto& f : index.frames) remap[f.camera_id] = 1;
+    std::vector<CameraPrior> cams;
+    std::vector<CameraGroup> grps;
+    for (size_t i = 0; i < index.cameras.size(); ++i) {
+      if (!remap[i + 1]) continue;
+      remap[i + 1] = static_cast<uint32_t>(cams.size() + 1);
+      cams.push_back(index.cameras[i]);
+      cams.back().camera.id = remap[i + 1];
+      grps.push_back(groups[i]);
+    }
+    for (auto& f : index.frames) f.camera_id = remap[f.camera_id];
+    index.cameras = std::move(cams);
+    groups = std::move(grps);
+  }
+
+  // Intrinsics priors.
+  for (size_t i = 0; i < index.cameras.size(); ++i) {
+    if (!options.prior) continue;
+    std::string source = "guess";
+    core::Camera cam = options.prior(groups[i], &source);
+    cam.id = index.cameras[i].camera.id;
+    if (cam.width != groups[i].width || cam.height != groups[i].height)
+      throw Error(groups[i].source + ": intrinsics prior has the wrong image size");
+    cam.Validate();
+    index.cameras[i].camera = cam;
+    index.cameras[i].prior_source = source;
+  }
+  for (const auto& c : index.cameras)
+    spdlog::info("camera {}: {}x{} f={:.1f} ({}) from {}", c.camera.id, c.camera.width, c.camera.height, c.camera.f,
+                 c.prior_source, c.source);
+
+  WriteFramesIndex(index, staging.dir / "frames.json");
+
+  // Swap the complete staging folder in place of frames/.
+  std::error_code ec;
+  const fs::path old = options.workspace / (".frames-old-" + std::to_string(getpid()));
+  if (fs::exists(frames_dir, ec)) {
+    fs::rename(frames_dir, old, ec);
+    if (ec) throw Error(frames_dir.string() + ": cannot replace (" + ec.message() + ")");
+  }
+  fs::rename(staging.dir, frames_dir, ec);
+  if (ec) {
+    std::error_code ec2;
+    if (fs::exists(old, ec2)) fs::rename(old, frames_dir, ec2);
+    throw Error(frames_dir.string() + ": cannot write (" + ec.message() + ")");
+  }
+  staging.released = true;
+  fs::remove_all(old, ec);
+  spdlog::info("{}: {} frames, {} cameras", frames_dir.string(), index.frames.size(), index.cameras.size());
+  return index;
+}
+
+}  // namespace fmv3d::io

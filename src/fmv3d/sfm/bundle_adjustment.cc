@@ -1,0 +1,214 @@
+#include "fmv3d/sfm/bundle_adjustment.h"
+
+#include <ceres/ceres.h>
+#include <spdlog/spdlog.h>
+
+#include <array>
+#include <chrono>
+#include <cmath>
+#include <limits>
+#include <map>
+
+#include "fmv3d/core/error.h"
+#include "fmv3d/core/threading.h"
+#include "fmv3d/geometry/reprojection_error.h"
+
+namespace fmv3d::sfm {
+
+void BundleAdjustmentOptions::Check() const {
+  if (!(loss_scale_px > 0)) throw Error("bundle adjustment: loss_scale_px must be > 0");
+  if (max_iterations < 1) throw Error("bundle adjustment: max_iterations must be ≥ 1");
+  if (!(function_tolerance > 0)) throw Error("bundle adjustment: function_tolerance must be > 0");
+}
+
+double ObservationError(const core::Reconstruction& rec, uint32_t image_id, uint32_t point2d_idx,
+                        const Eigen::Vector3d& xyz) {
+  const auto& image = rec.images.at(image_id);
+  const auto& cam = rec.cameras.at(image.camera_id);
+  const Eigen::Vector3d x = image.pose.Transform(xyz);
+  if (x.z() <= 0) return std::numeric_limits<double>::infinity();
+  return (cam.Project(x) - image.points2d[point2d_idx]).norm();
+}
+
+void UpdatePointErrors(core::Reconstruction* rec) {
+  for (auto& [id, p] : rec->points) {
+    double sum = 0;
+    for (const auto& el : p.track) sum += ObservationError(*rec, el.image_id, el.point2d_idx, p.xyz);
+    p.error = p.track.empty() ? 0 : sum / p.track.size();
+  }
+}
+
+namespace {
+
+struct PoseBlock {
+  std::array<double, 4> q;  // Eigen order x y z w
+  std::array<double, 3> t;
+};
+
+}  // namespace
+
+BundleAdjustmentSummary BundleAdjust(core::Reconstruction* rec, const BundleAdjustmentConfig& config,
+                                     const BundleAdjustmentOptions& options) {
+  options.Check();
+  const auto start = std::chrono::steady_clock::now();
+  BundleAdjustmentSummary out;
+  if (rec->images.size() < 2) return out;
+
+  std::set<uint32_t> variable = config.variable_images;
+  if (variable.empty())
+    for (const auto& [id, im] : rec->images) variable.insert(id);
+
+  // Points seen by a variable image, and every image observing them.
+  std::set<uint64_t> point_ids;
+  for (uint32_t id : variable) {
+    auto it = rec->images.find(id);
+    if (it == rec->images.end()) continue;
+    for (int64_t pid : it->second.point3d_ids)
+      if (pid != core::kNoPoint3D) point_ids.insert(static_cast<uint64_t>(pid));
+  }
+  if (point_ids.empty()) return out;
+
+  std::map<uint32_t, PoseBlock> poses;
+  std::map<uint32_t, std::array<double, core::kNumIntrinsics>> intr;
+  std::map<uint64_t, std::array<double, 3>> pts;
+  ceres::Problem::Options popts;
+  popts.loss_function_ownership = ceres::TAKE_OWNERSHIP;
+  ceres::Problem problem(popts);
+
+  auto loss = [&]() -> ceres::LossFunction* {
+    switch (options.loss) {
+      case BundleAdjustmentOptions::Loss::kCauchy: return new ceres::CauchyLoss(options.loss_scale_px);
+      case BundleAdjustmentOptions::Loss::kHuber: return new ceres::HuberLoss(options.loss_scale_px);
+      default: return nullptr;
+    }
+  };
+
+  std::vector<std::pair<uint32_t, uint32_t>> residual_obs;  // (image, point2d) per residual, for RMS
+  for (uint64_t pid : point_ids) {
+    auto& P = rec->points.at(pid);
+    auto& X = pts[pid];
+    X = {P.xyz.x(), P.xyz.y(), P.xyz.z()};
+    for (const auto& el : P.track) {
+      auto& image = rec->images.at(el.image_id);
+      auto pit = poses.find(el.image_id);
+      if (pit == poses.end()) {
+        PoseBlock b;
+        b.q = {image.pose.q.x(), image.pose.q.y(), image.pose.q.z(), image.pose.q.w()};
+        b.t = {image.pose.t.x(), image.pose.t.y(), image.pose.t.z()};
+        pit = poses.emplace(el.image_id, b).first;
+      }
+      auto cit = intr.find(image.camera_id);
+      if (cit == intr.end()) cit = intr.emplace(image.camera_id, rec->cameras.at(image.camera_id).Params()).first;
+      problem.AddResidualBlock(new geometry::AnalyticReprojectionError(image.points2d[el.point2d_idx]), loss(),
+                               cit->second.data(), pit->second.q.data(), pit->second.t.data(), X.data());
+      residual_obs.emplace_back(el.image_id, el.point2d_idx);
+    }
+    if (!options.refine_points) problem.SetParameterBlockConstant(X.data());
+  }
+
+  // Poses: variable unless constant or outside the variable set; gauge fixed when nothing else anchors it.
+  bool any_constant = false;
+  for (auto& [id, b] : poses) {
+    problem.SetManifold(b.q.data(), new ceres::EigenQuaternionManifold);
+    if (!variable.count(id) || config.constant_images.count(id)) {
+      problem.SetParameterBlockConstant(b.q.data());
+      problem.SetParameterBlockConstant(b.t.data());
+      any_constant = true;
+    }
+  }
+  if (!any_constant) {
+    uint32_t g1 = config.gauge_image1, g2 = config.gauge_image2;
+    if (!poses.count(g1) || !poses.count(g2) || g1 == g2) {
+      auto it = poses.begin();
+      g1 = it->first;
+      g2 = std::next(it)->first;
+    }
+    problem.SetParameterBlockConstant(poses[g1].q.data());
+    problem.SetParameterBlockConstant(poses[g1].t.data());
+    auto& t2 = poses[g2].t;
+    int largest = 0;
+    for (int k = 1; k < 3; ++k)
+      if (std::abs(t2[k]) > std::abs(t2[largest])) largest = k;
+    problem.SetManifold(t2.data(), new ceres::SubsetManifold(3, {largest}));
+  }
+  for (auto& [cid, params] : intr) {
+    std::vector<int> fixed;
+    const bool cam_const = config.constant_cameras.count(cid) > 0;
+    auto keep = [&](int k, bool refine) {
+      if (cam_const || !refine) fixed.push_back(k);
+    };
+    keep(core::kF, options.refine_focal);
+    keep(core::kAspect, options.refine_aspect);
+    keep(core::kU0, options.refine_principal_point);
+    keep(core::kV0, options.refine_principal_point);
+    keep(core::kK1, options.refine_k1);
+    keep(core::kK2, options.refine_k2);
+    keep(core::kP1, options.refine_tangential);
+    keep(core::kP2, options.refine_tangential);
+    if (fixed.size() == core::kNumIntrinsics)
+      problem.SetParameterBlockConstant(params.data());
+    else if (!fixed.empty())
+      problem.SetManifold(params.data(), new ceres::SubsetManifold(core::kNumIntrinsics, fixed));
+  }
+
+  ceres::Solver::Options sopts;
+  const int num_var_images = static_cast<int>(variable.size());
+  sopts.linear_solver_type = num_var_images <= options.dense_schur_max_images ? ceres::DENSE_SCHUR
+                                                                                : ceres::SPARSE_SCHUR;
+  auto ordering = std::make_shared<ceres::ParameterBlockOrdering>();
+  for (auto& [pid, X] : pts) ordering->AddElementToGroup(X.data(), 0);
+  for (auto& [id, b] : poses) {
+    ordering->AddElementToGroup(b.q.data(), 1);
+    ordering->AddElementToGroup(b.t.data(), 1);
+  }
+  for (auto& [cid, params] : intr) ordering->AddElementToGroup(params.data(), 1);
+  sopts.linear_solver_ordering = ordering;
+  sopts.max_num_iterations = options.max_iterations;
+  sopts.function_tolerance = options.function_tolerance;
+  sopts.gradient_tolerance = options.gradient_tolerance;
+  sopts.parameter_tolerance = options.parameter_tolerance;
+  sopts.num_threads = options.num_threads > 0 ? options.num_threads : core::NumThreads();
+  sopts.minimizer_progress_to_stdout = false;
+  sopts.logging_type = ceres::SILENT;
+
+  auto rms = [&]() {
+    double sum = 0;
+    ceres::Problem::EvaluateOptions eopts;
+    eopts.apply_loss_function = false;
+    eopts.num_threads = sopts.num_threads;
+    std::vector<double> res;
+    problem.Evaluate(eopts, nullptr, &res, nullptr, nullptr);
+    for (double r : res) sum += r * r;
+    const size_t n = res.size() / 2;
+    return n ? std::sqrt(sum / n) : 0.0;
+  };
+  out.initial_rms_px = rms();
+  ceres::Solver::Summary summary;
+  ceres::Solve(sopts, &problem, &summary);
+  out.final_rms_px = rms();
+  out.num_residuals = static_cast<int>(residual_obs.size());
+  out.num_iterations = static_cast<int>(summary.iterations.size());
+  out.success = summary.IsSolutionUsable();
+  if (out.success) {
+    for (auto& [id, b] : poses) {
+      if (!variable.count(id) || config.constant_images.count(id)) continue;
+      auto& pose = rec->images.at(id).pose;
+      pose.q = Eigen::Quaterniond(b.q[3], b.q[0], b.q[1], b.q[2]).normalized();
+      pose.t = Eigen::Vector3d(b.t[0], b.t[1], b.t[2]);
+    }
+    for (auto& [cid, params] : intr) rec->cameras.at(cid).SetParams(params.data());
+    for (auto& [pid, X] : pts) rec->points.at(pid).xyz = Eigen::Vector3d(X[0], X[1], X[2]);
+    for (uint64_t pid : point_ids) {
+      auto& P = rec->points.at(pid);
+      double sum = 0;
+      for (const auto& el : P.track) sum += ObservationError(*rec, el.image_id, el.point2d_idx, P.xyz);
+      P.error = P.track.empty() ? 0 : sum / P.track.size();
+    }
+  } else {
+    spdlog::warn("bundle adjustment did not converge: {}", summary.BriefReport());
+  }
+  out.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  return out;
+}
+
+}  // namespace fmv3d::sfm

@@ -1,0 +1,67 @@
+// Bundle adjustment with Ceres: camera poses, 3D points and per-camera intrinsics (f, u0, v0, k1, k2; p1, p2
+// optional; aspect fixed by default) minimise the robust reprojection error of every observation, using the
+// same core::ProjectPoint as the rest of the system (geometry/reprojection_error.h).
+//
+// Solver: Schur complement (points eliminated first) — DENSE_SCHUR for small problems, SPARSE_SCHUR for large
+// ones; Levenberg–Marquardt until the relative cost decrease falls below function_tolerance.
+// Gauge: when no constant pose takes part, the first gauge image's pose is held fixed and one translation
+// coordinate of the second (its largest) too, which removes rotation, translation and scale freedom.
+#pragma once
+
+#include <cstdint>
+#include <set>
+#include <vector>
+
+#include "fmv3d/core/reconstruction.h"
+
+namespace fmv3d::sfm {
+
+struct BundleAdjustmentOptions {
+  enum class Loss { kTrivial, kHuber, kCauchy };
+  Loss loss = Loss::kCauchy;
+  double loss_scale_px = 1.0;
+  bool refine_focal = true;
+  bool refine_principal_point = false;
+  bool refine_k1 = true;
+  bool refine_k2 = true;
+  bool refine_tangential = false;
+  bool refine_aspect = false;
+  bool refine_points = true;
+  int max_iterations = 100;
+  double function_tolerance = 1e-6;
+  double gradient_tolerance = 1e-10;
+  double parameter_tolerance = 1e-8;
+  int dense_schur_max_images = 60;  // larger problems use SPARSE_SCHUR
+  int num_threads = 0;              // 0: core::NumThreads()
+  void Check() const;
+};
+
+// Which part of the model to adjust. Empty variable_images means all images.
+struct BundleAdjustmentConfig {
+  std::set<uint32_t> variable_images;  // images whose poses move (local BA: the new image and its neighbours)
+  std::set<uint32_t> constant_images;  // images whose poses stay fixed even if in variable_images
+  std::set<uint32_t> constant_cameras; // cameras whose intrinsics stay fixed whatever the options say
+  uint32_t gauge_image1 = 0, gauge_image2 = 0;  // 0: choose the two lowest image ids
+};
+
+struct BundleAdjustmentSummary {
+  bool success = false;
+  int num_residuals = 0;
+  int num_iterations = 0;
+  double initial_rms_px = 0, final_rms_px = 0;  // of the raw (un-robustified) residuals
+  double seconds = 0;
+};
+
+// Adjusts rec in place. Points observed by a variable image are variable (with all their observations in the
+// problem; images outside the variable set contribute as constants). Point errors are updated afterwards.
+BundleAdjustmentSummary BundleAdjust(core::Reconstruction* rec, const BundleAdjustmentConfig& config,
+                                     const BundleAdjustmentOptions& options);
+
+// Recomputes Point3D::error (mean reprojection error over the track) for all points.
+void UpdatePointErrors(core::Reconstruction* rec);
+
+// Reprojection error (pixels) of one observation; infinity when the point is behind the camera.
+double ObservationError(const core::Reconstruction& rec, uint32_t image_id, uint32_t point2d_idx,
+                        const Eigen::Vector3d& xyz);
+
+}  // namespace fmv3d::sfm

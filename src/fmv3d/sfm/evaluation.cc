@@ -1,0 +1,95 @@
+#include "fmv3d/sfm/evaluation.h"
+
+#include <algorithm>
+#include <cmath>
+#include <filesystem>
+
+#include "fmv3d/core/error.h"
+#include "fmv3d/geometry/similarity.h"
+#include "fmv3d/io/colmap_model.h"
+#include "fmv3d/io/ground_truth.h"
+
+namespace fmv3d::sfm {
+
+namespace fs = std::filesystem;
+
+nlohmann::json SparseEvaluation::ToJson() const {
+  return {{"truth_images", num_truth_images},
+          {"matched_images", num_matched},
+          {"centre_rmse", centre_rmse},
+          {"extent", extent},
+          {"extent_definition", "max pairwise distance between true camera centres"},
+          {"centre_rmse_percent_of_extent", 100 * centre_rmse_fraction},
+          {"max_centre_error_percent_of_extent", 100 * max_centre_error_fraction},
+          {"median_relative_rotation_error_deg", median_rotation_error_deg},
+          {"focal_relative_error_percent", 100 * focal_relative_error},
+          {"alignment", {{"scale", alignment.s},
+                         {"q_wxyz", {alignment.q.w(), alignment.q.x(), alignment.q.y(), alignment.q.z()}},
+                         {"t", {alignment.t.x(), alignment.t.y(), alignment.t.z()}}}}};
+}
+
+double MedianRelativeRotationErrorDeg(const std::vector<core::Pose>& estimate,
+                                      const std::vector<core::Pose>& truth) {
+  std::vector<double> errs;
+  for (size_t i = 0; i < estimate.size(); ++i)
+    for (size_t j = i + 1; j < estimate.size(); ++j) {
+      const Eigen::Quaterniond re = estimate[j].q * estimate[i].q.conjugate();
+      const Eigen::Quaterniond rt = truth[j].q * truth[i].q.conjugate();
+      errs.push_back(core::RotationAngle(re, rt) * 180.0 / M_PI);
+    }
+  if (errs.empty()) return 0;
+  std::nth_element(errs.begin(), errs.begin() + errs.size() / 2, errs.end());
+  return errs[errs.size() / 2];
+}
+
+SparseEvaluation EvaluateSparse(const core::Reconstruction& estimate, const core::Reconstruction& truth) {
+  SparseEvaluation ev;
+  ev.num_truth_images = static_cast<int>(truth.images.size());
+  std::vector<Eigen::Vector3d> ce, ct;
+  std::vector<core::Pose> pe, pt;
+  std::map<uint32_t, uint32_t> camera_match;  // our camera → true camera
+  for (const auto& [id, im] : estimate.images) {
+    const core::Image* t = truth.FindImageByName(im.name);
+    if (!t) continue;
+    ce.push_back(im.pose.Centre());
+    ct.push_back(t->pose.Centre());
+    pe.push_back(im.pose);
+    pt.push_back(t->pose);
+    camera_match.emplace(im.camera_id, t->camera_id);
+  }
+  ev.num_matched = static_cast<int>(ce.size());
+  if (ce.size() < 3)
+    throw Error("evaluate: only " + std::to_string(ce.size()) +
+                " registered images match ground-truth images by name (need ≥ 3)");
+  if (!geometry::EstimateSimilarity(ce, ct, &ev.alignment))
+    throw Error("evaluate: camera centres are degenerate (collinear or identical); cannot align");
+  double sum = 0;
+  for (size_t i = 0; i < ce.size(); ++i) {
+    for (size_t j = i + 1; j < ct.size(); ++j) ev.extent = std::max(ev.extent, (ct[i] - ct[j]).norm());
+  }
+  for (size_t i = 0; i < ce.size(); ++i) {
+    const double e = (ev.alignment.Apply(ce[i]) - ct[i]).norm();
+    sum += e * e;
+    ev.max_centre_error_fraction = std::max(ev.max_centre_error_fraction, e);
+  }
+  ev.centre_rmse = std::sqrt(sum / ce.size());
+  ev.centre_rmse_fraction = ev.extent > 0 ? ev.centre_rmse / ev.extent : 0;
+  ev.max_centre_error_fraction = ev.extent > 0 ? ev.max_centre_error_fraction / ev.extent : 0;
+  ev.median_rotation_error_deg = MedianRelativeRotationErrorDeg(pe, pt);
+  for (const auto& [ours, theirs] : camera_match) {
+    const double fe = estimate.cameras.at(ours).f, ft = truth.cameras.at(theirs).f;
+    if (ft > 0) ev.focal_relative_error = std::max(ev.focal_relative_error, std::abs(fe - ft) / ft);
+  }
+  return ev;
+}
+
+core::Reconstruction LoadTruth(const std::string& dir_str) {
+  const fs::path dir(dir_str);
+  if (!fs::is_directory(dir)) throw Error(dir_str + ": ground-truth folder not found");
+  if (fs::exists(dir / "images.txt")) return io::ReadColmapText(dir);
+  for (const auto& e : fs::directory_iterator(dir))
+    if (e.path().extension() == ".camera") return io::ReadStrechaCameras(dir);
+  throw Error(dir_str + ": no ground truth (neither a COLMAP text model nor Strecha NAME.camera files)");
+}
+
+}  // namespace fmv3d::sfm

@@ -1,0 +1,43 @@
+// Accuracy of a reconstruction against ground truth, as issue 4 measures it (and as ANCHORS.md reports COLMAP):
+//  - similarity (Umeyama) alignment of our camera centres to the true ones, images matched by name;
+//  - centre RMSE after alignment, as a fraction of the true cameras' extent, where the extent is the LARGEST
+//    PAIRWISE DISTANCE between true camera centres (the set's diameter);
+//  - median over all image pairs of the angle of R_rel_est · R_rel_trueᵀ, with R_rel = R_j R_iᵀ (gauge-free);
+//  - relative focal error |f_est − f_true| / f_true per camera (matched through the first image using it).
+#pragma once
+
+#include <map>
+#include <string>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include "fmv3d/core/pose.h"
+#include "fmv3d/core/reconstruction.h"
+
+namespace fmv3d::sfm {
+
+struct SparseEvaluation {
+  int num_truth_images = 0;
+  int num_matched = 0;        // our images found in the truth by name
+  double centre_rmse = 0;     // same units as the truth
+  double extent = 0;          // max pairwise distance of the matched true centres
+  double centre_rmse_fraction = 0;  // centre_rmse / extent
+  double median_rotation_error_deg = 0;
+  double max_centre_error_fraction = 0;
+  double focal_relative_error = 0;  // worst over matched cameras
+  core::Sim3 alignment;             // ours → truth
+  nlohmann::json ToJson() const;
+};
+
+// Throws fmv3d::Error when fewer than 3 images can be matched by name (no alignment possible).
+SparseEvaluation EvaluateSparse(const core::Reconstruction& estimate, const core::Reconstruction& truth);
+
+// Median relative-rotation error (degrees) over all pairs of corresponding poses (same order in both lists).
+double MedianRelativeRotationErrorDeg(const std::vector<core::Pose>& estimate, const std::vector<core::Pose>& truth);
+
+// Loads ground truth from a COLMAP text model folder, or from a Strecha folder of NAME.camera files
+// (io::ReadStrechaCameras).
+core::Reconstruction LoadTruth(const std::string& dir);
+
+}  // namespace fmv3d::sfm

@@ -1,0 +1,782 @@
+#include "fmv3d/sfm/incremental_mapper.h"
+
+#include <spdlog/spdlog.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <numeric>
+#include <opencv2/calib3d.hpp>
+#include <opencv2/core/eigen.hpp>
+#include <set>
+
+#include "fmv3d/core/error.h"
+#include "fmv3d/geometry/absolute_pose.h"
+#include "fmv3d/geometry/triangulation.h"
+#include "fmv3d/sfm/bundle_adjustment.h"
+#include "fmv3d/sfm/correspondence_graph.h"
+
+namespace fmv3d::sfm {
+
+void MapperOptions::Check() const {
+  if (init_min_inliers < 8) throw Error("mapper: init_min_inliers must be ≥ 8");
+  if (!(init_min_tri_angle_deg > 0)) throw Error("mapper: init_min_tri_angle_deg must be > 0");
+  if (!(abs_pose_max_error_px > 0)) throw Error("mapper: abs_pose_max_error_px must be > 0");
+  if (abs_pose_min_inliers < 4) throw Error("mapper: abs_pose_min_inliers must be ≥ 4");
+  if (!(tri_max_error_px > 0) || !(filter_max_error_px > 0)) throw Error("mapper: error thresholds must be > 0");
+  if (tri_min_angle_deg < 0 || filter_min_angle_deg < 0) throw Error("mapper: angles must be ≥ 0");
+  if (local_ba_num_images < 1) throw Error("mapper: local_ba_num_images must be ≥ 1");
+  if (!(global_ba_growth_ratio > 1)) throw Error("mapper: global_ba_growth_ratio must be > 1");
+  if (min_model_size < 2) throw Error("mapper: min_model_size must be ≥ 2");
+  if (max_models < 1) throw Error("mapper: max_models must be ≥ 1");
+}
+
+namespace {
+
+constexpr double kDeg = M_PI / 180.0;
+using Clock = std::chrono::steady_clock;
+
+double Seconds(Clock::time_point since) { return std::chrono::duration<double>(Clock::now() - since).count(); }
+
+struct Timings {
+  double init = 0, registration = 0, triangulation = 0, local_ba = 0, global_ba = 0, filtering = 0;
+};
+
+struct PairCandidate {
+  const features::VerifiedPair* pair = nullptr;
+  bool evaluated = false, valid = false;
+  double h_ratio = 0;
+  double median_angle_deg = 0;
+  int num_good = 0;
+  core::Pose pose2;  // pose of image 2 with image 1 at the origin, unit baseline
+};
+
+class ModelBuilder {
+ public:
+  ModelBuilder(const MapperInput& input, const std::map<uint32_t, const MapperImage*>& images,
+               const CorrespondenceGraph& graph, const MapperOptions& options, const std::set<uint32_t>& pool,
+               Timings* timings)
+      : input_(input), images_(images), graph_(graph), opt_(options), pool_(pool), t_(timings) {}
+
+  bool Initialize();
+  void Grow();
+  core::Reconstruction& rec() { return rec_; }
+  const std::map<uint32_t, std::string>& fail_reasons() const { return fail_reason_; }
+  std::pair<uint32_t, uint32_t> init_pair() const { return {gauge1_, gauge2_}; }
+  int num_global_ba() const { return num_global_ba_; }
+
+ private:
+  Eigen::Vector2d Normalized(const core::Camera& cam, const Eigen::Vector2d& uv) const {
+    return cam.Unproject(uv).head<2>();
+  }
+  void EvaluatePair(PairCandidate* c) const;
+  bool TryInitialPair(const PairCandidate& c);
+  void AddImage(uint32_t id, const core::Pose& pose);
+  void AddObservation(uint64_t pid, uint32_t image_id, uint32_t kp);
+  void DeletePoint(uint64_t pid);
+  bool TriangulateObservations(const std::vector<core::TrackElement>& obs);
+  void TriangulateKeypoint(uint32_t image_id, uint32_t kp);
+  int CompletePoint(uint64_t pid);
+  int MergePoint(uint64_t pid);
+  bool PointHasImage(uint64_t pid, uint32_t image_id) const;
+  int64_t PointOf(const core::TrackElement& el) const {
+    auto it = rec_.images.find(el.image_id);
+    return it == rec_.images.end() ? core::kNoPoint3D : it->second.point3d_ids[el.point2d_idx];
+  }
+  int TriangulateImage(uint32_t image_id);
+  int Retriangulate();
+  int FilterPoints(const std::set<uint64_t>* subset);
+  int VisiblePoints(uint32_t image_id, double* score) const;
+  bool TryRegister(uint32_t image_id);
+  void LocalBundleAdjust(uint32_t image_id);
+  BundleAdjustmentSummary GlobalBundleAdjust(bool final_pass, bool principal_point = false);
+  void TryPrincipalPoint();
+  BundleAdjustmentOptions BaOptions() const;
+
+  const MapperInput& input_;
+  const std::map<uint32_t, const MapperImage*>& images_;
+  const CorrespondenceGraph& graph_;
+  uint64_t next_point_id_ = 1;
+  const MapperOptions& opt_;
+  std::set<uint32_t> pool_;
+  Timings* t_;
+  core::Reconstruction rec_;
+  uint32_t gauge1_ = 0, gauge2_ = 0;
+  std::map<uint32_t, std::string> fail_reason_;
+  std::map<uint32_t, int> trials_;
+  std::map<uint32_t, int> visible_at_failure_;
+  size_t images_at_last_global_ = 0;
+  int num_global_ba_ = 0;
+};
+
+void ModelBuilder::EvaluatePair(PairCandidate* c) const {
+  c->evaluated = true;
+  const auto& pair = *c->pair;
+  const MapperImage& im1 = *images_.at(pair.image_id1);
+  const MapperImage& im2 = *images_.at(pair.image_id2);
+  const core::Camera& cam1 = input_.cameras.at(im1.camera_id).camera;
+  const core::Camera& cam2 = input_.cameras.at(im2.camera_id).camera;
+  std::vector<cv::Point2d> p1, p2, u1, u2;
+  for (const auto& m : pair.inliers) {
+    const Eigen::Vector2d a = Normalized(cam1, im1.keypoints[m.idx1]);
+    const Eigen::Vector2d b = Normalized(cam2, im2.keypoints[m.idx2]);
+    p1.emplace_back(a.x(), a.y());
+    p2.emplace_back(b.x(), b.y());
+    u1.emplace_back(im1.keypoints[m.idx1].x(), im1.keypoints[m.idx1].y());
+    u2.emplace_back(im2.keypoints[m.idx2].x(), im2.keypoints[m.idx2].y());
+  }
+  if (p1.size() < 8) return;
+  // Homography-dominated pairs (planar scene, pure rotation) give an unstable relative pose.
+  if (pair.num_inliers_H > 0 && !pair.inliers.empty()) {
+    c->h_ratio = static_cast<double>(pair.num_inliers_H) / pair.inliers.size();
+  } else {
+    cv::Mat hmask;
+    const cv::Mat H = cv::findHomography(u1, u2, cv::RANSAC, 4.0, hmask, 2000, 0.999);
+    c->h_ratio = H.empty() ? 0 : static_cast<double>(cv::countNonZero(hmask)) / p1.size();
+  }
+  const double f = 0.5 * (cam1.f + cam2.f);
+  cv::Mat mask;
+  cv::Mat E;
+  try {
+    E = cv::findEssentialMat(p1, p2, cv::Mat::eye(3, 3, CV_64F), cv::RANSAC, 0.9999,
+                             opt_.tri_max_error_px / f, 5000, mask);
+  } catch (const cv::Exception&) {
+    return;
+  }
+  if (E.rows != 3 || E.cols != 3) return;  // several solutions stacked or none: degenerate
+  cv::Mat R, t;
+  const int n_front = cv::recoverPose(E, p1, p2, cv::Mat::eye(3, 3, CV_64F), R, t, mask);
+  if (n_front < opt_.init_min_inliers / 2) return;
+  Eigen::Matrix3d Re;
+  Eigen::Vector3d te;
+  cv::cv2eigen(R, Re);
+  cv::cv2eigen(t, te);
+  c->pose2 = core::Pose(Eigen::Quaterniond(Re), te.normalized());
+  const core::Pose pose1;
+  std::vector<double> angles;
+  for (size_t i = 0; i < p1.size(); ++i) {
+    if (!mask.at<uint8_t>(static_cast<int>(i))) continue;
+    const std::vector<core::Pose> poses = {pose1, c->pose2};
+    const std::vector<Eigen::Vector2d> xs = {{p1[i].x, p1[i].y}, {p2[i].x, p2[i].y}};
+    Eigen::Vector3d X;
+    if (!geometry::TriangulateDLT(poses, xs, &X)) continue;
+    if (!geometry::HasPositiveDepth(pose1, X) || !geometry::HasPositiveDepth(c->pose2, X)) continue;
+    const double e1 = (cam1.Project(pose1.Transform(X)) - Eigen::Vector2d(u1[i].x, u1[i].y)).norm();
+    const double e2 = (cam2.Project(c->pose2.Transform(X)) - Eigen::Vector2d(u2[i].x, u2[i].y)).norm();
+    if (e1 > opt_.tri_max_error_px || e2 > opt_.tri_max_error_px) continue;
+    angles.push_back(geometry::TriangulationAngle(pose1.Centre(), c->pose2.Centre(), X) / kDeg);
+  }
+  if (angles.size() < 8) return;
+  std::nth_element(angles.begin(), angles.begin() + angles.size() / 2, angles.end());
+  c->median_angle_deg = angles[angles.size() / 2];
+  c->num_good = static_cast<int>(angles.size());
+  c->valid = true;
+}
+
+void ModelBuilder::AddImage(uint32_t id, const core::Pose& pose) {
+  const MapperImage& mi = *images_.at(id);
+  if (!rec_.cameras.count(mi.camera_id)) rec_.cameras[mi.camera_id] = input_.cameras.at(mi.camera_id).camera;
+  core::Image im;
+  im.id = id;
+  im.camera_id = mi.camera_id;
+  im.name = mi.name;
+  im.pose = pose;
+  im.points2d = mi.keypoints;
+  im.point3d_ids.assign(mi.keypoints.size(), core::kNoPoint3D);
+  rec_.images[id] = std::move(im);
+}
+
+void ModelBuilder::AddObservation(uint64_t pid, uint32_t image_id, uint32_t kp) {
+  auto& im = rec_.images.at(image_id);
+  if (im.point3d_ids[kp] != core::kNoPoint3D) return;
+  im.point3d_ids[kp] = static_cast<int64_t>(pid);
+  rec_.points.at(pid).track.push_back({image_id, kp});
+}
+
+void ModelBuilder::DeletePoint(uint64_t pid) {
+  auto it = rec_.points.find(pid);
+  if (it == rec_.points.end()) return;
+  for (const auto& el : it->second.track) rec_.images.at(el.image_id).point3d_ids[el.point2d_idx] = core::kNoPoint3D;
+  rec_.points.erase(it);
+}
+
+bool ModelBuilder::TryInitialPair(const PairCandidate& c) {
+  rec_ = core::Reconstruction();
+  const auto& pair = *c.pair;
+  AddImage(pair.image_id1, core::Pose());
+  AddImage(pair.image_id2, c.pose2);
+  gauge1_ = pair.image_id1;
+  gauge2_ = pair.image_id2;
+  int made = 0;
+  for (const auto& m : pair.inliers) {
+    if (rec_.images.at(pair.image_id1).point3d_ids[m.idx1] != core::kNoPoint3D ||
+        rec_.images.at(pair.image_id2).point3d_ids[m.idx2] != core::kNoPoint3D)
+      continue;
+    made += TriangulateObservations({{pair.image_id1, m.idx1}, {pair.image_id2, m.idx2}}) ? 1 : 0;
+  }
+  if (made < opt_.init_min_inliers / 2) return false;
+  BundleAdjustmentConfig cfg;
+  cfg.gauge_image1 = gauge1_;
+  cfg.gauge_image2 = gauge2_;
+  for (const auto& [cid, cam] : rec_.cameras) cfg.constant_cameras.insert(cid);
+  BundleAdjust(&rec_, cfg, BaOptions());
+  FilterPoints(nullptr);
+  return static_cast<int>(rec_.points.size()) >= opt_.init_min_inliers / 2;
+}
+
+bool ModelBuilder::Initialize() {
+  const auto start = Clock::now();
+  std::vector<PairCandidate> cands;
+  for (const auto& p : input_.pairs)
+    if (pool_.count(p.image_id1) && pool_.count(p.image_id2) &&
+        static_cast<int>(p.inliers.size()) >= opt_.init_min_inliers) {
+      PairCandidate c;
+      c.pair = &p;
+      cands.push_back(c);
+    }
+  std::stable_sort(cands.begin(), cands.end(), [](const PairCandidate& a, const PairCandidate& b) {
+    return a.pair->inliers.size() > b.pair->inliers.size();
+  });
+  if (static_cast<int>(cands.size()) > opt_.init_max_candidates) cands.resize(opt_.init_max_candidates);
+  for (auto& c : cands) EvaluatePair(&c);
+  // Strict first (enough angle, not planar), then relax the angle and finally accept planar pairs.
+  const std::vector<std::pair<double, bool>> passes = {
+      {opt_.init_min_tri_angle_deg, false},       {opt_.init_min_tri_angle_deg / 2, false},
+      {opt_.init_min_tri_angle_deg / 4, false},   {opt_.init_min_tri_angle_deg / 2, true},
+      {opt_.init_min_tri_angle_deg / 8, true},    {opt_.init_min_tri_angle_deg / 32, true}};
+  std::set<const features::VerifiedPair*> tried;
+  for (const auto& [min_angle, allow_planar] : passes) {
+    std::vector<const PairCandidate*> ok;
+    for (const auto& c : cands)
+      if (c.valid && c.median_angle_deg >= min_angle && (allow_planar || c.h_ratio <= opt_.init_max_h_ratio) &&
+          c.num_good >= opt_.init_min_inliers / 2 && !tried.count(c.pair))
+        ok.push_back(&c);
+    std::stable_sort(ok.begin(), ok.end(),
+                     [](const PairCandidate* a, const PairCandidate* b) { return a->num_good > b->num_good; });
+    for (const PairCandidate* c : ok) {
+      tried.insert(c->pair);
+      if (TryInitialPair(*c)) {
+        spdlog::info("initial pair {} + {}: {} points, median angle {:.2f}°, H ratio {:.2f}",
+                     images_.at(c->pair->image_id1)->name, images_.at(c->pair->image_id2)->name,
+                     rec_.points.size(), c->median_angle_deg, c->h_ratio);
+        t_->init += Seconds(start);
+        images_at_last_global_ = 2;
+        return true;
+      }
+    }
+  }
+  rec_ = core::Reconstruction();
+  t_->init += Seconds(start);
+  return false;
+}
+
+bool ModelBuilder::PointHasImage(uint64_t pid, uint32_t image_id) const {
+  for (const auto& el : rec_.points.at(pid).track)
+    if (el.image_id == image_id) return true;
+  return false;
+}
+
+bool ModelBuilder::TriangulateObservations(const std::vector<core::TrackElement>& obs) {
+  const size_t n = obs.size();
+  if (n < 2) return false;
+  std::vector<core::Pose> poses(n);
+  std::vector<Eigen::Vector2d> xs(n), uvs(n);
+  std::vector<Eigen::Vector3d> centres(n);
+  std::vector<const core::Camera*> cams(n);
+  for (size_t i = 0; i < n; ++i) {
+    const auto& im = rec_.images.at(obs[i].image_id);
+    cams[i] = &rec_.cameras.at(im.camera_id);
+    poses[i] = im.pose;
+    uvs[i] = im.points2d[obs[i].point2d_idx];
+    xs[i] = Normalized(*cams[i], uvs[i]);
+    centres[i] = im.pose.Centre();
+  }
+  auto inliers_of = [&](const Eigen::Vector3d& X, std::vector<size_t>* in) {
+    in->clear();
+    for (size_t i = 0; i < n; ++i) {
+      const Eigen::Vector3d xc = poses[i].Transform(X);
+      if (xc.z() <= 0) continue;
+      if ((cams[i]->Project(xc) - uvs[i]).norm() <= opt_.tri_max_error_px) in->push_back(i);
+    }
+  };
+  // Small RANSAC over observation pairs: the correspondences can contain a wrong match.
+  std::vector<size_t> best_in;
+  const size_t m = std::min<size_t>(n, 10);
+  for (size_t i = 0; i < m && best_in.size() < n; ++i)
+    for (size_t j = i + 1; j < m; ++j) {
+      Eigen::Vector3d X;
+      if (!geometry::TriangulateDLT({poses[i], poses[j]}, {xs[i], xs[j]}, &X)) continue;
+      if (geometry::TriangulationAngle(centres[i], centres[j], X) < opt_.tri_min_angle_deg * kDeg) continue;
+      std::vector<size_t> in;
+      inliers_of(X, &in);
+      if (in.size() > best_in.size()) best_in = in;
+      if (best_in.size() == n) break;
+    }
+  if (best_in.size() < 2) return false;
+  std::vector<core::Pose> ps;
+  std::vector<Eigen::Vector2d> xx;
+  for (size_t i : best_in) {
+    ps.push_back(poses[i]);
+    xx.push_back(xs[i]);
+  }
+  Eigen::Vector3d X;
+  if (!geometry::TriangulateDLT(ps, xx, &X)) return false;
+  geometry::RefinePoint(ps, xx, &X);
+  std::vector<size_t> in;
+  inliers_of(X, &in);
+  if (in.size() < 2) return false;
+  std::vector<Eigen::Vector3d> cs;
+  for (size_t i : in) cs.push_back(centres[i]);
+  if (geometry::MaxTriangulationAngle(cs, X) < opt_.tri_min_angle_deg * kDeg) return false;
+  const uint64_t pid = next_point_id_++;
+  core::Point3D p;
+  p.id = pid;
+  p.xyz = X;
+  const MapperImage& first = *images_.at(obs[in[0]].image_id);
+  if (first.colors.size() == first.keypoints.size()) p.rgb = first.colors[obs[in[0]].point2d_idx];
+  rec_.points[pid] = p;
+  for (size_t i : in) AddObservation(pid, obs[i].image_id, obs[i].point2d_idx);
+  return true;
+}
+
+void ModelBuilder::TriangulateKeypoint(uint32_t image_id, uint32_t kp) {
+  const auto& corrs = graph_.Correspondences(image_id, kp);
+  if (corrs.empty()) return;
+  auto& im = rec_.images.at(image_id);
+  if (im.point3d_ids[kp] != core::kNoPoint3D) return;
+  // Continuation: join the best-fitting existing point among the correspondences.
+  int64_t best_pid = core::kNoPoint3D;
+  double best_err = opt_.tri_max_error_px;
+  for (const auto& c : corrs) {
+    const int64_t pid = PointOf(c);
+    if (pid == core::kNoPoint3D || pid == best_pid) continue;
+    const double e = ObservationError(rec_, image_id, kp, rec_.points.at(static_cast<uint64_t>(pid)).xyz);
+    if (e <= best_err && !PointHasImage(static_cast<uint64_t>(pid), image_id)) {
+      best_err = e;
+      best_pid = pid;
+    }
+  }
+  if (best_pid != core::kNoPoint3D) {
+    AddObservation(static_cast<uint64_t>(best_pid), image_id, kp);
+    return;
+  }
+  // Creation: this keypoint and its registered, untriangulated correspondences (one per image).
+  std::vector<core::TrackElement> obs = {{image_id, kp}};
+  std::set<uint32_t> seen = {image_id};
+  for (const auto& c : corrs)
+    if (rec_.images.count(c.image_id) && PointOf(c) == core::kNoPoint3D && seen.insert(c.image_id).second)
+      obs.push_back(c);
+  if (obs.size() >= 2) TriangulateObservations(obs);
+}
+
+int ModelBuilder::CompletePoint(uint64_t pid) {
+  int added = 0;
+  // Breadth-first over the correspondence graph: an added observation can bring further ones.
+  for (size_t k = 0; k < rec_.points.at(pid).track.size(); ++k) {
+    const core::TrackElement el = rec_.points.at(pid).track[k];
+    for (const auto& c : graph_.Correspondences(el.image_id, el.point2d_idx)) {
+      if (!rec_.images.count(c.image_id) || PointOf(c) != core::kNoPoint3D || PointHasImage(pid, c.image_id))
+        continue;
+      if (ObservationError(rec_, c.image_id, c.point2d_idx, rec_.points.at(pid).xyz) <= opt_.tri_max_error_px) {
+        AddObservation(pid, c.image_id, c.point2d_idx);
+        ++added;
+      }
+    }
+  }
+  return added;
+}
+
+int ModelBuilder::MergePoint(uint64_t pid) {
+  int merged = 0;
+  for (size_t k = 0; rec_.points.count(pid) && k < rec_.points.at(pid).track.size(); ++k) {
+    const core::TrackElement el = rec_.points.at(pid).track[k];
+    for (const auto& c : graph_.Correspondences(el.image_id, el.point2d_idx)) {
+      const int64_t other = PointOf(c);
+      if (other == core::kNoPoint3D || static_cast<uint64_t>(other) == pid) continue;
+      auto& P = rec_.points.at(pid);
+      auto& Q = rec_.points.at(static_cast<uint64_t>(other));
+      bool ok = true;
+      for (const auto& q : Q.track) ok = ok && !PointHasImage(pid, q.image_id);
+      if (!ok) continue;
+      // Candidate position: the better-supported point's; every observation of both must agree with it.
+      const Eigen::Vector3d X = P.track.size() >= Q.track.size() ? P.xyz : Q.xyz;
+      for (const auto& o : P.track) ok = ok && ObservationError(rec_, o.image_id, o.point2d_idx, X) <= opt_.tri_max_error_px;
+      for (const auto& o : Q.track) ok = ok && ObservationError(rec_, o.image_id, o.point2d_idx, X) <= opt_.tri_max_error_px;
+      if (!ok) continue;
+      const auto qtrack = Q.track;
+      DeletePoint(static_cast<uint64_t>(other));
+      rec_.points.at(pid).xyz = X;
+      for (const auto& o : qtrack) AddObservation(pid, o.image_id, o.point2d_idx);
+      ++merged;
+    }
+  }
+  return merged;
+}
+
+int ModelBuilder::TriangulateImage(uint32_t image_id) {
+  const auto start = Clock::now();
+  const size_t before = rec_.points.size();
+  const auto& im = rec_.images.at(image_id);
+  for (uint32_t kp = 0; kp < im.points2d.size(); ++kp) TriangulateKeypoint(image_id, kp);
+  std::set<uint64_t> pts;
+  for (int64_t pid : rec_.images.at(image_id).point3d_ids)
+    if (pid != core::kNoPoint3D) pts.insert(static_cast<uint64_t>(pid));
+  for (uint64_t pid : pts) {
+    if (!rec_.points.count(pid)) continue;
+    CompletePoint(pid);
+    MergePoint(pid);
+  }
+  t_->triangulation += Seconds(start);
+  return static_cast<int>(rec_.points.size()) - static_cast<int>(before);
+}
+
+int ModelBuilder::Retriangulate() {
+  const auto start = Clock::now();
+  const size_t before = rec_.points.size();
+  std::vector<uint32_t> ids;
+  for (const auto& [id, im] : rec_.images) ids.push_back(id);
+  for (uint32_t id : ids)
+    for (uint32_t kp = 0; kp < rec_.images.at(id).points2d.size(); ++kp) TriangulateKeypoint(id, kp);
+  std::vector<uint64_t> pids;
+  for (const auto& [pid, p] : rec_.points) pids.push_back(pid);
+  int changed = 0;
+  for (uint64_t pid : pids) {
+    if (!rec_.points.count(pid)) continue;
+    changed += CompletePoint(pid);
+    changed += MergePoint(pid);
+  }
+  t_->triangulation += Seconds(start);
+  return changed + static_cast<int>(rec_.points.size()) - static_cast<int>(before);
+}
+
+int ModelBuilder::FilterPoints(const std::set<uint64_t>* subset) {
+  const auto start = Clock::now();
+  std::vector<uint64_t> ids;
+  if (subset)
+    ids.assign(subset->begin(), subset->end());
+  else
+    for (const auto& [pid, p] : rec_.points) ids.push_back(pid);
+  int removed = 0;
+  for (uint64_t pid : ids) {
+    auto it = rec_.points.find(pid);
+    if (it == rec_.points.end()) continue;
+    auto& p = it->second;
+    std::vector<core::TrackElement> keep;
+    for (const auto& el : p.track) {
+      if (ObservationError(rec_, el.image_id, el.point2d_idx, p.xyz) <= opt_.filter_max_error_px)
+        keep.push_back(el);
+      else
+        rec_.images.at(el.image_id).point3d_ids[el.point2d_idx] = core::kNoPoint3D;
+    }
+    p.track = keep;
+    bool drop = p.track.size() < 2;
+    if (!drop) {
+      std::vector<Eigen::Vector3d> cs;
+      for (const auto& el : p.track) cs.push_back(rec_.images.at(el.image_id).pose.Centre());
+      drop = geometry::MaxTriangulationAngle(cs, p.xyz) < opt_.filter_min_angle_deg * kDeg;
+    }
+    if (drop) {
+      DeletePoint(pid);
+      ++removed;
+    }
+  }
+  t_->filtering += Seconds(start);
+  return removed;
+}
+
+int ModelBuilder::VisiblePoints(uint32_t image_id, double* score) const {
+  const MapperImage& mi = *images_.at(image_id);
+  const core::Camera& cam = input_.cameras.at(mi.camera_id).camera;
+  constexpr int kLevels = 3;
+  std::set<int> cells[kLevels];
+  int count = 0;
+  for (uint32_t kp = 0; kp < mi.keypoints.size(); ++kp) {
+    bool seen = false;
+    for (const auto& c : graph_.Correspondences(image_id, kp))
+      if (PointOf(c) != core::kNoPoint3D) {
+        seen = true;
+        break;
+      }
+    if (!seen) continue;
+    ++count;
+    for (int l = 0; l < kLevels; ++l) {
+      const int g = 2 << l;  // 2, 4, 8 cells per side
+      const int cx = std::clamp(static_cast<int>(mi.keypoints[kp].x() / std::max(1, cam.width) * g), 0, g - 1);
+      const int cy = std::clamp(static_cast<int>(mi.keypoints[kp].y() / std::max(1, cam.height) * g), 0, g - 1);
+      cells[l].insert(cy * g + cx);
+    }
+  }
+  if (score) {
+    *score = 0;
+    for (int l = 0; l < kLevels; ++l) *score += static_cast<double>(cells[l].size()) * (2 << l);
+  }
+  return count;
+}
+
+BundleAdjustmentOptions ModelBuilder::BaOptions() const {
+  BundleAdjustmentOptions o;
+  o.loss_scale_px = opt_.ba_loss_scale_px;
+  const int n = static_cast<int>(rec_.images.size());
+  o.refine_focal = n >= opt_.refine_focal_min_images;
+  o.refine_k1 = n >= opt_.refine_focal_min_images;
+  o.refine_k2 = n >= opt_.refine_k2_min_images;
+  o.refine_principal_point = false;  // only the final model-selection test frees it
+  o.refine_tangential = opt_.refine_tangential && n >= opt_.refine_principal_point_min_images;
+  return o;
+}
+
+bool ModelBuilder::TryRegister(uint32_t image_id) {
+  const auto start = Clock::now();
+  const MapperImage& mi = *images_.at(image_id);
+  std::vector<Eigen::Vector2d> p2;
+  std::vector<Eigen::Vector3d> p3;
+  std::vector<std::pair<uint32_t, uint64_t>> kps;  // (keypoint, point) per correspondence
+  for (uint32_t kp = 0; kp < mi.keypoints.size(); ++kp) {
+    std::set<int64_t> pids;
+    for (const auto& c : graph_.Correspondences(image_id, kp)) {
+      const int64_t pid = PointOf(c);
+      if (pid == core::kNoPoint3D || !pids.insert(pid).second) continue;
+      p2.push_back(mi.keypoints[kp]);
+      p3.push_back(rec_.points.at(static_cast<uint64_t>(pid)).xyz);
+      kps.emplace_back(kp, static_cast<uint64_t>(pid));
+    }
+  }
+  core::Camera cam = rec_.cameras.count(mi.camera_id) ? rec_.cameras.at(mi.camera_id)
+                                                       : input_.cameras.at(mi.camera_id).camera;
+  geometry::AbsolutePoseOptions po;
+  po.max_error_px = opt_.abs_pose_max_error_px;
+  po.min_inliers = opt_.abs_pose_min_inliers;
+  po.min_inlier_ratio = opt_.abs_pose_min_inlier_ratio;
+  const auto r = geometry::EstimateAbsolutePose(p2, p3, cam, po);
+  t_->registration += Seconds(start);
+  if (!r.success) {
+    fail_reason_[image_id] = "absolute pose failed: " + std::to_string(r.num_inliers) + " inliers of " +
+                             std::to_string(p2.size()) + " 2D-3D correspondences";
+    return false;
+  }
+  AddImage(image_id, r.pose);
+  for (size_t i = 0; i < kps.size(); ++i)
+    if (r.inlier_mask[i] && rec_.images.at(image_id).point3d_ids[kps[i].first] == core::kNoPoint3D &&
+        !PointHasImage(kps[i].second, image_id))
+      AddObservation(kps[i].second, image_id, kps[i].first);
+  fail_reason_.erase(image_id);
+  return true;
+}
+
+void ModelBuilder::LocalBundleAdjust(uint32_t image_id) {
+  const auto start = Clock::now();
+  // Neighbours: the registered images sharing most points with the new one.
+  std::map<uint32_t, int> shared;
+  for (int64_t pid : rec_.images.at(image_id).point3d_ids) {
+    if (pid == core::kNoPoint3D) continue;
+    for (const auto& el : rec_.points.at(static_cast<uint64_t>(pid)).track)
+      if (el.image_id != image_id) ++shared[el.image_id];
+  }
+  std::vector<std::pair<int, uint32_t>> order;
+  for (const auto& [id, n] : shared) order.emplace_back(-n, id);
+  std::sort(order.begin(), order.end());
+  BundleAdjustmentConfig cfg;
+  cfg.variable_images.insert(image_id);
+  for (size_t i = 0; i < order.size() && static_cast<int>(i) < opt_.local_ba_num_images - 1; ++i)
+    cfg.variable_images.insert(order[i].second);
+  cfg.constant_images.insert(gauge1_);  // the gauge image never moves, so the frame stays put
+  cfg.gauge_image1 = gauge1_;
+  cfg.gauge_image2 = gauge2_;
+  for (const auto& [cid, cam] : rec_.cameras) cfg.constant_cameras.insert(cid);
+  BundleAdjustmentOptions o = BaOptions();
+  o.max_iterations = 25;
+  BundleAdjust(&rec_, cfg, o);
+  t_->local_ba += Seconds(start);
+  std::set<uint64_t> pts;
+  for (uint32_t id : cfg.variable_images)
+    for (int64_t pid : rec_.images.at(id).point3d_ids)
+      if (pid != core::kNoPoint3D) pts.insert(static_cast<uint64_t>(pid));
+  FilterPoints(&pts);
+}
+
+BundleAdjustmentSummary ModelBuilder::GlobalBundleAdjust(bool final_pass, bool principal_point) {
+  const auto start = Clock::now();
+  BundleAdjustmentConfig cfg;
+  cfg.gauge_image1 = gauge1_;
+  cfg.gauge_image2 = gauge2_;
+  BundleAdjustmentOptions o = BaOptions();
+  o.refine_principal_point = principal_point;
+  if (final_pass) {
+    o.function_tolerance = 1e-9;
+    o.max_iterations = 200;
+  }
+  const auto s = BundleAdjust(&rec_, cfg, o);
+  ++num_global_ba_;
+  t_->global_ba += Seconds(start);
+  spdlog::debug("global BA ({} images, {} points): rms {:.3f} → {:.3f} px in {} iterations, {:.2f} s",
+                rec_.images.size(), rec_.points.size(), s.initial_rms_px, s.final_rms_px, s.num_iterations,
+                s.seconds);
+  FilterPoints(nullptr);
+  images_at_last_global_ = rec_.images.size();
+  return s;
+}
+
+// The principal point is weakly constrained in many configurations (an orbit of cameras all looking at one
+// centre: a shift trades against a common tilt), and freeing it there only adds noise to every rotation.
+// Model selection: free it, and keep the result only when the squared error drops by far more than the two
+// extra parameters explain for pure noise (Δχ² with σ² estimated from the fixed-point fit).
+void ModelBuilder::TryPrincipalPoint() {
+  BundleAdjustmentOptions o = BaOptions();
+  o.loss = BundleAdjustmentOptions::Loss::kTrivial;  // χ² needs plain squared errors (outliers are filtered)
+  o.function_tolerance = 1e-9;
+  BundleAdjustmentConfig cfg;
+  cfg.gauge_image1 = gauge1_;
+  cfg.gauge_image2 = gauge2_;
+  core::Reconstruction fixed = rec_, freed = rec_;
+  o.refine_principal_point = false;
+  const auto s0 = BundleAdjust(&fixed, cfg, o);
+  o.refine_principal_point = true;
+  const auto s1 = BundleAdjust(&freed, cfg, o);
+  if (!s0.success || !s1.success) return;
+  const double n = s0.num_residuals;
+  const double ss0 = s0.final_rms_px * s0.final_rms_px * n, ss1 = s1.final_rms_px * s1.final_rms_px * n;
+  const double dof = std::max(1.0, 2 * n - 6.0 * rec_.images.size() - 3.0 * rec_.points.size());
+  const double chi2 = (ss0 - ss1) / std::max(ss0 / dof, 1e-12);
+  const auto& cam = freed.cameras.begin()->second;
+  const bool keep = chi2 > opt_.principal_point_min_chi2;
+  spdlog::info("principal point test: Δχ² = {:.1f} → {} (free fit: {:.2f}, {:.2f})", chi2,
+               keep ? "refined" : "kept fixed", cam.u0, cam.v0);
+  if (keep) {
+    rec_ = std::move(freed);
+    GlobalBundleAdjust(true, true);
+  }
+}
+
+void ModelBuilder::Grow() {
+  GlobalBundleAdjust(false);
+  for (;;) {
+    std::vector<std::pair<double, uint32_t>> cands;
+    for (uint32_t id : pool_) {
+      if (rec_.images.count(id)) continue;
+      double score = 0;
+      const int vis = VisiblePoints(id, &score);
+      if (vis < opt_.min_visible_points) {
+        if (!fail_reason_.count(id) || fail_reason_[id].rfind("too few", 0) == 0)
+          fail_reason_[id] = "too few triangulated points visible (" + std::to_string(vis) + " < " +
+                             std::to_string(opt_.min_visible_points) + ")";
+        continue;
+      }
+      // A frame that failed is retried only after the model offers it clearly more points.
+      auto f = visible_at_failure_.find(id);
+      if (f != visible_at_failure_.end() &&
+          (vis < 1.25 * f->second + 5 || trials_[id] >= opt_.max_registration_trials))
+        continue;
+      cands.emplace_back(-score, id);
+    }
+    if (cands.empty()) break;
+    std::sort(cands.begin(), cands.end());
+    bool registered = false;
+    for (const auto& [neg, id] : cands) {
+      if (TryRegister(id)) {
+        const int made = TriangulateImage(id);
+        LocalBundleAdjust(id);
+        spdlog::debug("registered {} ({} images, +{} points)", images_.at(id)->name, rec_.images.size(), made);
+        registered = true;
+        break;
+      }
+      ++trials_[id];
+      visible_at_failure_[id] = VisiblePoints(id, nullptr);
+    }
+    if (!registered) break;
+    const size_t n = rec_.images.size();
+    if (static_cast<int>(n) < opt_.global_ba_every_image_below ||
+        n >= opt_.global_ba_growth_ratio * images_at_last_global_) {
+      GlobalBundleAdjust(false);
+      Retriangulate();
+    }
+  }
+  // Final polish: retriangulate with the refined cameras, then a tight global BA.
+  GlobalBundleAdjust(false);
+  Retriangulate();
+  GlobalBundleAdjust(true);
+  if (static_cast<int>(rec_.images.size()) >= opt_.refine_principal_point_min_images) TryPrincipalPoint();
+  UpdatePointErrors(&rec_);
+}
+
+}  // namespace
+
+MapperResult RunIncrementalMapper(const MapperInput& input, const MapperOptions& options) {
+  options.Check();
+  const auto start = Clock::now();
+  MapperResult result;
+  std::map<uint32_t, const MapperImage*> images;
+  std::map<uint32_t, size_t> num_kp;
+  for (const auto& im : input.images) {
+    if (!input.cameras.count(im.camera_id))
+      throw Error("mapper: image " + im.name + " refers to unknown camera " + std::to_string(im.camera_id));
+    input.cameras.at(im.camera_id).camera.Validate();
+    if (images.count(im.id)) throw Error("mapper: duplicate image id " + std::to_string(im.id));
+    images[im.id] = &im;
+    num_kp[im.id] = im.keypoints.size();
+  }
+  const CorrespondenceGraph graph(num_kp, input.pairs);
+  std::map<uint32_t, int> pair_count;
+  for (const auto& p : input.pairs)
+    if (images.count(p.image_id1) && images.count(p.image_id2) && !p.inliers.empty()) {
+      ++pair_count[p.image_id1];
+      ++pair_count[p.image_id2];
+    }
+  std::set<uint32_t> pool;
+  std::map<uint32_t, std::string> reasons;
+  for (const auto& [id, im] : images) {
+    if (pair_count[id] > 0)
+      pool.insert(id);
+    else
+      reasons[id] = im->keypoints.empty() ? "no features (blank or textureless frame)"
+                                          : "no verified matches with any other image";
+  }
+  spdlog::info("mapper: {} images, {} verified pairs, {} correspondences ({} invalid skipped)", images.size(),
+               input.pairs.size(), graph.NumCorrespondences(), graph.NumSkipped());
+
+  Timings timings;
+  std::vector<std::map<uint32_t, std::string>> model_fail;
+  while (static_cast<int>(pool.size()) >= options.min_model_size &&
+         static_cast<int>(result.models.size()) < options.max_models) {
+    ModelBuilder builder(input, images, graph, options, pool, &timings);
+    if (!builder.Initialize()) break;
+    builder.Grow();
+    auto& rec = builder.rec();
+    for (const auto& [id, im] : rec.images) pool.erase(id);
+    for (const auto& [id, why] : builder.fail_reasons())
+      if (!reasons.count(id)) reasons[id] = why;
+    if (static_cast<int>(rec.images.size()) < options.min_model_size) continue;
+    spdlog::info("model {}: {} images, {} points", result.models.size(), rec.images.size(), rec.points.size());
+    result.models.push_back(std::move(rec));
+  }
+  std::stable_sort(result.models.begin(), result.models.end(),
+                   [](const core::Reconstruction& a, const core::Reconstruction& b) {
+                     return a.images.size() > b.images.size();
+                   });
+  for (size_t m = 0; m < result.models.size(); ++m)
+    for (const auto& [id, im] : result.models[m].images) {
+      if (m == 0)
+        reasons.erase(id);
+      else
+        reasons[id] = "registered in disconnected model " + std::to_string(m) + " (" +
+                      std::to_string(result.models[m].images.size()) + " images)";
+    }
+  for (uint32_t id : pool)
+    if (!reasons.count(id)) reasons[id] = "no initial pair or connection to a model";
+  for (const auto& [id, im] : images)
+    if (!(result.models.size() && result.models[0].images.count(id)) && !reasons.count(id))
+      reasons[id] = "not registered";
+  result.left_out = reasons;
+  result.stats = {{"correspondences", graph.NumCorrespondences()},
+                  {"invalid_matches_skipped", graph.NumSkipped()},
+                  {"models", result.models.size()},
+                  {"seconds", {{"initial_pair", timings.init},
+                               {"absolute_pose", timings.registration},
+                               {"triangulation", timings.triangulation},
+                               {"local_ba", timings.local_ba},
+                               {"global_ba", timings.global_ba},
+                               {"filtering", timings.filtering},
+                               {"total", Seconds(start)}}}};
+  return result;
+}
+
+}  // namespace fmv3d::sfm

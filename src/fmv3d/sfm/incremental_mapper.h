@@ -1,0 +1,93 @@
+// Incremental structure-from-motion (COLMAP's shape, our code):
+//   1. tracks from the verified pairs (tracks.h);
+//   2. initial pair: many inliers, enough triangulation angle, not homography-dominated — relative pose from
+//      the essential matrix, two-view triangulation, BA;
+//   3. repeat: next-best view (most visible triangulated points, well spread over the image) → absolute pose
+//      (P3P RANSAC + refinement) → triangulate the tracks it completes (multi-view DLT with angle and
+//      reprojection checks) → local BA → outlier filtering; global BA (+ re-triangulation and track completion)
+//      whenever the model has grown by a fixed ratio; frames that failed are retried once the model has grown;
+//   4. when no more images register, a new model starts from the remaining images; models are returned
+//      largest first.
+// Intrinsics: one core::Camera per camera id (shared by its frames). When the prior is only a guess
+// (focal_known = false), focal and k1/k2 are refined by global BA once enough images constrain them; the
+// principal point is held during growth; at the end it is freed only when the data clearly ask for it
+// (a Δχ² model-selection test, see TryPrincipalPoint in the .cc).
+#pragma once
+
+#include <cstdint>
+#include <map>
+#include <string>
+#include <vector>
+
+#include <Eigen/Core>
+#include <nlohmann/json.hpp>
+
+#include "fmv3d/core/reconstruction.h"
+#include "fmv3d/features/types.h"
+
+namespace fmv3d::sfm {
+
+struct MapperImage {
+  uint32_t id = 0;
+  uint32_t camera_id = 1;
+  std::string name;
+  std::vector<Eigen::Vector2d> keypoints;             // pixels, fmv3d convention
+  std::vector<Eigen::Matrix<uint8_t, 3, 1>> colors;   // optional, same size as keypoints
+};
+
+struct MapperCamera {
+  core::Camera camera;       // prior intrinsics
+  bool focal_known = false;  // false: the prior is a guess, self-calibrate
+};
+
+struct MapperInput {
+  std::map<uint32_t, MapperCamera> cameras;
+  std::vector<MapperImage> images;
+  std::vector<features::VerifiedPair> pairs;
+};
+
+struct MapperOptions {
+  // Initial pair.
+  int init_min_inliers = 60;
+  double init_min_tri_angle_deg = 4.0;  // median angle wanted; relaxed step by step when no pair has it
+  double init_max_h_ratio = 0.85;       // H inliers / pair inliers above this: planar/rotation, tried last
+  int init_max_candidates = 40;
+  // Registration.
+  double abs_pose_max_error_px = 12;
+  int abs_pose_min_inliers = 15;
+  double abs_pose_min_inlier_ratio = 0.2;
+  int min_visible_points = 15;  // an image needs this many triangulated tracks to be tried
+  int max_registration_trials = 4;
+  // Triangulation / filtering.
+  double tri_min_angle_deg = 1.5;
+  double tri_max_error_px = 4;
+  double filter_max_error_px = 4;
+  double filter_min_angle_deg = 1.5;
+  // Bundle adjustment.
+  int local_ba_num_images = 6;
+  double global_ba_growth_ratio = 1.1;  // global BA when the model grew by 10%
+  int global_ba_every_image_below = 12; // ... and after every image while the model is small
+  int refine_focal_min_images = 3;
+  int refine_k2_min_images = 6;
+  int refine_principal_point_min_images = 8;  // from then on the final BA tests freeing it (Δχ²)
+  double principal_point_min_chi2 = 50;
+  bool refine_tangential = false;
+  double ba_loss_scale_px = 1.0;
+  // Models.
+  int min_model_size = 3;
+  int max_models = 20;
+  uint64_t seed = 42;
+  void Check() const;
+};
+
+struct MapperResult {
+  std::vector<core::Reconstruction> models;     // largest first
+  std::map<uint32_t, std::string> left_out;     // image id → reason it is not in the largest model
+  nlohmann::json stats;                         // counts and timings per stage
+};
+
+// Never throws on bad data (too few matches, unrelated images): such images are left out with a reason.
+// Throws fmv3d::Error only for invalid options or inconsistent input (image referring to an unknown camera).
+MapperResult RunIncrementalMapper(const MapperInput& input, const MapperOptions& options);
+
+}  // namespace fmv3d::sfm

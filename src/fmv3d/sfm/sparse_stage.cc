@@ -1,0 +1,124 @@
+#include "fmv3d/sfm/sparse_stage.h"
+
+#include <spdlog/spdlog.h>
+
+#include <chrono>
+#include <fstream>
+
+#include "fmv3d/core/error.h"
+#include "fmv3d/core/files.h"
+#include "fmv3d/features/feature_io.h"
+#include "fmv3d/io/colmap_model.h"
+#include "fmv3d/io/frames_index.h"
+#include "fmv3d/pipeline/workspace.h"
+
+namespace fmv3d::sfm {
+
+namespace fs = std::filesystem;
+
+void WritePointsPly(const core::Reconstruction& rec, const fs::path& path) {
+  core::WriteAtomically(path, [&](const fs::path& tmp) {
+    std::ofstream out(tmp, std::ios::binary);
+    if (!out) throw Error(tmp.string() + ": cannot write");
+    out << "ply\nformat binary_little_endian 1.0\nelement vertex " << rec.points.size()
+        << "\nproperty float x\nproperty float y\nproperty float z\nproperty uchar red\nproperty uchar green\n"
+           "property uchar blue\nend_header\n";
+    for (const auto& [id, p] : rec.points) {
+      const float xyz[3] = {static_cast<float>(p.xyz.x()), static_cast<float>(p.xyz.y()),
+                            static_cast<float>(p.xyz.z())};
+      out.write(reinterpret_cast<const char*>(xyz), sizeof xyz);
+      out.write(reinterpret_cast<const char*>(p.rgb.data()), 3);
+    }
+    if (!out) throw Error(tmp.string() + ": write failed");
+  });
+}
+
+nlohmann::json RunSparseStage(const fs::path& workspace, const SparseStageOptions& options) {
+  options.Check();
+  using Clock = std::chrono::steady_clock;
+  const auto start = Clock::now();
+  const pipeline::Workspace ws(workspace);
+  ws.Require(ws.frames_json(), "frames");
+  ws.Require(ws.features_dir(), "features");
+  ws.Require(features::MatchesPath(ws.matches_dir()), "match");
+  const io::FramesIndex index = io::ReadFramesIndex(ws.frames_json());
+
+  MapperInput input;
+  for (const auto& c : index.cameras) {
+    MapperCamera mc;
+    mc.camera = c.camera;
+    mc.focal_known = c.prior_source != "guess";
+    input.cameras[c.camera.id] = mc;
+  }
+  std::vector<size_t> num_kp;
+  for (size_t i = 0; i < index.frames.size(); ++i) {
+    const auto& fr = index.frames[i];
+    MapperImage im;
+    im.id = static_cast<uint32_t>(i + 1);
+    im.camera_id = fr.camera_id;
+    im.name = fr.name;
+    const fs::path fp = features::FeaturePath(ws.features_dir(), fr.name);
+    if (fs::exists(fp)) {
+      const features::FeatureSet fs_ = features::ReadFeatures(fp);
+      im.keypoints.reserve(fs_.keypoints.size());
+      for (const auto& k : fs_.keypoints) im.keypoints.emplace_back(k.x, k.y);
+      if (fs_.colors.size() == fs_.keypoints.size()) im.colors = fs_.colors;
+    }
+    num_kp.push_back(im.keypoints.size());
+    input.images.push_back(std::move(im));
+  }
+  const fs::path matches_path = features::MatchesPath(ws.matches_dir());
+  input.pairs = features::ReadMatches(matches_path);
+  features::ValidateMatches(input.pairs, num_kp, matches_path.string());
+  const double load_seconds = std::chrono::duration<double>(Clock::now() - start).count();
+
+  const MapperResult result = RunIncrementalMapper(input, options.mapper);
+
+  const auto write_start = Clock::now();
+  core::EnsureDirectory(ws.sparse_dir());
+  core::EnsureDirectory(ws.report_dir());
+  // Stale sub-models of an earlier run must not survive next to the new ones.
+  for (int k = 1; fs::exists(ws.sparse_dir() / std::to_string(k)); ++k) fs::remove_all(ws.sparse_dir() / std::to_string(k));
+  for (size_t m = 0; m < result.models.size(); ++m) {
+    const fs::path dir = m == 0 ? ws.sparse_dir() : ws.sparse_dir() / std::to_string(m);
+    core::EnsureDirectory(dir);
+    io::WriteColmapText(result.models[m], dir);
+    WritePointsPly(result.models[m], dir / "sparse.ply");
+  }
+  nlohmann::json report;
+  report["total_images"] = input.images.size();
+  report["models"] = nlohmann::json::array();
+  for (const auto& rec : result.models) {
+    nlohmann::json cams = nlohmann::json::array();
+    for (const auto& [id, c] : rec.cameras)
+      cams.push_back({{"id", id}, {"f", c.f}, {"aspect", c.aspect}, {"u0", c.u0}, {"v0", c.v0}, {"k1", c.k1},
+                      {"k2", c.k2}, {"p1", c.p1}, {"p2", c.p2}});
+    report["models"].push_back({{"registered_images", rec.images.size()},
+                                {"points", rec.points.size()},
+                                {"mean_track_length", rec.MeanTrackLength()},
+                                {"mean_reprojection_error_px", rec.MeanReprojectionError()},
+                                {"cameras", cams}});
+  }
+  const core::Reconstruction* best = result.models.empty() ? nullptr : &result.models[0];
+  report["registered_images"] = best ? best->images.size() : 0;
+  report["points"] = best ? best->points.size() : 0;
+  report["mean_track_length"] = best ? best->MeanTrackLength() : 0.0;
+  report["mean_reprojection_error_px"] = best ? best->MeanReprojectionError() : 0.0;
+  nlohmann::json left = nlohmann::json::array();
+  for (const auto& [id, why] : result.left_out) left.push_back({{"image", input.images[id - 1].name}, {"reason", why}});
+  report["left_out"] = left;
+  report["mapper"] = result.stats;
+  report["seconds"] = {{"load", load_seconds},
+                       {"mapping", result.stats["seconds"]["total"]},
+                       {"write", std::chrono::duration<double>(Clock::now() - write_start).count()},
+                       {"total", std::chrono::duration<double>(Clock::now() - start).count()}};
+  core::WriteJson(ws.report_dir() / "sparse.json", report);
+  if (!best)
+    throw Error(workspace.string() + ": no model could be reconstructed (see report/sparse.json for the reasons)");
+  spdlog::info("sparse: {} / {} images registered, {} points, mean track {:.2f}, reprojection {:.3f} px",
+               best->images.size(), input.images.size(), best->points.size(), best->MeanTrackLength(),
+               best->MeanReprojectionError());
+  return report;
+}
+
+}  // namespace fmv3d::sfm

@@ -1,0 +1,29 @@
+// The `fmv3d sparse WS` stage: frames.json + features/*.feat + matches/matches.bin → incremental SfM →
+//   WS/sparse/            the largest model as a COLMAP text model (+ sparse.ply, coloured points)
+//   WS/sparse/1, 2, ...   further disconnected models, largest first
+//   WS/report/sparse.json registered / total (with the reason for every image left out), points, mean track
+//                         length, mean reprojection error, cameras, time per stage.
+#pragma once
+
+#include <filesystem>
+#include <nlohmann/json.hpp>
+
+#include "fmv3d/core/reconstruction.h"
+#include "fmv3d/sfm/incremental_mapper.h"
+
+namespace fmv3d::sfm {
+
+struct SparseStageOptions {
+  MapperOptions mapper;
+  void Check() const { mapper.Check(); }
+};
+
+// Returns the summary that is also written to WS/report/sparse.json. Throws fmv3d::Error naming the missing
+// or malformed input file; when nothing can be reconstructed it still writes the report (with reasons), and
+// then throws so the CLI exits non-zero.
+nlohmann::json RunSparseStage(const std::filesystem::path& workspace, const SparseStageOptions& options);
+
+// Binary little-endian PLY of the model's points: x y z (float), red green blue (uchar).
+void WritePointsPly(const core::Reconstruction& rec, const std::filesystem::path& path);
+
+}  // namespace fmv3d::sfm

@@ -1,0 +1,38 @@
+// Synthetic correspondences with exact ground truth, for tests and benchmarks of the mapper without images:
+// random 3D points seen by known cameras, projected through a known camera model (with distortion), with
+// Gaussian keypoint noise, unmatched clutter keypoints and wrong matches mixed into the verified pairs.
+#pragma once
+
+#include <cstdint>
+
+#include "fmv3d/core/reconstruction.h"
+#include "fmv3d/sfm/incremental_mapper.h"
+
+namespace fmv3d::sfm {
+
+struct SyntheticSceneOptions {
+  enum class Layout { kOrbit, kNadirGrid };
+  Layout layout = Layout::kOrbit;
+  int num_cameras = 40;
+  int num_points = 2000;
+  int width = 1280, height = 720;
+  double focal = 1000;   // true focal (pixels)
+  double k1 = -0.08, k2 = 0;
+  double u0_offset = 0, v0_offset = 0;  // true principal point minus the image centre
+  double noise_px = 0.5;
+  double outlier_ratio = 0.1;       // fraction of each pair's matches replaced by wrong ones
+  double clutter_ratio = 0.1;       // extra unmatched keypoints per image
+  double guess_focal_factor = 1.2;  // prior focal = factor · max(w, h); ≤ 0: prior = true focal, known
+  int min_pair_matches = 30;        // pairs sharing fewer points are not reported
+  int max_pair_gap = 0;             // > 0: only pairs (i, j) with |i − j| ≤ gap (sequential matching)
+  uint64_t seed = 1;
+};
+
+struct SyntheticScene {
+  core::Reconstruction truth;  // true cameras/poses (images named like input.images), points with tracks
+  MapperInput input;           // what the mapper sees
+};
+
+SyntheticScene MakeSyntheticScene(const SyntheticSceneOptions& options);
+
+}  // namespace fmv3d::sfm

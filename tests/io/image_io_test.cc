@@ -1,0 +1,161 @@
+#include "fmv3d/io/image_io.h"
+
+#include <gtest/gtest.h>
+
+#include <cstring>
+#include <fstream>
+#include <vector>
+
+#include <opencv2/imgcodecs.hpp>
+
+#include "fmv3d/core/error.h"
+#include "test_util.h"
+#include "video_test_util.h"
+
+namespace fmv3d::io {
+namespace {
+
+using test::TempDir;
+
+TEST(ImageIo, ReadsEveryAcceptedFormat) {
+  TempDir tmp("fmv3d-img");
+  const cv::Mat img = test::ViewOf(test::RandomTexture(400, 300, 21), {255, 171}, 200, 150);
+  struct Case {
+    std::string name;
+    double tolerance;  // mean absolute difference
+  };
+  for (const Case& c : {Case{"a.png", 0}, Case{"a.bmp", 0}, Case{"a.tif", 0}, Case{"a.jpg", 10}, Case{"b.JPEG", 10}}) {
+    ASSERT_TRUE(cv::imwrite((tmp / c.name).string(), img)) << c.name;
+    const cv::Mat back = ReadImage(tmp / c.name);
+    ASSERT_EQ(back.size(), img.size()) << c.name;
+    ASSERT_EQ(back.type(), CV_8UC3) << c.name;
+    cv::Mat d;
+    cv::absdiff(back, img, d);
+    EXPECT_LE(cv::mean(d)[0], c.tolerance) << c.name;
+    EXPECT_TRUE(HasImageExtension(tmp / c.name));
+  }
+  // GIF (palette): through FFmpeg, since OpenCV 4.6 has none.
+  test::EncodeVideo(tmp / "a.gif", 1, 10, [&](int) { return img; }, "gif");
+  const cv::Mat gif = ReadImage(tmp / "a.gif");
+  ASSERT_EQ(gif.size(), img.size());
+  cv::Mat d;
+  cv::absdiff(gif, img, d);
+  EXPECT_LT(cv::mean(d)[0], 40);  // 256-colour palette
+  // Atomic write: the file appears complete under its name, no temporary left.
+  WriteImage(tmp / "out.png", img);
+  EXPECT_EQ(cv::norm(ReadImage(tmp / "out.png"), img, cv::NORM_INF), 0);
+  int files = 0;
+  for (const auto& e : std::filesystem::directory_iterator(tmp.path())) files += e.path().filename().string()[0] == '.';
+  EXPECT_EQ(files, 0);
+}
+
+TEST(ImageIo, BadFilesThrowNamingTheFile) {
+  TempDir tmp("fmv3d-img");
+  {
+    std::ofstream(tmp / "text.png") << "this is not a PNG";
+    std::ofstream(tmp / "empty.jpg");
+    std::ofstream(tmp / "junk.gif") << "GIF89a but nothing else";
+  }
+  for (const char* name : {"text.png", "empty.jpg", "junk.gif", "missing.tif"}) {
+    try {
+      ReadImage(tmp / name);
+      ADD_FAILURE() << "no error for " << name;
+    } catch (const Error& e) {
+      EXPECT_NE(std::string(e.what()).find(name), std::string::npos) << e.what();
+    }
+  }
+}
+
+// A little-endian TIFF/EXIF block: IFD0 with Make, Model and the EXIF IFD pointer; the EXIF IFD with
+// FocalLength (rational) and FocalLengthIn35mmFilm (short).
+std::vector<unsigned char> MakeExif(const std::string& make, const std::string& model, uint32_t focal_num,
+                                    uint32_t focal_den, uint16_t focal35) {
+  std::vector<unsigned char> b;
+  auto u16 = [&](uint16_t v) { b.push_back(v & 0xFF), b.push_back(v >> 8); };
+  auto u32 = [&](uint32_t v) { for (int i = 0; i < 4; ++i) b.push_back((v >> (8 * i)) & 0xFF); };
+  const uint32_t ifd0 = 8, ifd0_size = 2 + 3 * 12 + 4;
+  const uint32_t make_off = ifd0 + ifd0_size, model_off = make_off + uint32_t(make.size()) + 1;
+  uint32_t exif_off = model_off + uint32_t(model.size()) + 1;
+  exif_off += exif_off % 2;
+  const uint32_t rational_off = exif_off + 2 + 2 * 12 + 4;
+  b = {'I', 'I'};
+  u16(42);
+  u32(ifd0);
+  u16(3);
+  // Values of up to 4 bytes sit in the entry itself (TIFF 6.0), longer ones at an offset.
+  auto ascii_entry = [&](uint16_t tag, const std::string& s, uint32_t off) {
+    u16(tag), u16(2), u32(uint32_t(s.size()) + 1);
+    if (s.size() + 1 <= 4) {
+      for (size_t i = 0; i < 4; ++i) b.push_back(i < s.size() ? s[i] : 0);
+    } else {
+      u32(off);
+    }
+  };
+  ascii_entry(0x010F, make, make_off);
+  ascii_entry(0x0110, model, model_off);
+  u16(0x8769), u16(4), u32(1), u32(exif_off);
+  u32(0);
+  for (char c : make) b.push_back(c);
+  b.push_back(0);
+  for (char c : model) b.push_back(c);
+  b.push_back(0);
+  while (b.size() < exif_off) b.push_back(0);
+  u16(2);
+  u16(0x920A), u16(5), u32(1), u32(rational_off);
+  u16(0xA405), u16(3), u32(1), u16(focal35), u16(0);
+  u32(0);
+  u32(focal_num), u32(focal_den);
+  return b;
+}
+
+// Inserts an APP1 Exif segment right after the SOI of a JPEG file.
+void AddExifToJpeg(const std::filesystem::path& path, const std::vector<unsigned char>& tiff) {
+  std::ifstream in(path, std::ios::binary);
+  std::vector<unsigned char> jpg((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  std::vector<unsigned char> seg = {0xFF, 0xE1, 0, 0, 'E', 'x', 'i', 'f', 0, 0};
+  seg.insert(seg.end(), tiff.begin(), tiff.end());
+  const size_t len = seg.size() - 2;
+  seg[2] = static_cast<unsigned char>(len >> 8);
+  seg[3] = static_cast<unsigned char>(len & 0xFF);
+  jpg.insert(jpg.begin() + 2, seg.begin(), seg.end());
+  std::ofstream(path, std::ios::binary).write(reinterpret_cast<const char*>(jpg.data()), jpg.size());
+}
+
+TEST(ImageIo, ExifFromJpeg) {
+  TempDir tmp("fmv3d-img");
+  const cv::Mat img = test::ViewOf(test::RandomTexture(200, 200, 22), {96, 64}, 100, 100);
+  cv::imwrite((tmp / "dji.jpg").string(), img);
+  AddExifToJpeg(tmp / "dji.jpg", MakeExif("DJI", "FC6310", 88, 10, 24));
+  const ExifInfo e = ReadExif(tmp / "dji.jpg");
+  EXPECT_EQ(e.make, "DJI");
+  EXPECT_EQ(e.model, "FC6310");
+  EXPECT_DOUBLE_EQ(e.focal_mm, 8.8);
+  EXPECT_DOUBLE_EQ(e.focal_35mm, 24);
+  EXPECT_EQ(ReadImage(tmp / "dji.jpg").size(), img.size());  // still a valid JPEG
+  // No EXIF at all.
+  cv::imwrite((tmp / "plain.jpg").string(), img);
+  EXPECT_TRUE(ReadExif(tmp / "plain.jpg").empty());
+  EXPECT_TRUE(ReadExif(tmp / "missing.jpg").empty());
+}
+
+TEST(ImageIo, MalformedExifNeverReadsOutOfBounds) {
+  // Every truncation and a sweep of single-byte corruptions of a valid block: the parser must stay in
+  // bounds (ASan checks) and never invent a focal length out of range.
+  const auto good = MakeExif("Canon", "Canon EOS 5D Mark III", 50, 1, 50);
+  for (size_t n = 0; n <= good.size(); ++n) {
+    const ExifInfo e = ParseTiffExif(good.data(), n);
+    EXPECT_TRUE(e.focal_mm == 0 || e.focal_mm == 50);
+  }
+  for (size_t i = 0; i < good.size(); ++i) {
+    for (unsigned char v : {0x00, 0x7F, 0xFF}) {
+      auto bad = good;
+      bad[i] = v;
+      const ExifInfo e = ParseTiffExif(bad.data(), bad.size());
+      EXPECT_TRUE(e.focal_mm >= 0 && e.focal_mm < 5000);
+    }
+  }
+  EXPECT_EQ(ParseTiffExif(good.data(), good.size()).model, "Canon EOS 5D Mark III");
+}
+
+}  // namespace
+}  // namespace fmv3d::io

@@ -1,0 +1,166 @@
+// Bundle adjustment: perturbed poses, points and intrinsics converge back to the truth.
+#include <gtest/gtest.h>
+
+#include <random>
+
+#include "fmv3d/core/error.h"
+#include "fmv3d/sfm/bundle_adjustment.h"
+#include "fmv3d/sfm/evaluation.h"
+#include "fmv3d/sfm/synthetic_correspondences.h"
+
+namespace fmv3d::sfm {
+namespace {
+
+// The true model with the observations of every point (noise as in the options), no outliers.
+core::Reconstruction TrueModelWithObservations(const SyntheticSceneOptions& so) {
+  const auto scene = MakeSyntheticScene(so);
+  core::Reconstruction rec = scene.truth;
+  rec.points.clear();
+  for (auto& [id, im] : rec.images) {
+    const auto& mi = scene.input.images[id - 1];
+    im.points2d = mi.keypoints;
+    im.point3d_ids.assign(mi.keypoints.size(), core::kNoPoint3D);
+  }
+  // Recover which keypoint sees which point by projecting the truth (noise < 3 px, clutter far away).
+  for (const auto& [pid, p] : scene.truth.points) {
+    core::Point3D q = p;
+    for (auto& [id, im] : rec.images) {
+      const Eigen::Vector3d xc = im.pose.Transform(p.xyz);
+      if (xc.z() <= 0) continue;
+      const Eigen::Vector2d uv = rec.cameras.at(1).Project(xc);
+      for (uint32_t k = 0; k < im.points2d.size(); ++k)
+        if ((im.points2d[k] - uv).norm() < 4 * so.noise_px + 1e-9 && im.point3d_ids[k] == core::kNoPoint3D) {
+          im.point3d_ids[k] = static_cast<int64_t>(pid);
+          q.track.push_back({id, k});
+          break;
+        }
+    }
+    if (q.track.size() >= 2) {
+      rec.points[pid] = q;
+    } else {
+      for (const auto& el : q.track) rec.images[el.image_id].point3d_ids[el.point2d_idx] = core::kNoPoint3D;
+    }
+  }
+  return rec;
+}
+
+// Largest difference (pixels) between two cameras' radial distortion from the centre out to a normalised radius
+// r_max (where the scene's points are: beyond, the data do not constrain the polynomial).
+double MaxRadialDifferencePx(const core::Camera& a, const core::Camera& b, double r_max) {
+  double worst = 0;
+  for (double r = 0; r <= r_max; r += r_max / 100) {
+    const double da = r * (a.k1 * r * r + a.k2 * r * r * r * r), db = r * (b.k1 * r * r + b.k2 * r * r * r * r);
+    worst = std::max(worst, b.f * std::abs(da - db));
+  }
+  return worst;
+}
+
+TEST(BundleAdjustment, PerturbedPosesPointsAndFocalConverge) {
+  SyntheticSceneOptions so;
+  so.num_cameras = 12;
+  so.num_points = 400;
+  so.noise_px = 0;
+  so.outlier_ratio = 0;
+  so.clutter_ratio = 0;
+  const core::Reconstruction truth = TrueModelWithObservations(so);
+  core::Reconstruction rec = truth;
+  std::mt19937_64 rng(7);
+  std::normal_distribution<double> g(0, 1);
+  for (auto& [id, im] : rec.images) {
+    if (id <= 2) continue;  // images 1 and 2 hold the gauge
+    im.pose.q = (im.pose.q * Eigen::Quaterniond(Eigen::AngleAxisd(0.01, Eigen::Vector3d(g(rng), g(rng), g(rng)).normalized()))).normalized();
+    im.pose.t += 0.05 * Eigen::Vector3d(g(rng), g(rng), g(rng));
+  }
+  for (auto& [id, p] : rec.points) p.xyz += 0.05 * Eigen::Vector3d(g(rng), g(rng), g(rng));
+  rec.cameras.at(1).f *= 1.03;
+  rec.cameras.at(1).k1 = 0;
+  UpdatePointErrors(&rec);
+  EXPECT_GT(rec.MeanReprojectionError(), 5);
+  BundleAdjustmentConfig cfg;
+  cfg.gauge_image1 = 1;
+  cfg.gauge_image2 = 2;
+  BundleAdjustmentOptions o;
+  o.function_tolerance = 1e-12;
+  o.max_iterations = 200;
+  const auto s = BundleAdjust(&rec, cfg, o);
+  ASSERT_TRUE(s.success);
+  EXPECT_LT(s.final_rms_px, 1e-4);
+  EXPECT_LT(rec.MeanReprojectionError(), 1e-4);
+  const auto ev = EvaluateSparse(rec, truth);
+  EXPECT_LT(ev.centre_rmse_fraction, 1e-6);
+  EXPECT_LT(ev.median_rotation_error_deg, 1e-5);
+  EXPECT_NEAR(rec.cameras.at(1).f, truth.cameras.at(1).f, 1e-3);
+  EXPECT_NEAR(rec.cameras.at(1).k1, truth.cameras.at(1).k1, 1e-6);
+}
+
+TEST(BundleAdjustment, SelfCalibratesFocalAndK1FromTheGuess) {
+  SyntheticSceneOptions so;  // f = 1000, k1 = -0.08, 0.5 px noise
+  so.num_cameras = 16;
+  so.num_points = 600;
+  so.outlier_ratio = 0;
+  so.clutter_ratio = 0;
+  const core::Reconstruction truth = TrueModelWithObservations(so);
+  core::Reconstruction rec = truth;
+  // Start from the 1.2·max(w, h) guess without distortion; poses and points slightly off.
+  rec.cameras.at(1).f = 1.2 * 1280;
+  rec.cameras.at(1).k1 = 0;
+  std::mt19937_64 rng(8);
+  std::normal_distribution<double> g(0, 1);
+  for (auto& [id, p] : rec.points) p.xyz += 0.02 * Eigen::Vector3d(g(rng), g(rng), g(rng));
+  BundleAdjustmentOptions o;
+  o.function_tolerance = 1e-10;
+  o.max_iterations = 300;
+  ASSERT_TRUE(BundleAdjust(&rec, {}, o).success);
+  const auto ev = EvaluateSparse(rec, truth);
+  EXPECT_LT(ev.focal_relative_error, 0.002);
+  // k1 and k2 trade off against each other; what must match is the distortion across the image.
+  EXPECT_LT(MaxRadialDifferencePx(rec.cameras.at(1), truth.cameras.at(1), 0.3), 0.5);
+  EXPECT_LT(ev.centre_rmse_fraction, 0.0005);
+  EXPECT_LT(rec.MeanReprojectionError(), 0.8);
+}
+
+TEST(BundleAdjustment, LocalAdjustmentMovesOnlyVariableImages) {
+  SyntheticSceneOptions so;
+  so.num_cameras = 8;
+  so.num_points = 300;
+  so.noise_px = 0;
+  so.outlier_ratio = 0;
+  so.clutter_ratio = 0;
+  const core::Reconstruction truth = TrueModelWithObservations(so);
+  core::Reconstruction rec = truth;
+  rec.images.at(5).pose.t += Eigen::Vector3d(0.1, -0.05, 0.02);
+  BundleAdjustmentConfig cfg;
+  cfg.variable_images = {5};
+  cfg.constant_cameras = {1};
+  ASSERT_TRUE(BundleAdjust(&rec, cfg, {}).success);
+  EXPECT_LT((rec.images.at(5).pose.Centre() - truth.images.at(5).pose.Centre()).norm(), 1e-5);
+  for (uint32_t id : {1u, 2u, 3u, 8u})
+    EXPECT_EQ((rec.images.at(id).pose.t - truth.images.at(id).pose.t).norm(), 0.0);
+  EXPECT_EQ(rec.cameras.at(1).f, truth.cameras.at(1).f);
+}
+
+TEST(Evaluation, AlignmentIsSimilarityInvariant) {
+  SyntheticSceneOptions so;
+  so.num_cameras = 10;
+  so.num_points = 50;
+  const auto scene = MakeSyntheticScene(so);
+  core::Reconstruction est = scene.truth;
+  core::Sim3 sim;
+  sim.s = 0.3;
+  sim.q = Eigen::Quaterniond(Eigen::AngleAxisd(1.0, Eigen::Vector3d::UnitY()));
+  sim.t = Eigen::Vector3d(1, 2, 3);
+  est.Transform(sim);
+  est.images.at(4).pose.t += Eigen::Vector3d(0.03, 0, 0);  // 0.1 m true error (t scaled by 0.3)
+  const auto ev = EvaluateSparse(est, scene.truth);
+  EXPECT_EQ(ev.num_matched, 10);
+  EXPECT_NEAR(ev.extent, 20.0, 0.5);  // orbit diameter
+  EXPECT_GT(ev.centre_rmse_fraction, 0.0005);
+  EXPECT_LT(ev.centre_rmse_fraction, 0.01);
+  EXPECT_LT(ev.median_rotation_error_deg, 1e-9);
+  EXPECT_NEAR(ev.alignment.s, 1 / 0.3, 0.01);
+  core::Reconstruction few;
+  EXPECT_THROW(EvaluateSparse(few, scene.truth), Error);
+}
+
+}  // namespace
+}  // namespace fmv3d::sfm
