@@ -10,6 +10,8 @@
 #include <set>
 #include <tuple>
 
+#include <tbb/task_group.h>
+
 #include "fmv3d/core/error.h"
 #include "fmv3d/core/files.h"
 #include "fmv3d/core/logging.h"
@@ -183,13 +185,19 @@ FramesIndex IngestFrames(const std::vector<fs::path>& inputs, const IngestOption
     g.height = info.height;
     g.source = file.string();
     g.is_video = true;
+    g.pixel_aspect = info.pixel_aspect;
     const uint32_t cam_id = add_camera(g);
     const std::string stem = names.Unique(file, file.stem().string());
     KeyframeSelector selector(options.keyframes, info.fps);
     spdlog::info("{}: {}x{} {} {:.2f} fps, ~{} frames; keyframe gap {}..{} frames", file.string(), info.width,
                  info.height, info.codec, info.fps, info.frame_count_hint, selector.min_gap(), selector.max_gap());
+    if (info.interlaced)
+      spdlog::warn("{}: interlaced video; frames are used as decoded (no deinterlacing), fast motion will comb",
+                   file.string());
     core::Progress progress("decode " + stem, static_cast<size_t>(std::max<int64_t>(info.frame_count_hint, 0)));
     std::vector<Keyframe> kept;
+    tbb::task_group writers;
+    int in_flight = 0;
     auto flush = [&] {
       for (const Keyframe& k : kept) {
         char idx[32];
@@ -201,7 +209,12 @@ FramesIndex IngestFrames(const std::vector<fs::path>& inputs, const IngestOption
         r.frame_index = k.index;
         r.timestamp = k.timestamp;
         r.sharpness = k.sharpness;
-        WriteImage(staging.dir / r.name, k.image);
+        // PNG encoding costs more than decoding: it runs beside the decoder, at most 4 frames in flight.
+        if (++in_flight > 4) {
+          writers.wait();
+          in_flight = 1;
+        }
+        writers.run([path = staging.dir / r.name, image = k.image] { WriteImage(path, image); });
         index.frames.push_back(r);
       }
       kept.clear();
@@ -217,6 +230,7 @@ FramesIndex IngestFrames(const std::vector<fs::path>& inputs, const IngestOption
     }
     selector.Finish(&kept);
     flush();
+    writers.wait();  // rethrows a write error
     progress.Finish();
     if (reader->frames_read() == 0)
       throw Error(file.string() + ": no decodable video frame" +
@@ -266,12 +280,14 @@ FramesIndex IngestFrames(const std::vector<fs::path>& inputs, const IngestOption
 
   // Intrinsics priors.
   for (size_t i = 0; i < index.cameras.size(); ++i) {
-    if (!options.prior) continue;
     std::string source = "guess";
-    core::Camera cam = options.prior(groups[i], &source);
+    core::Camera cam = options.prior ? options.prior(groups[i], &source) : GuessPrior(groups[i].width, groups[i].height);
     cam.id = index.cameras[i].camera.id;
     if (cam.width != groups[i].width || cam.height != groups[i].height)
       throw Error(groups[i].source + ": intrinsics prior has the wrong image size");
+    // Non-square pixels (e.g. DV/SD video, SAR 10:11): a pixel is pixel_aspect times wider than tall, so the
+    // horizontal focal in pixels is f / pixel_aspect. A calibration already measured it.
+    if (groups[i].pixel_aspect != 1.0 && source.rfind("calibration:", 0) != 0) cam.aspect /= groups[i].pixel_aspect;
     cam.Validate();
     index.cameras[i].camera = cam;
     index.cameras[i].prior_source = source;

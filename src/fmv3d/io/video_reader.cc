@@ -105,6 +105,11 @@ struct VideoReader::Impl {
     info.width = dec->width;
     info.height = dec->height;
     info.codec = codec->name;
+    const AVRational sar = av_guess_sample_aspect_ratio(fmt, st, nullptr);
+    if (sar.num > 0 && sar.den > 0) info.pixel_aspect = av_q2d(sar);
+    if (info.pixel_aspect < 0.25 || info.pixel_aspect > 4) info.pixel_aspect = 1;  // nonsense metadata
+    info.interlaced = st->codecpar->field_order != AV_FIELD_PROGRESSIVE &&
+                      st->codecpar->field_order != AV_FIELD_UNKNOWN;
     info.container = fmt->iformat ? fmt->iformat->name : "";
     const AVRational fr = st->avg_frame_rate.num > 0 ? st->avg_frame_rate : st->r_frame_rate;
     info.fps = fr.num > 0 && fr.den > 0 ? av_q2d(fr) : 0;
