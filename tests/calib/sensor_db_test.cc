@@ -34,8 +34,9 @@ TEST(SensorDb, ShippedDatabaseLoadsAndMatchesExif) {
     EXPECT_TRUE(names.insert(e.name).second) << "duplicate " << e.name;
     EXPECT_GT(e.width, 0) << e.name;
     EXPECT_TRUE(e.sensor_width_mm > 0 || e.focal_35mm > 0) << e.name;
-    if (e.sensor_width_mm > 0 && e.width > 0)  // sensor and pixel aspect ratios agree (within 4:3 vs 1/2.3")
+    if (e.sensor_width_mm > 0 && e.width > 0) {  // sensor and pixel aspect ratios agree (4:3 vs 1/2.3")
       EXPECT_NEAR(e.sensor_width_mm / e.sensor_height_mm, double(e.width) / e.height, 0.06) << e.name;
+    }
   }
   const SensorEntry* p4p = db.FindByExif("DJI", "FC6310");
   ASSERT_NE(p4p, nullptr);
