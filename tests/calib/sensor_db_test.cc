@@ -14,6 +14,7 @@
 #include "fmv3d/core/error.h"
 #include "fmv3d/core/files.h"
 #include "fmv3d/io/frames_index.h"
+#include "io/image_test_util.h"
 #include "test_util.h"
 
 namespace fmv3d::calib {
@@ -33,8 +34,9 @@ TEST(SensorDb, ShippedDatabaseLoadsAndMatchesExif) {
     EXPECT_TRUE(names.insert(e.name).second) << "duplicate " << e.name;
     EXPECT_GT(e.width, 0) << e.name;
     EXPECT_TRUE(e.sensor_width_mm > 0 || e.focal_35mm > 0) << e.name;
-    if (e.sensor_width_mm > 0 && e.width > 0)  // sensor and pixel aspect ratios agree (within 4:3 vs 1/2.3")
+    if (e.sensor_width_mm > 0 && e.width > 0) {  // sensor and pixel aspect ratios agree (4:3 vs 1/2.3")
       EXPECT_NEAR(e.sensor_width_mm / e.sensor_height_mm, double(e.width) / e.height, 0.06) << e.name;
+    }
   }
   const SensorEntry* p4p = db.FindByExif("DJI", "FC6310");
   ASSERT_NE(p4p, nullptr);
@@ -236,6 +238,33 @@ TEST(CalibCli, CalibrateSaveAsCamerasAndFramesWithPriors) {
   EXPECT_NE(r.exit_code, 0);
   EXPECT_NE(r.err.find("no such camera"), std::string::npos) << r.err;
   unsetenv("FMV3D_USER_SENSORS");
+}
+
+}  // namespace
+}  // namespace fmv3d::calib
+
+namespace fmv3d::calib {
+namespace {
+
+TEST(Priors, ExifJpegMatchesSensorDatabaseThroughIngestion) {
+  // A 1368x912 JPEG whose EXIF says DJI FC6310 (Phantom 4 Pro): 8.8 mm on a 13.2 mm wide sensor → 912 px;
+  // a second image without EXIF of the same size is a different camera with a guessed focal.
+  TempDir tmp("fmv3d-exif-ingest");
+  const cv::Mat img(912, 1368, CV_8UC3, cv::Scalar(90, 120, 150));
+  cv::imwrite((tmp / "dji.jpg").string(), img);
+  test::AddExifToJpeg(tmp / "dji.jpg", test::MakeExif("DJI", "FC6310", 88, 10, 24));
+  cv::imwrite((tmp / "plain.jpg").string(), img);
+  io::IngestOptions opt;
+  opt.workspace = tmp / "ws";
+  opt.prior = PriorChooser({}, SensorDatabase::LoadDefault()).AsFunction();
+  const io::FramesIndex index = io::IngestFrames({tmp / "dji.jpg", tmp / "plain.jpg"}, opt);
+  ASSERT_EQ(index.cameras.size(), 2u);
+  EXPECT_EQ(index.cameras[0].prior_source, "sensor-db:DJI Phantom 4 Pro");
+  EXPECT_NEAR(index.cameras[0].camera.f, 912, 1e-9);
+  EXPECT_EQ(index.cameras[1].prior_source, "guess");
+  EXPECT_NEAR(index.cameras[1].camera.f, 1.2 * 1368, 1e-9);
+  // The JPEG is copied byte for byte (EXIF kept).
+  EXPECT_EQ(io::ReadExif(tmp / "ws" / "frames" / "dji.jpg").model, "FC6310");
 }
 
 }  // namespace

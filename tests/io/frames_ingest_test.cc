@@ -154,6 +154,20 @@ TEST(FramesIngest, CorruptVideoKeepsFramesBeforeDamage) {
   EXPECT_EQ(ReadFramesIndex(opt.workspace / "frames" / "frames.json").frames.size(), index.frames.size());
 }
 
+TEST(FramesIngest, NonSquarePixelsSetTheAspectPrior) {
+  // SD video with 10:11 pixels (narrower than tall): the horizontal focal in pixels is f · 11/10.
+  MixedInputs in;
+  const fs::path sd = in.tmp / "sd.mkv";
+  test::EncodeVideo(sd, 10, 30, [&](int i) { return test::ViewOf(in.tex, {360, 240}, 300 + i, 300); }, "ffv1", 12,
+                    10, 11);
+  IngestOptions opt;
+  opt.workspace = in.tmp / "ws";
+  const FramesIndex index = IngestFrames({sd}, opt);
+  ASSERT_EQ(index.cameras.size(), 1u);
+  EXPECT_NEAR(index.cameras[0].camera.aspect, 1.1, 1e-9);
+  EXPECT_DOUBLE_EQ(index.cameras[0].camera.f, 1.2 * 360);
+}
+
 TEST(FramesIngest, NameClashesGetUniqueNames) {
   MixedInputs in;
   fs::create_directories(in.tmp / "other");

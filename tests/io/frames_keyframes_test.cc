@@ -123,7 +123,9 @@ TEST(Keyframes, BlurredFramesAreNeverKept) {
   // Inside the 15-frame burst one blurred frame may be taken (the best of the wait); elsewhere none.
   EXPECT_LE(kept_blurred, 1);
   for (const auto& k : kept)
-    if (blurred.count(static_cast<int>(k.index))) EXPECT_TRUE(k.index >= 100 && k.index < 115) << k.index;
+    if (blurred.count(static_cast<int>(k.index))) {
+      EXPECT_TRUE(k.index >= 100 && k.index < 115) << k.index;
+    }
   // Every isolated blurred frame is detected; inside the burst the running median adapts (relative test).
   int isolated = 0;
   for (int i : blurred) isolated += (i < 100 || i >= 115) ? 1 : 0;

@@ -53,7 +53,7 @@ cv::Mat ViewOf(const cv::Mat& texture, cv::Size out, double cx, double cy, doubl
 }
 
 void EncodeVideo(const std::filesystem::path& path, int n, double fps, const std::function<cv::Mat(int)>& frame_fn,
-                 const std::string& codec_name, int gop) {
+                 const std::string& codec_name, int gop, int sar_num, int sar_den) {
   auto fail = [&](const std::string& what) { throw std::runtime_error("EncodeVideo " + path.string() + ": " + what); };
   const cv::Mat first = frame_fn(0);
   AVFormatContext* fmt = nullptr;
@@ -68,6 +68,7 @@ void EncodeVideo(const std::filesystem::path& path, int n, double fps, const std
   enc->time_base = av_inv_q(rate);
   enc->framerate = rate;
   enc->gop_size = gop;
+  enc->sample_aspect_ratio = AVRational{sar_num, sar_den};
   enc->max_b_frames = codec_name == "mpeg2video" ? 2 : 0;  // B-frames: decode-order ≠ output order
   enc->pix_fmt = codec_name == "gif" ? AV_PIX_FMT_RGB8 : codec_name == "mjpeg" ? AV_PIX_FMT_YUVJ420P
                : codec_name == "ffv1" ? AV_PIX_FMT_YUV444P : AV_PIX_FMT_YUV420P;
@@ -82,6 +83,7 @@ void EncodeVideo(const std::filesystem::path& path, int n, double fps, const std
   if (avcodec_open2(enc, codec, nullptr) < 0) fail("cannot open encoder");
   avcodec_parameters_from_context(st->codecpar, enc);
   st->time_base = enc->time_base;
+  st->sample_aspect_ratio = enc->sample_aspect_ratio;
   if (!(fmt->oformat->flags & AVFMT_NOFILE) && avio_open(&fmt->pb, path.c_str(), AVIO_FLAG_WRITE) < 0)
     fail("cannot open output");
   if (avformat_write_header(fmt, nullptr) < 0) fail("cannot write header");

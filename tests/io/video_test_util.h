@@ -22,7 +22,7 @@ cv::Mat ViewOf(const cv::Mat& texture, cv::Size out_size, double cx, double cy, 
 // Encodes n frames produced by frame(i) (BGR, all the same size) with an FFmpeg encoder ("mpeg4", "ffv1",
 // "libx264", "mpeg2video", "gif", "mjpeg") into `path` (container from its extension). Throws on failure.
 void EncodeVideo(const std::filesystem::path& path, int n, double fps, const std::function<cv::Mat(int)>& frame,
-                 const std::string& codec = "mpeg4", int gop = 12);
+                 const std::string& codec = "mpeg4", int gop = 12, int sar_num = 1, int sar_den = 1);
 
 // Copies the first `fraction` of a file's bytes (a truncated video).
 void TruncateCopy(const std::filesystem::path& from, const std::filesystem::path& to, double fraction);

@@ -6,9 +6,13 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <exception>
 #include <map>
 #include <set>
 #include <tuple>
+
+#include <tbb/parallel_for.h>
+#include <tbb/task_group.h>
 
 #include "fmv3d/core/error.h"
 #include "fmv3d/core/files.h"
@@ -90,7 +94,7 @@ std::vector<fs::path> ExpandInputs(const std::vector<fs::path>& inputs) {
         if (HasImageExtension(e.path()) || HasVideoExtension(e.path())) found.push_back(e.path());
       }
       if (ec) throw Error(in.string() + ": cannot list folder (" + ec.message() + ")");
-      if (found.empty()) throw Error(in.string() + ": folder holds no images or videos");
+      if (found.empty()) throw Error(in.string() + ": folder holds no images or videos (sub-folders are not searched)");
       std::sort(found.begin(), found.end());
       files.insert(files.end(), found.begin(), found.end());
     } else if (fs::exists(in, ec)) {
@@ -131,18 +135,48 @@ FramesIndex IngestFrames(const std::vector<fs::path>& inputs, const IngestOption
     return index.cameras.back().camera.id;
   };
 
-  for (const fs::path& file : files) {
+  // Still images are decoded in parallel first (size, EXIF, sharpness); only this metadata is kept.
+  struct ImageMeta {
+    int width = 0, height = 0;
+    ExifInfo exif;
+    double sharpness = 0;
+  };
+  std::vector<ImageMeta> meta(files.size());
+  {
+    std::vector<size_t> images;
+    for (size_t i = 0; i < files.size(); ++i)
+      if (HasImageExtension(files[i])) images.push_back(i);
+    std::vector<std::exception_ptr> errors(files.size());
+    if (!images.empty()) {
+      core::Progress progress("read images", images.size());
+      tbb::parallel_for(size_t(0), images.size(), [&](size_t k) {
+        const size_t i = images[k];
+        try {
+          const cv::Mat img = ReadImage(files[i]);
+          meta[i] = {img.cols, img.rows, ReadExif(files[i]), Sharpness(img)};
+        } catch (...) {
+          errors[i] = std::current_exception();
+        }
+        progress.Add();
+      });
+    }
+    for (const auto& e : errors)  // the first bad file in input order
+      if (e) std::rethrow_exception(e);
+  }
+
+  for (size_t file_i = 0; file_i < files.size(); ++file_i) {
+    const fs::path& file = files[file_i];
     const bool is_image = HasImageExtension(file);
     if (is_image) {
-      const cv::Mat img = ReadImage(file);
-      const ExifInfo exif = ReadExif(file);
-      const ImageCameraKey key{img.cols, img.rows, exif.make, exif.model, std::lround(exif.focal_mm * 100)};
+      const ImageMeta& m = meta[file_i];
+      const ExifInfo& exif = m.exif;
+      const ImageCameraKey key{m.width, m.height, exif.make, exif.model, std::lround(exif.focal_mm * 100)};
       auto it = image_cameras.find(key);
       uint32_t cam_id;
       if (it == image_cameras.end()) {
         CameraGroup g;
-        g.width = img.cols;
-        g.height = img.rows;
+        g.width = m.width;
+        g.height = m.height;
         g.source = file.parent_path().string();
         g.exif = exif;
         cam_id = add_camera(g);
@@ -154,7 +188,7 @@ FramesIndex IngestFrames(const std::vector<fs::path>& inputs, const IngestOption
       const std::string stem = names.Unique(file, file.stem().string());
       const std::string name = stem + (convert ? std::string(".png") : file.extension().string());
       if (convert) {
-        WriteImage(staging.dir / name, img);
+        WriteImage(staging.dir / name, ReadImage(file));
       } else {
         std::error_code ec;
         fs::copy_file(file, staging.dir / name, fs::copy_options::overwrite_existing, ec);
@@ -164,7 +198,7 @@ FramesIndex IngestFrames(const std::vector<fs::path>& inputs, const IngestOption
       r.name = name;
       r.camera_id = cam_id;
       r.source = file.string();
-      r.sharpness = Sharpness(img);
+      r.sharpness = m.sharpness;
       index.frames.push_back(r);
       continue;
     }
@@ -183,13 +217,19 @@ FramesIndex IngestFrames(const std::vector<fs::path>& inputs, const IngestOption
     g.height = info.height;
     g.source = file.string();
     g.is_video = true;
+    g.pixel_aspect = info.pixel_aspect;
     const uint32_t cam_id = add_camera(g);
     const std::string stem = names.Unique(file, file.stem().string());
     KeyframeSelector selector(options.keyframes, info.fps);
     spdlog::info("{}: {}x{} {} {:.2f} fps, ~{} frames; keyframe gap {}..{} frames", file.string(), info.width,
                  info.height, info.codec, info.fps, info.frame_count_hint, selector.min_gap(), selector.max_gap());
+    if (info.interlaced)
+      spdlog::warn("{}: interlaced video; frames are used as decoded (no deinterlacing), fast motion will comb",
+                   file.string());
     core::Progress progress("decode " + stem, static_cast<size_t>(std::max<int64_t>(info.frame_count_hint, 0)));
     std::vector<Keyframe> kept;
+    tbb::task_group writers;
+    int in_flight = 0;
     auto flush = [&] {
       for (const Keyframe& k : kept) {
         char idx[32];
@@ -201,7 +241,12 @@ FramesIndex IngestFrames(const std::vector<fs::path>& inputs, const IngestOption
         r.frame_index = k.index;
         r.timestamp = k.timestamp;
         r.sharpness = k.sharpness;
-        WriteImage(staging.dir / r.name, k.image);
+        // PNG encoding costs more than decoding: it runs beside the decoder, at most 4 frames in flight.
+        if (++in_flight > 4) {
+          writers.wait();
+          in_flight = 1;
+        }
+        writers.run([path = staging.dir / r.name, image = k.image] { WriteImage(path, image); });
         index.frames.push_back(r);
       }
       kept.clear();
@@ -217,6 +262,7 @@ FramesIndex IngestFrames(const std::vector<fs::path>& inputs, const IngestOption
     }
     selector.Finish(&kept);
     flush();
+    writers.wait();  // rethrows a write error
     progress.Finish();
     if (reader->frames_read() == 0)
       throw Error(file.string() + ": no decodable video frame" +
@@ -266,12 +312,14 @@ FramesIndex IngestFrames(const std::vector<fs::path>& inputs, const IngestOption
 
   // Intrinsics priors.
   for (size_t i = 0; i < index.cameras.size(); ++i) {
-    if (!options.prior) continue;
     std::string source = "guess";
-    core::Camera cam = options.prior(groups[i], &source);
+    core::Camera cam = options.prior ? options.prior(groups[i], &source) : GuessPrior(groups[i].width, groups[i].height);
     cam.id = index.cameras[i].camera.id;
     if (cam.width != groups[i].width || cam.height != groups[i].height)
       throw Error(groups[i].source + ": intrinsics prior has the wrong image size");
+    // Non-square pixels (e.g. DV/SD video, SAR 10:11): a pixel is pixel_aspect times wider than tall, so the
+    // horizontal focal in pixels is f / pixel_aspect. A calibration already measured it.
+    if (groups[i].pixel_aspect != 1.0 && source.rfind("calibration:", 0) != 0) cam.aspect /= groups[i].pixel_aspect;
     cam.Validate();
     index.cameras[i].camera = cam;
     index.cameras[i].prior_source = source;

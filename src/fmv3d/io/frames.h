@@ -27,6 +27,7 @@ struct CameraGroup {
   int width = 0, height = 0;
   std::string source;  // video file, or the folder/file of the first image
   bool is_video = false;
+  double pixel_aspect = 1;  // video sample aspect ratio (pixel width / height); applied after the prior
   ExifInfo exif;       // of the first image (empty for videos)
 };
 

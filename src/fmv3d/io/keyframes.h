@@ -31,7 +31,7 @@ struct KeyframeOptions {
   double blur_ratio = 0.6;    // blurred when sharpness < blur_ratio × running median
   int blur_window = 15;       // frames in the running median
   int track_size = 480;       // larger side of the KLT working image, pixels
-  int max_features = 200;
+  int max_features = 120;
   bool all_frames = false;    // keep every decoded frame (no selection, no blur rejection)
   // Throws fmv3d::Error on nonsensical values.
   void Check() const;

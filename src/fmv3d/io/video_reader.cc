@@ -5,6 +5,7 @@ extern "C" {
 #include <libavformat/avformat.h>
 #include <libavutil/imgutils.h>
 #include <libavutil/log.h>
+#include <libavutil/opt.h>
 #include <libswscale/swscale.h>
 }
 
@@ -50,6 +51,8 @@ struct VideoReader::Impl {
   AVFormatContext* fmt = nullptr;
   AVCodecContext* dec = nullptr;
   AVPacket* pkt = nullptr;
+  AVPacket* held = nullptr;  // the next packet to send (see Feed)
+  bool held_valid = false;
   AVFrame* frame = nullptr;
   SwsContext* sws = nullptr;
   int stream = -1;
@@ -67,6 +70,7 @@ struct VideoReader::Impl {
     sws_freeContext(sws);
     av_frame_free(&frame);
     av_packet_free(&pkt);
+    av_packet_free(&held);
     avcodec_free_context(&dec);
     if (fmt) avformat_close_input(&fmt);
   }
@@ -98,13 +102,19 @@ struct VideoReader::Impl {
     if (rc < 0) Fail(std::string("cannot open the ") + codec->name + " decoder (" + AvError(rc) + ")");
     if (dec->width <= 0 || dec->height <= 0) Fail("video stream has no frame size");
     pkt = av_packet_alloc();
+    held = av_packet_alloc();
     frame = av_frame_alloc();
-    if (!pkt || !frame) Fail("out of memory");
+    if (!pkt || !held || !frame) Fail("out of memory");
 
     time_base = st->time_base;
     info.width = dec->width;
     info.height = dec->height;
     info.codec = codec->name;
+    const AVRational sar = av_guess_sample_aspect_ratio(fmt, st, nullptr);
+    if (sar.num > 0 && sar.den > 0) info.pixel_aspect = av_q2d(sar);
+    if (info.pixel_aspect < 0.25 || info.pixel_aspect > 4) info.pixel_aspect = 1;  // nonsense metadata
+    info.interlaced = st->codecpar->field_order != AV_FIELD_PROGRESSIVE &&
+                      st->codecpar->field_order != AV_FIELD_UNKNOWN;
     info.container = fmt->iformat ? fmt->iformat->name : "";
     const AVRational fr = st->avg_frame_rate.num > 0 ? st->avg_frame_rate : st->r_frame_rate;
     info.fps = fr.num > 0 && fr.den > 0 ? av_q2d(fr) : 0;
@@ -125,40 +135,80 @@ struct VideoReader::Impl {
       start_seconds = st->start_time * av_q2d(st->time_base);
   }
 
-  // Feeds one packet of our stream to the decoder (or starts draining at the end). Returns false on damage.
-  bool Feed() {
+  void StopFeeding() {
+    avcodec_send_packet(dec, nullptr);
+    flushing = true;
+  }
+
+  // True when the file ends inside the last packet: then that picture is incomplete. MPEG-TS is a sequence
+  // of fixed-size packets (188/192/204 bytes), so a cut shows in the file size; other containers store a
+  // packet's bytes contiguously at pkt->pos.
+  bool TailTruncated(const AVPacket* last) const {
+    const int64_t size = fmt->pb ? avio_size(fmt->pb) : -1;
+    if (size <= 0) return false;
+    if (info.container == "mpegts") {
+      int64_t ts_packet = 188;
+      if (av_opt_get_int(fmt, "ts_packetsize", AV_OPT_SEARCH_CHILDREN, &ts_packet) < 0 || ts_packet <= 0)
+        ts_packet = 188;
+      return size % ts_packet != 0;
+    }
+    return last->pos >= 0 && last->pos + last->size > size;
+  }
+
+  // Sends one packet to the decoder; false (with the warning set) when the stream is damaged from here on.
+  bool Send(AVPacket* p) {
+    const bool corrupt_packet = (p->flags & AV_PKT_FLAG_CORRUPT) != 0;
+    const int rc = corrupt_packet ? AVERROR_INVALIDDATA : avcodec_send_packet(dec, p);
+    av_packet_unref(p);
+    if (rc >= 0) return true;
+    // Errors before the first picture are normal for streams cut mid-GOP (TS captures): skip them.
+    if (next_index == 0 && !corrupt_packet) return true;
+    warning = "corrupt data after frame " + std::to_string(next_index) +
+              (corrupt_packet ? std::string(" (truncated packet)") : " (" + AvError(rc) + ")") +
+              "; keeping the frames decoded before it";
+    return false;
+  }
+
+  // Feeds one packet of our stream to the decoder (or starts draining at the end). One packet is held back
+  // so that the last one can be checked for truncation before it is decoded.
+  void Feed() {
     while (true) {
       const int rc = av_read_frame(fmt, pkt);
-      if (rc == AVERROR_EOF) {
-        avcodec_send_packet(dec, nullptr);
-        flushing = true;
-        return true;
-      }
       if (rc < 0) {
-        warning = "read error after frame " + std::to_string(next_index) + " (" + AvError(rc) +
-                  "); keeping the frames decoded before it";
-        avcodec_send_packet(dec, nullptr);
-        flushing = true;
-        return true;
+        if (rc != AVERROR_EOF)
+          warning = "read error after frame " + std::to_string(next_index) + " (" + AvError(rc) +
+                    "); keeping the frames decoded before it";
+        if (held_valid) {
+          held_valid = false;
+          if (rc == AVERROR_EOF && TailTruncated(held)) {
+            warning = "the file ends inside the last picture (truncated); keeping the frames before it";
+            av_packet_unref(held);
+          } else if (warning.empty()) {
+            Send(held);
+          } else {
+            av_packet_unref(held);
+          }
+        }
+        StopFeeding();
+        return;
       }
       if (pkt->stream_index != stream) {
         av_packet_unref(pkt);
         continue;
       }
-      const bool corrupt_packet = (pkt->flags & AV_PKT_FLAG_CORRUPT) != 0;
-      const int send = avcodec_send_packet(dec, pkt);
-      av_packet_unref(pkt);
-      // Errors before the first picture are normal for streams cut mid-GOP (TS captures): skip them.
-      if ((send < 0 && send != AVERROR(EAGAIN)) || corrupt_packet) {
-        if (next_index == 0 && !corrupt_packet) continue;
-        warning = "corrupt data after frame " + std::to_string(next_index) +
-                  (send < 0 ? " (" + AvError(send) + ")" : std::string(" (truncated packet)")) +
-                  "; keeping the frames decoded before it";
-        avcodec_send_packet(dec, nullptr);
-        flushing = true;
-        return true;
+      if (!held_valid) {
+        av_packet_move_ref(held, pkt);
+        held_valid = true;
+        continue;
       }
-      return true;
+      const bool ok = Send(held);
+      av_packet_move_ref(held, pkt);
+      if (!ok) {
+        av_packet_unref(held);
+        held_valid = false;
+        StopFeeding();
+      }
+      return;
     }
   }
 

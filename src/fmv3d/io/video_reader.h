@@ -21,6 +21,8 @@ namespace fmv3d::io {
 
 struct VideoInfo {
   int width = 0, height = 0;
+  double pixel_aspect = 1;        // sample aspect ratio (pixel width / pixel height), 1 when unknown
+  bool interlaced = false;        // the stream declares interlaced fields (frames are returned as decoded)
   double fps = 0;                 // average frame rate (0 when unknown)
   double duration = 0;            // seconds (0 when unknown)
   int64_t frame_count_hint = 0;   // from the container or duration × fps; 0 when unknown; not exact
