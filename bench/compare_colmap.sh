@@ -78,8 +78,12 @@ printf '%-28s %14s %14s\n' "registered" "$f_reg/$nframes" "$c_reg/$nframes"
 printf '%-28s %14s %14s\n' "points" "$f_pts" "$c_pts"
 printf '%-28s %14s %14s\n' "mean reprojection (px)" "$f_err" "$c_err"
 if [[ -n "$truth" ]]; then
-  ev() { "$FMV3D" -q evaluate-sparse --model "$1" --truth "$truth" --json "$2" >/dev/null 2>&1 || echo "{}" >"$2"; \
-         python3 -c "import json;d=json.load(open('$2'));print(d.get('centre_rmse_percent','-'),d.get('median_rotation_error_deg','-'),d.get('focal_error_percent','-'))"; }
+  ev() {  # model dir, json copy → "centre% rotation° focal%"
+    rm -f "$ws/report/sparse_eval.json"
+    "$FMV3D" -q evaluate-sparse "$ws" --model "$1" --truth "$truth" >/dev/null 2>&1 || true
+    if [[ -f "$ws/report/sparse_eval.json" ]]; then cp "$ws/report/sparse_eval.json" "$2"; else echo "{}" >"$2"; fi
+    python3 -c "import json;d=json.load(open('$2'));g=lambda k:d.get(k,'-');print(g('centre_rmse_percent_of_extent'),g('median_relative_rotation_error_deg'),g('focal_relative_error_percent'))"
+  }
   read -r f_c f_r f_f <<<"$(ev "$ws/sparse" "$out/fmv3d_eval.json")"
   if [[ -n "$best" ]]; then read -r c_c c_r c_f <<<"$(ev "$best" "$out/colmap_eval.json")"; else c_c=-; c_r=-; c_f=-; fi
   printf '%-28s %14s %14s\n' "centre RMSE (% extent)" "$f_c" "$c_c"

@@ -17,6 +17,8 @@
 #include "fmv3d/core/error.h"
 #include "fmv3d/core/files.h"
 #include "fmv3d/core/logging.h"
+#include "fmv3d/io/dji_srt.h"
+#include "fmv3d/io/telemetry.h"
 #include "fmv3d/io/video_reader.h"
 
 namespace fmv3d::io {
@@ -106,6 +108,32 @@ std::vector<fs::path> ExpandInputs(const std::vector<fs::path>& inputs) {
   if (files.empty()) throw Error("frames: no input given");
   return files;
 }
+
+namespace {
+// A video's own telemetry: KLV data streams (MISB ST 0601 / EG0104) or a DJI .SRT beside it. Telemetry is an
+// optional extra: a damaged stream costs a warning, never the frames.
+std::vector<TelemetrySample> LoadTelemetry(const std::filesystem::path& video) {
+  std::vector<TelemetrySample> samples;
+  try {
+    TelemetryStats stats;
+    samples = ReadVideoTelemetry(video, &stats);
+    if (stats.klv.bad_checksum + stats.klv.malformed > 0)
+      spdlog::warn("{}: {} malformed KLV packets skipped", video.string(),
+                   stats.klv.bad_checksum + stats.klv.malformed);
+    if (samples.empty()) {
+      if (auto srt = FindDjiSrtBeside(video)) {
+        samples = ReadDjiSrt(*srt);
+        spdlog::info("{}: {} telemetry samples from {}", video.string(), samples.size(), srt->string());
+      }
+    } else {
+      spdlog::info("{}: {} KLV telemetry samples", video.string(), samples.size());
+    }
+  } catch (const Error& e) {
+    spdlog::warn("{}: telemetry ignored ({})", video.string(), e.what());
+  }
+  return samples;
+}
+}  // namespace
 
 FramesIndex IngestFrames(const std::vector<fs::path>& inputs, const IngestOptions& options) {
   options.Check();
@@ -226,6 +254,7 @@ FramesIndex IngestFrames(const std::vector<fs::path>& inputs, const IngestOption
     if (info.interlaced)
       spdlog::warn("{}: interlaced video; frames are used as decoded (no deinterlacing), fast motion will comb",
                    file.string());
+    const std::vector<TelemetrySample> telemetry = LoadTelemetry(file);
     core::Progress progress("decode " + stem, static_cast<size_t>(std::max<int64_t>(info.frame_count_hint, 0)));
     std::vector<Keyframe> kept;
     tbb::task_group writers;
@@ -241,6 +270,7 @@ FramesIndex IngestFrames(const std::vector<fs::path>& inputs, const IngestOption
         r.frame_index = k.index;
         r.timestamp = k.timestamp;
         r.sharpness = k.sharpness;
+        if (auto t = InterpolateTelemetry(telemetry, k.timestamp)) r.telemetry = ToJson(*t);
         // PNG encoding costs more than decoding: it runs beside the decoder, at most 4 frames in flight.
         if (++in_flight > 4) {
           writers.wait();
