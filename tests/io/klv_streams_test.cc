@@ -149,7 +149,11 @@ TEST(KlvStreams, AphillYields300Eg0104PacketsNearTheSite) {
     EXPECT_NEAR(*s.sensor_longitude, -77.35, 0.05) << i;
     EXPECT_GT(*s.sensor_altitude_msl, 100.0);
     EXPECT_LT(*s.sensor_altitude_msl, 10000.0);
-    ASSERT_TRUE(s.horizontal_fov && s.platform_heading);
+    ASSERT_TRUE(s.horizontal_fov && s.platform_heading && s.sensor_relative_azimuth);
+    EXPECT_GE(*s.platform_heading, 0.0);
+    EXPECT_LT(*s.platform_heading, 360.0);
+    EXPECT_GE(*s.sensor_relative_azimuth, 0.0);
+    EXPECT_LT(*s.sensor_relative_azimuth, 360.0);
     EXPECT_GT(*s.horizontal_fov, 0.0);
     EXPECT_LT(*s.horizontal_fov, 90.0);
     lat_sum += *s.sensor_latitude;

@@ -4,7 +4,7 @@
 #include <cctype>
 #include <cmath>
 #include <map>
-#include <regex>
+#include <charconv>
 #include <sstream>
 
 #include "fmv3d/core/error.h"
@@ -14,25 +14,110 @@ namespace fmv3d::io {
 
 namespace {
 
-std::optional<double> ParseNumber(const std::string& s) {
-  try {
-    size_t used = 0;
-    const double v = std::stod(s, &used);
-    if (!std::isfinite(v)) return std::nullopt;
-    return v;
-  } catch (...) {
-    return std::nullopt;
+bool IsIdent(char c) { return std::isalpha(static_cast<unsigned char>(c)) || c == '_'; }
+bool IsDigit(char c) { return c >= '0' && c <= '9'; }
+
+size_t SkipSpaces(const std::string& s, size_t i) {
+  while (i < s.size() && (s[i] == ' ' || s[i] == '\t')) ++i;
+  return i;
+}
+
+// A decimal number at s[i] ([+-]digits[.digits][e[+-]digits], locale-independent); advances i past it.
+// Hand-written rather than std::regex: libstdc++'s regex recurses per character and can overflow the stack
+// on long hostile lines.
+std::optional<double> ScanNumber(const std::string& s, size_t* i) {
+  size_t j = *i;
+  if (j < s.size() && (s[j] == '+' || s[j] == '-')) ++j;
+  const size_t digits_start = j;
+  while (j < s.size() && IsDigit(s[j])) ++j;
+  size_t n_digits = j - digits_start;
+  if (j < s.size() && s[j] == '.') {
+    ++j;
+    const size_t f = j;
+    while (j < s.size() && IsDigit(s[j])) ++j;
+    n_digits += j - f;
   }
+  if (n_digits == 0) return std::nullopt;
+  if (j < s.size() && (s[j] == 'e' || s[j] == 'E')) {
+    size_t k = j + 1;
+    if (k < s.size() && (s[k] == '+' || s[k] == '-')) ++k;
+    if (k < s.size() && IsDigit(s[k])) {
+      while (k < s.size() && IsDigit(s[k])) ++k;
+      j = k;
+    }
+  }
+  const char* first = s.data() + *i + (s[*i] == '+' ? 1 : 0);
+  double v = 0;
+  const auto res = std::from_chars(first, s.data() + j, v);
+  if (res.ec != std::errc() || !std::isfinite(v)) return std::nullopt;
+  *i = j;
+  return v;
 }
 
 // "HH:MM:SS,mmm" (a '.' is accepted for the comma) -> seconds.
 std::optional<double> ParseSrtTime(const std::string& s) {
-  static const std::regex re(R"(^\s*(\d+):(\d{1,2}):(\d{1,2})[,.](\d{1,3}))");
-  std::smatch m;
-  if (!std::regex_search(s, m, re)) return std::nullopt;
-  const std::string ms = m[4].str();
-  return std::stod(m[1]) * 3600 + std::stod(m[2]) * 60 + std::stod(m[3]) +
-         std::stod(ms) / std::pow(10.0, static_cast<double>(ms.size()));
+  size_t i = SkipSpaces(s, 0);
+  double parts[3] = {0, 0, 0};
+  for (int k = 0; k < 3; ++k) {
+    const size_t b = i;
+    while (i < s.size() && IsDigit(s[i]) && i - b < 6) ++i;
+    if (i == b) return std::nullopt;
+    parts[k] = std::stod(s.substr(b, i - b));
+    const char sep = k < 2 ? ':' : ',';
+    if (i >= s.size() || (s[i] != sep && !(k == 2 && s[i] == '.'))) return std::nullopt;
+    ++i;
+  }
+  const size_t b = i;
+  while (i < s.size() && IsDigit(s[i]) && i - b < 3) ++i;
+  if (i == b) return std::nullopt;
+  const double frac = std::stod(s.substr(b, i - b)) / std::pow(10.0, static_cast<double>(i - b));
+  return parts[0] * 3600 + parts[1] * 60 + parts[2] + frac;
+}
+
+// Older layout: "GPS(lon,lat[,alt])", numbers optionally followed by a unit letter.
+bool ScanGps(const std::string& text, std::vector<double>* values) {
+  const size_t at = text.find("GPS");
+  if (at == std::string::npos) return false;
+  size_t i = SkipSpaces(text, at + 3);
+  if (i >= text.size() || text[i] != '(') return false;
+  ++i;
+  while (true) {
+    i = SkipSpaces(text, i);
+    const auto v = ScanNumber(text, &i);
+    if (!v) return false;
+    values->push_back(*v);
+    i = SkipSpaces(text, i);
+    if (i < text.size() && std::isalpha(static_cast<unsigned char>(text[i]))) i = SkipSpaces(text, i + 1);
+    if (i < text.size() && text[i] == ',') {
+      ++i;
+      continue;
+    }
+    return i < text.size() && text[i] == ')' && values->size() >= 2;
+  }
+}
+
+// Every "name: number" pair (names lower-cased); the first occurrence of a name wins.
+std::map<std::string, double> ScanPairs(const std::string& text) {
+  std::map<std::string, double> kv;
+  size_t i = 0;
+  while (i < text.size()) {
+    if (!IsIdent(text[i]) || (i > 0 && IsIdent(text[i - 1]))) {
+      ++i;
+      continue;
+    }
+    const size_t b = i;
+    while (i < text.size() && IsIdent(text[i])) ++i;
+    std::string key = text.substr(b, i - b);
+    size_t j = SkipSpaces(text, i);
+    if (j >= text.size() || text[j] != ':') continue;
+    j = SkipSpaces(text, j + 1);
+    if (const auto v = ScanNumber(text, &j)) {
+      std::transform(key.begin(), key.end(), key.begin(), [](unsigned char c) { return std::tolower(c); });
+      kv.emplace(std::move(key), *v);
+      i = j;
+    }
+  }
+  return kv;
 }
 
 void ParseBlock(const std::vector<std::string>& lines, std::vector<TelemetrySample>* out) {
@@ -54,28 +139,18 @@ void ParseBlock(const std::vector<std::string>& lines, std::vector<TelemetrySamp
   TelemetrySample s;
   s.time = *start;
   s.source = "DJI-SRT";
-  // Older layout: GPS(lon,lat,alt) BAROMETER:x
-  static const std::regex gps(R"(GPS\s*\(\s*([-+0-9.eE]+)\s*,\s*([-+0-9.eE]+)\s*(?:,\s*([-+0-9.eE]+)\s*M?)?\s*\))");
-  static const std::regex baro(R"(BAROMETER\s*:\s*([-+0-9.eE]+))");
-  // Newer layout: "name: value" pairs, several per [...] group.
-  static const std::regex pair(R"(([A-Za-z_]+)\s*:\s*([-+]?[0-9]*\.?[0-9]+(?:[eE][-+]?[0-9]+)?))");
-  std::smatch m;
-  if (std::regex_search(text, m, gps)) {
-    s.sensor_longitude = ParseNumber(m[1]);
-    s.sensor_latitude = ParseNumber(m[2]);
-    if (m[3].matched) s.sensor_altitude_msl = ParseNumber(m[3]);
-    if (std::regex_search(text, m, baro)) s.sensor_relative_altitude = ParseNumber(m[1]);
+  std::vector<double> gps;
+  const auto kv = ScanPairs(text);
+  auto get = [&](const char* k) -> std::optional<double> {
+    const auto f = kv.find(k);
+    return f == kv.end() ? std::nullopt : std::optional<double>(f->second);
+  };
+  if (ScanGps(text, &gps)) {
+    s.sensor_longitude = gps[0];
+    s.sensor_latitude = gps[1];
+    if (gps.size() > 2) s.sensor_altitude_msl = gps[2];
+    s.sensor_relative_altitude = get("barometer");
   } else {
-    std::map<std::string, double> kv;
-    for (auto it = std::sregex_iterator(text.begin(), text.end(), pair); it != std::sregex_iterator(); ++it) {
-      std::string key = (*it)[1].str();
-      std::transform(key.begin(), key.end(), key.begin(), [](unsigned char c) { return std::tolower(c); });
-      if (const auto v = ParseNumber((*it)[2].str())) kv.emplace(key, *v);
-    }
-    auto get = [&](const char* k) -> std::optional<double> {
-      const auto f = kv.find(k);
-      return f == kv.end() ? std::nullopt : std::optional<double>(f->second);
-    };
     s.sensor_latitude = get("latitude");
     s.sensor_longitude = get("longitude");
     if (!s.sensor_longitude) s.sensor_longitude = get("longtitude");  // a spelling some firmwares write

@@ -294,6 +294,8 @@ nlohmann::json ToJson(const Packet& p) {
   nlohmann::json j;
   j["stream-index"] = p.stream_index;
   j["time"] = p.time_seconds ? nlohmann::json(*p.time_seconds) : nlohmann::json();
+  // KWIVER's field: the media time in microseconds.
+  j["microseconds"] = p.time_seconds ? nlohmann::json(std::llround(*p.time_seconds * 1e6)) : nlohmann::json();
   j["key"] = UlJson(p.key, p.name);
   nlohmann::json items = nlohmann::json::array();
   for (const auto& it : p.items) items.push_back(ToJson(it));

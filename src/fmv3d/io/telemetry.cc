@@ -145,7 +145,9 @@ std::optional<TelemetrySample> SampleFromPacket(const klv::Packet& p) {
     s.sensor_latitude = num(Eg0104Field::kDeviceLatitude);
     s.sensor_longitude = num(Eg0104Field::kDeviceLongitude);
     s.sensor_altitude_msl = num(Eg0104Field::kDeviceAltitude);
+    // EG0104 floats may carry headings in (-180, 180]; ST 0601's convention is [0, 360).
     s.platform_heading = num(Eg0104Field::kPlatformHeading);
+    if (s.platform_heading) s.platform_heading = Wrap360(*s.platform_heading);
     s.platform_pitch = num(Eg0104Field::kPlatformPitch);
     s.platform_roll = num(Eg0104Field::kPlatformRoll);
     s.sensor_angle_to_north = num(Eg0104Field::kAngleToNorth);
