@@ -110,6 +110,14 @@ TEST(Stage, FeaturesAndMatchThroughTheCli) {
   r = test::RunCli("match '" + ws.string() + "' --pairs spatial");
   EXPECT_EQ(r.exit_code, 1);
   EXPECT_NE(r.err.find("not implemented"), std::string::npos) << r.err;
+
+  // Features that do not fit the cameras in frames.json: refused with the way out.
+  auto index = io::ReadFramesIndex(ws / "frames" / "frames.json");
+  index.cameras[0].camera.width = 500;
+  io::WriteFramesIndex(index, ws / "frames" / "frames.json");
+  r = test::RunCli("match '" + ws.string() + "'");
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_NE(r.err.find("is 480x320 but camera 1 is 500x320"), std::string::npos) << r.err;
 }
 
 // Strecha ground truth: K (3 rows), distortion row, R camera-to-world (3 rows), C, size.
