@@ -1,7 +1,14 @@
 // Descriptor matching: FLANN randomized kd-trees vs brute force (OpenCV SIMD batchDistance), per pair, as a
 // function of the number of features per image. Real SIFT from fountain-P11 images 0000/0001 (../shared/data)
 // when present, else from two synthetic textured images related by a homography.
-// Run: build/match_bench --benchmark_min_time=1  (single-threaded: one pair at a time, as in the stage)
+// Run: build/bench/match_bench --benchmark_min_time=1  (single-threaded: one pair at a time, as in the stage)
+// Measured here (AMD EPYC, AVX2/AVX-512, CPU time per pair incl. building the search structures):
+//   features   brute force (ours, AVX2 int16)   FLANN 4 trees / 128 checks   (OpenCV batchDistance BF: 930 ms @8k)
+//     1000          2.7 ms                          52 ms
+//     2000          9.4 ms                         115 ms
+//     4000           34 ms                         295 ms
+//     8000          127 ms                         761 ms
+// FLANN alone at 8000: build 70 ms per image, 8000 2-NN queries 143 / 278 / 547 ms at 32 / 64 / 128 checks.
 #include <benchmark/benchmark.h>
 
 #include <cstdlib>

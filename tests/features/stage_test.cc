@@ -110,6 +110,14 @@ TEST(Stage, FeaturesAndMatchThroughTheCli) {
   r = test::RunCli("match '" + ws.string() + "' --pairs spatial");
   EXPECT_EQ(r.exit_code, 1);
   EXPECT_NE(r.err.find("not implemented"), std::string::npos) << r.err;
+
+  // Features that do not fit the cameras in frames.json: refused with the way out.
+  auto index = io::ReadFramesIndex(ws / "frames" / "frames.json");
+  index.cameras[0].camera.width = 500;
+  io::WriteFramesIndex(index, ws / "frames" / "frames.json");
+  r = test::RunCli("match '" + ws.string() + "'");
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_NE(r.err.find("is 480x320 but camera 1 is 500x320"), std::string::npos) << r.err;
 }
 
 // Strecha ground truth: K (3 rows), distortion row, R camera-to-world (3 rows), C, size.
@@ -133,24 +141,24 @@ TEST(Stage, FountainAdjacentPairsGiveGroundTruthRotations) {
   FMV3D_REQUIRE_SHARED_DATA("mvs/fountain-P11/images/0000.jpg");
   cv::setNumThreads(1);
   const fs::path dir = test::SharedData() / "mvs/fountain-P11";
-  // Downscaled to 1024x683 to keep the test fast; K scaled accordingly (gt K in the integer-centre convention).
-  const double s = 1024.0 / 3072.0;
+  // Downscaled to 768x512 to keep the test fast; K scaled accordingly (gt K in the integer-centre convention).
+  const double s = 768.0 / 3072.0;
   std::vector<FeatureSet> feats;
   std::vector<GtCamera> gts;
   std::vector<core::Camera> cams;
   SiftOptions so;
-  so.max_features = 4000;
+  so.max_features = 3000;
   for (int i = 0; i < 11; ++i) {
     char name[32];
     std::snprintf(name, sizeof(name), "%04d.jpg", i);
     cv::Mat img = cv::imread((dir / "images" / name).string());
     ASSERT_FALSE(img.empty());
-    cv::resize(img, img, cv::Size(1024, 683), 0, 0, cv::INTER_AREA);
+    cv::resize(img, img, cv::Size(768, 512), 0, 0, cv::INTER_AREA);
     feats.push_back(ExtractSift(img, so));
     gts.push_back(ReadGt(dir / "gt_dense_cameras" / (std::string(name) + ".camera")));
     core::Camera c;
-    c.width = 1024;
-    c.height = 683;
+    c.width = 768;
+    c.height = 512;
     c.f = gts.back().K(1, 1) * s;
     c.aspect = gts.back().K(0, 0) / gts.back().K(1, 1);
     c.u0 = (gts.back().K(0, 2) + 0.5) * s;
@@ -158,6 +166,7 @@ TEST(Stage, FountainAdjacentPairsGiveGroundTruthRotations) {
     cams.push_back(c);
   }
   double worst_deg = 0;
+  std::vector<double> errs;
   for (int i = 0; i + 1 < 11; ++i) {
     ImageDescriptors a(feats[i].descriptors, i + 1), b(feats[i + 1].descriptors, i + 2);
     const auto m = MatchDescriptors(a, b, {});
@@ -179,8 +188,12 @@ TEST(Stage, FountainAdjacentPairsGiveGroundTruthRotations) {
     std::cout << "[measured] fountain pair " << i << "-" << i + 1 << ": " << m.size() << " putative, "
               << r.inliers.size() << " inliers, rotation error " << err << " deg\n";
     worst_deg = std::max(worst_deg, err);
+    errs.push_back(err);
   }
-  EXPECT_LT(worst_deg, 0.15);  // measured 0.007-0.032 deg at this 1/3 resolution
+  // Measured at this 1/4 resolution: 0.011-0.13 deg, median 0.033 (full resolution through the CLI: max 0.066).
+  EXPECT_LT(worst_deg, 0.3);
+  std::nth_element(errs.begin(), errs.begin() + errs.size() / 2, errs.end());
+  EXPECT_LT(errs[errs.size() / 2], 0.08);
 }
 
 }  // namespace

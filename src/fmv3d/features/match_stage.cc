@@ -105,6 +105,11 @@ MatchStageStats RunMatchStage(const fs::path& workspace, const MatchStageOptions
       throw Error(frames_json.string() + ": frame '" + index.frames[i].name + "' refers to camera " +
                   std::to_string(index.frames[i].camera_id) + ", which is not in \"cameras\"");
     cameras[i] = &prior->camera;
+    if (features[i].width != prior->camera.width || features[i].height != prior->camera.height)
+      throw Error(frames_json.string() + ": frame '" + index.frames[i].name + "' is " +
+                  std::to_string(features[i].width) + "x" + std::to_string(features[i].height) + " but camera " +
+                  std::to_string(prior->camera.id) + " is " + std::to_string(prior->camera.width) + "x" +
+                  std::to_string(prior->camera.height) + " (stale features? re-run `fmv3d features --force`)");
     trusted[i] = !prior->prior_source.empty() && prior->prior_source != "guess";
   }
   stats.seconds_load = Since(t_start);

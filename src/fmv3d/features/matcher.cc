@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <cstring>
 #include <cstdlib>
+#include <climits>
 #include <limits>
 #include <opencv2/core.hpp>
 #include <opencv2/flann.hpp>
@@ -37,7 +38,8 @@ void ImageDescriptors::BuildInt16() {
     const int n4 = (n + 3) / 4 * 4, n16 = (n + 15) / 16 * 16;
     rows16_.assign(size_t(n4) * 128, 0);
     blocks16_.assign(size_t(n16) * 128, 0);
-    norms_.assign(n16, 0);
+    // Padding descriptors get a huge norm so they never become anyone's neighbour (sums stay below 2^31).
+    norms_.assign(n16, 1 << 29);
     for (int i = 0; i < n; ++i) {
       int32_t norm = 0;
       for (int k = 0; k < 128; ++k) {
@@ -90,22 +92,43 @@ struct Best2 {
 }  // namespace
 
 // Exact 2-NN both ways from one pass over all descriptor pairs. Squared distances |a|² + |b|² − 2 a·b in exact
-// int32 arithmetic; the dot products come from an AVX2 kernel (16-bit multiply-add over pairs of dimensions,
-// 4 query rows x 16 candidates per step) when the CPU has it, else from the same loop in scalar code.
+// int32 arithmetic; an AVX2 kernel (16-bit multiply-add over pairs of dimensions, 4 query rows x 16 candidates
+// per step) computes them and tests them against the running second-best of rows and columns in SIMD, so the
+// scalar best-2 update only runs for the few distances that improve something. Scalar fallback otherwise.
 struct BruteForceAccess {
-  static void Dots4x16Scalar(const int16_t* a_rows, const int16_t* block, int32_t* dots /*4 x 16*/) {
+  struct Best2Arrays {
+    std::vector<int32_t> d1, d2, i1;
+    explicit Best2Arrays(size_t n) : d1(n, INT32_MAX), d2(n, INT32_MAX), i1(n, -1) {}
+    void Add(size_t k, int32_t d, int32_t idx) {
+      if (d < d1[k]) {
+        d2[k] = d1[k];
+        d1[k] = d;
+        i1[k] = idx;
+      } else if (d < d2[k]) {
+        d2[k] = d;
+      }
+    }
+    bool Passes(size_t k, double ratio_sq) const { return i1[k] >= 0 && d1[k] < ratio_sq * d2[k]; }
+  };
+
+  // Rows i0..i0+3 of A against block b (descriptors 16b..16b+15) of B.
+  static void BlockScalar(const int16_t* a_rows, const int16_t* block, const int32_t* na, const int32_t* nb,
+                          int i0, int j0, Best2Arrays* rows, Best2Arrays* cols) {
     for (int r = 0; r < 4; ++r)
       for (int m = 0; m < 16; ++m) {
-        int32_t s = 0;
+        int32_t dot = 0;
         for (int pair = 0; pair < 64; ++pair)
-          s += int32_t(a_rows[r * 128 + 2 * pair]) * block[(pair * 16 + m) * 2] +
-               int32_t(a_rows[r * 128 + 2 * pair + 1]) * block[(pair * 16 + m) * 2 + 1];
-        dots[r * 16 + m] = s;
+          dot += int32_t(a_rows[r * 128 + 2 * pair]) * block[(pair * 16 + m) * 2] +
+                 int32_t(a_rows[r * 128 + 2 * pair + 1]) * block[(pair * 16 + m) * 2 + 1];
+        const int32_t d = na[r] + nb[m] - 2 * dot;
+        if (d < rows->d2[i0 + r]) rows->Add(i0 + r, d, j0 + m);
+        if (d < cols->d2[j0 + m]) cols->Add(j0 + m, d, i0 + r);
       }
   }
 
-  __attribute__((target("avx2"))) static void Dots4x16Avx2(const int16_t* a_rows, const int16_t* block,
-                                                            int32_t* dots) {
+  __attribute__((target("avx2"))) static void BlockAvx2(const int16_t* a_rows, const int16_t* block,
+                                                         const int32_t* na, const int32_t* nb, int i0, int j0,
+                                                         Best2Arrays* rows, Best2Arrays* cols) {
     __m256i acc[4][2];
     for (auto& r : acc) r[0] = r[1] = _mm256_setzero_si256();
     for (int pair = 0; pair < 64; ++pair) {
@@ -119,9 +142,29 @@ struct BruteForceAccess {
         acc[r][1] = _mm256_add_epi32(acc[r][1], _mm256_madd_epi16(a, b1));
       }
     }
+    const __m256i nb0 = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(nb));
+    const __m256i nb1 = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(nb + 8));
+    alignas(32) int32_t d[16];
     for (int r = 0; r < 4; ++r) {
-      _mm256_storeu_si256(reinterpret_cast<__m256i*>(dots + r * 16), acc[r][0]);
-      _mm256_storeu_si256(reinterpret_cast<__m256i*>(dots + r * 16 + 8), acc[r][1]);
+      const __m256i nar = _mm256_set1_epi32(na[r]);
+      const __m256i d0 = _mm256_sub_epi32(_mm256_add_epi32(nar, nb0), _mm256_slli_epi32(acc[r][0], 1));
+      const __m256i d1 = _mm256_sub_epi32(_mm256_add_epi32(nar, nb1), _mm256_slli_epi32(acc[r][1], 1));
+      // Lanes that beat the column's current second best, or this row's.
+      const __m256i c0 = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(cols->d2.data() + j0));
+      const __m256i c1 = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(cols->d2.data() + j0 + 8));
+      const __m256i rr = _mm256_set1_epi32(rows->d2[i0 + r]);
+      const int mask_c = _mm256_movemask_ps(_mm256_castsi256_ps(_mm256_cmpgt_epi32(c0, d0))) |
+                         (_mm256_movemask_ps(_mm256_castsi256_ps(_mm256_cmpgt_epi32(c1, d1))) << 8);
+      const int mask_r = _mm256_movemask_ps(_mm256_castsi256_ps(_mm256_cmpgt_epi32(rr, d0))) |
+                         (_mm256_movemask_ps(_mm256_castsi256_ps(_mm256_cmpgt_epi32(rr, d1))) << 8);
+      if ((mask_c | mask_r) == 0) continue;
+      _mm256_store_si256(reinterpret_cast<__m256i*>(d), d0);
+      _mm256_store_si256(reinterpret_cast<__m256i*>(d + 8), d1);
+      for (int m = 0; m < 16; ++m) {
+        // Re-test: an earlier lane of this row may have tightened the row's bound.
+        if (d[m] < rows->d2[i0 + r]) rows->Add(i0 + r, d[m], j0 + m);
+        if ((mask_c >> m) & 1) cols->Add(j0 + m, d[m], i0 + r);
+      }
     }
   }
 
@@ -129,36 +172,24 @@ struct BruteForceAccess {
     A.BuildInt16();
     B.BuildInt16();
     const int n1 = A.size(), n2 = B.size();
+    const int n1p = (n1 + 3) / 4 * 4, num_blocks = (n2 + 15) / 16;
     const double r2 = o.ratio * o.ratio;
     static const bool avx2 = __builtin_cpu_supports("avx2");
-    auto* kernel = avx2 ? &Dots4x16Avx2 : &Dots4x16Scalar;
-    std::vector<Best2> rows(n1), cols(n2);
-    alignas(32) int32_t dots[64];
-    const int num_blocks = (n2 + 15) / 16;
+    auto* block_fn = avx2 ? &BlockAvx2 : &BlockScalar;
+    Best2Arrays rows(n1p), cols(size_t(num_blocks) * 16);
+    // A's norms padded to a multiple of 4 (A.norms_ is padded to 16).
     for (int i0 = 0; i0 < n1; i0 += 4) {
       const int16_t* a_rows = A.rows16_.data() + size_t(i0) * 128;
-      const int rmax = std::min(4, n1 - i0);
-      for (int b = 0; b < num_blocks; ++b) {
-        kernel(a_rows, B.blocks16_.data() + size_t(b) * 64 * 32, dots);
-        const int mmax = std::min(16, n2 - b * 16);
-        for (int r = 0; r < rmax; ++r) {
-          const int i = i0 + r;
-          const int32_t na = A.norms_[i];
-          Best2& row = rows[i];
-          for (int m = 0; m < mmax; ++m) {
-            const int j = b * 16 + m;
-            const float d = static_cast<float>(na + B.norms_[j] - 2 * dots[r * 16 + m]);
-            if (d < row.d2) row.Add(d, j);
-            if (d < cols[j].d2) cols[j].Add(d, i);
-          }
-        }
-      }
+      for (int b = 0; b < num_blocks; ++b)
+        block_fn(a_rows, B.blocks16_.data() + size_t(b) * 64 * 32, A.norms_.data() + i0, B.norms_.data() + b * 16,
+                 i0, b * 16, &rows, &cols);
     }
     std::vector<FeatureMatch> out;
     for (int r = 0; r < n1; ++r) {
-      if (!rows[r].Passes(r2)) continue;
-      const int c = rows[r].i1;
-      if (o.mutual && !(cols[c].Passes(r2) && cols[c].i1 == r)) continue;
+      if (!rows.Passes(r, r2)) continue;
+      const int c = rows.i1[r];
+      if (c >= n2) continue;
+      if (o.mutual && !(cols.Passes(c, r2) && cols.i1[c] == r)) continue;
       out.push_back({static_cast<uint32_t>(r), static_cast<uint32_t>(c)});
     }
     return out;

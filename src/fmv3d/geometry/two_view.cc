@@ -43,21 +43,6 @@ Eigen::Vector2d Apply(const Eigen::Matrix3d& T, const Eigen::Vector2d& p) {
   return (T * p.homogeneous()).hnormalized();
 }
 
-// Fn (normalised coordinates) = U diag(1, s, 0) V^T; F in pixels = T2^T Fn T1.
-struct SampsonFCost {
-  Eigen::Vector2d x1, x2;
-  Eigen::Matrix3d T1, T2t;
-  template <typename T>
-  bool operator()(const T* qu, const T* qv, const T* s, T* residual) const {
-    const Eigen::Quaternion<T> QU(qu[3], qu[0], qu[1], qu[2]), QV(qv[3], qv[0], qv[1], qv[2]);
-    const Eigen::Matrix<T, 3, 3> U = QU.toRotationMatrix(), V = QV.toRotationMatrix();
-    const Eigen::Matrix<T, 3, 3> Fn = U.col(0) * V.col(0).transpose() + s[0] * U.col(1) * V.col(1).transpose();
-    const Eigen::Matrix<T, 3, 3> F = T2t.cast<T>() * Fn * T1.cast<T>();
-    residual[0] = SampsonResidual<T>(F, x1, x2);
-    return true;
-  }
-};
-
 struct SampsonECost {
   Eigen::Vector2d n1, n2;
   double focal;
@@ -155,10 +140,20 @@ bool EightPointFundamental(const Points2& x1, const Points2& x2, Eigen::Matrix3d
   return true;
 }
 
+// Levenberg–Marquardt with analytic derivatives (Ceres autodiff through the rotation parametrisation cost 2/3
+// of the whole match stage on video). Fn = U diag(1, s, 0) V^T in Hartley-normalised coordinates y = T x;
+// updates U <- U exp([wu]x), V <- V exp([wv]x), s <- s + ds. With T = [k 0 -k c; 0 k -k c'; 0 0 1], the pixel
+// Sampson residual is r = y2^T Fn y1 / sqrt(k2² |(Fn y1)_01|² + k1² |(Fn^T y2)_01|²).
 bool RefineFundamental(const Points2& x1, const Points2& x2, Eigen::Matrix3d* F) {
-  if (x1.size() < 9 || x1.size() != x2.size()) return false;
+  const size_t n = x1.size();
+  if (n < 9 || n != x2.size()) return false;
   const Eigen::Matrix3d T1 = NormalisingTransform(x1), T2 = NormalisingTransform(x2);
-  // F in the normalised frames, then its SVD as the starting point on the rank-2 manifold.
+  const double k1 = T1(0, 0), k2 = T2(0, 0);
+  std::vector<Eigen::Vector3d> y1(n), y2(n);
+  for (size_t i = 0; i < n; ++i) {
+    y1[i] = T1 * x1[i].homogeneous();
+    y2[i] = T2 * x2[i].homogeneous();
+  }
   Eigen::Matrix3d Fn = T2.transpose().inverse() * (*F) * T1.inverse();
   Eigen::JacobiSVD<Eigen::Matrix3d> svd(Fn, Eigen::ComputeFullU | Eigen::ComputeFullV);
   Eigen::Matrix3d U = svd.matrixU(), V = svd.matrixV();
@@ -167,24 +162,94 @@ bool RefineFundamental(const Points2& x1, const Points2& x2, Eigen::Matrix3d* F)
   const Eigen::Vector3d sv = svd.singularValues();
   if (!(sv(0) > 0)) return false;
   double s = sv(1) / sv(0);
-  Eigen::Quaterniond qu(U), qv(V);
-  double pu[4] = {qu.x(), qu.y(), qu.z(), qu.w()}, pv[4] = {qv.x(), qv.y(), qv.z(), qv.w()};
 
-  ceres::Problem problem;
-  for (size_t i = 0; i < x1.size(); ++i) {
-    auto* cost = new ceres::AutoDiffCostFunction<SampsonFCost, 1, 4, 4, 1>(
-        new SampsonFCost{x1[i], x2[i], T1, T2.transpose()});
-    problem.AddResidualBlock(cost, nullptr, pu, pv, &s);
+  auto make_F = [](const Eigen::Matrix3d& U, const Eigen::Matrix3d& V, double s) -> Eigen::Matrix3d {
+    return U.col(0) * V.col(0).transpose() + s * U.col(1) * V.col(1).transpose();
+  };
+  auto cost = [&](const Eigen::Matrix3d& M) {
+    double c = 0;
+    for (size_t i = 0; i < n; ++i) {
+      const Eigen::Vector3d g = M * y1[i], h = M.transpose() * y2[i];
+      const double d = k2 * k2 * g.head<2>().squaredNorm() + k1 * k1 * h.head<2>().squaredNorm();
+      const double a = y2[i].dot(g);
+      c += a * a / std::max(d, 1e-300);
+    }
+    return c;
+  };
+  auto exp_so3 = [](const Eigen::Vector3d& w) -> Eigen::Matrix3d {
+    const double th = w.norm();
+    if (th < 1e-12) return Eigen::Matrix3d::Identity();
+    return Eigen::AngleAxisd(th, w / th).toRotationMatrix();
+  };
+  const double initial_cost = cost(make_F(U, V, s));
+  double current = initial_cost, lambda = 1e-3;
+  for (int iter = 0; iter < 30; ++iter) {
+    Fn = make_F(U, V, s);
+    // dFn/dp for p = (wu, wv, s): columns of a 9x7 matrix (Fn row-major flattened).
+    Eigen::Matrix<double, 9, 7> dF;
+    const Eigen::Matrix3d Dm = Eigen::Vector3d(1, s, 0).asDiagonal();
+    for (int k = 0; k < 3; ++k) {
+      Eigen::Matrix3d ek = Eigen::Matrix3d::Zero();
+      const Eigen::Vector3d e = Eigen::Vector3d::Unit(k);
+      ek << 0, -e.z(), e.y(), e.z(), 0, -e.x(), -e.y(), e.x(), 0;
+      const Eigen::Matrix3d dU = U * ek * Dm * V.transpose();
+      const Eigen::Matrix3d dV = -U * Dm * ek * V.transpose();  // (V exp(w))^T = exp(-w) V^T
+      for (int r = 0; r < 3; ++r)
+        for (int c = 0; c < 3; ++c) {
+          dF(3 * r + c, k) = dU(r, c);
+          dF(3 * r + c, 3 + k) = dV(r, c);
+        }
+    }
+    const Eigen::Matrix3d dS = U.col(1) * V.col(1).transpose();
+    for (int r = 0; r < 3; ++r)
+      for (int c = 0; c < 3; ++c) dF(3 * r + c, 6) = dS(r, c);
+
+    Eigen::Matrix<double, 7, 7> JtJ = Eigen::Matrix<double, 7, 7>::Zero();
+    Eigen::Matrix<double, 7, 1> Jtr = Eigen::Matrix<double, 7, 1>::Zero();
+    for (size_t i = 0; i < n; ++i) {
+      const Eigen::Vector3d g = Fn * y1[i], h = Fn.transpose() * y2[i];
+      const double d = std::max(k2 * k2 * g.head<2>().squaredNorm() + k1 * k1 * h.head<2>().squaredNorm(), 1e-300);
+      const double a = y2[i].dot(g), sd = std::sqrt(d);
+      const double r = a / sd;
+      // dr/dFn(p, q) = y2_p y1_q / sd - a / (2 d sd) * dd/dFn(p, q)
+      Eigen::Matrix<double, 1, 9> drdF;
+      for (int pp = 0; pp < 3; ++pp)
+        for (int q = 0; q < 3; ++q) {
+          double dd = 0;
+          if (pp < 2) dd += 2 * k2 * k2 * g(pp) * y1[i](q);
+          if (q < 2) dd += 2 * k1 * k1 * h(q) * y2[i](pp);
+          drdF(3 * pp + q) = y2[i](pp) * y1[i](q) / sd - a / (2 * d * sd) * dd;
+        }
+      const Eigen::Matrix<double, 1, 7> J = drdF * dF;
+      JtJ.noalias() += J.transpose() * J;
+      Jtr.noalias() += J.transpose() * r;
+    }
+    bool improved = false;
+    for (int attempt = 0; attempt < 10 && !improved; ++attempt) {
+      Eigen::Matrix<double, 7, 7> A = JtJ;
+      A.diagonal() += lambda * JtJ.diagonal().cwiseMax(1e-12);
+      const Eigen::Matrix<double, 7, 1> step = -A.ldlt().solve(Jtr);
+      if (!step.allFinite()) return false;
+      const Eigen::Matrix3d U2 = U * exp_so3(step.head<3>()), V2 = V * exp_so3(step.segment<3>(3));
+      const double s2 = s + step(6);
+      const double c2 = cost(make_F(U2, V2, s2));
+      if (c2 < current) {
+        const double rel = (current - c2) / std::max(current, 1e-300);
+        U = U2;
+        V = V2;
+        s = s2;
+        current = c2;
+        lambda = std::max(lambda / 10, 1e-12);
+        improved = true;
+        if (rel < 1e-10) iter = 1000;  // converged
+      } else {
+        lambda *= 10;
+      }
+    }
+    if (!improved) break;
   }
-  problem.SetManifold(pu, new ceres::EigenQuaternionManifold);
-  problem.SetManifold(pv, new ceres::EigenQuaternionManifold);
-  ceres::Solver::Summary summary;
-  ceres::Solve(SmallSolverOptions(), &problem, &summary);
-  if (!summary.IsSolutionUsable() || summary.final_cost > summary.initial_cost) return false;
-  const Eigen::Matrix3d Ur = Eigen::Quaterniond(pu[3], pu[0], pu[1], pu[2]).normalized().toRotationMatrix();
-  const Eigen::Matrix3d Vr = Eigen::Quaterniond(pv[3], pv[0], pv[1], pv[2]).normalized().toRotationMatrix();
-  const Eigen::Matrix3d Fr =
-      T2.transpose() * (Ur.col(0) * Vr.col(0).transpose() + s * Ur.col(1) * Vr.col(1).transpose()) * T1;
+  if (!(current <= initial_cost)) return false;
+  const Eigen::Matrix3d Fr = T2.transpose() * make_F(U, V, s) * T1;
   if (!Fr.allFinite() || !(Fr.norm() > 0)) return false;
   *F = Fr / Fr.norm();
   return true;

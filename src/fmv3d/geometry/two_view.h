@@ -25,7 +25,7 @@ double SampsonErrorSq(const Eigen::Matrix3d& M, const Eigen::Vector2d& x1, const
 // Returns false for fewer than 8 points or a degenerate configuration. F is scaled to unit Frobenius norm.
 bool EightPointFundamental(const Points2& x1, const Points2& x2, Eigen::Matrix3d* F);
 
-// Non-linear least squares (Ceres, Levenberg–Marquardt) of the sum of squared Sampson errors over the given
+// Non-linear least squares (our Levenberg–Marquardt, analytic Jacobian) of the sum of squared Sampson errors over the given
 // correspondences, on the rank-2 manifold F = U diag(1, s, 0) V^T (U, V rotations; Hartley-normalised inside
 // for conditioning). Returns false when the problem is too small or the solver fails; F is then unchanged.
 bool RefineFundamental(const Points2& x1, const Points2& x2, Eigen::Matrix3d* F);
