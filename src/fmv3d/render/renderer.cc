@@ -54,6 +54,31 @@ inline float FastLog2(float x) {
   return static_cast<float>(e - 1) + (-0.34484843f * m + 2.02466578f) * m - 0.67487759f;
 }
 
+// The nearest of the candidate faces whose plane the ray d crosses inside the triangle; -1 when all
+// candidates are empty (sky) and -2 when faces were offered but none contains the ray.
+inline int ContainingFace(const std::vector<Eigen::Matrix3d>& planes, const int32_t* cand, int n,
+                          const Eigen::Vector3d& d) {
+  int best = -1;
+  double best_s = 0;
+  bool any = false;
+  for (int k = 0; k < n; ++k) {
+    const int f = cand[k];
+    if (f < 0 || f == best) continue;
+    any = true;
+    const Eigen::Vector3d bm = planes[f] * d;
+    const double s = bm.sum();
+    if (!(s > 0)) continue;
+    const double tol = -1e-9 * s;
+    if (bm[0] < tol || bm[1] < tol || bm[2] < tol) continue;
+    if (best < 0 || s > best_s || (s == best_s && f < best)) {
+      best = f;
+      best_s = s;
+    }
+  }
+  if (best < 0 && any) return -2;
+  return best;
+}
+
 // Buffers reused across frames rendered by the same thread (page faults on fresh 30 MB buffers cost more
 // than clearing them).
 struct Scratch {
@@ -154,11 +179,13 @@ std::shared_ptr<const Renderer::RayTable> Renderer::Rays(const core::Camera& cam
     t->vh = static_cast<int>(std::ceil(vh));
     t->cu = -box.min().x() * t->fvx + 1;
     t->cv = -box.min().y() * t->fvy + 1;
+    // Each sub-sample looks at the 2x2 raster samples around it (top-left one stored) and takes the
+    // nearest of their faces that contains its exact ray, so edges are placed exactly, not snapped.
     t->sub_cell.resize(t->sub.size());
     for (size_t k = 0; k < t->sub.size(); ++k) {
-      const int X = static_cast<int>(std::floor(t->sub[k].x() * t->fvx + t->cu));
-      const int Y = static_cast<int>(std::floor(t->sub[k].y() * t->fvy + t->cv));
-      t->sub_cell[k] = (X >= 0 && Y >= 0 && X < t->vw && Y < t->vh) ? Y * t->vw + X : -1;
+      const int X = static_cast<int>(std::floor(t->sub[k].x() * t->fvx + t->cu - 0.5));
+      const int Y = static_cast<int>(std::floor(t->sub[k].y() * t->fvy + t->cv - 0.5));
+      t->sub_cell[k] = (X >= 0 && Y >= 0 && X + 1 < t->vw && Y + 1 < t->vh) ? Y * t->vw + X : -1;
     }
   }
   std::lock_guard<std::mutex> lock(cache_mutex_);
@@ -398,7 +425,16 @@ RenderResult Renderer::Render(const core::Camera& camera, const core::Pose& pose
             id = ibuf[size_t(S * j + b) * rt.vw + S * i + a];
           } else {
             const int32_t cell = rt.sub_cell[p * SS + b * S + a];
-            id = cell >= 0 ? ibuf[cell] : -1;
+            if (cell >= 0) {
+              const int32_t c4[4] = {ibuf[cell], ibuf[cell + 1], ibuf[cell + rt.vw], ibuf[cell + rt.vw + 1]};
+              if (c4[0] == c4[1] && c4[0] == c4[2] && c4[0] == c4[3]) {
+                id = c4[0];
+              } else {
+                const Eigen::Vector3d ds(rt.sub[p * SS + b * S + a].x(), rt.sub[p * SS + b * S + a].y(), 1.0);
+                id = ContainingFace(planes, c4, 4, ds);
+                if (id < -1) id = c4[0];  // none contains the ray (sliver): keep the nearest sample's face
+              }
+            }
           }
           ids[b * S + a] = id;
         }
@@ -414,20 +450,7 @@ RenderResult Renderer::Render(const core::Camera& camera, const core::Pose& pose
         colour = centre_face >= 0 ? shade(centre_face, dc) : sky(dc);
       } else {
         // The face through the exact pixel centre: the nearest of the sampled faces that contains it.
-        double best_w = 0;
-        for (int k = 0; k < SS; ++k) {
-          const int f = ids[k];
-          if (f < 0 || f == centre_face) continue;
-          const Eigen::Vector3d bm = planes[f] * dc;
-          const double s = bm.sum();
-          if (!(s > 0)) continue;
-          const double tol = -1e-9 * std::abs(s);
-          if (bm[0] < tol || bm[1] < tol || bm[2] < tol) continue;
-          if (s > best_w || (s == best_w && f < centre_face)) {
-            best_w = s;
-            centre_face = f;
-          }
-        }
+        centre_face = std::max(-1, ContainingFace(planes, ids.data(), SS, dc));
         colour.setZero();
         for (int b = 0; b < S; ++b)
           for (int a = 0; a < S; ++a) {
