@@ -23,11 +23,13 @@ inline uint64_t SplitMix(uint64_t x) {
   x = (x ^ (x >> 27)) * 0x94D049BB133111EBull;
   return x ^ (x >> 31);
 }
-inline double Gaussian(uint64_t seed, uint64_t index) {
-  const uint64_t h1 = SplitMix(seed ^ SplitMix(index * 2 + 1)), h2 = SplitMix(h1 + 0x632BE59BD9B4E019ull);
-  const double u1 = (static_cast<double>(h1 >> 11) + 0.5) * (1.0 / 9007199254740992.0);
-  const double u2 = static_cast<double>(h2 >> 11) * (1.0 / 9007199254740992.0);
-  return std::sqrt(-2.0 * std::log(u1)) * std::cos(2.0 * M_PI * u2);
+// Approximately standard-normal noise: the sum of four 16-bit uniforms from one hash (Irwin–Hall),
+// rescaled to unit variance. Per-pixel Box–Muller (log, cos) cost a fifth of the frame time.
+inline float Gaussian(uint64_t seed, uint64_t index) {
+  const uint64_t h = SplitMix(seed ^ SplitMix(index));
+  const uint32_t sum = static_cast<uint32_t>(h & 0xFFFF) + static_cast<uint32_t>((h >> 16) & 0xFFFF) +
+                       static_cast<uint32_t>((h >> 32) & 0xFFFF) + static_cast<uint32_t>(h >> 48);
+  return (static_cast<float>(sum) * (1.0f / 65536.0f) - 2.0f) * 1.7320508f;
 }
 
 // A face prepared for rasterisation: its (near-clipped) outline in visibility-raster coordinates, the
@@ -411,6 +413,7 @@ RenderResult Renderer::Render(const core::Camera& camera, const core::Pose& pose
   out.depth.create(H, W, CV_32F);
   out.face.create(H, W, CV_32S);
   const int SS = S * S;
+  const float noise_sigma = static_cast<float>(options.noise_sigma);
   tbb::parallel_for(0, H, [&](int j) {
     uint8_t* img = out.image.ptr<uint8_t>(j);
     float* dep = out.depth.ptr<float>(j);
@@ -468,9 +471,9 @@ RenderResult Renderer::Render(const core::Camera& camera, const core::Pose& pose
       fid[i] = centre_face;
       dep[i] = centre_face >= 0 ? static_cast<float>(1.0 / shade_planes[centre_face].m.dot(dc)) : 0.0f;
       for (int c = 0; c < 3; ++c) {
-        double val = colour[c];
-        if (options.noise_sigma > 0) val += options.noise_sigma * Gaussian(options.noise_seed, p * 3 + c);
-        img[3 * i + c] = static_cast<uint8_t>(std::clamp(std::lround(val), 0l, 255l));
+        float val = colour[c];
+        if (noise_sigma > 0) val += noise_sigma * Gaussian(options.noise_seed, p * 3 + c);
+        img[3 * i + c] = static_cast<uint8_t>(std::clamp(val, 0.0f, 255.0f) + 0.5f);
       }
     }
   });
