@@ -27,7 +27,14 @@ class MipTexture {
   struct Level {
     int w = 0, h = 0;
     float fw = 0, fh = 0;
-    std::vector<uint8_t> bgr;  // row-major, 4 bytes per texel (B, G, R, unused) for aligned loads
+    int tiles_x = 0;
+    // 4 bytes per texel (B, G, R, unused), stored in 32x32-texel tiles (4 KiB, one page): a bilinear
+    // footprint walking across a large texture in any direction then stays within few pages and cache
+    // lines (row-major storage made the shading pass TLB-bound).
+    std::vector<uint8_t> bgr;
+    size_t Offset(int x, int y) const {
+      return ((size_t(y >> 5) * tiles_x + (x >> 5)) << 12) + ((y & 31) << 7) + ((x & 31) << 2);
+    }
   };
   Eigen::Vector3f Bilinear(const Level& l, float u, float v) const;
   std::vector<Level> levels_;
