@@ -419,6 +419,11 @@ RenderResult Renderer::Render(const core::Camera& camera, const core::Pose& pose
     float* dep = out.depth.ptr<float>(j);
     int32_t* fid = out.face.ptr<int32_t>(j);
     std::array<int32_t, 16> ids;
+    // Colours go to a float row first: byte stores would alias every value the loop reads and force
+    // the compiler to reload them after each pixel.
+    thread_local std::vector<float> row_colour;
+    row_colour.resize(size_t(W) * 3);
+    float* rc = row_colour.data();
     for (int i = 0; i < W; ++i) {
       const size_t p = size_t(j) * W + i;
       for (int b = 0; b < S; ++b)
@@ -470,11 +475,15 @@ RenderResult Renderer::Render(const core::Camera& camera, const core::Pose& pose
       }
       fid[i] = centre_face;
       dep[i] = centre_face >= 0 ? static_cast<float>(1.0 / shade_planes[centre_face].m.dot(dc)) : 0.0f;
-      for (int c = 0; c < 3; ++c) {
-        float val = colour[c];
-        if (noise_sigma > 0) val += noise_sigma * Gaussian(options.noise_seed, p * 3 + c);
-        img[3 * i + c] = static_cast<uint8_t>(std::clamp(val, 0.0f, 255.0f) + 0.5f);
-      }
+      rc[3 * i] = colour[0];
+      rc[3 * i + 1] = colour[1];
+      rc[3 * i + 2] = colour[2];
+    }
+    const size_t p0 = size_t(j) * W * 3;
+    for (int k = 0; k < 3 * W; ++k) {
+      float val = rc[k];
+      if (noise_sigma > 0) val += noise_sigma * Gaussian(options.noise_seed, p0 + k);
+      img[k] = static_cast<uint8_t>(std::clamp(val, 0.0f, 255.0f) + 0.5f);
     }
   });
   return out;
