@@ -4,6 +4,7 @@
 #include <cstdlib>
 #include <fstream>
 #include <iterator>
+#include <opencv2/calib3d.hpp>
 #include <opencv2/features2d.hpp>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
@@ -318,6 +319,48 @@ TEST(Synth, TownFramesAreRichInSiftFeatures) {
   std::printf("SIFT keypoints on a 1280x720 town frame: %zu, 4x4 cells with >= 40: %d\n", kps.size(), filled);
   EXPECT_GT(kps.size(), 2000u);
   EXPECT_GE(filled, 14);
+}
+
+}  // namespace
+}  // namespace fmv3d::synth
+
+namespace fmv3d::synth {
+namespace {
+
+// The calibration board: OpenCV finds its 9x6 inner corners where the ground truth projects them.
+TEST(Synth, ChessboardCornersLandWhereTheyProject) {
+  const Scene scene = MakeScene("board");
+  SynthOptions o;
+  o.scene = "board";
+  o.width = 640;
+  o.height = 480;
+  o.distortion = {-0.1, 0.02, 0, 0};
+  o.flight.frames = 6;
+  const core::Camera cam = SynthCamera(o);
+  const auto poses = MakeFlight(scene, cam, o.flight);
+  const render::Renderer renderer(scene.mesh);
+  double worst = 0;
+  for (int k : {0, 2, 4}) {
+    const auto r = renderer.Render(cam, poses[k], o.render);
+    cv::Mat gray;
+    cv::cvtColor(r.image, gray, cv::COLOR_BGR2GRAY);
+    std::vector<cv::Point2f> corners;
+    ASSERT_TRUE(cv::findChessboardCorners(gray, cv::Size(9, 6), corners)) << "frame " << k;
+    cv::cornerSubPix(gray, corners, cv::Size(5, 5), cv::Size(-1, -1),
+                     cv::TermCriteria(cv::TermCriteria::EPS + cv::TermCriteria::COUNT, 50, 1e-4));
+    // Match each detected corner to the nearest projected board corner (OpenCV's order may be reversed).
+    for (const auto& c : corners) {
+      double best = 1e9;
+      for (int j = 0; j < 6; ++j)
+        for (int i = 0; i < 9; ++i) {
+          const Eigen::Vector2d p = cam.Project(poses[k].Transform(Eigen::Vector3d(i * 0.1, j * 0.1, 0)));
+          best = std::min(best, (p - Eigen::Vector2d(c.x + 0.5, c.y + 0.5)).norm());
+        }
+      worst = std::max(worst, best);
+    }
+  }
+  std::printf("chessboard corners vs projected truth: max %.3f px\n", worst);
+  EXPECT_LT(worst, 0.25);
 }
 
 }  // namespace

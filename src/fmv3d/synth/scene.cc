@@ -236,7 +236,7 @@ Scene MakeBoard(const SceneOptions& o) {
   scene.ground_height = [](double, double) { return 0.0; };
   scene.ground_extent = Eigen::AlignedBox2d(Eigen::Vector2d(x0, y0), Eigen::Vector2d(x1, y1));
   scene.target = {4 * sq, 2.5 * sq, 0};
-  scene.interest_radius = 6 * sq;
+  scene.interest_radius = 4 * sq;
   scene.characteristic_length = x1 - x0;
   scene.bounds = scene.mesh.Bounds();
   return scene;
