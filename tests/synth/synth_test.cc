@@ -288,7 +288,9 @@ TEST(Synth, ObjRoundTripKeepsGeometryUvsAndTextures) {
     const auto& a = back.materials[m].texture;
     const auto& b = scene.mesh.materials[m].texture;
     ASSERT_EQ(a.empty(), b.empty());
-    if (!a.empty()) EXPECT_EQ(cv::norm(a, b, cv::NORM_INF), 0) << back.materials[m].name;
+    if (!a.empty()) {
+      EXPECT_EQ(cv::norm(a, b, cv::NORM_INF), 0) << back.materials[m].name;
+    }
   }
   EXPECT_THROW(io::ReadObj(dir / "missing.obj"), Error);
 }
