@@ -17,15 +17,15 @@ MipTexture::MipTexture(const cv::Mat& bgr) {
     l.h = level.rows;
     l.fw = static_cast<float>(l.w);
     l.fh = static_cast<float>(l.h);
-    l.bgr.resize(size_t(l.w) * l.h * 4);
+    l.tiles_x = (l.w + 31) / 32;
+    l.bgr.assign(size_t(l.tiles_x) * ((l.h + 31) / 32) * 4096, 0);
     for (int y = 0; y < l.h; ++y) {
       const uint8_t* src = level.ptr<uint8_t>(y);
-      uint8_t* dst = &l.bgr[size_t(y) * l.w * 4];
       for (int x = 0; x < l.w; ++x) {
-        dst[4 * x] = src[3 * x];
-        dst[4 * x + 1] = src[3 * x + 1];
-        dst[4 * x + 2] = src[3 * x + 2];
-        dst[4 * x + 3] = 0;
+        uint8_t* dst = &l.bgr[l.Offset(x, y)];
+        dst[0] = src[3 * x];
+        dst[1] = src[3 * x + 1];
+        dst[2] = src[3 * x + 2];
       }
     }
     levels_.push_back(std::move(l));
@@ -46,39 +46,6 @@ MipTexture::MipTexture(const cv::Mat& bgr) {
     }
     level = next;
   }
-}
-
-Eigen::Vector3f MipTexture::Bilinear(const Level& l, float u, float v) const {
-  // Texel centres at (i + 0.5) / w; v flipped (OBJ convention); coordinates wrap.
-  const float x = u * l.fw - 0.5f, y = (1.0f - v) * l.fh - 0.5f;
-  const float fx = std::floor(x), fy = std::floor(y);
-  const float ax = x - fx, ay = y - fy;
-  int x0 = static_cast<int>(fx), y0 = static_cast<int>(fy);
-  if (x0 < 0 || x0 >= l.w) x0 = ((x0 % l.w) + l.w) % l.w;
-  if (y0 < 0 || y0 >= l.h) y0 = ((y0 % l.h) + l.h) % l.h;
-  const int x1 = x0 + 1 < l.w ? x0 + 1 : 0, y1 = y0 + 1 < l.h ? y0 + 1 : 0;
-  const uint8_t* r0 = &l.bgr[size_t(y0) * l.w * 4];
-  const uint8_t* r1 = &l.bgr[size_t(y1) * l.w * 4];
-  const uint8_t* p00 = r0 + 4 * x0;
-  const uint8_t* p01 = r0 + 4 * x1;
-  const uint8_t* p10 = r1 + 4 * x0;
-  const uint8_t* p11 = r1 + 4 * x1;
-  const float w00 = (1 - ax) * (1 - ay), w01 = ax * (1 - ay), w10 = (1 - ax) * ay, w11 = ax * ay;
-  return {w00 * p00[0] + w01 * p01[0] + w10 * p10[0] + w11 * p11[0],
-          w00 * p00[1] + w01 * p01[1] + w10 * p10[1] + w11 * p11[1],
-          w00 * p00[2] + w01 * p01[2] + w10 * p10[2] + w11 * p11[2]};
-}
-
-Eigen::Vector3f MipTexture::Sample(float u, float v, float lod) const {
-  if (levels_.empty()) return Eigen::Vector3f::Zero();
-  const int last = static_cast<int>(levels_.size()) - 1;
-  if (!(lod > 0)) return Bilinear(levels_[0], u, v);
-  if (lod >= last) return Bilinear(levels_[last], u, v);
-  const int l0 = static_cast<int>(lod);
-  const float a = lod - l0;
-  if (a < 0.02f) return Bilinear(levels_[l0], u, v);
-  if (a > 0.98f) return Bilinear(levels_[l0 + 1], u, v);
-  return (1 - a) * Bilinear(levels_[l0], u, v) + a * Bilinear(levels_[l0 + 1], u, v);
 }
 
 }  // namespace fmv3d::render

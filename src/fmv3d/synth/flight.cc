@@ -122,7 +122,10 @@ std::vector<core::Pose> MakeFlight(const Scene& scene, const core::Camera& camer
     const Eigen::Matrix3d jitter = Eigen::AngleAxisd(rv.norm(), rv.norm() > 0 ? rv.normalized() : Eigen::Vector3d::UnitX())
                                        .toRotationMatrix();
     // Jitter is applied in the camera frame (the gimbal wobbles around the commanded attitude).
-    poses[k] = core::Pose::FromRotationAndCentre(jitter * rotations[k], centres[k] + o.position_jitter * dp);
+    // Position jitter is specified for a 100 m stand-off and scales with the distance to the target, so
+    // small scenes (the chessboard) are not shaken out of view.
+    const double scale = std::min(1.0, (centres[k] - g.look_at).norm() / 100.0);
+    poses[k] = core::Pose::FromRotationAndCentre(jitter * rotations[k], centres[k] + o.position_jitter * scale * dp);
   }
   return poses;
 }

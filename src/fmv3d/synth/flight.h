@@ -26,7 +26,7 @@ struct FlightOptions {
   std::optional<double> radius;              // orbit radius / grid half-size / pass stand-off, metres
   std::optional<Eigen::Vector3d> look_at;    // default: the scene's target
   double jitter_deg = 0.4;                   // attitude jitter (1 sigma), degrees
-  double position_jitter = 0.3;              // metres (1 sigma)
+  double position_jitter = 0.3;              // metres (1 sigma) at >= 100 m from the target, less when closer
   uint64_t seed = 1;
   void Check() const;
 };

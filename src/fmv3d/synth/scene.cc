@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <opencv2/imgproc.hpp>
 
 #include "fmv3d/core/error.h"
 #include "fmv3d/synth/noise.h"
@@ -94,6 +95,9 @@ io::TexturedMesh MakeFarGround(const Eigen::AlignedBox2d& tile, const std::funct
   const Eigen::AlignedBox2d far(c - Eigen::Vector2d::Constant(3.5 * e), c + Eigen::Vector2d::Constant(3.5 * e));
   const int tex = std::clamp(static_cast<int>(std::lround(1024 * detail)), 64, 2048);
   cv::Mat texture = GroundTexture(tex, far, 77, nullptr, nullptr);
+  // Distant land: blur away texel-level grain (texels are ~20 m here) and add a little haze.
+  cv::GaussianBlur(texture, texture, cv::Size(0, 0), 1.5);
+  cv::addWeighted(texture, 0.75, cv::Mat(texture.size(), texture.type(), cv::Scalar(150, 160, 150)), 0.25, 0, texture);
   Builder b;
   const int mat = b.Material("far_ground", {0.4f, 0.6f, 0.5f}, texture);
   for (int j = 0; j <= n; ++j)
@@ -101,6 +105,9 @@ io::TexturedMesh MakeFarGround(const Eigen::AlignedBox2d& tile, const std::funct
       const double x = far.min().x() + i * step, y = far.min().y() + j * step;
       b.V({x, y, h(x, y) - 0.3});
       b.T(static_cast<double>(i) / n, static_cast<double>(j) / n);
+      const double g = 0.5 * step;
+      const Eigen::Vector3d nn(-(h(x + g, y) - h(x - g, y)) / (2 * g), -(h(x, y + g) - h(x, y - g)) / (2 * g), 1);
+      b.m.normals.push_back(nn.normalized().cast<float>());
     }
   for (int j = 0; j < n; ++j)
     for (int i = 0; i < n; ++i) {
@@ -110,6 +117,8 @@ io::TexturedMesh MakeFarGround(const Eigen::AlignedBox2d& tile, const std::funct
       b.Tri(a, bb, ee, a, bb, ee, mat, Eigen::Vector3d::UnitZ());
       b.Tri(a, ee, d, a, ee, d, mat, Eigen::Vector3d::UnitZ());
     }
+  for (auto& f : b.m.faces)
+    for (int k = 0; k < 3; ++k) f.vn[k] = f.v[k];
   return std::move(b.m);
 }
 
@@ -227,7 +236,7 @@ Scene MakeBoard(const SceneOptions& o) {
   scene.ground_height = [](double, double) { return 0.0; };
   scene.ground_extent = Eigen::AlignedBox2d(Eigen::Vector2d(x0, y0), Eigen::Vector2d(x1, y1));
   scene.target = {4 * sq, 2.5 * sq, 0};
-  scene.interest_radius = 6 * sq;
+  scene.interest_radius = 4 * sq;
   scene.characteristic_length = x1 - x0;
   scene.bounds = scene.mesh.Bounds();
   return scene;
@@ -294,7 +303,7 @@ Scene MakeScene(const std::string& name, const SceneOptions& o) {
       return hills + ridge - 10.0;
     };
     scene.target = {0, 0, scene.ground_height(0, 0)};
-    scene.interest_radius = 200;
+    scene.interest_radius = 140;
   } else {
     throw Error("unknown scene '" + name + "' (expected building, town, terrain or board)");
   }

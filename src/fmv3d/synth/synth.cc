@@ -172,7 +172,7 @@ SynthResult RunSynth(const SynthOptions& o) {
     core::Image img;
     img.id = static_cast<uint32_t>(k + 1);
     img.camera_id = 1;
-    img.name = FrameName(static_cast<int>(k));
+    img.name = FrameName(static_cast<int>(k), o.format == "jpg" ? "jpg" : "png");  // as the files / extractor name them
     img.pose = poses[k];
     // Ground-truth observations: sampled points whose projection lands on the surface they lie on.
     for (size_t p = 0; p < samples.size(); ++p) {
@@ -237,7 +237,8 @@ SynthResult RunSynth(const SynthOptions& o) {
   j["frames"] = result.frames;
   j["format"] = o.format;
   j["video"] = o.IsVideo() ? video_path.filename().string() : "";
-  j["frame_names"] = "flight-NNNNNN.png (6 digits, from 0 in decode order)";
+  j["frame_names"] = std::string("flight-NNNNNN.") + (o.format == "jpg" ? "jpg" : "png") +
+                     " (6 digits, from 0 in decode order)";
   j["camera"] = {{"width", camera.width}, {"height", camera.height}, {"f", camera.f}, {"aspect", camera.aspect},
                  {"u0", camera.u0}, {"v0", camera.v0}, {"k1", camera.k1}, {"k2", camera.k2},
                  {"p1", camera.p1}, {"p2", camera.p2}};

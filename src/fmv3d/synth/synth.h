@@ -6,7 +6,8 @@
 //   flight.mp4 | flight.ts         the video instead (mp4/ts formats); the frame extractor names its frames
 //                                  flight-000000.png ..., the names used in truth/images.txt
 //   truth/cameras.txt              COLMAP text model: one OPENCV camera with the exact intrinsics
-//   truth/images.txt               one image per frame (world-to-camera pose, name flight-NNNNNN.png) with
+//   truth/images.txt               one image per frame (world-to-camera pose, name flight-NNNNNN.png, or
+//                                  .jpg for the jpg format: the frame files' names) with
 //   truth/points3D.txt             the projections of a sample of visible surface points (tracks)
 //   depth/flight-NNNNNN.tiff       (with write_depth) 32-bit float depth maps: camera z in metres, 0 = sky
 //   scene.obj, scene.mtl, *.png    the scene mesh in world metres (z up) with its textures
