@@ -9,7 +9,7 @@
 namespace fmv3d::test {
 namespace {
 
-void Run(const std::string& args) {
+void Cli(const std::string& args) {
   const auto r = RunCli(args);
   ASSERT_EQ(r.exit_code, 0) << "fmv3d " << args << "\n" << r.err;
 }
@@ -17,12 +17,12 @@ void Run(const std::string& args) {
 TEST(E2eSparse, SyntheticOrbitUnknownLens) {
   TempDir dir("fmv3d-e2e-sparse");
   const std::string synth = (dir / "synth").string(), ws = (dir / "ws").string();
-  Run("-q synth --scene town --path orbit --frames 36 --size 960x540 --distortion -0.08,0,0,0 --seed 7 -o " + synth);
-  Run("-q frames " + synth + "/frames -o " + ws);
-  Run("-q features " + ws);
-  Run("-q match " + ws);
-  Run("-q sparse " + ws);
-  Run("-q evaluate-sparse " + ws + " --truth " + synth + "/truth");
+  Cli("-q synth --scene town --path orbit --frames 36 --size 960x540 --distortion -0.08,0,0,0 --seed 7 -o " + synth);
+  Cli("-q frames " + synth + "/frames -o " + ws);
+  Cli("-q features " + ws);
+  Cli("-q match " + ws);
+  Cli("-q sparse " + ws);
+  Cli("-q evaluate-sparse " + ws + " --truth " + synth + "/truth");
   const auto eval = core::ReadJson(dir / "ws/report/sparse_eval.json");
   std::cout << eval.dump(2) << "\n";
   EXPECT_EQ(eval.at("matched_images").get<int>(), 36) << "every frame registered";
