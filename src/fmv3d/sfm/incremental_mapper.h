@@ -51,7 +51,7 @@ struct MapperOptions {
   int init_min_inliers = 60;
   double init_min_tri_angle_deg = 4.0;  // median angle wanted; relaxed step by step when no pair has it
   double init_max_h_ratio = 0.85;       // H inliers / pair inliers above this: planar/rotation, tried last
-  int init_max_candidates = 40;
+  int init_max_candidates = 20;
   // Registration.
   double abs_pose_max_error_px = 12;
   int abs_pose_min_inliers = 15;
