@@ -57,7 +57,10 @@ class ModelBuilder {
   ModelBuilder(const MapperInput& input, const std::map<uint32_t, const MapperImage*>& images,
                const CorrespondenceGraph& graph, const MapperOptions& options, const std::set<uint32_t>& pool,
                Timings* timings)
-      : input_(input), images_(images), graph_(graph), opt_(options), pool_(pool), t_(timings) {}
+      : input_(input), images_(images), graph_(graph), opt_(options), pool_(pool), t_(timings) {
+    tri_min_angle_deg_ = opt_.tri_min_angle_deg;
+    filter_min_angle_deg_ = opt_.filter_min_angle_deg;
+  }
 
   bool Initialize();
   void Grow();
@@ -100,6 +103,8 @@ class ModelBuilder {
   const CorrespondenceGraph& graph_;
   uint64_t next_point_id_ = 1;
   double init_focal_scale_ = 1;
+  // Angle thresholds of this model: the options', lowered for narrow-baseline (telephoto) models, see Initialize.
+  double tri_min_angle_deg_ = 0, filter_min_angle_deg_ = 0;  // set in the constructor body
   const MapperOptions& opt_;
   std::set<uint32_t> pool_;
   Timings* t_;
@@ -323,10 +328,16 @@ bool ModelBuilder::Initialize() {
                      [](const PairCandidate* a, const PairCandidate* b) { return a->num_good > b->num_good; });
     for (const PairCandidate* c : ok) {
       tried.insert(c->pair);
+      // Telephoto video sees the scene through a narrow cone: no pair reaches the usual angles. The model then
+      // works with thresholds scaled to the baseline it has (points still need a measurable parallax).
+      tri_min_angle_deg_ = std::min(opt_.tri_min_angle_deg, std::max(0.05, c->median_angle_deg / 3));
+      filter_min_angle_deg_ = std::min(opt_.filter_min_angle_deg, tri_min_angle_deg_);
       if (TryInitialPair(*c)) {
-        spdlog::info("initial pair {} + {}: {} points, median angle {:.2f}°, H ratio {:.2f}, focal {:.1f}",
+        spdlog::info("initial pair {} + {}: {} points, median angle {:.2f}°, H ratio {:.2f}, focal {:.1f}, "
+                     "min angle {:.2f}°",
                      images_.at(c->pair->image_id1)->name, images_.at(c->pair->image_id2)->name,
-                     rec_.points.size(), c->median_angle_deg, c->h_ratio, rec_.cameras.begin()->second.f);
+                     rec_.points.size(), c->median_angle_deg, c->h_ratio, rec_.cameras.begin()->second.f,
+                     tri_min_angle_deg_);
         t_->init += Seconds(start);
         images_at_last_global_ = 2;
         return true;
@@ -374,7 +385,7 @@ bool ModelBuilder::TriangulateObservations(const std::vector<core::TrackElement>
     for (size_t j = i + 1; j < m; ++j) {
       Eigen::Vector3d X;
       if (!geometry::TriangulateDLT({poses[i], poses[j]}, {xs[i], xs[j]}, &X)) continue;
-      if (geometry::TriangulationAngle(centres[i], centres[j], X) < opt_.tri_min_angle_deg * kDeg) continue;
+      if (geometry::TriangulationAngle(centres[i], centres[j], X) < tri_min_angle_deg_ * kDeg) continue;
       std::vector<size_t> in;
       inliers_of(X, &in);
       if (in.size() > best_in.size()) best_in = in;
@@ -395,7 +406,7 @@ bool ModelBuilder::TriangulateObservations(const std::vector<core::TrackElement>
   if (in.size() < 2) return false;
   std::vector<Eigen::Vector3d> cs;
   for (size_t i : in) cs.push_back(centres[i]);
-  if (geometry::MaxTriangulationAngle(cs, X) < opt_.tri_min_angle_deg * kDeg) return false;
+  if (geometry::MaxTriangulationAngle(cs, X) < tri_min_angle_deg_ * kDeg) return false;
   const uint64_t pid = next_point_id_++;
   core::Point3D p;
   p.id = pid;
@@ -541,7 +552,7 @@ int ModelBuilder::FilterPoints(const std::set<uint64_t>* subset) {
     if (!drop) {
       std::vector<Eigen::Vector3d> cs;
       for (const auto& el : p.track) cs.push_back(rec_.images.at(el.image_id).pose.Centre());
-      drop = geometry::MaxTriangulationAngle(cs, p.xyz) < opt_.filter_min_angle_deg * kDeg;
+      drop = geometry::MaxTriangulationAngle(cs, p.xyz) < filter_min_angle_deg_ * kDeg;
     }
     if (drop) {
       DeletePoint(pid);
