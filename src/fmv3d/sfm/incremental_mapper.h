@@ -70,7 +70,7 @@ struct MapperOptions {
   int refine_focal_min_images = 3;
   int refine_k2_min_images = 6;
   int refine_principal_point_min_images = 8;  // from then on the final BA tests freeing it (Δχ²)
-  double principal_point_min_chi2 = 50;
+  double principal_point_min_chi2 = 1000;  // high: small systematic effects pass a 2-dof test easily
   bool refine_tangential = false;
   double ba_loss_scale_px = 1.0;
   // Models.
