@@ -48,6 +48,7 @@ struct PairCandidate {
   double h_ratio = 0;
   double median_angle_deg = 0;
   int num_good = 0;
+  double focal_scale = 1;  // chosen multiple of the guessed focal (1 when the focal is known)
   core::Pose pose2;  // pose of image 2 with image 1 at the origin, unit baseline
 };
 
@@ -56,7 +57,10 @@ class ModelBuilder {
   ModelBuilder(const MapperInput& input, const std::map<uint32_t, const MapperImage*>& images,
                const CorrespondenceGraph& graph, const MapperOptions& options, const std::set<uint32_t>& pool,
                Timings* timings)
-      : input_(input), images_(images), graph_(graph), opt_(options), pool_(pool), t_(timings) {}
+      : input_(input), images_(images), graph_(graph), opt_(options), pool_(pool), t_(timings) {
+    tri_min_angle_deg_ = opt_.tri_min_angle_deg;
+    filter_min_angle_deg_ = opt_.filter_min_angle_deg;
+  }
 
   bool Initialize();
   void Grow();
@@ -70,6 +74,7 @@ class ModelBuilder {
     return cam.Unproject(uv).head<2>();
   }
   void EvaluatePair(PairCandidate* c) const;
+  double ScanFocal(const features::VerifiedPair& pair) const;
   bool TryInitialPair(const PairCandidate& c);
   void AddImage(uint32_t id, const core::Pose& pose);
   void AddObservation(uint64_t pid, uint32_t image_id, uint32_t kp);
@@ -97,6 +102,9 @@ class ModelBuilder {
   const std::map<uint32_t, const MapperImage*>& images_;
   const CorrespondenceGraph& graph_;
   uint64_t next_point_id_ = 1;
+  double init_focal_scale_ = 1;
+  // Angle thresholds of this model: the options', lowered for narrow-baseline (telephoto) models, see Initialize.
+  double tri_min_angle_deg_ = 0, filter_min_angle_deg_ = 0;  // set in the constructor body
   const MapperOptions& opt_;
   std::set<uint32_t> pool_;
   Timings* t_;
@@ -109,22 +117,74 @@ class ModelBuilder {
   int num_global_ba_ = 0;
 };
 
+// A guessed focal can be far off (telephoto video: tens of times longer than 1.2·max(w, h)), and the essential
+// matrix of a wrong focal explains the matches worse. Scans multiples of the guess and returns the one whose E
+// has most inliers (ties within 2%: the one nearest the guess).
+double ModelBuilder::ScanFocal(const features::VerifiedPair& pair) const {
+  const MapperImage& im1 = *images_.at(pair.image_id1);
+  const MapperImage& im2 = *images_.at(pair.image_id2);
+  core::Camera cam1 = input_.cameras.at(im1.camera_id).camera;
+  core::Camera cam2 = input_.cameras.at(im2.camera_id).camera;
+  const double f1 = cam1.f, f2 = cam2.f;
+  std::vector<std::pair<double, int>> scores;
+  std::vector<cv::Point2d> p1, p2;
+  for (double k : {0.5, 0.7, 1.0, 1.4, 2.0, 3.0, 4.0, 6.0, 8.0, 12.0, 16.0, 24.0, 32.0, 48.0, 64.0}) {
+    cam1.f = f1 * k;
+    cam2.f = f2 * k;
+    p1.clear();
+    p2.clear();
+    for (const auto& m : pair.inliers) {
+      const Eigen::Vector2d a = Normalized(cam1, im1.keypoints[m.idx1]);
+      const Eigen::Vector2d b = Normalized(cam2, im2.keypoints[m.idx2]);
+      p1.emplace_back(a.x(), a.y());
+      p2.emplace_back(b.x(), b.y());
+    }
+    cv::Mat m;
+    try {
+      cv::findEssentialMat(p1, p2, cv::Mat::eye(3, 3, CV_64F), cv::RANSAC, 0.999,
+                           opt_.tri_max_error_px / (0.5 * (cam1.f + cam2.f)), 1000, m);
+    } catch (const cv::Exception&) {
+      continue;
+    }
+    scores.emplace_back(k, m.empty() ? 0 : cv::countNonZero(m));
+  }
+  int best = 0;
+  for (const auto& sc : scores) best = std::max(best, sc.second);
+  double chosen = 1, dist = 1e9;
+  for (const auto& [k, n] : scores)
+    if (n >= 0.98 * best && std::abs(std::log(k)) < dist) {
+      dist = std::abs(std::log(k));
+      chosen = k;
+    }
+  return chosen;
+}
+
 void ModelBuilder::EvaluatePair(PairCandidate* c) const {
   c->evaluated = true;
   const auto& pair = *c->pair;
   const MapperImage& im1 = *images_.at(pair.image_id1);
   const MapperImage& im2 = *images_.at(pair.image_id2);
-  const core::Camera& cam1 = input_.cameras.at(im1.camera_id).camera;
-  const core::Camera& cam2 = input_.cameras.at(im2.camera_id).camera;
+  core::Camera cam1 = input_.cameras.at(im1.camera_id).camera;
+  core::Camera cam2 = input_.cameras.at(im2.camera_id).camera;
+  auto normalise = [&](std::vector<cv::Point2d>* p1, std::vector<cv::Point2d>* p2) {
+    p1->clear();
+    p2->clear();
+    for (const auto& m : pair.inliers) {
+      const Eigen::Vector2d a = Normalized(cam1, im1.keypoints[m.idx1]);
+      const Eigen::Vector2d b = Normalized(cam2, im2.keypoints[m.idx2]);
+      p1->emplace_back(a.x(), a.y());
+      p2->emplace_back(b.x(), b.y());
+    }
+  };
   std::vector<cv::Point2d> p1, p2, u1, u2;
   for (const auto& m : pair.inliers) {
-    const Eigen::Vector2d a = Normalized(cam1, im1.keypoints[m.idx1]);
-    const Eigen::Vector2d b = Normalized(cam2, im2.keypoints[m.idx2]);
-    p1.emplace_back(a.x(), a.y());
-    p2.emplace_back(b.x(), b.y());
     u1.emplace_back(im1.keypoints[m.idx1].x(), im1.keypoints[m.idx1].y());
     u2.emplace_back(im2.keypoints[m.idx2].x(), im2.keypoints[m.idx2].y());
   }
+  c->focal_scale = init_focal_scale_;
+  cam1.f *= init_focal_scale_;
+  cam2.f *= init_focal_scale_;
+  normalise(&p1, &p2);
   if (p1.size() < 8) return;
   // Homography-dominated pairs (planar scene, pure rotation) give an unstable relative pose.
   if (pair.num_inliers_H > 0 && !pair.inliers.empty()) {
@@ -205,6 +265,7 @@ bool ModelBuilder::TryInitialPair(const PairCandidate& c) {
   const auto& pair = *c.pair;
   AddImage(pair.image_id1, core::Pose());
   AddImage(pair.image_id2, c.pose2);
+  for (auto& [cid, cam] : rec_.cameras) cam.f *= c.focal_scale;
   gauge1_ = pair.image_id1;
   gauge2_ = pair.image_id2;
   int made = 0;
@@ -238,6 +299,18 @@ bool ModelBuilder::Initialize() {
     return a.pair->inliers.size() > b.pair->inliers.size();
   });
   if (static_cast<int>(cands.size()) > opt_.init_max_candidates) cands.resize(opt_.init_max_candidates);
+  // Guessed focal: scan it on the three strongest pairs (median), then use it for every candidate.
+  std::vector<double> scales;
+  for (size_t i = 0; i < cands.size() && i < 3; ++i) {
+    const auto& pr = *cands[i].pair;
+    if (!input_.cameras.at(images_.at(pr.image_id1)->camera_id).focal_known ||
+        !input_.cameras.at(images_.at(pr.image_id2)->camera_id).focal_known)
+      scales.push_back(ScanFocal(pr));
+  }
+  if (!scales.empty()) {
+    std::sort(scales.begin(), scales.end());
+    init_focal_scale_ = scales[scales.size() / 2];
+  }
   for (auto& c : cands) EvaluatePair(&c);
   // Strict first (enough angle, not planar), then relax the angle and finally accept planar pairs.
   const std::vector<std::pair<double, bool>> passes = {
@@ -255,10 +328,16 @@ bool ModelBuilder::Initialize() {
                      [](const PairCandidate* a, const PairCandidate* b) { return a->num_good > b->num_good; });
     for (const PairCandidate* c : ok) {
       tried.insert(c->pair);
+      // Telephoto video sees the scene through a narrow cone: no pair reaches the usual angles. The model then
+      // works with thresholds scaled to the baseline it has (points still need a measurable parallax).
+      tri_min_angle_deg_ = std::min(opt_.tri_min_angle_deg, std::max(0.05, c->median_angle_deg / 3));
+      filter_min_angle_deg_ = std::min(opt_.filter_min_angle_deg, tri_min_angle_deg_);
       if (TryInitialPair(*c)) {
-        spdlog::info("initial pair {} + {}: {} points, median angle {:.2f}°, H ratio {:.2f}",
+        spdlog::info("initial pair {} + {}: {} points, median angle {:.2f}°, H ratio {:.2f}, focal {:.1f}, "
+                     "min angle {:.2f}°",
                      images_.at(c->pair->image_id1)->name, images_.at(c->pair->image_id2)->name,
-                     rec_.points.size(), c->median_angle_deg, c->h_ratio);
+                     rec_.points.size(), c->median_angle_deg, c->h_ratio, rec_.cameras.begin()->second.f,
+                     tri_min_angle_deg_);
         t_->init += Seconds(start);
         images_at_last_global_ = 2;
         return true;
@@ -306,7 +385,7 @@ bool ModelBuilder::TriangulateObservations(const std::vector<core::TrackElement>
     for (size_t j = i + 1; j < m; ++j) {
       Eigen::Vector3d X;
       if (!geometry::TriangulateDLT({poses[i], poses[j]}, {xs[i], xs[j]}, &X)) continue;
-      if (geometry::TriangulationAngle(centres[i], centres[j], X) < opt_.tri_min_angle_deg * kDeg) continue;
+      if (geometry::TriangulationAngle(centres[i], centres[j], X) < tri_min_angle_deg_ * kDeg) continue;
       std::vector<size_t> in;
       inliers_of(X, &in);
       if (in.size() > best_in.size()) best_in = in;
@@ -327,7 +406,7 @@ bool ModelBuilder::TriangulateObservations(const std::vector<core::TrackElement>
   if (in.size() < 2) return false;
   std::vector<Eigen::Vector3d> cs;
   for (size_t i : in) cs.push_back(centres[i]);
-  if (geometry::MaxTriangulationAngle(cs, X) < opt_.tri_min_angle_deg * kDeg) return false;
+  if (geometry::MaxTriangulationAngle(cs, X) < tri_min_angle_deg_ * kDeg) return false;
   const uint64_t pid = next_point_id_++;
   core::Point3D p;
   p.id = pid;
@@ -473,7 +552,7 @@ int ModelBuilder::FilterPoints(const std::set<uint64_t>* subset) {
     if (!drop) {
       std::vector<Eigen::Vector3d> cs;
       for (const auto& el : p.track) cs.push_back(rec_.images.at(el.image_id).pose.Centre());
-      drop = geometry::MaxTriangulationAngle(cs, p.xyz) < opt_.filter_min_angle_deg * kDeg;
+      drop = geometry::MaxTriangulationAngle(cs, p.xyz) < filter_min_angle_deg_ * kDeg;
     }
     if (drop) {
       DeletePoint(pid);
@@ -584,7 +663,8 @@ void ModelBuilder::LocalBundleAdjust(uint32_t image_id) {
   cfg.gauge_image2 = gauge2_;
   for (const auto& [cid, cam] : rec_.cameras) cfg.constant_cameras.insert(cid);
   BundleAdjustmentOptions o = BaOptions();
-  o.max_iterations = 25;
+  o.max_iterations = 15;
+  o.function_tolerance = 1e-4;
   BundleAdjust(&rec_, cfg, o);
   t_->local_ba += Seconds(start);
   std::set<uint64_t> pts;
@@ -601,6 +681,9 @@ BundleAdjustmentSummary ModelBuilder::GlobalBundleAdjust(bool final_pass, bool p
   cfg.gauge_image2 = gauge2_;
   BundleAdjustmentOptions o = BaOptions();
   o.refine_principal_point = principal_point;
+  // Intermediate adjustments only need to be near the optimum (the next image and the final pass refine further).
+  o.max_iterations = 30;
+  o.function_tolerance = 1e-5;
   if (final_pass) {
     o.function_tolerance = 1e-9;
     o.max_iterations = 200;
@@ -627,9 +710,10 @@ void ModelBuilder::TryPrincipalPoint() {
   BundleAdjustmentConfig cfg;
   cfg.gauge_image1 = gauge1_;
   cfg.gauge_image2 = gauge2_;
-  core::Reconstruction fixed = rec_, freed = rec_;
+  core::Reconstruction fixed = rec_;
   o.refine_principal_point = false;
   const auto s0 = BundleAdjust(&fixed, cfg, o);
+  core::Reconstruction freed = fixed;  // starts at the fixed optimum: a few steps only
   o.refine_principal_point = true;
   const auto s1 = BundleAdjust(&freed, cfg, o);
   if (!s0.success || !s1.success) return;

@@ -51,7 +51,7 @@ struct MapperOptions {
   int init_min_inliers = 60;
   double init_min_tri_angle_deg = 4.0;  // median angle wanted; relaxed step by step when no pair has it
   double init_max_h_ratio = 0.85;       // H inliers / pair inliers above this: planar/rotation, tried last
-  int init_max_candidates = 40;
+  int init_max_candidates = 20;
   // Registration.
   double abs_pose_max_error_px = 12;
   int abs_pose_min_inliers = 15;
@@ -70,7 +70,7 @@ struct MapperOptions {
   int refine_focal_min_images = 3;
   int refine_k2_min_images = 6;
   int refine_principal_point_min_images = 8;  // from then on the final BA tests freeing it (Δχ²)
-  double principal_point_min_chi2 = 50;
+  double principal_point_min_chi2 = 1000;  // high: small systematic effects pass a 2-dof test easily
   bool refine_tangential = false;
   double ba_loss_scale_px = 1.0;
   // Models.

@@ -10,7 +10,6 @@
 #include "fmv3d/features/feature_io.h"
 #include "fmv3d/io/colmap_model.h"
 #include "fmv3d/io/frames_index.h"
-#include "fmv3d/pipeline/workspace.h"
 
 namespace fmv3d::sfm {
 
@@ -37,10 +36,23 @@ nlohmann::json RunSparseStage(const fs::path& workspace, const SparseStageOption
   options.Check();
   using Clock = std::chrono::steady_clock;
   const auto start = Clock::now();
-  const pipeline::Workspace ws(workspace);
-  ws.Require(ws.frames_json(), "frames");
-  ws.Require(ws.features_dir(), "features");
-  ws.Require(features::MatchesPath(ws.matches_dir()), "match");
+  // Plain paths (WS layout of DESIGN.md): sfm/ sits below pipeline/ and must not depend on it.
+  struct {
+    fs::path root;
+    fs::path frames_json() const { return root / "frames" / "frames.json"; }
+    fs::path features_dir() const { return root / "features"; }
+    fs::path matches_dir() const { return root / "matches"; }
+    fs::path sparse_dir() const { return root / "sparse"; }
+    fs::path report_dir() const { return root / "report"; }
+  } ws{workspace};
+  auto require = [&](const fs::path& p, const char* cmd) {
+    if (!fs::exists(p))
+      throw Error(workspace.string() + ": no " + fs::relative(p, workspace).string() + " — run `fmv3d " + cmd +
+                  "` first");
+  };
+  require(ws.frames_json(), "frames");
+  require(ws.features_dir(), "features");
+  require(features::MatchesPath(ws.matches_dir()), "match");
   const io::FramesIndex index = io::ReadFramesIndex(ws.frames_json());
 
   MapperInput input;

@@ -1,0 +1,97 @@
+// The sparse stage on a workspace written from synthetic correspondences: files in, COLMAP model + PLY + report
+// out, with the reason for an image that cannot be registered.
+#include <gtest/gtest.h>
+
+#include <filesystem>
+
+#include "fmv3d/core/error.h"
+#include "fmv3d/core/files.h"
+#include "fmv3d/features/feature_io.h"
+#include "fmv3d/io/colmap_model.h"
+#include "fmv3d/io/frames_index.h"
+#include "fmv3d/sfm/evaluation.h"
+#include "fmv3d/sfm/sparse_stage.h"
+#include "fmv3d/sfm/synthetic_correspondences.h"
+#include "test_util.h"
+
+namespace fmv3d::sfm {
+namespace {
+
+void WriteWorkspace(const SyntheticScene& scene, const std::filesystem::path& ws, bool add_blank) {
+  io::FramesIndex index;
+  io::CameraPrior prior;
+  prior.camera = scene.input.cameras.at(1).camera;
+  prior.prior_source = scene.input.cameras.at(1).focal_known ? "calibration:test" : "guess";
+  index.cameras.push_back(prior);
+  core::EnsureDirectory(ws / "frames");
+  core::EnsureDirectory(ws / "features");
+  core::EnsureDirectory(ws / "matches");
+  auto images = scene.input.images;
+  if (add_blank) {
+    MapperImage blank;
+    blank.id = static_cast<uint32_t>(images.size() + 1);
+    blank.name = "blank.png";
+    images.push_back(blank);
+  }
+  for (const auto& im : images) {
+    io::FrameRecord fr;
+    fr.name = im.name;
+    index.frames.push_back(fr);
+    features::FeatureSet fs;
+    fs.image_name = im.name;
+    fs.width = prior.camera.width;
+    fs.height = prior.camera.height;
+    for (const auto& k : im.keypoints) fs.keypoints.push_back({static_cast<float>(k.x()), static_cast<float>(k.y()), 2, 0});
+    fs.descriptors.setZero(static_cast<Eigen::Index>(fs.keypoints.size()), 128);
+    fs.colors = im.colors;
+    if (fs.colors.size() != fs.keypoints.size()) fs.colors.assign(fs.keypoints.size(), {0, 0, 0});
+    features::WriteFeatures(fs, features::FeaturePath(ws / "features", im.name));
+  }
+  io::WriteFramesIndex(index, ws / "frames" / "frames.json");
+  features::WriteMatches(scene.input.pairs, features::MatchesPath(ws / "matches"));
+}
+
+TEST(SparseStage, WritesModelPlyAndReport) {
+  SyntheticSceneOptions so;
+  so.num_cameras = 10;
+  so.num_points = 500;
+  const auto scene = MakeSyntheticScene(so);
+  test::TempDir dir("sparse");
+  WriteWorkspace(scene, dir.path(), true);
+  const auto report = RunSparseStage(dir.path(), {});
+  EXPECT_EQ(report["total_images"], 11);
+  EXPECT_EQ(report["registered_images"], 10);
+  ASSERT_EQ(report["left_out"].size(), 1u);
+  EXPECT_EQ(report["left_out"][0]["image"], "blank.png");
+  EXPECT_NE(report["left_out"][0]["reason"].get<std::string>().find("no features"), std::string::npos);
+  EXPECT_GT(report["points"].get<int>(), 300);
+  EXPECT_LT(report["mean_reprojection_error_px"].get<double>(), 1.0);
+  EXPECT_TRUE(report["seconds"].contains("mapping"));
+  const auto rec = io::ReadColmapText(dir / "sparse");
+  rec.Validate();
+  EXPECT_EQ(rec.images.size(), 10u);
+  EXPECT_TRUE(std::filesystem::exists(dir / "sparse" / "sparse.ply"));
+  EXPECT_GT(std::filesystem::file_size(dir / "sparse" / "sparse.ply"), rec.points.size() * 15);
+  const auto json = core::ReadJson(dir / "report" / "sparse.json");
+  EXPECT_EQ(json["registered_images"], 10);
+  EXPECT_LE(EvaluateSparse(rec, scene.truth).centre_rmse_fraction, 0.001);
+
+  // The CLI evaluation against the truth written as a COLMAP model.
+  io::WriteColmapText(scene.truth, dir / "truth");
+  const auto r = test::RunCli("evaluate-sparse " + dir.path().string() + " --truth " + (dir / "truth").string());
+  EXPECT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_NE(r.out.find("median relative rotation error"), std::string::npos);
+  const auto ev = core::ReadJson(dir / "report" / "sparse_eval.json");
+  EXPECT_LT(ev["centre_rmse_percent_of_extent"].get<double>(), 0.1);
+}
+
+TEST(SparseStage, MissingInputsAreUserErrors) {
+  test::TempDir dir("sparse-missing");
+  EXPECT_THROW(RunSparseStage(dir.path(), {}), Error);
+  const auto r = test::RunCli("sparse " + dir.path().string());
+  EXPECT_NE(r.exit_code, 0);
+  EXPECT_NE(r.err.find("frames"), std::string::npos) << r.err;
+}
+
+}  // namespace
+}  // namespace fmv3d::sfm
