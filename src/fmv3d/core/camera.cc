@@ -7,6 +7,22 @@
 #include "fmv3d/core/error.h"
 
 namespace fmv3d::core {
+namespace {
+
+// d(xd, yd)/d(x, y) of DistortNormalized at normalised point x.
+Eigen::Matrix2d DistortionJacobian(const Camera& c, const Eigen::Vector2d& x) {
+  const double r2 = x.squaredNorm();
+  const double radial = 1 + c.k1 * r2 + c.k2 * r2 * r2;
+  const double dradial = 2 * c.k1 + 4 * c.k2 * r2;  // 2 · d(radial)/d(r²)
+  Eigen::Matrix2d J;
+  J(0, 0) = radial + x.x() * dradial * x.x() + 2 * c.p1 * x.y() + 6 * c.p2 * x.x();
+  J(0, 1) = x.x() * dradial * x.y() + 2 * c.p1 * x.x() + 2 * c.p2 * x.y();
+  J(1, 0) = x.y() * dradial * x.x() + 2 * c.p1 * x.x() + 2 * c.p2 * x.y();
+  J(1, 1) = radial + x.y() * dradial * x.y() + 6 * c.p1 * x.y() + 2 * c.p2 * x.x();
+  return J;
+}
+
+}  // namespace
 
 Camera Camera::Pinhole(int width, int height, double f) {
   Camera c;
@@ -50,17 +66,7 @@ Eigen::Vector2d Camera::Undistort(const Eigen::Vector2d& xd) const {
   // many tools stalls near the image corners for strong barrel distortion.
   // Damped Newton: a step is taken only if it reduces the residual and stays where the lens map is locally
   // invertible (det J > 0), so it cannot jump past the fold of a strong barrel lens to a spurious root.
-  auto jacobian = [&](const Eigen::Vector2d& x) {
-    const double r2 = x.squaredNorm();
-    const double radial = 1 + k1 * r2 + k2 * r2 * r2;
-    const double dradial = 2 * k1 + 4 * k2 * r2;  // 2 · d(radial)/d(r²)
-    Eigen::Matrix2d J;
-    J(0, 0) = radial + x.x() * dradial * x.x() + 2 * p1 * x.y() + 6 * p2 * x.x();
-    J(0, 1) = x.x() * dradial * x.y() + 2 * p1 * x.x() + 2 * p2 * x.y();
-    J(1, 0) = x.y() * dradial * x.x() + 2 * p1 * x.x() + 2 * p2 * x.y();
-    J(1, 1) = radial + x.y() * dradial * x.y() + 6 * p1 * x.y() + 2 * p2 * x.x();
-    return J;
-  };
+  auto jacobian = [&](const Eigen::Vector2d& x) { return DistortionJacobian(*this, x); };
   Eigen::Vector2d x = xd;
   Eigen::Vector2d r = Distort(x) - xd;
   for (int it = 0; it < 100 && r.squaredNorm() > 1e-30; ++it) {
@@ -103,14 +109,7 @@ Eigen::Vector3d Camera::Unproject(const Eigen::Vector2d& uv) const {
 Eigen::Matrix<double, 2, 3> Camera::ProjectJacobian(const Eigen::Vector3d& X) const {
   const double iz = 1.0 / X.z();
   const double x = X.x() * iz, y = X.y() * iz;
-  const double x2 = x * x, y2 = y * y, r2 = x2 + y2;
-  const double radial = 1 + k1 * r2 + k2 * r2 * r2;
-  const double dradial = 2 * k1 + 4 * k2 * r2;
-  Eigen::Matrix2d Jd;  // d(xd, yd)/d(x, y)
-  Jd(0, 0) = radial + x * dradial * x + 2 * p1 * y + 6 * p2 * x;
-  Jd(0, 1) = x * dradial * y + 2 * p1 * x + 2 * p2 * y;
-  Jd(1, 0) = y * dradial * x + 2 * p1 * x + 2 * p2 * y;
-  Jd(1, 1) = radial + y * dradial * y + 6 * p1 * y + 2 * p2 * x;
+  const Eigen::Matrix2d Jd = DistortionJacobian(*this, Eigen::Vector2d(x, y));
   Eigen::Matrix<double, 2, 3> Jn;  // d(x, y)/d(X)
   Jn << iz, 0, -x * iz, 0, iz, -y * iz;
   Eigen::Matrix2d F = Eigen::Vector2d(fx(), fy()).asDiagonal();
