@@ -1,3 +1,4 @@
+#include "fmv3d/core/camera_json.h"
 #include "fmv3d/calib/camera_file.h"
 
 #include <algorithm>
@@ -89,14 +90,7 @@ core::Camera ReadCameraFile(const fs::path& path) {
     try {
       c.width = j.at("width").get<int>();
       c.height = j.at("height").get<int>();
-      c.f = j.at("f").get<double>();
-      c.aspect = j.value("aspect", 1.0);
-      c.u0 = j.value("u0", c.width * 0.5);
-      c.v0 = j.value("v0", c.height * 0.5);
-      c.k1 = j.value("k1", 0.0);
-      c.k2 = j.value("k2", 0.0);
-      c.p1 = j.value("p1", 0.0);
-      c.p2 = j.value("p2", 0.0);
+      core::IntrinsicsFromJson(j, &c);
     } catch (const nlohmann::json::exception& e) {
       throw Error(path.string() + ": not a camera file (" + e.what() + ")");
     }

@@ -1,3 +1,4 @@
+#include "fmv3d/core/camera_json.h"
 #include "fmv3d/calib/sensor_db.h"
 
 #include <spdlog/spdlog.h>
@@ -46,14 +47,7 @@ SensorEntry EntryFromJson(const nlohmann::json& j, const fs::path& origin) {
     core::Camera cam;
     cam.width = c.at("width").get<int>();
     cam.height = c.at("height").get<int>();
-    cam.f = c.at("f").get<double>();
-    cam.aspect = c.value("aspect", 1.0);
-    cam.u0 = c.value("u0", cam.width * 0.5);
-    cam.v0 = c.value("v0", cam.height * 0.5);
-    cam.k1 = c.value("k1", 0.0);
-    cam.k2 = c.value("k2", 0.0);
-    cam.p1 = c.value("p1", 0.0);
-    cam.p2 = c.value("p2", 0.0);
+    core::IntrinsicsFromJson(c, &cam);
     cam.Validate();
     e.calibration = cam;
     if (e.width == 0) {

@@ -1,3 +1,4 @@
+#include "fmv3d/core/camera_json.h"
 #include "fmv3d/io/frames_index.h"
 
 #include "fmv3d/core/error.h"
@@ -56,14 +57,7 @@ FramesIndex ReadFramesIndex(const std::filesystem::path& path) {
       c.camera.width = cj.at("width").get<int>();
       c.camera.height = cj.at("height").get<int>();
       const auto& p = cj.at("prior");
-      c.camera.f = p.at("f").get<double>();
-      c.camera.aspect = p.value("aspect", 1.0);
-      c.camera.u0 = p.value("u0", c.camera.width * 0.5);
-      c.camera.v0 = p.value("v0", c.camera.height * 0.5);
-      c.camera.k1 = p.value("k1", 0.0);
-      c.camera.k2 = p.value("k2", 0.0);
-      c.camera.p1 = p.value("p1", 0.0);
-      c.camera.p2 = p.value("p2", 0.0);
+      core::IntrinsicsFromJson(p, &c.camera);
       c.prior_source = cj.value("prior_source", "");
       c.source = cj.value("source", "");
       c.camera.Validate();

@@ -1,0 +1,16 @@
+#include "fmv3d/core/camera_json.h"
+
+namespace fmv3d::core {
+
+void IntrinsicsFromJson(const nlohmann::json& j, Camera* c) {
+  c->f = j.at("f").get<double>();
+  c->aspect = j.value("aspect", 1.0);
+  c->u0 = j.value("u0", c->width * 0.5);
+  c->v0 = j.value("v0", c->height * 0.5);
+  c->k1 = j.value("k1", 0.0);
+  c->k2 = j.value("k2", 0.0);
+  c->p1 = j.value("p1", 0.0);
+  c->p2 = j.value("p2", 0.0);
+}
+
+}  // namespace fmv3d::core
