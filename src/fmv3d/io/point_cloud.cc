@@ -1,0 +1,263 @@
+#include "fmv3d/io/point_cloud.h"
+
+#include <algorithm>
+#include <cstring>
+#include <fstream>
+#include <sstream>
+#include <string>
+
+#include "fmv3d/core/error.h"
+#include "fmv3d/core/files.h"
+
+namespace fmv3d::io {
+
+namespace fs = std::filesystem;
+
+void OrientedPointCloud::Reserve(size_t n) {
+  positions.reserve(n);
+  normals.reserve(n);
+  colors.reserve(n);
+  visibility.reserve(n);
+}
+
+void OrientedPointCloud::Append(const OrientedPointCloud& other) {
+  if (empty()) {
+    *this = other;
+    return;
+  }
+  const bool keep_n = has_normals() && other.has_normals();
+  const bool keep_c = has_colors() && other.has_colors();
+  const bool keep_v = has_visibility() && other.has_visibility();
+  positions.insert(positions.end(), other.positions.begin(), other.positions.end());
+  if (keep_n) normals.insert(normals.end(), other.normals.begin(), other.normals.end()); else normals.clear();
+  if (keep_c) colors.insert(colors.end(), other.colors.begin(), other.colors.end()); else colors.clear();
+  if (keep_v) visibility.insert(visibility.end(), other.visibility.begin(), other.visibility.end());
+  else visibility.clear();
+}
+
+Eigen::AlignedBox3d OrientedPointCloud::Bounds() const {
+  Eigen::AlignedBox3d box;
+  box.setEmpty();
+  for (const auto& p : positions) box.extend(p);
+  return box;
+}
+
+void OrientedPointCloud::Validate() const {
+  const size_t n = positions.size();
+  if ((!normals.empty() && normals.size() != n) || (!colors.empty() && colors.size() != n) ||
+      (!visibility.empty() && visibility.size() != n))
+    throw Error("point cloud: attribute count differs from the point count");
+}
+
+void WritePointCloudPly(const OrientedPointCloud& cloud, const fs::path& path) {
+  cloud.Validate();
+  core::WriteAtomically(path, [&](const fs::path& tmp) {
+    std::ofstream out(tmp, std::ios::binary);
+    if (!out) throw Error(tmp.string() + ": cannot write");
+    out << "ply\nformat binary_little_endian 1.0\ncomment fmv3d oriented points\nelement vertex "
+        << cloud.size() << "\nproperty float x\nproperty float y\nproperty float z\n";
+    if (cloud.has_normals()) out << "property float nx\nproperty float ny\nproperty float nz\n";
+    if (cloud.has_colors()) out << "property uchar red\nproperty uchar green\nproperty uchar blue\n";
+    if (cloud.has_visibility()) out << "property list uchar int visibility\n";
+    out << "end_header\n";
+    std::string buf;
+    for (size_t i = 0; i < cloud.size(); ++i) {
+      buf.clear();
+      auto put = [&](const void* p, size_t n) { buf.append(static_cast<const char*>(p), n); };
+      const float xyz[3] = {float(cloud.positions[i].x()), float(cloud.positions[i].y()),
+                            float(cloud.positions[i].z())};
+      put(xyz, sizeof xyz);
+      if (cloud.has_normals()) put(cloud.normals[i].data(), 3 * sizeof(float));
+      if (cloud.has_colors()) put(cloud.colors[i].data(), 3);
+      if (cloud.has_visibility()) {
+        const auto& v = cloud.visibility[i];
+        const uint8_t n = static_cast<uint8_t>(std::min<size_t>(v.size(), 255));
+        put(&n, 1);
+        for (int k = 0; k < n; ++k) {
+          const int32_t id = static_cast<int32_t>(v[k]);
+          put(&id, 4);
+        }
+      }
+      out.write(buf.data(), static_cast<std::streamsize>(buf.size()));
+    }
+    if (!out) throw Error(tmp.string() + ": write failed");
+  });
+}
+
+namespace {
+
+enum class Type { kI8, kU8, kI16, kU16, kI32, kU32, kF32, kF64 };
+
+Type ParseType(const std::string& s, const std::string& file) {
+  if (s == "char" || s == "int8") return Type::kI8;
+  if (s == "uchar" || s == "uint8") return Type::kU8;
+  if (s == "short" || s == "int16") return Type::kI16;
+  if (s == "ushort" || s == "uint16") return Type::kU16;
+  if (s == "int" || s == "int32") return Type::kI32;
+  if (s == "uint" || s == "uint32") return Type::kU32;
+  if (s == "float" || s == "float32") return Type::kF32;
+  if (s == "double" || s == "float64") return Type::kF64;
+  throw Error(file + ": unknown PLY property type '" + s + "'");
+}
+
+size_t SizeOf(Type t) {
+  switch (t) {
+    case Type::kI8: case Type::kU8: return 1;
+    case Type::kI16: case Type::kU16: return 2;
+    case Type::kI32: case Type::kU32: case Type::kF32: return 4;
+    case Type::kF64: return 8;
+  }
+  return 0;
+}
+
+struct Property {
+  std::string name;
+  bool is_list = false;
+  Type count_type = Type::kU8, type = Type::kF32;
+};
+
+struct Element {
+  std::string name;
+  size_t count = 0;
+  std::vector<Property> props;
+};
+
+// Reads values of one element, in ascii or binary (with or without byte swap).
+class ValueReader {
+ public:
+  ValueReader(std::istream& in, int format, const std::string& file) : in_(in), format_(format), file_(file) {}
+  double Read(Type t) {
+    if (format_ == 0) {
+      double v;
+      if (!(in_ >> v)) throw Error(file_ + ": truncated or malformed ascii PLY data");
+      return v;
+    }
+    unsigned char b[8];
+    const size_t n = SizeOf(t);
+    if (!in_.read(reinterpret_cast<char*>(b), static_cast<std::streamsize>(n)))
+      throw Error(file_ + ": truncated PLY data");
+    if (format_ == 2) std::reverse(b, b + n);
+    switch (t) {
+      case Type::kI8: return static_cast<int8_t>(b[0]);
+      case Type::kU8: return b[0];
+      case Type::kI16: { int16_t v; std::memcpy(&v, b, 2); return v; }
+      case Type::kU16: { uint16_t v; std::memcpy(&v, b, 2); return v; }
+      case Type::kI32: { int32_t v; std::memcpy(&v, b, 4); return v; }
+      case Type::kU32: { uint32_t v; std::memcpy(&v, b, 4); return v; }
+      case Type::kF32: { float v; std::memcpy(&v, b, 4); return v; }
+      case Type::kF64: { double v; std::memcpy(&v, b, 8); return v; }
+    }
+    return 0;
+  }
+
+ private:
+  std::istream& in_;
+  int format_;  // 0 ascii, 1 binary little endian, 2 binary big endian
+  const std::string& file_;
+};
+
+}  // namespace
+
+OrientedPointCloud ReadPointCloudPly(const fs::path& path) {
+  const std::string file = path.string();
+  std::ifstream in(path, std::ios::binary);
+  if (!in) throw Error(file + ": cannot open");
+  std::string line;
+  if (!std::getline(in, line) || line.rfind("ply", 0) != 0) throw Error(file + ": not a PLY file");
+  int format = -1;
+  std::vector<Element> elements;
+  while (true) {
+    if (!std::getline(in, line)) throw Error(file + ": PLY header has no end_header");
+    if (!line.empty() && line.back() == '\r') line.pop_back();
+    std::istringstream ls(line);
+    std::string word;
+    ls >> word;
+    if (word == "end_header") break;
+    if (word == "format") {
+      std::string f;
+      ls >> f;
+      format = f == "ascii" ? 0 : f == "binary_little_endian" ? 1 : f == "binary_big_endian" ? 2 : -1;
+      if (format < 0) throw Error(file + ": unknown PLY format '" + f + "'");
+    } else if (word == "element") {
+      Element e;
+      long long count = -1;
+      ls >> e.name >> count;
+      if (count < 0 || count > (1LL << 34)) throw Error(file + ": bad PLY element count");
+      e.count = static_cast<size_t>(count);
+      elements.push_back(e);
+    } else if (word == "property") {
+      if (elements.empty()) throw Error(file + ": PLY property before any element");
+      Property p;
+      std::string t;
+      ls >> t;
+      if (t == "list") {
+        std::string ct, it;
+        ls >> ct >> it >> p.name;
+        p.is_list = true;
+        p.count_type = ParseType(ct, file);
+        p.type = ParseType(it, file);
+      } else {
+        p.type = ParseType(t, file);
+        ls >> p.name;
+      }
+      elements.back().props.push_back(p);
+    }
+  }
+  if (format < 0) throw Error(file + ": PLY header has no format line");
+
+  OrientedPointCloud cloud;
+  ValueReader reader(in, format, file);
+  for (const Element& e : elements) {
+    const bool is_vertex = e.name == "vertex";
+    int ix = -1, iy = -1, iz = -1, inx = -1, iny = -1, inz = -1, ir = -1, ig = -1, ib = -1, ivis = -1;
+    for (size_t k = 0; k < e.props.size(); ++k) {
+      const auto& n = e.props[k].name;
+      const int kk = static_cast<int>(k);
+      if (n == "x") ix = kk; else if (n == "y") iy = kk; else if (n == "z") iz = kk;
+      else if (n == "nx") inx = kk; else if (n == "ny") iny = kk; else if (n == "nz") inz = kk;
+      else if (n == "red" || n == "r") ir = kk; else if (n == "green" || n == "g") ig = kk;
+      else if (n == "blue" || n == "b") ib = kk;
+      else if (n == "visibility" && e.props[k].is_list) ivis = kk;
+    }
+    if (is_vertex) {
+      if (ix < 0 || iy < 0 || iz < 0) throw Error(file + ": PLY vertices have no x, y, z");
+      cloud.positions.resize(e.count);
+      if (inx >= 0 && iny >= 0 && inz >= 0) cloud.normals.resize(e.count);
+      if (ir >= 0 && ig >= 0 && ib >= 0) cloud.colors.resize(e.count);
+      if (ivis >= 0) cloud.visibility.resize(e.count);
+    }
+    std::vector<double> values(e.props.size());
+    for (size_t i = 0; i < e.count; ++i) {
+      for (size_t k = 0; k < e.props.size(); ++k) {
+        const Property& p = e.props[k];
+        if (!p.is_list) {
+          values[k] = reader.Read(p.type);
+          continue;
+        }
+        const double n = reader.Read(p.count_type);
+        if (n < 0 || n > 1e6) throw Error(file + ": bad PLY list length");
+        const bool keep = is_vertex && static_cast<int>(k) == ivis;
+        for (int j = 0; j < static_cast<int>(n); ++j) {
+          const double v = reader.Read(p.type);
+          if (keep) cloud.visibility[i].push_back(static_cast<uint32_t>(v));
+        }
+      }
+      if (!is_vertex) continue;
+      cloud.positions[i] = {values[ix], values[iy], values[iz]};
+      if (cloud.has_normals())
+        cloud.normals[i] = {float(values[inx]), float(values[iny]), float(values[inz])};
+      if (cloud.has_colors()) {
+        // Float colours in [0, 1] are scaled to 8 bits.
+        const bool unit = e.props[ir].type == Type::kF32 || e.props[ir].type == Type::kF64;
+        auto c8 = [&](double v) {
+          return static_cast<uint8_t>(std::clamp(unit ? v * 255.0 + 0.5 : v, 0.0, 255.0));
+        };
+        cloud.colors[i] = {c8(values[ir]), c8(values[ig]), c8(values[ib])};
+      }
+    }
+    if (is_vertex) break;  // later elements (faces) are not needed
+  }
+  return cloud;
+}
+
+}  // namespace fmv3d::io
