@@ -18,6 +18,7 @@ void Add(CLI::App& app) {
   auto* cmd = app.add_subcommand("evaluate-dense", "Compare WS/dense/fused.ply with a synthetic scene's true mesh");
   struct Args {
     std::string ws, truth, cloud;
+    bool everywhere = false;
     mvs::DenseEvaluationOptions opt;
   };
   auto a = std::make_shared<Args>();
@@ -27,6 +28,8 @@ void Add(CLI::App& app) {
   cmd->add_option("--completeness", a->opt.completeness_fraction,
                   "Completeness distance, fraction of the characteristic length")
       ->capture_default_str();
+  cmd->add_flag("--everywhere", a->everywhere,
+                "Completeness over all seen surface, including synth's backdrop beyond truth.json bounds");
   cmd->callback([a] {
     namespace fs = std::filesystem;
     const pipeline::Workspace ws(a->ws);
@@ -41,6 +44,12 @@ void Add(CLI::App& app) {
     if (!truth_json.contains("characteristic_length"))
       throw Error((truth_dir / "truth.json").string() + ": no characteristic_length");
     const double length = truth_json.at("characteristic_length").get<double>();
+    if (truth_json.contains("bounds") && !a->everywhere) {
+      const auto& b = truth_json.at("bounds");
+      a->opt.region = Eigen::AlignedBox3d(
+          Eigen::Vector3d(b.at("min")[0].get<double>(), b.at("min")[1].get<double>(), b.at("min")[2].get<double>()),
+          Eigen::Vector3d(b.at("max")[0].get<double>(), b.at("max")[1].get<double>(), b.at("max")[2].get<double>()));
+    }
     const auto est = io::ReadColmapText(ws.sparse_dir());
     const auto truth = io::ReadColmapText(truth_dir / "truth");
     const auto scene = io::ReadObj(truth_dir / "scene.obj", false);

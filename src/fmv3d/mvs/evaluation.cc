@@ -115,7 +115,11 @@ DenseEvaluation EvaluateDense(const io::OrientedPointCloud& cloud, const core::R
 
   // Completeness over the surface two or more true cameras see.
   double area = 0;
-  for (size_t f = 0; f < mesh.num_triangles(); ++f) area += mesh.Area(static_cast<int>(f));
+  for (size_t f = 0; f < mesh.num_triangles(); ++f) {
+    const auto& tri = mesh.triangles()[f];
+    const Eigen::Vector3d c = (mesh.vertices()[tri[0]] + mesh.vertices()[tri[1]] + mesh.vertices()[tri[2]]) / 3;
+    if (opt.region.isEmpty() || opt.region.contains(c)) area += mesh.Area(static_cast<int>(f));
+  }
   ev.sample_spacing = std::max(opt.min_spacing_fraction * characteristic_length,
                                std::sqrt(area / static_cast<double>(opt.max_surface_samples)));
   std::vector<int> faces;
@@ -158,6 +162,7 @@ DenseEvaluation EvaluateDense(const io::OrientedPointCloud& cloud, const core::R
   std::atomic<size_t> n_seen{0}, n_complete{0};
   tbb::parallel_for(size_t{0}, samples.size(), [&](size_t i) {
     if (seen[i] < opt.min_cameras) return;
+    if (!opt.region.isEmpty() && !opt.region.contains(samples[i])) return;
     n_seen++;
     if (grid.AnyWithin(samples[i], radius)) n_complete++;
   });

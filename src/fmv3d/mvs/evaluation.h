@@ -9,6 +9,7 @@
 //    point lies within completeness_fraction · characteristic length of it.
 #pragma once
 
+#include <Eigen/Geometry>
 #include <cstddef>
 #include <nlohmann/json.hpp>
 
@@ -26,6 +27,9 @@ struct DenseEvaluationOptions {
   double min_spacing_fraction = 0.0025; // finest sample spacing, of the characteristic length
   size_t max_accuracy_points = 3000000; // evenly thinned beyond this
   int render_max_size = 800;            // truth depth maps for the visibility test, longer side
+  // Completeness counts only surface inside this box (e.g. truth.json "bounds": the modelled area, not the
+  // coarse backdrop ring synth adds for the horizon); empty box = everywhere.
+  Eigen::AlignedBox3d region;
   void Check() const;
 };
 

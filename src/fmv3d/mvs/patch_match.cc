@@ -278,12 +278,23 @@ class Solver {
     float best_d = depth_[i], best_cost = cost_[i], best_photo = photo_[i];
     Eigen::Vector3f best_n = normal_[i];
     const Eigen::Vector3f ray = Ray(x, y);
+    // Converged regions hand the same plane around: a candidate equal to one already scored is skipped
+    // (most of the propagation cost after the first rounds).
+    float tried_d[16];
+    Eigen::Vector3f tried_n[16];
+    int n_tried = 0;
     auto trial = [&](float d, const Eigen::Vector3f& n) {
+      for (int k = 0; k < n_tried; ++k)
+        if (std::abs(d - tried_d[k]) <= 1e-5f * d && n.dot(tried_n[k]) >= 0.99999f) return;
+      if (n_tried < 16) tried_d[n_tried] = d, tried_n[n_tried++] = n;
       float photo;
       const float c = Cost(*rp, x, y, d, n, &photo);
       if (c < best_cost) best_cost = c, best_photo = photo, best_d = d, best_n = n;
     };
     // Propagation: the planes of the opposite colour at distance 1 and 5 (both odd: the other colour).
+    tried_d[0] = best_d;
+    tried_n[0] = best_n;
+    n_tried = 1;
     static const int kOff[8][2] = {{-1, 0}, {1, 0}, {0, -1}, {0, 1}, {-5, 0}, {5, 0}, {0, -5}, {0, 5}};
     for (const auto& o : kOff) {
       const int nx = x + o[0], ny = y + o[1];
@@ -304,8 +315,10 @@ class Solver {
       return p.dot(ray) < 0 ? p : n;
     };
     const float dp = 0.05f * scale, np = 0.5f * scale;
-    trial(RandomDepth(rng), best_n);
-    trial(best_d, RandomNormal(rng, ray));
+    if (round < 2) {  // fresh guesses only while planes are still far off; later rounds only polish
+      trial(RandomDepth(rng), best_n);
+      trial(best_d, RandomNormal(rng, ray));
+    }
     trial(best_d * (1 + dp * rng.Symmetric()), perturb_normal(best_n, np));
     trial(best_d * (1 + dp * rng.Symmetric()), best_n);
     trial(best_d, perturb_normal(best_n, np));
