@@ -107,6 +107,7 @@ void BM_TextureStage(benchmark::State& state) {
   ro.shading = false;
   const auto r = renderer.Render(truth.cameras.at(im->camera_id), im->pose, ro);
   const cv::Mat frame = cv::imread((s.synth_dir / "frames" / kHeldOut).string());
+  if (std::getenv("FMV3D_BENCH_KEEP")) cv::imwrite((s.ws / "held_out_render.png").string(), r.image);
   double se = 0;
   size_t n = 0;
   for (int y = 0; y < frame.rows; ++y)

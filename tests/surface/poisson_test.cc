@@ -113,10 +113,11 @@ TEST(Poisson, DecimatesToTheTargetFaceCount) {
 }
 
 TEST(Poisson, DepthFollowsThePointSpacing) {
-  // A 100 m box of points 0.1 m apart wants cells ~0.2 m: 110 / 0.2 = 550 → depth 10.
+  // A 100 m box of points 0.1 m apart wants cells ~0.2 m: 110 / 0.2 = 550 ≈ 2^9.1 → depth 9.
   PoissonOptions opt;
   Eigen::AlignedBox3d box(Eigen::Vector3d::Zero(), Eigen::Vector3d(100, 100, 30));
-  EXPECT_EQ(AutomaticDepth(box, 0.1, opt), 10);
+  EXPECT_EQ(AutomaticDepth(box, 0.1, opt), 9);
+  EXPECT_EQ(AutomaticDepth(box, 0.05, opt), 10);
   EXPECT_EQ(AutomaticDepth(box, 10.0, opt), opt.min_depth);
   EXPECT_EQ(AutomaticDepth(box, 1e-4, opt), opt.max_depth);
   // Spacing of a regular 0.5 m grid.

@@ -7,6 +7,7 @@
 #include <tiny_gltf.h>  // declarations only: the implementation lives in fmv3d_surface
 #include <gtest/gtest.h>
 
+#include <memory>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
@@ -27,15 +28,20 @@ namespace {
 
 namespace fs = std::filesystem;
 
-// A workspace with a Poisson mesh from a slightly noisy cloud; frame 6 is not in its sparse model.
+// A workspace with a Poisson mesh from a slightly noisy cloud (frame 6 is not in its sparse model), made
+// once and copied for each test, since tests may spoil its frames.
 void PrepareMeshed(const fs::path& ws) {
-  const auto& flight = testing::Flight();
-  SyntheticCloudOptions o;
-  o.spacing = 0.15;
-  o.position_noise = 0.02;
-  o.region = Eigen::AlignedBox3d(Eigen::Vector3d(-18, -18, -3), Eigen::Vector3d(18, 18, 35));
-  PrepareSyntheticWorkspace(flight.synth_dir, ws, o, {testing::kHeldOut});
-  RunMeshStage(ws, MeshStageOptions{});
+  static const std::unique_ptr<test::TempDir> meshed = [] {
+    auto dir = std::make_unique<test::TempDir>("fmv3d-texture-base");
+    SyntheticCloudOptions o;
+    o.spacing = 0.15;
+    o.position_noise = 0.02;
+    o.region = Eigen::AlignedBox3d(Eigen::Vector3d(-18, -18, -3), Eigen::Vector3d(18, 18, 35));
+    PrepareSyntheticWorkspace(testing::Flight().synth_dir, dir->path(), o, {testing::kHeldOut});
+    RunMeshStage(dir->path(), MeshStageOptions{});
+    return dir;
+  }();
+  fs::copy(meshed->path(), ws, fs::copy_options::recursive | fs::copy_options::overwrite_existing);
 }
 
 struct Comparison {

@@ -64,12 +64,12 @@ void PoissonOptions::Check() const {
   if (threads < 0) throw Error("poisson: threads must be >= 0");
 }
 
-double MedianPointSpacing(const std::vector<Eigen::Vector3d>& points, size_t max_queries) {
+namespace {
+
+double SpacingFromTree(const open3d::geometry::KDTreeFlann& tree, const std::vector<Eigen::Vector3d>& points,
+                       size_t max_queries) {
   constexpr int kK = 7;  // the query point itself + 6 neighbours
   if (points.size() < static_cast<size_t>(kK)) return 0;
-  open3d::geometry::PointCloud pc;
-  pc.points_ = points;
-  open3d::geometry::KDTreeFlann tree(pc);
   const size_t n = std::min(points.size(), std::max<size_t>(max_queries, 1));
   const double step = static_cast<double>(points.size()) / n;
   std::vector<double> spacing(n, 0);
@@ -88,10 +88,38 @@ double MedianPointSpacing(const std::vector<Eigen::Vector3d>& points, size_t max
   return *mid;
 }
 
+// Per-axis [q, 1 − q] quantiles of the points: the extent of the scene without its stray far points.
+Eigen::AlignedBox3d RobustBounds(const std::vector<Eigen::Vector3d>& points, double q) {
+  Eigen::AlignedBox3d box;
+  if (points.empty()) return box;
+  std::vector<double> c(points.size());
+  for (int axis = 0; axis < 3; ++axis) {
+    for (size_t i = 0; i < points.size(); ++i) c[i] = points[i][axis];
+    const size_t lo = static_cast<size_t>(q * (c.size() - 1)), hi = c.size() - 1 - lo;
+    std::nth_element(c.begin(), c.begin() + lo, c.end());
+    box.min()[axis] = c[lo];
+    std::nth_element(c.begin(), c.begin() + hi, c.end());
+    box.max()[axis] = c[hi];
+  }
+  return box;
+}
+
+}  // namespace
+
+double MedianPointSpacing(const std::vector<Eigen::Vector3d>& points, size_t max_queries) {
+  if (points.size() < 7) return 0;
+  open3d::geometry::PointCloud pc;
+  pc.points_ = points;
+  const open3d::geometry::KDTreeFlann tree(pc);
+  return SpacingFromTree(tree, points, max_queries);
+}
+
 int AutomaticDepth(const Eigen::AlignedBox3d& bounds, double spacing, const PoissonOptions& options) {
   if (!(spacing > 0) || bounds.isEmpty()) return options.min_depth;
   const double cube = 1.1 * bounds.sizes().maxCoeff();  // Open3D's default scale
-  const int depth = static_cast<int>(std::ceil(std::log2(cube / (options.cell_to_spacing * spacing))));
+  // Nearest depth in log scale: the cell is within a factor √2 of the wanted width (rounding up would make
+  // it up to 2× finer, 8× the octree nodes and time, for no accuracy: finer cells fit the noise).
+  const int depth = static_cast<int>(std::lround(std::log2(cube / (options.cell_to_spacing * spacing))));
   return std::clamp(depth, options.min_depth, options.max_depth);
 }
 
@@ -105,21 +133,40 @@ ColoredMesh ReconstructPoisson(const io::OrientedPointCloud& cloud, const Poisso
   nlohmann::json st;
   const auto start = Clock::now();
 
-  open3d::geometry::PointCloud pc;
-  pc.points_ = cloud.positions;
-  pc.normals_.reserve(cloud.size());
-  for (const auto& n : cloud.normals) pc.normals_.push_back(n.cast<double>());
-  if (cloud.has_colors()) {
-    pc.colors_.reserve(cloud.size());
-    for (const auto& c : cloud.colors) pc.colors_.push_back(c.cast<double>() / 255.0);
+  // Stray points far from the scene would blow up Poisson's cube (and so coarsen every cell): the working
+  // box is the 0.1–99.9% quantile box of the points, enlarged by the crop margin; points outside are dropped.
+  Eigen::AlignedBox3d bounds = RobustBounds(cloud.positions, 0.001);
+  {
+    const double margin = options.crop_margin * bounds.diagonal().norm();
+    bounds.min().array() -= margin;
+    bounds.max().array() += margin;
   }
-  const Eigen::AlignedBox3d bounds = cloud.Bounds();
-  const double spacing = MedianPointSpacing(cloud.positions);
-  const int depth = options.depth > 0 ? options.depth : AutomaticDepth(bounds, spacing, options);
+  open3d::geometry::PointCloud pc;
+  pc.points_.reserve(cloud.size());
+  pc.normals_.reserve(cloud.size());
+  std::vector<size_t> kept;
+  kept.reserve(cloud.size());
+  for (size_t i = 0; i < cloud.size(); ++i)
+    if (bounds.contains(cloud.positions[i])) {
+      kept.push_back(i);
+      pc.points_.push_back(cloud.positions[i]);
+      pc.normals_.push_back(cloud.normals[i].cast<double>());
+    }
+  if (cloud.has_colors()) {
+    pc.colors_.reserve(kept.size());
+    for (size_t i : kept) pc.colors_.push_back(cloud.colors[i].cast<double>() / 255.0);
+  }
+  st["points_outside_bounds"] = cloud.size() - kept.size();
+  if (pc.points_.size() < 16) throw Error("poisson: too few points (" + std::to_string(pc.points_.size()) + ") for a surface");
+  const open3d::geometry::KDTreeFlann tree(pc);
+  const double spacing = SpacingFromTree(tree, pc.points_, 20000);
+  Eigen::AlignedBox3d kept_box;  // Open3D's cube is 1.1 × the largest extent of the points it is given
+  for (const auto& p : pc.points_) kept_box.extend(p);
+  const int depth = options.depth > 0 ? options.depth : AutomaticDepth(kept_box, spacing, options);
   st["points"] = cloud.size();
   st["point_spacing"] = spacing;
   st["depth"] = depth;
-  st["cell_width"] = 1.1 * bounds.sizes().maxCoeff() / std::ldexp(1.0, depth);
+  st["cell_width"] = 1.1 * kept_box.sizes().maxCoeff() / std::ldexp(1.0, depth);
   spdlog::info("poisson: {} points, spacing {:.4g}, octree depth {} (cell {:.4g})", cloud.size(), spacing, depth,
                st["cell_width"].get<double>());
 
@@ -139,7 +186,6 @@ ColoredMesh ReconstructPoisson(const io::OrientedPointCloud& cloud, const Poisso
   spdlog::debug("poisson: raw {}", DescribeCounts(mesh));
 
   t = Clock::now();
-  open3d::geometry::KDTreeFlann tree(pc);
   // 2 + 3: trim by density and by distance to the samples, in one vertex mask.
   std::vector<bool> remove(mesh.vertices_.size(), false);
   if (options.density_quantile > 0 && densities.size() == mesh.vertices_.size()) {
@@ -177,10 +223,9 @@ ColoredMesh ReconstructPoisson(const io::OrientedPointCloud& cloud, const Poisso
     st["components"] = {{"found", areas.size()}, {"kept", kept}};
   }
 
-  // 5. Crop to the enlarged bounds of the points.
+  // 5. Crop to the working box (the points' robust bounds, enlarged).
   {
-    const double margin = options.crop_margin * bounds.diagonal().norm();
-    const Eigen::Vector3d lo = bounds.min().array() - margin, hi = bounds.max().array() + margin;
+    const Eigen::Vector3d lo = bounds.min(), hi = bounds.max();
     std::vector<bool> outside(mesh.vertices_.size(), false);
     for (size_t i = 0; i < mesh.vertices_.size(); ++i)
       outside[i] = (mesh.vertices_[i].array() < lo.array()).any() || (mesh.vertices_[i].array() > hi.array()).any();

@@ -8,7 +8,9 @@
 //      every input point are removed (0 disables);
 //   4. keep the main connected component (and any other whose area is at least `min_component_share` of
 //      it), dropping floating blobs fitted to outliers;
-//   5. crop to the points' bounding box enlarged by `crop_margin` × its diagonal;
+//   5. crop to the points' bounding box enlarged by `crop_margin` × its diagonal (the box of the 0.1–99.9%
+//      quantiles per axis: stray far points are dropped before reconstruction, as they would otherwise
+//      inflate Poisson's cube and coarsen every cell);
 //   6. optional quadric decimation to `target_faces`.
 // Vertex colours are interpolated from the points' colours; triangles are wound so that their normals agree
 // with the input normals (towards the cameras).
@@ -43,7 +45,7 @@ struct PoissonOptions {
 // duplicates do not fool), estimated on at most `max_queries` evenly spread points. 0 for < 7 points.
 double MedianPointSpacing(const std::vector<Eigen::Vector3d>& points, size_t max_queries = 20000);
 
-// Depth whose finest cell is about cell_to_spacing × spacing for Open3D's reconstruction cube (1.1 × the
+// Depth whose finest cell is nearest (in log scale) to cell_to_spacing × spacing for Open3D's reconstruction cube (1.1 × the
 // largest extent of the points), clamped to [min_depth, max_depth].
 int AutomaticDepth(const Eigen::AlignedBox3d& bounds, double spacing, const PoissonOptions& options);
 
