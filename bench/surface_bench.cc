@@ -12,6 +12,7 @@
 #include <cmath>
 #include <cstdlib>
 #include <memory>
+#include <sys/resource.h>
 #include <unistd.h>
 #include <opencv2/imgcodecs.hpp>
 
@@ -29,6 +30,13 @@ namespace fs = std::filesystem;
 using namespace fmv3d;
 
 const char* kHeldOut = "flight-000005.png";
+
+// Process CPU seconds (all threads), so the figure means something on a shared, loaded machine too.
+double ProcessCpuSeconds() {
+  rusage u{};
+  getrusage(RUSAGE_SELF, &u);
+  return u.ru_utime.tv_sec + u.ru_stime.tv_sec + 1e-6 * (u.ru_utime.tv_usec + u.ru_stime.tv_usec);
+}
 
 double EnvDouble(const char* name, double fallback) {
   const char* v = std::getenv(name);
@@ -80,7 +88,9 @@ Setup& Get() {
 void BM_MeshStage(benchmark::State& state) {
   Setup& s = Get();
   nlohmann::json report;
+  const double cpu0 = ProcessCpuSeconds();
   for (auto _ : state) report = surface::RunMeshStage(s.ws, surface::MeshStageOptions{});
+  state.counters["process_cpu_s"] = ProcessCpuSeconds() - cpu0;
   const surface::ColoredMesh mesh = surface::ReadMeshPly(s.ws / "mesh/poisson.ply");
   const geometry::MeshDistance truth(io::ReadObj(s.synth_dir / "scene.obj", false));
   const auto acc = surface::EvaluateMesh(mesh, truth, s.cloud.seen_surface, 0.1, 0.01 * s.length);
@@ -97,7 +107,9 @@ void BM_TextureStage(benchmark::State& state) {
   Setup& s = Get();
   if (!fs::exists(s.ws / "mesh/poisson.ply")) surface::RunMeshStage(s.ws, surface::MeshStageOptions{});
   nlohmann::json report;
+  const double cpu0 = ProcessCpuSeconds();
   for (auto _ : state) report = surface::RunTextureStage(s.ws, surface::TextureStageOptions{});
+  state.counters["process_cpu_s"] = ProcessCpuSeconds() - cpu0;
   // Held-out view: render the textured model from its true pose and compare with the frame.
   const core::Reconstruction truth = io::ReadColmapText(s.synth_dir / "truth");
   const core::Image* im = truth.FindImageByName(kHeldOut);

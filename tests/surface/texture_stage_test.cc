@@ -162,6 +162,30 @@ TEST(TextureStage, GlbHoldsTheMeshAndItsPages) {
   for (const auto& img : model.images) EXPECT_GT(img.width, 0);
 }
 
+TEST(TextureStage, CliSplitsTheAtlasIntoSmallPages) {
+  test::TempDir ws("fmv3d-texture");
+  PrepareMeshed(ws.path());
+  const auto r = test::RunCli("-q texture " + ws.path().string() + " --page-size 256");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const nlohmann::json report = core::ReadJson(ws / "report/texture.json");
+  const int pages = report["atlas"]["pages"].get<int>();
+  EXPECT_GT(pages, 1);
+  const std::string mtl = core::ReadTextFile(ws / "mesh/textured.mtl");
+  for (int p = 0; p < pages; ++p) {
+    const std::string name = "textured_atlas_" + std::to_string(p) + ".png";
+    EXPECT_NE(mtl.find(name), std::string::npos) << name;
+    const cv::Mat page = cv::imread((ws / "mesh" / name).string());
+    ASSERT_FALSE(page.empty()) << name;
+    EXPECT_LE(page.cols, 256);
+    EXPECT_LE(page.rows, 256);
+  }
+  // Every face is still textured from the pages it names.
+  const io::TexturedMesh mesh = io::ReadObj(ws / "mesh/textured.obj");
+  EXPECT_EQ(mesh.materials.size(), static_cast<size_t>(pages));
+  for (const auto& f : mesh.faces) ASSERT_TRUE(f.material >= 0 && f.material < pages);
+  EXPECT_EQ(test::RunCli("texture " + ws.path().string() + " --page-size 1000").exit_code, 1);
+}
+
 TEST(TextureStage, MissingInputsNameTheCommand) {
   test::TempDir ws("fmv3d-texture");
   try {
