@@ -139,6 +139,8 @@ nlohmann::json WriteReport(const fs::path& root, const nlohmann::json& timings) 
   auto row = [&](const std::string& k, const std::string& v) {
     h << "<tr><th>" << Escape(k) << "</th><td>" << Escape(v) << "</td></tr>\n";
   };
+  if (report["project"].is_object() && report["project"].contains("inputs"))
+    for (const auto& in : report["project"]["inputs"]) row("input", in.get<std::string>());
   if (report.contains("frames")) row("frames", Num(report["frames"]["count"]));
   if (report["frames"].is_object())
     for (const auto& c : report["frames"]["cameras"])
