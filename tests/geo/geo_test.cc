@@ -5,6 +5,8 @@
 
 #include <Eigen/Geometry>
 #include <cmath>
+#include <gdal_priv.h>
+#include <gdal_utils.h>
 #include <fstream>
 #include <open3d/geometry/TriangleMesh.h>
 #include <open3d/io/TriangleMeshIO.h>
@@ -27,6 +29,30 @@
 namespace fmv3d::geo {
 namespace {
 
+// What `gdalinfo FILE` prints (GDAL's own library entry point for it).
+std::string GdalInfo(const std::filesystem::path& path) {
+  GDALAllRegister();
+  GDALDatasetH ds = GDALOpen(path.c_str(), GA_ReadOnly);
+  if (!ds) return "";
+  char* text = GDALInfo(ds, nullptr);
+  std::string out = text ? text : "";
+  CPLFree(text);
+  GDALClose(ds);
+  return out;
+}
+
+// Pixel (band b, row r, col c) of a GeoTIFF.
+int Pixel(const std::filesystem::path& path, int band, int r, int c) {
+  GDALAllRegister();
+  GDALDataset* ds = static_cast<GDALDataset*>(GDALOpen(path.c_str(), GA_ReadOnly));
+  if (!ds) return -1;
+  uint8_t v = 0;
+  const CPLErr err = ds->GetRasterBand(band)->RasterIO(GF_Read, c, r, 1, 1, &v, 1, 1, GDT_Byte, 0, 0);
+  GDALClose(ds);
+  return err == CE_None ? v : -1;
+}
+
+namespace fs = std::filesystem;
 const GeoPoint kOrigin{38.16, -77.35, 60};
 
 TEST(Geodesy, ProjAgreesWithClosedFormEnu) {
@@ -253,6 +279,9 @@ TEST(Dsm, MeshRasterisedToHighestSurfaceInUtm) {
   EXPECT_NEAR(height_at({-40, 20, 0}), 60.0, 0.01);
   // Outside the mesh: no data.
   EXPECT_TRUE(std::isnan(h.at<float>(0, 0)));
+  const std::string info = GdalInfo(dir / "geo/dsm.tif");
+  EXPECT_NE(info.find("UTM zone 18N"), std::string::npos) << info;
+  EXPECT_NE(info.find("NoData Value=-9999"), std::string::npos) << info;
   EXPECT_TRUE(std::filesystem::exists(dir / "geo/hillshade.png"));
   // LAS: the sparse points with the UTM CRS, at the right place.
   const LasInfo las = ReadLas(dir / "geo/points.las", true);
@@ -290,6 +319,24 @@ TEST(Dsm, OrthoFromTexturedMesh) {
   const auto j = RunOrthoStage(dir.path());
   EXPECT_GT(j["valid_cells"].get<int>(), 0);
   EXPECT_EQ(j["source"].get<std::string>(), (dir / "mesh/textured.obj").string());
+  // West half red, east half blue (the texture's left and right), transparent outside the quad.
+  GridSpec grid;
+  ReadHeightGeoTiff(dir / "geo/dsm.tif", &grid);
+  const LocalFrame frame(kOrigin);
+  auto cell = [&](double e, double n) {
+    const Eigen::Vector3d u = frame.EnuToUtm({e, n, 20});
+    return std::pair<int, int>(static_cast<int>(grid.Row(u.y())), static_cast<int>(grid.Col(u.x())));
+  };
+  const fs::path ortho = dir / "geo/ortho.tif";
+  const auto [rw, cw] = cell(-5, 0);
+  const auto [re, ce] = cell(5, 0);
+  const auto [ro, co] = cell(30, 30);
+  EXPECT_EQ(Pixel(ortho, 1, rw, cw), 255);
+  EXPECT_EQ(Pixel(ortho, 3, rw, cw), 0);
+  EXPECT_EQ(Pixel(ortho, 1, re, ce), 0);
+  EXPECT_EQ(Pixel(ortho, 3, re, ce), 255);
+  EXPECT_EQ(Pixel(ortho, 4, re, ce), 255);
+  EXPECT_EQ(Pixel(ortho, 4, ro, co), 0);
 }
 
 TEST(Dsm, NeedsGeoref) {
