@@ -120,13 +120,39 @@ double ChooseGsd(const UtmSurface& s) {
 
 cv::Mat RasteriseDsm(const UtmSurface& s, const GridSpec& grid) {
   cv::Mat h(grid.height, grid.width, CV_32F, cv::Scalar(std::numeric_limits<float>::quiet_NaN()));
+  auto cell_of = [&](const Eigen::Vector3d& p, int* r, int* c) {
+    const double fc = std::floor(grid.Col(p.x())), fr = std::floor(grid.Row(p.y()));
+    if (!(fr >= 0 && fc >= 0 && fr < grid.height && fc < grid.width)) return false;
+    *r = static_cast<int>(fr), *c = static_cast<int>(fc);
+    return true;
+  };
+  if (s.triangles.empty()) {
+    // Points: the median height of the points in each cell. Points carry noise, and the maximum of a few
+    // noisy samples of one surface sits above it (by ~1σ for a handful); the median does not.
+    std::vector<std::pair<int64_t, float>> cells;
+    cells.reserve(s.vertices.size());
+    for (const auto& p : s.vertices) {
+      int r, c;
+      if (cell_of(p, &r, &c)) cells.emplace_back(static_cast<int64_t>(r) * grid.width + c, static_cast<float>(p.z()));
+    }
+    std::sort(cells.begin(), cells.end());
+    for (size_t i = 0; i < cells.size();) {
+      size_t j = i;
+      while (j < cells.size() && cells[j].first == cells[i].first) ++j;
+      const size_t m = i + (j - i) / 2;
+      const float med = (j - i) % 2 ? cells[m].second : 0.5f * (cells[m - 1].second + cells[m].second);
+      h.at<float>(static_cast<int>(cells[i].first / grid.width), static_cast<int>(cells[i].first % grid.width)) = med;
+      i = j;
+    }
+    return h;
+  }
   auto put = [&](int r, int c, double z) {
     float& v = h.at<float>(r, c);
     if (!(v >= z)) v = static_cast<float>(z);  // NaN compares false: first value wins
   };
   for (const auto& p : s.vertices) {
-    const int c = static_cast<int>(std::floor(grid.Col(p.x()))), r = static_cast<int>(std::floor(grid.Row(p.y())));
-    if (r >= 0 && c >= 0 && r < grid.height && c < grid.width) put(r, c, p.z());
+    int r, c;
+    if (cell_of(p, &r, &c)) put(r, c, p.z());
   }
   for (const auto& t : s.triangles)
     RasteriseTriangle(grid, s.vertices[t[0]], s.vertices[t[1]], s.vertices[t[2]],
@@ -139,8 +165,18 @@ nlohmann::json RunDsmStage(const fs::path& ws, const DsmOptions& o) {
   const Georef g = ReadGeoref(ws);
   const UtmSurface s = LoadUtmSurface(ws, g);
   double gsd = o.gsd ? *o.gsd : ChooseGsd(s);
-  Eigen::Vector2d lo = s.vertices.front().head<2>(), hi = lo;
-  for (const auto& p : s.vertices) lo = lo.cwiseMin(p.head<2>()), hi = hi.cwiseMax(p.head<2>());
+  // Extent: the 0.2-99.8% quantiles widened by 5% (never past the data), so a few stray points far away
+  // (sparse outliers) neither blow up the grid nor coarsen its cells; they are left out.
+  Eigen::Vector2d lo, hi;
+  for (int k = 0; k < 2; ++k) {
+    std::vector<double> v;
+    v.reserve(s.vertices.size());
+    for (const auto& p : s.vertices) v.push_back(p[k]);
+    std::sort(v.begin(), v.end());
+    const double a = v[static_cast<size_t>(0.002 * (v.size() - 1))], b = v[static_cast<size_t>(0.998 * (v.size() - 1))];
+    lo[k] = std::max(v.front(), a - 0.05 * (b - a));
+    hi[k] = std::min(v.back(), b + 0.05 * (b - a));
+  }
   GridSpec grid = GridSpec::Covering(lo, hi, gsd, g.utm);
   if (static_cast<double>(grid.width) * grid.height > o.max_cells) {
     const double f = std::sqrt(static_cast<double>(grid.width) * grid.height / o.max_cells);
@@ -256,8 +292,10 @@ nlohmann::json RunOrthoStage(const fs::path& ws) {
     ToUtm(g, &cloud.positions);
     for (size_t i = 0; i < cloud.size(); ++i) {
       const auto& p = cloud.positions[i];
-      const int c = static_cast<int>(std::floor(grid.Col(p.x()))), r = static_cast<int>(std::floor(grid.Row(p.y())));
-      if (r < 0 || c < 0 || r >= grid.height || c >= grid.width || p.z() <= top.at<float>(r, c)) continue;
+      const double fc = std::floor(grid.Col(p.x())), fr = std::floor(grid.Row(p.y()));
+      if (!(fr >= 0 && fc >= 0 && fr < grid.height && fc < grid.width)) continue;
+      const int r = static_cast<int>(fr), c = static_cast<int>(fc);
+      if (p.z() <= top.at<float>(r, c)) continue;
       top.at<float>(r, c) = static_cast<float>(p.z());
       const auto& rgb = cloud.colors[i];
       bgr.at<cv::Vec3b>(r, c) = cv::Vec3b(rgb[2], rgb[1], rgb[0]);

@@ -4,7 +4,8 @@
 // points (WS/sparse/). Everything is mapped sparse frame → ENU (georef.json's similarity) → UTM (the zone of
 // georef.json); heights keep georef.json's vertical datum.
 //
-// dsm:   WS/geo/dsm.tif        Float32 GeoTIFF, highest surface per cell, nodata (-9999) where unseen
+// dsm:   WS/geo/dsm.tif        Float32 GeoTIFF, highest surface per cell (points: their median height per
+//                              cell, see RasteriseDsm), nodata (-9999) where unseen
 //        WS/geo/hillshade.png  for viewing
 //        WS/geo/points.las     LAS 1.4 with the UTM CRS: the dense points, else the sparse points
 //        WS/geo/dsm.json       grid, source, counts
@@ -46,8 +47,9 @@ struct UtmSurface {
 // Loads the first available surface (see above) and maps it to UTM. Throws fmv3d::Error when none exists.
 UtmSurface LoadUtmSurface(const std::filesystem::path& workspace, const Georef& georef);
 
-// Highest surface per cell; NaN where nothing lands. Points fall in their cell; triangles cover the cells whose
+// Height per cell; NaN where nothing lands. A mesh gives the highest surface: triangles cover the cells whose
 // centres they contain, and their vertices mark their own cells (so thin or steep triangles still count).
+// Points give the median of the points in the cell (robust to their noise, which a maximum would pick up).
 cv::Mat RasteriseDsm(const UtmSurface& surface, const GridSpec& grid);
 // See the header comment.
 double ChooseGsd(const UtmSurface& surface);

@@ -9,6 +9,7 @@
 #include "fmv3d/geo/georef.h"
 #include "fmv3d/geometry/mesh_distance.h"
 #include "fmv3d/io/colmap_model.h"
+#include "fmv3d/io/frames_index.h"
 #include "fmv3d/io/obj_io.h"
 
 namespace fmv3d::geo {
@@ -62,6 +63,33 @@ nlohmann::json EvaluateGeoAgainstSynth(const fs::path& ws, const fs::path& synth
                   {"vertical_rms_m", cv_.Rms()},
                   {"bias_enu_m", {bias.x(), bias.y(), bias.z()}},
                   {"bias_m", bias.norm()}};
+  // The floor set by the telemetry itself: the mean of (telemetry − true) camera positions, which a
+  // position-only georeference cannot see past (its translation error tends to exactly this).
+  const fs::path frames_json = ws / "frames" / "frames.json";
+  if (fs::exists(frames_json)) {
+    const io::FramesIndex index = io::ReadFramesIndex(frames_json);
+    Stats tx, ty, tz;
+    Eigen::Vector3d mean = Eigen::Vector3d::Zero();
+    for (const auto& f : index.frames) {
+      const core::Image* t = tru.FindImageByName(f.name);
+      const auto& tel = f.telemetry;
+      if (!t || !tel.is_object() || !tel.contains("sensor_latitude") || !tel.contains("sensor_longitude")) continue;
+      const char* alt = tel.contains("sensor_altitude_hae") ? "sensor_altitude_hae" : "sensor_altitude_msl";
+      if (!tel.contains(alt)) continue;
+      const GeoPoint p{tel["sensor_latitude"].get<double>(), tel["sensor_longitude"].get<double>(), tel[alt].get<double>()};
+      const Eigen::Vector3d d = fg.ToEnu(p) - to_ws(t->pose.Centre());
+      tx.Add(d.x()), ty.Add(d.y()), tz.Add(d.z());
+      mean += d;
+    }
+    if (tx.n) {
+      mean /= static_cast<double>(tx.n);
+      j["telemetry"] = {{"frames", tx.n},
+                        {"error_rms_per_axis_m", {tx.Rms(), ty.Rms(), tz.Rms()}},
+                        {"mean_error_enu_m", {mean.x(), mean.y(), mean.z()}},
+                        {"mean_error_m", mean.norm()}};
+      j["cameras"]["bias_minus_telemetry_mean_m"] = (bias - mean).norm();
+    }
+  }
   // Points against the true mesh.
   io::TexturedMesh mesh = io::ReadObj(synth / "scene.obj", false);
   for (auto& v : mesh.vertices) v = to_ws(v);

@@ -169,7 +169,8 @@ LasInfo ReadLas(const fs::path& path, bool read_points) {
       info.wkt.assign(reinterpret_cast<const char*>(&b[at + kVlrHeaderSize]), strnlen(reinterpret_cast<const char*>(&b[at + kVlrHeaderSize]), len));
     at += kVlrHeaderSize + len;
   }
-  if (offset_points + info.num_points * info.point_record_length > b.size())
+  if (info.num_points > b.size() || offset_points > b.size() ||
+      offset_points + info.num_points * info.point_record_length > b.size())
     throw Error(path.string() + ": truncated point data");
   if (read_points) {
     if (info.point_format < 6 || info.point_record_length < 30) throw Error(path.string() + ": unsupported point format");

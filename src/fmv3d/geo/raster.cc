@@ -32,10 +32,13 @@ void RasteriseTriangle(const GridSpec& g, const Eigen::Vector3d& a, const Eigen:
   const Eigen::Vector2d pa(g.Col(a.x()), g.Row(a.y())), pb(g.Col(b.x()), g.Row(b.y())), pc(g.Col(c.x()), g.Row(c.y()));
   const double area = (pb - pa).x() * (pc - pa).y() - (pb - pa).y() * (pc - pa).x();
   if (std::abs(area) < 1e-12) return;
-  const int c0 = std::max(0, static_cast<int>(std::floor(std::min({pa.x(), pb.x(), pc.x()}) - 0.5)));
-  const int c1 = std::min(g.width - 1, static_cast<int>(std::ceil(std::max({pa.x(), pb.x(), pc.x()}) - 0.5)));
-  const int r0 = std::max(0, static_cast<int>(std::floor(std::min({pa.y(), pb.y(), pc.y()}) - 0.5)));
-  const int r1 = std::min(g.height - 1, static_cast<int>(std::ceil(std::max({pa.y(), pb.y(), pc.y()}) - 0.5)));
+  // Bounds clamped in double first: a far-away vertex must not overflow the int conversion.
+  auto clampi = [](double v, int hi) { return static_cast<int>(std::clamp(v, -1.0, static_cast<double>(hi))); };
+  const int c0 = std::max(0, clampi(std::floor(std::min({pa.x(), pb.x(), pc.x()}) - 0.5), g.width));
+  const int c1 = std::min(g.width - 1, clampi(std::ceil(std::max({pa.x(), pb.x(), pc.x()}) - 0.5), g.width));
+  const int r0 = std::max(0, clampi(std::floor(std::min({pa.y(), pb.y(), pc.y()}) - 0.5), g.height));
+  const int r1 = std::min(g.height - 1, clampi(std::ceil(std::max({pa.y(), pb.y(), pc.y()}) - 0.5), g.height));
+  if (!pa.allFinite() || !pb.allFinite() || !pc.allFinite()) return;
   for (int r = r0; r <= r1; ++r)
     for (int col = c0; col <= c1; ++col) {
       const Eigen::Vector2d p(col + 0.5, r + 0.5);
