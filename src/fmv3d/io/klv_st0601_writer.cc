@@ -96,7 +96,8 @@ std::vector<uint8_t> EncodeBerOid(uint64_t value) {
 }
 
 uint64_t EncodeUnsignedMapped(double value, size_t bytes, double lo, double hi) {
-  if (bytes < 1 || bytes > 8 || !(hi > lo)) throw Error("KLV: bad unsigned mapping");
+  // Up to 4 bytes (every int-mapped ST 0601 tag): wider codes would not be exact in a double.
+  if (bytes < 1 || bytes > 4 || !(hi > lo)) throw Error("KLV: bad unsigned mapping");
   Require(std::isfinite(value) && value >= lo && value <= hi, "value", value);
   const double max = std::ldexp(1.0, static_cast<int>(8 * bytes)) - 1.0;
   const double code = std::round((value - lo) / (hi - lo) * max);
@@ -104,7 +105,7 @@ uint64_t EncodeUnsignedMapped(double value, size_t bytes, double lo, double hi) 
 }
 
 int64_t EncodeSignedMapped(double value, size_t bytes, double range) {
-  if (bytes < 1 || bytes > 8 || !(range > 0)) throw Error("KLV: bad signed mapping");
+  if (bytes < 1 || bytes > 4 || !(range > 0)) throw Error("KLV: bad signed mapping");
   Require(std::isfinite(value) && std::abs(value) <= range, "value", value);
   const double max = std::ldexp(1.0, static_cast<int>(8 * bytes - 1)) - 1.0;
   const double code = std::clamp(std::round(value / range * max), -max, max);  // never the reserved -2^(8n-1)

@@ -42,7 +42,8 @@ struct St0601Record {
 // range (a latitude of 91°, an altitude of 20 km, a NaN) rather than writing a wrong code.
 std::vector<uint8_t> EncodeSt0601Packet(const St0601Record& record);
 
-// Encoding primitives (exposed for tests). Codes are rounded to nearest; out-of-range values throw.
+// Encoding primitives (exposed for tests). Codes are rounded to nearest; out-of-range values and widths other
+// than 1-4 bytes throw.
 std::vector<uint8_t> EncodeBerLength(uint64_t length);
 std::vector<uint8_t> EncodeBerOid(uint64_t value);
 uint64_t EncodeUnsignedMapped(double value, size_t bytes, double lo, double hi);  // inverse of MapUnsigned

@@ -130,7 +130,10 @@ VideoWriter::VideoWriter(const fs::path& path, int width, int height, const Vide
     if (!m.klv) m.Fail("out of memory", 0);
     m.klv->codecpar->codec_type = AVMEDIA_TYPE_DATA;
     m.klv->codecpar->codec_id = AV_CODEC_ID_SMPTE_KLV;
-    m.klv->codecpar->profile = FF_PROFILE_KLVA_SYNC;  // PES with PTS: metadata tied to the frames
+    // Asynchronous carriage (stream type 0x06, no ISO 13818-1 metadata AU cell header), but every PES still has
+    // the frame's PTS. (FFmpeg 5.1's muxer writes synchronous 0x15 streams without the AU cell header that
+    // its own demuxer then strips, cutting 5 bytes off every packet.)
+    m.klv->codecpar->profile = FF_PROFILE_KLVA_ASYNC;
     m.klv->time_base = m.enc->time_base;
   }
   if (!(m.fmt->oformat->flags & AVFMT_NOFILE)) {

@@ -2,7 +2,7 @@
 // yuv420p. The container follows the extension (.mp4, .ts, .mkv). When libx264 is missing, it falls back to
 // MPEG-4 part 2 (mp4/mkv) or MPEG-2 (ts). Encoding is single-threaded with bit-exact flags, so the same
 // frames give a byte-identical file. yuv420p needs even width and height (an odd size is an error).
-// With `klv_stream`, an MPEG-TS also gets a synchronous SMPTE KLV data stream (STANAG 4609 style): WriteKlv
+// With `klv_stream`, an MPEG-TS also gets a SMPTE KLV data stream (STANAG 4609 style, KLVA): WriteKlv
 // puts one metadata packet at a frame's presentation time.
 #pragma once
 
@@ -19,7 +19,7 @@ struct VideoWriterOptions {
   int crf = 18;         // x264 quality (lower = better); other codecs get a matching bit rate
   int gop = 25;         // key-frame interval, frames
   std::string preset = "medium";
-  bool klv_stream = false;  // add a synchronous KLV data stream (MPEG-TS only)
+  bool klv_stream = false;  // add a KLV data stream, packets stamped with frame PTS (MPEG-TS only)
   void Check() const;
 };
 

@@ -14,7 +14,7 @@
 //   truth.json                     characteristic_length (tallest building, m), scene bounds, seed, frame
 //                                  rate, flight geometry, camera and every option; with klv also
 //                                  "geo_origin": {"lat","lon","alt"} (the world is that origin's ENU frame)
-//   flight.ts with klv             + a synchronous MISB ST 0601 KLV stream, one packet per frame at the
+//   flight.ts with klv             + a MISB ST 0601 KLV data stream, one packet per frame at the
 //                                  frame's PTS, from the truth cameras with GPS/attitude noise (telemetry.h)
 #pragma once
 
