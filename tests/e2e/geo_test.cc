@@ -7,7 +7,7 @@
 // and tilt to ~σ/(R·√N) — which a DSM 80 m below the cameras turns into ~0.5-1 m of height. So this test checks
 // that the georeference reaches that floor (camera bias = telemetry mean error within 0.2 m, every frame an
 // inlier, the noise level recovered) and bounds the absolute errors it implies: camera centres ≤ 2 m RMS
-// (measured 1.72), DSM heights on flat cells ≤ 1.5 m RMS (measured 1.17 with sparse points). The issue's
+// (measured 1.61), DSM heights on flat cells ≤ 1.5 m RMS (measured 1.13 with sparse points). The issue's
 // 0.5 m needs N ≳ 110 frames at σ = 3 m (see the closing note for the sweep with a perfect model).
 #include <gtest/gtest.h>
 

@@ -22,6 +22,7 @@
 #include "fmv3d/geo/raster.h"
 #include "fmv3d/io/colmap_model.h"
 #include "fmv3d/io/frames_index.h"
+#include "fmv3d/io/klv_st0601_writer.h"
 #include "fmv3d/io/obj_io.h"
 #include "fmv3d/synth/telemetry.h"
 #include "test_util.h"
@@ -102,9 +103,13 @@ struct GeorefCase {
   core::Sim3 true_to_model;
 };
 
-void MakeGeorefCase(GeorefCase* g, int n, double noise, bool straight, int outlier) {
+// attitude_noise < 0: no attitude in the telemetry; heading_offset: a systematic heading error (degrees).
+void MakeGeorefCase(GeorefCase* g, int n, double noise, bool straight, int outlier, double attitude_noise = -1,
+                    double heading_offset = 0, double radius = 200) {
   std::mt19937_64 rng(5);
   std::normal_distribution<double> N(0, 1);
+  std::mt19937_64 rng_att(9);  // separate, so positions are the same with and without attitude
+  std::normal_distribution<double> Na(0, 1);
   core::Reconstruction rec;
   rec.cameras[1] = core::Camera::Pinhole(640, 360, 500);
   rec.cameras[1].id = 1;
@@ -117,7 +122,7 @@ void MakeGeorefCase(GeorefCase* g, int n, double noise, bool straight, int outli
   for (int k = 0; k < n; ++k) {
     Eigen::Vector3d c;
     if (straight) c = Eigen::Vector3d(-300 + 600.0 * k / (n - 1), -150, 120);
-    else c = Eigen::Vector3d(200 * std::cos(2 * M_PI * k / n), 200 * std::sin(2 * M_PI * k / n), 120 + 10 * std::sin(3.0 * k));
+    else c = Eigen::Vector3d(radius * std::cos(2 * M_PI * k / n), radius * std::sin(2 * M_PI * k / n), 120 + 10 * std::sin(3.0 * k));
     g->true_centres.push_back(c);
     core::Image img;
     img.id = k + 1;
@@ -133,6 +138,18 @@ void MakeGeorefCase(GeorefCase* g, int n, double noise, bool straight, int outli
     const GeoPoint p = frame.ToGeodetic(noisy);
     f.telemetry = {{"time", k * 0.1}, {"source", "ST0601"}, {"sensor_latitude", p.lat}, {"sensor_longitude", p.lon},
                    {"sensor_altitude_hae", p.alt}, {"sensor_altitude_msl", p.alt}};
+    if (attitude_noise >= 0) {
+      // Split the true attitude for a nominal platform, then state a noisy (and offset) platform, as synth does:
+      // the telemetry's camera attitude is off by about attitude_noise per axis (and by heading_offset).
+      const Eigen::Matrix3d cam_to_enu = core::Pose::LookAt(c, {0, 0, 0}).R().transpose();
+      const auto a = io::klv::St0601FromCameraToEnu(cam_to_enu, 90, 0, 0);
+      f.telemetry["platform_heading"] = 90 + heading_offset + attitude_noise * Na(rng_att);
+      f.telemetry["platform_pitch"] = attitude_noise * Na(rng_att);
+      f.telemetry["platform_roll"] = attitude_noise * Na(rng_att);
+      f.telemetry["sensor_relative_azimuth"] = a.sensor_relative_azimuth;
+      f.telemetry["sensor_relative_elevation"] = a.sensor_relative_elevation;
+      f.telemetry["sensor_relative_roll"] = a.sensor_relative_roll;
+    }
     index.frames.push_back(f);
   }
   // Ground points (a plane with small bumps) so the model has a ground.
@@ -181,6 +198,40 @@ TEST(Georef, NoisyTelemetryWithAnOutlier) {
   EXPECT_GE(j["inliers"].get<int>(), n - 3);
   EXPECT_NEAR(j["residuals"]["sigma_per_axis_m"].get<double>(), 3.0, 0.6);
   EXPECT_LT(CentreRms(g), 1.5);
+}
+
+// The fusion weighs each source by its information: precise positions on a wide orbit are not pulled off by
+// 1° attitudes; noisy positions on a tight orbit (rotation known to ~1.4°) are sharpened by 0.2° attitudes.
+double RotationErrorDeg(const GeorefCase& g) {
+  const Georef r = ReadGeoref(g.dir.path());
+  return core::RotationAngle(r.sparse_to_enu.q * g.true_to_model.q, Eigen::Quaterniond::Identity()) * 180 / M_PI;
+}
+
+TEST(Georef, AttitudeFusionWeighsBothSources) {
+  {
+    GeorefCase g;
+    MakeGeorefCase(&g, 40, 0.01, false, -1, 1.0);
+    const auto j = RunGeorefStage(g.dir.path(), {});
+    EXPECT_TRUE(j["attitude"]["used"].get<bool>()) << j["attitude"].dump();
+    EXPECT_LT(RotationErrorDeg(g), 0.005);
+  }
+  double err[2];
+  for (int use = 0; use < 2; ++use) {
+    GeorefCase g;
+    MakeGeorefCase(&g, 40, 3.0, false, -1, use ? 0.2 : -1, 0, 20);
+    const auto j = RunGeorefStage(g.dir.path(), {});
+    EXPECT_EQ(j["attitude"]["used"].get<bool>(), use == 1) << j["attitude"].dump();
+    err[use] = RotationErrorDeg(g);
+  }
+  EXPECT_LT(err[1], 0.15) << "positions only: " << err[0];
+}
+
+TEST(Georef, InconsistentAttitudeIsNotUsed) {
+  GeorefCase g;
+  MakeGeorefCase(&g, 40, 1.0, false, -1, 0.2, 20.0);  // every attitude 20° off in heading
+  const auto j = RunGeorefStage(g.dir.path(), {});
+  EXPECT_FALSE(j["attitude"]["used"].get<bool>()) << j["attitude"].dump();
+  EXPECT_NEAR(j["attitude"]["disagreement_deg"].get<double>(), 20, 1);
 }
 
 TEST(Georef, StraightTrackTakesItsRollFromTheGround) {

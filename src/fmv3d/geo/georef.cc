@@ -19,6 +19,7 @@
 #include "fmv3d/geometry/similarity.h"
 #include "fmv3d/io/colmap_model.h"
 #include "fmv3d/io/frames_index.h"
+#include "fmv3d/io/klv_st0601_writer.h"
 
 namespace fmv3d::geo {
 namespace fs = std::filesystem;
@@ -129,6 +130,27 @@ double Collinearity(const std::vector<Eigen::Vector3d>& p) {  // second / first 
   for (const auto& x : p) cov += (x - c) * (x - c).transpose();
   const Eigen::Vector3d ev = Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d>(cov).eigenvalues();
   return ev(2) > 0 ? std::sqrt(std::max(0.0, ev(1)) / ev(2)) : 0;
+}
+
+Eigen::Vector3d LogRotation(const Eigen::Matrix3d& R) {
+  const Eigen::AngleAxisd aa(R);
+  return aa.angle() * aa.axis();
+}
+
+// Telemetry camera-to-ENU rotation of a frame with the full ST 0601 angle chain, else nullopt.
+std::optional<Eigen::Matrix3d> TelemetryAttitude(const nlohmann::json& t) {
+  const char* keys[] = {"platform_heading", "platform_pitch", "platform_roll", "sensor_relative_azimuth",
+                        "sensor_relative_elevation", "sensor_relative_roll"};
+  for (const char* k : keys)
+    if (!t.contains(k) || !t[k].is_number()) return std::nullopt;
+  io::klv::St0601Attitude a;
+  a.platform_heading = t["platform_heading"].get<double>();
+  a.platform_pitch = t["platform_pitch"].get<double>();
+  a.platform_roll = t["platform_roll"].get<double>();
+  a.sensor_relative_azimuth = t["sensor_relative_azimuth"].get<double>();
+  a.sensor_relative_elevation = t["sensor_relative_elevation"].get<double>();
+  a.sensor_relative_roll = t["sensor_relative_roll"].get<double>();
+  return io::klv::CameraToEnuFromSt0601(a);
 }
 
 }  // namespace
@@ -295,7 +317,7 @@ nlohmann::json RunGeorefStage(const fs::path& ws, const GeorefOptions& o) {
     Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eig(cov);
     const double lateral_sd = std::sqrt(std::max(0.0, eig.eigenvalues()(1)) / dst.size());
     const double along_sd = std::sqrt(std::max(0.0, eig.eigenvalues()(2)) / dst.size());
-    if (lateral_sd < std::max(5 * sigma, 0.05 * along_sd)) {
+    if (lateral_sd < std::max(sigma, 0.05 * along_sd)) {  // no sideways spread beyond the noise
       Eigen::Vector3d model_above = Eigen::Vector3d::Zero();
       for (const auto& c : src) model_above += c;
       const auto normal = GroundNormal(rec, model_above / static_cast<double>(src.size()));
@@ -305,6 +327,84 @@ nlohmann::json RunGeorefStage(const fs::path& ws, const GeorefOptions& o) {
       sim = LevelAboutAxis(sim, eig.eigenvectors().col(2), mean, *normal);
       roll_source = "ground plane of the sparse points (nearly straight track)";
       spdlog::warn("georef: nearly straight track; the roll about it is taken from the level ground plane");
+    }
+  }
+
+  // Telemetry attitude (sensor angles of every inlier frame) as a second, independent measurement of the
+  // rotation: each frame gives R ≈ R_telemetry · R_model⁻¹. Positions constrain a rotation by their spread
+  // (information Σ [d]ₓᵀ[d]ₓ / σ²), the attitudes by their count over their scatter (N / σₐ²); the two are
+  // fused in the information form and s, t refitted for the fused rotation. Skipped (with a note) when the
+  // two disagree beyond their uncertainties, e.g. an attitude convention the source does not follow.
+  nlohmann::json attitude_json = {{"used", false}};
+  if (roll_source == "camera positions") {
+    std::vector<Eigen::Matrix3d> rel;
+    for (size_t i = 0; i < pairs.size(); ++i) {
+      if (!inliers[i]) continue;
+      const auto ra = TelemetryAttitude(*pairs[i].telemetry);
+      if (!ra) continue;
+      const core::Image* img = rec.FindImageByName(pairs[i].name);
+      rel.push_back(*ra * img->pose.R());  // camera-to-ENU · model-to-camera = model-to-ENU rotation
+    }
+    if (rel.size() >= 3) {
+      // Chordal mean, then the scatter about it.
+      Eigen::Matrix3d sum = Eigen::Matrix3d::Zero();
+      for (const auto& r : rel) sum += r;
+      Eigen::JacobiSVD<Eigen::Matrix3d> svd(sum, Eigen::ComputeFullU | Eigen::ComputeFullV);
+      Eigen::Matrix3d r_att = svd.matrixU() * svd.matrixV().transpose();
+      if (r_att.determinant() < 0) {
+        Eigen::Matrix3d d = Eigen::Matrix3d::Identity();
+        d(2, 2) = -1;
+        r_att = svd.matrixU() * d * svd.matrixV().transpose();
+      }
+      double sq = 0;
+      for (const auto& r : rel) sq += LogRotation(r * r_att.transpose()).squaredNorm();
+      const double sigma_att = std::max(1e-4, std::sqrt(sq / (3.0 * rel.size())));  // rad per axis
+      const Eigen::Matrix3d r_pos = sim.q.toRotationMatrix();
+      const Eigen::Vector3d w_att = LogRotation(r_att * r_pos.transpose());  // world-frame correction
+      Eigen::Vector3d mean = Eigen::Vector3d::Zero();
+      size_t n_in = 0;
+      for (size_t i = 0; i < dst.size(); ++i)
+        if (inliers[i]) mean += dst[i], ++n_in;
+      mean /= static_cast<double>(n_in);
+      Eigen::Matrix3d info_pos = Eigen::Matrix3d::Zero();
+      for (size_t i = 0; i < dst.size(); ++i) {
+        if (!inliers[i]) continue;
+        const Eigen::Vector3d d = sim.Apply(src[i]) - mean;
+        Eigen::Matrix3d dx;
+        dx << 0, -d.z(), d.y(), d.z(), 0, -d.x(), -d.y(), d.x(), 0;
+        info_pos += dx.transpose() * dx / (sigma * sigma);
+      }
+      const Eigen::Matrix3d info_att = Eigen::Matrix3d::Identity() * (rel.size() / (sigma_att * sigma_att));
+      const Eigen::Matrix3d cov_diff = info_pos.inverse() + info_att.inverse();
+      const double chi2 = w_att.dot(cov_diff.inverse() * w_att);
+      attitude_json = {{"used", false},
+                       {"frames", rel.size()},
+                       {"scatter_deg", sigma_att * 180 / M_PI},
+                       {"disagreement_deg", w_att.norm() * 180 / M_PI},
+                       {"chi2", chi2}};
+      if (chi2 < 16.3 && info_pos.allFinite()) {  // 99.9% of a 3-dof chi²
+        const Eigen::Vector3d w = (info_pos + info_att).inverse() * info_att * w_att;
+        const Eigen::Matrix3d R = Eigen::AngleAxisd(w.norm(), w.norm() > 0 ? w.normalized() : Eigen::Vector3d::UnitZ())
+                                      .toRotationMatrix() * r_pos;
+        // Scale and translation for this rotation (least squares on the inliers).
+        Eigen::Vector3d ms = Eigen::Vector3d::Zero(), md = Eigen::Vector3d::Zero();
+        for (size_t i = 0; i < src.size(); ++i)
+          if (inliers[i]) ms += src[i], md += dst[i];
+        ms /= static_cast<double>(n_in), md /= static_cast<double>(n_in);
+        double num = 0, den = 0;
+        for (size_t i = 0; i < src.size(); ++i)
+          if (inliers[i]) num += (dst[i] - md).dot(R * (src[i] - ms)), den += (src[i] - ms).squaredNorm();
+        if (den > 0 && num > 0) {
+          sim.q = Eigen::Quaterniond(R).normalized();
+          sim.s = num / den;
+          sim.t = md - sim.s * (sim.q * ms);
+          attitude_json["used"] = true;
+          attitude_json["correction_deg"] = w.norm() * 180 / M_PI;
+        }
+      } else {
+        spdlog::warn("georef: telemetry attitude disagrees with the positions ({:.2f}°, χ² {:.1f}); not used",
+                     w_att.norm() * 180 / M_PI, chi2);
+      }
     }
   }
 
@@ -321,6 +421,7 @@ nlohmann::json RunGeorefStage(const fs::path& ws, const GeorefOptions& o) {
   j["frame"] = "local East-North-Up (topocentric) metres at origin: x east, y north, z up";
   j["similarity"] = SimJson(sim);
   j["rotation_about_track_from"] = roll_source;
+  j["attitude"] = attitude_json;
   std::vector<double> res;
   nlohmann::json per = nlohmann::json::array();
   size_t n_in = 0;

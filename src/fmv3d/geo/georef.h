@@ -6,12 +6,16 @@
 // Outputs: WS/geo/sparse_enu/   the model transformed into ENU metres at the origin (x east, y north, z up)
 //          WS/geo/georef.json   {"origin": {lat, lon, alt}, "vertical_datum", "similarity": {scale, rotation
 //                               (quaternion wxyz and 3x3), translation, matrix 4x4; maps sparse → ENU},
-//                               "residuals": {rms, median, max, per image}, "inliers", "utm": {zone, epsg, name},
+//                               "residuals": {rms, median, max, sigma per axis, per image}, "inliers",
+//                               "attitude": {used, frames, scatter, disagreement}, "utm": {zone, epsg, name},
 //                               "proj": {enu, utm pipelines}, "wkt_utm"}
 //
-// Estimation: least median of squares over minimal 3-camera samples (deterministic), inliers within 3 robust
-// sigmas, Umeyama on the inliers (refined twice). Positions only: with GPS noise σ per axis and N cameras,
-// the frame's translation is known to about σ/√N.
+// Estimation: least median of squares over minimal 3-camera samples (deterministic), inliers within 3.5 robust
+// sigmas, Umeyama on the inliers (refined twice). A nearly straight track leaves the roll about it free: it is
+// taken from the sparse points' ground plane (level in ENU). When the telemetry states the full ST 0601 angle
+// chain, the frames' attitudes are fused with the positions' rotation (information-weighted; skipped when they
+// disagree beyond their uncertainties) and scale/translation refitted. With GPS noise σ per axis and N
+// cameras, the translation is known to about σ·√(3/N) (3D) — georef.json's expected_translation_error_m.
 #pragma once
 
 #include <filesystem>
