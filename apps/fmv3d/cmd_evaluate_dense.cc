@@ -1,0 +1,66 @@
+// `fmv3d evaluate-dense WS --truth SYNTH_DIR`: accuracy and completeness of WS/dense/fused.ply against the
+// synthetic scene of `fmv3d synth` (truth/, scene.obj, truth.json) → stdout table + WS/report/dense_eval.json.
+#include <cstdio>
+
+#include "command.h"
+#include "fmv3d/core/error.h"
+#include "fmv3d/core/files.h"
+#include "fmv3d/io/colmap_model.h"
+#include "fmv3d/io/obj_io.h"
+#include "fmv3d/io/point_cloud.h"
+#include "fmv3d/mvs/evaluation.h"
+#include "fmv3d/pipeline/workspace.h"
+
+namespace fmv3d::app {
+namespace {
+
+void Add(CLI::App& app) {
+  auto* cmd = app.add_subcommand("evaluate-dense", "Compare WS/dense/fused.ply with a synthetic scene's true mesh");
+  struct Args {
+    std::string ws, truth, cloud;
+    mvs::DenseEvaluationOptions opt;
+  };
+  auto a = std::make_shared<Args>();
+  cmd->add_option("WS", a->ws, "Workspace folder")->required();
+  cmd->add_option("--truth", a->truth, "Output folder of `fmv3d synth` (truth/, scene.obj, truth.json)")->required();
+  cmd->add_option("--cloud", a->cloud, "Point cloud to evaluate (default WS/dense/fused.ply)");
+  cmd->add_option("--completeness", a->opt.completeness_fraction,
+                  "Completeness distance, fraction of the characteristic length")
+      ->capture_default_str();
+  cmd->callback([a] {
+    namespace fs = std::filesystem;
+    const pipeline::Workspace ws(a->ws);
+    const fs::path cloud_path = a->cloud.empty() ? ws.dense_dir() / "fused.ply" : fs::path(a->cloud);
+    ws.Require(ws.sparse_dir() / "images.txt", "sparse");
+    if (!fs::exists(cloud_path)) throw Error(cloud_path.string() + ": not found — run `fmv3d dense` first");
+    const fs::path truth_dir(a->truth);
+    for (const char* f : {"truth/images.txt", "scene.obj", "truth.json"})
+      if (!fs::exists(truth_dir / f))
+        throw Error(a->truth + ": no " + f + " (expected the output folder of `fmv3d synth`)");
+    const auto truth_json = core::ReadJson(truth_dir / "truth.json");
+    if (!truth_json.contains("characteristic_length"))
+      throw Error((truth_dir / "truth.json").string() + ": no characteristic_length");
+    const double length = truth_json.at("characteristic_length").get<double>();
+    const auto est = io::ReadColmapText(ws.sparse_dir());
+    const auto truth = io::ReadColmapText(truth_dir / "truth");
+    const auto scene = io::ReadObj(truth_dir / "scene.obj", false);
+    const auto cloud = io::ReadPointCloudPly(cloud_path);
+    const auto ev = mvs::EvaluateDense(cloud, est, truth, scene, length, a->opt);
+    core::EnsureDirectory(ws.report_dir());
+    core::WriteJson(ws.report_dir() / "dense_eval.json", ev.ToJson());
+    std::printf("%-34s %14s\n", "dense cloud vs true mesh", "");
+    std::printf("%-34s %14zu\n", "points", ev.points);
+    std::printf("%-34s %14.4f\n", "characteristic length", length);
+    std::printf("%-34s %14.5f  (%.3f%%)\n", "accuracy median", ev.median_error, 100 * ev.median_fraction());
+    std::printf("%-34s %14.5f  (%.3f%%)\n", "accuracy p90", ev.p90_error, 100 * ev.p90_fraction());
+    std::printf("%-34s %14.5f\n", "accuracy mean", ev.mean_error);
+    std::printf("%-34s %13.2f%%\n", "points within 1% of length", 100 * ev.within_1_percent);
+    std::printf("%-34s %13.2f%%  (%zu of %zu samples seen by >=%d cameras)\n", "completeness (1% of length)",
+                100 * ev.completeness, ev.complete_samples, ev.seen_samples, a->opt.min_cameras);
+  });
+}
+
+const RegisterCommand reg(510, Add);
+
+}  // namespace
+}  // namespace fmv3d::app

@@ -1,0 +1,119 @@
+// PatchMatch speed: one 960x540 depth map of the town scene (40-frame orbit, as OpenMVS's 16 s/view figure in
+// ANCHORS.md) with 4 or 6 source views, photometric pass (coarse-to-fine, default options) and the geometric
+// pass. Target (issue 5): <= 8 s per view on 2 cores. Run: build/bench/mvs_bench --benchmark_min_time=1
+#include <benchmark/benchmark.h>
+#include <sys/resource.h>
+
+#include <opencv2/imgproc.hpp>
+
+#include "fmv3d/mvs/patch_match.h"
+#include "fmv3d/render/renderer.h"
+#include "fmv3d/synth/flight.h"
+#include "fmv3d/synth/scene.h"
+#include "fmv3d/synth/synth.h"
+
+namespace {
+
+using namespace fmv3d;
+
+double ProcessCpuSeconds() {
+  rusage u{};
+  getrusage(RUSAGE_SELF, &u);
+  return u.ru_utime.tv_sec + u.ru_stime.tv_sec + 1e-6 * (u.ru_utime.tv_usec + u.ru_stime.tv_usec);
+}
+
+struct Views {
+  std::vector<mvs::View> views;  // 0 = reference, then neighbours by orbit distance
+  double dmin = 0, dmax = 0;
+};
+
+const Views& TownViews() {
+  static const Views v = [] {
+    Views out;
+    const synth::Scene scene = synth::MakeScene("town");
+    synth::SynthOptions o;
+    o.width = 960;
+    o.height = 540;
+    o.flight.frames = 40;
+    const core::Camera cam = synth::SynthCamera(o);
+    const auto poses = synth::MakeFlight(scene, cam, o.flight);
+    const render::Renderer renderer(scene.mesh);
+    for (int k : {0, 1, 39, 2, 38, 3, 37}) {
+      const auto r = renderer.Render(cam, poses[k], o.render);
+      mvs::View view;
+      view.geom.image_id = static_cast<uint32_t>(k + 1);
+      view.geom.width = cam.width;
+      view.geom.height = cam.height;
+      view.geom.K = cam.K();
+      view.geom.R = poses[k].R();
+      view.geom.t = poses[k].t;
+      view.color = r.image;
+      cv::Mat g;
+      cv::cvtColor(r.image, g, cv::COLOR_BGR2GRAY);
+      g.convertTo(view.gray, CV_32F, 1.0 / 255);
+      if (k == 0) {
+        double lo, hi;
+        cv::minMaxLoc(r.depth, nullptr, &hi);
+        cv::Mat d = r.depth.clone();
+        d.setTo(hi, d <= 0);
+        cv::minMaxLoc(d, &lo, nullptr);
+        out.dmin = 0.8 * lo;
+        out.dmax = 1.2 * hi;
+      }
+      out.views.push_back(std::move(view));
+    }
+    return out;
+  }();
+  return v;
+}
+
+mvs::PatchMatchInput Input(const Views& v, int sources) {
+  mvs::PatchMatchInput in;
+  in.ref = &v.views[0];
+  for (int k = 1; k <= sources; ++k) in.sources.push_back(&v.views[k]);
+  in.depth_min = v.dmin;
+  in.depth_max = v.dmax;
+  return in;
+}
+
+void BM_PatchMatchPhotometric960(benchmark::State& state) {
+  const Views& v = TownViews();
+  const auto in = Input(v, static_cast<int>(state.range(0)));
+  mvs::PatchMatchOptions opt;
+  const double cpu0 = ProcessCpuSeconds();
+  int valid = 0;
+  for (auto _ : state) {
+    mvs::PatchMatchStats st;
+    auto map = mvs::RunPatchMatch(in, opt, &st);
+    valid = st.valid_pixels;
+    benchmark::DoNotOptimize(map.depth.data);
+  }
+  state.counters["cpu_s_per_view"] = (ProcessCpuSeconds() - cpu0) / state.iterations();
+  state.counters["valid_fraction"] = static_cast<double>(valid) / (960.0 * 540.0);
+  state.SetLabel(std::to_string(state.range(0)) + " sources");
+}
+BENCHMARK(BM_PatchMatchPhotometric960)->Arg(4)->Arg(6)->Unit(benchmark::kSecond)->UseRealTime()->Iterations(1);
+
+void BM_PatchMatchGeometric960(benchmark::State& state) {
+  const Views& v = TownViews();
+  const int ns = static_cast<int>(state.range(0));
+  mvs::PatchMatchOptions opt;
+  // Photometric maps of the reference and its sources (not timed).
+  std::vector<mvs::DepthMap> maps;
+  const auto ref_in = Input(v, ns);
+  const mvs::DepthMap ref_map = mvs::RunPatchMatch(ref_in, opt);
+  for (int k = 1; k <= ns; ++k) maps.push_back(ref_map);  // stand-in maps of the right size
+  auto in = ref_in;
+  for (auto& m : maps) in.source_maps.push_back(&m);
+  in.init = &ref_map;
+  const double cpu0 = ProcessCpuSeconds();
+  for (auto _ : state) {
+    auto map = mvs::RunPatchMatch(in, opt);
+    benchmark::DoNotOptimize(map.depth.data);
+  }
+  state.counters["cpu_s_per_view"] = (ProcessCpuSeconds() - cpu0) / state.iterations();
+  state.SetLabel(std::to_string(ns) + " sources");
+}
+BENCHMARK(BM_PatchMatchGeometric960)->Arg(4)->Unit(benchmark::kSecond)->UseRealTime()->Iterations(1);
+
+}  // namespace

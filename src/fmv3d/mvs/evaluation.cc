@@ -1,0 +1,171 @@
+#include "fmv3d/mvs/evaluation.h"
+
+#include <tbb/parallel_for.h>
+
+#include <algorithm>
+#include <atomic>
+#include <cmath>
+#include <unordered_map>
+
+#include "fmv3d/core/error.h"
+#include "fmv3d/geometry/mesh_distance.h"
+#include "fmv3d/render/renderer.h"
+#include "fmv3d/sfm/evaluation.h"
+
+namespace fmv3d::mvs {
+namespace {
+
+// Uniform voxel hash of points for "is there a point within r" queries (cell size = r).
+class PointGrid {
+ public:
+  PointGrid(const std::vector<Eigen::Vector3d>& pts, double cell) : pts_(pts), cell_(cell) {
+    for (size_t i = 0; i < pts.size(); ++i) grid_[Key(Cell(pts[i]))].push_back(static_cast<uint32_t>(i));
+  }
+  bool AnyWithin(const Eigen::Vector3d& p, double r) const {
+    const Eigen::Vector3i c = Cell(p);
+    const double r2 = r * r;
+    for (int dz = -1; dz <= 1; ++dz)
+      for (int dy = -1; dy <= 1; ++dy)
+        for (int dx = -1; dx <= 1; ++dx) {
+          auto it = grid_.find(Key(c + Eigen::Vector3i(dx, dy, dz)));
+          if (it == grid_.end()) continue;
+          for (uint32_t i : it->second)
+            if ((pts_[i] - p).squaredNorm() <= r2) return true;
+        }
+    return false;
+  }
+
+ private:
+  Eigen::Vector3i Cell(const Eigen::Vector3d& p) const {
+    return Eigen::Vector3i(static_cast<int>(std::floor(p.x() / cell_)), static_cast<int>(std::floor(p.y() / cell_)),
+                           static_cast<int>(std::floor(p.z() / cell_)));
+  }
+  static uint64_t Key(const Eigen::Vector3i& c) {
+    return (static_cast<uint64_t>(c.x() & 0x1FFFFF) << 42) | (static_cast<uint64_t>(c.y() & 0x1FFFFF) << 21) |
+           static_cast<uint64_t>(c.z() & 0x1FFFFF);
+  }
+  const std::vector<Eigen::Vector3d>& pts_;
+  double cell_;
+  std::unordered_map<uint64_t, std::vector<uint32_t>> grid_;
+};
+
+double Quantile(std::vector<double> v, double q) {
+  if (v.empty()) return 0;
+  const size_t k = std::min(v.size() - 1, static_cast<size_t>(q * static_cast<double>(v.size() - 1) + 0.5));
+  std::nth_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(k), v.end());
+  return v[k];
+}
+
+}  // namespace
+
+void DenseEvaluationOptions::Check() const {
+  if (!(completeness_fraction > 0)) throw Error("evaluate-dense: completeness fraction must be positive");
+  if (min_cameras < 1) throw Error("evaluate-dense: min_cameras must be at least 1");
+  if (max_surface_samples < 100 || max_accuracy_points < 100) throw Error("evaluate-dense: too few samples");
+  if (render_max_size < 32) throw Error("evaluate-dense: render_max_size must be at least 32");
+}
+
+nlohmann::json DenseEvaluation::ToJson() const {
+  return {{"points", points},
+          {"characteristic_length", characteristic_length},
+          {"accuracy",
+           {{"median", median_error},
+            {"p90", p90_error},
+            {"mean", mean_error},
+            {"median_percent_of_length", 100 * median_fraction()},
+            {"p90_percent_of_length", 100 * p90_fraction()},
+            {"within_1_percent_of_length", within_1_percent}}},
+          {"completeness",
+           {{"fraction", completeness},
+            {"surface_samples", surface_samples},
+            {"seen_by_2_cameras", seen_samples},
+            {"complete_samples", complete_samples},
+            {"sample_spacing", sample_spacing}}},
+          {"alignment", {{"scale", alignment.s}, {"translation", {alignment.t.x(), alignment.t.y(), alignment.t.z()}}}}};
+}
+
+DenseEvaluation EvaluateDense(const io::OrientedPointCloud& cloud, const core::Reconstruction& estimate,
+                              const core::Reconstruction& truth, const io::TexturedMesh& scene,
+                              double characteristic_length, const DenseEvaluationOptions& opt) {
+  opt.Check();
+  if (cloud.empty()) throw Error("evaluate-dense: the fused cloud has no points");
+  if (!(characteristic_length > 0)) throw Error("evaluate-dense: characteristic length must be positive");
+  DenseEvaluation ev;
+  ev.points = cloud.size();
+  ev.characteristic_length = characteristic_length;
+  ev.alignment = sfm::EvaluateSparse(estimate, truth).alignment;
+
+  // Points in the truth frame, evenly thinned for the accuracy figures.
+  std::vector<Eigen::Vector3d> pts(cloud.size());
+  for (size_t i = 0; i < cloud.size(); ++i) pts[i] = ev.alignment.Apply(cloud.positions[i]);
+  const geometry::MeshDistance mesh(scene);
+  const size_t stride = (pts.size() + opt.max_accuracy_points - 1) / opt.max_accuracy_points;
+  std::vector<double> dist((pts.size() + stride - 1) / stride);
+  tbb::parallel_for(size_t{0}, dist.size(), [&](size_t k) { dist[k] = mesh.Closest(pts[k * stride]).distance; });
+  double sum = 0;
+  size_t within = 0;
+  for (double d : dist) {
+    sum += d;
+    within += d <= 0.01 * characteristic_length;
+  }
+  ev.mean_error = sum / static_cast<double>(dist.size());
+  ev.within_1_percent = static_cast<double>(within) / static_cast<double>(dist.size());
+  ev.median_error = Quantile(dist, 0.5);
+  ev.p90_error = Quantile(dist, 0.9);
+
+  // Completeness over the surface two or more true cameras see.
+  double area = 0;
+  for (size_t f = 0; f < mesh.num_triangles(); ++f) area += mesh.Area(static_cast<int>(f));
+  ev.sample_spacing = std::max(opt.min_spacing_fraction * characteristic_length,
+                               std::sqrt(area / static_cast<double>(opt.max_surface_samples)));
+  std::vector<int> faces;
+  const auto samples = mesh.SampleSurface(ev.sample_spacing, &faces, 7);
+  std::vector<std::atomic<uint16_t>> seen(samples.size());
+  for (auto& s : seen) s = 0;
+  const render::Renderer renderer(scene);
+  render::RenderOptions ro;
+  ro.supersample = 1;
+  ro.shading = false;
+  for (const auto& [id, im] : truth.images) {
+    core::Camera cam = truth.cameras.at(im.camera_id);
+    const double scale = std::min(1.0, static_cast<double>(opt.render_max_size) / std::max(cam.width, cam.height));
+    const int w = std::max(1, static_cast<int>(std::lround(cam.width * scale)));
+    const int h = std::max(1, static_cast<int>(std::lround(cam.height * scale)));
+    const double sx = static_cast<double>(w) / cam.width, sy = static_cast<double>(h) / cam.height;
+    cam.f *= sy;
+    cam.aspect *= sx / sy;
+    cam.u0 *= sx;
+    cam.v0 *= sy;
+    cam.width = w;
+    cam.height = h;
+    const cv::Mat depth = renderer.Render(cam, im.pose, ro).depth;
+    tbb::parallel_for(size_t{0}, samples.size(), [&](size_t i) {
+      const Eigen::Vector3d xc = im.pose.Transform(samples[i]);
+      if (!(xc.z() > 0)) return;
+      const Eigen::Vector3d view_dir = (im.pose.Centre() - samples[i]).normalized();
+      if (mesh.Normal(faces[i]).dot(view_dir) <= 0) return;  // back side of the face
+      const Eigen::Vector2d uv = cam.Project(xc);
+      const int u = static_cast<int>(std::floor(uv.x())), v = static_cast<int>(std::floor(uv.y()));
+      if (u < 0 || v < 0 || u >= w || v >= h) return;
+      const float d = depth.at<float>(v, u);
+      // Tolerance: the pixel footprint on a slanted surface plus a share of the length.
+      const double tol = 0.01 * characteristic_length + 3 * xc.z() / cam.f;
+      if (d > 0 && std::abs(d - xc.z()) <= tol) seen[i]++;
+    });
+  }
+  const double radius = opt.completeness_fraction * characteristic_length;
+  const PointGrid grid(pts, radius);
+  std::atomic<size_t> n_seen{0}, n_complete{0};
+  tbb::parallel_for(size_t{0}, samples.size(), [&](size_t i) {
+    if (seen[i] < opt.min_cameras) return;
+    n_seen++;
+    if (grid.AnyWithin(samples[i], radius)) n_complete++;
+  });
+  ev.surface_samples = samples.size();
+  ev.seen_samples = n_seen;
+  ev.complete_samples = n_complete;
+  ev.completeness = n_seen ? static_cast<double>(n_complete) / static_cast<double>(n_seen) : 0.0;
+  return ev;
+}
+
+}  // namespace fmv3d::mvs

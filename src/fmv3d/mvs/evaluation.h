@@ -1,0 +1,52 @@
+// Accuracy and completeness of a dense cloud against a synthetic scene (`fmv3d synth` output), as issue 5
+// measures them:
+//  - the sparse model is aligned to the true cameras by a similarity (sfm::EvaluateSparse, images by name)
+//    and the cloud is carried along;
+//  - accuracy: distance of every fused point to the true mesh (median, 90th percentile), also as a fraction
+//    of the characteristic length (the tallest building's height);
+//  - completeness: the true surface is sampled uniformly; a sample counts when at least `min_cameras` true
+//    cameras see it (depth test against the rasterised truth depth maps), and it is complete when a fused
+//    point lies within completeness_fraction · characteristic length of it.
+#pragma once
+
+#include <cstddef>
+#include <nlohmann/json.hpp>
+
+#include "fmv3d/core/pose.h"
+#include "fmv3d/core/reconstruction.h"
+#include "fmv3d/io/mesh.h"
+#include "fmv3d/io/point_cloud.h"
+
+namespace fmv3d::mvs {
+
+struct DenseEvaluationOptions {
+  double completeness_fraction = 0.01;  // of the characteristic length
+  int min_cameras = 2;                  // true cameras that must see a surface sample
+  size_t max_surface_samples = 1500000; // sample spacing grows on large scenes to stay below this
+  double min_spacing_fraction = 0.0025; // finest sample spacing, of the characteristic length
+  size_t max_accuracy_points = 3000000; // evenly thinned beyond this
+  int render_max_size = 800;            // truth depth maps for the visibility test, longer side
+  void Check() const;
+};
+
+struct DenseEvaluation {
+  size_t points = 0;
+  double characteristic_length = 0;
+  double median_error = 0, p90_error = 0, mean_error = 0;  // truth units
+  double within_1_percent = 0;                              // share of points within 1% of the length
+  size_t surface_samples = 0, seen_samples = 0, complete_samples = 0;
+  double completeness = 0;
+  double sample_spacing = 0;
+  core::Sim3 alignment;  // model → truth
+  double median_fraction() const { return median_error / characteristic_length; }
+  double p90_fraction() const { return p90_error / characteristic_length; }
+  nlohmann::json ToJson() const;
+};
+
+// `cloud` is in the estimate's frame. Throws fmv3d::Error when the models share fewer than 3 images, the
+// cloud is empty or the characteristic length is not positive.
+DenseEvaluation EvaluateDense(const io::OrientedPointCloud& cloud, const core::Reconstruction& estimate,
+                              const core::Reconstruction& truth, const io::TexturedMesh& scene,
+                              double characteristic_length, const DenseEvaluationOptions& options = {});
+
+}  // namespace fmv3d::mvs

@@ -1,0 +1,138 @@
+#include "fmv3d/mvs/fusion.h"
+
+#include <cmath>
+
+#include "fmv3d/core/error.h"
+
+namespace fmv3d::mvs {
+
+using Vec3s8 = cv::Vec<schar, 3>;
+
+void FusionOptions::Check() const {
+  if (min_views < 1) throw Error("fusion: min_views must be at least 1");
+  if (!(max_depth_error > 0 && max_depth_error < 1)) throw Error("fusion: max_depth_error must be in (0, 1)");
+  if (!(max_normal_error_deg > 0 && max_normal_error_deg <= 180))
+    throw Error("fusion: max_normal_error_deg must be in (0, 180]");
+  if (!(visibility_margin > 0)) throw Error("fusion: visibility_margin must be positive");
+}
+
+FusionView MakeFusionView(const ViewGeometry& geom, const DepthMap& map, const cv::Mat& color,
+                          std::vector<uint32_t> neighbours) {
+  if (map.width() != geom.width || map.height() != geom.height || color.cols != geom.width ||
+      color.rows != geom.height)
+    throw Error("fusion: depth map of '" + geom.name + "' does not match its view's size");
+  FusionView v;
+  v.geom = geom;
+  v.depth = map.depth.clone();
+  v.color = color;
+  v.neighbours = std::move(neighbours);
+  v.normal.create(map.height(), map.width(), CV_8SC3);
+  const Eigen::Matrix3f Rt = geom.R.transpose().cast<float>();
+  for (int y = 0; y < map.height(); ++y)
+    for (int x = 0; x < map.width(); ++x) {
+      const cv::Vec3f n = map.normal.at<cv::Vec3f>(y, x);
+      const Eigen::Vector3f w = Rt * Eigen::Vector3f(n[0], n[1], n[2]);
+      v.normal.at<Vec3s8>(y, x) = Vec3s8(static_cast<schar>(std::lround(127 * w.x())),
+                                         static_cast<schar>(std::lround(127 * w.y())),
+                                         static_cast<schar>(std::lround(127 * w.z())));
+    }
+  return v;
+}
+
+namespace {
+Eigen::Vector3f NormalAt(const FusionView& v, int x, int y) {
+  const Vec3s8 c = v.normal.at<Vec3s8>(y, x);
+  return Eigen::Vector3f(c[0], c[1], c[2]).normalized();
+}
+}  // namespace
+
+io::OrientedPointCloud FuseDepthMaps(const std::map<uint32_t, FusionView>& views, const FusionOptions& opt,
+                                     FusionStats* stats) {
+  opt.Check();
+  FusionStats st;
+  io::OrientedPointCloud cloud;
+  std::map<uint32_t, cv::Mat> used;
+  for (const auto& [id, v] : views) used[id] = cv::Mat::zeros(v.depth.size(), CV_8U);
+  const float cos_max = static_cast<float>(std::cos(opt.max_normal_error_deg * M_PI / 180));
+
+  struct Hit {
+    const FusionView* view;
+    int x, y;
+    bool fresh;
+  };
+  std::vector<Hit> hits;
+  for (const auto& [rid, ref] : views) {
+    std::vector<const FusionView*> nbs;
+    for (uint32_t j : ref.neighbours) {
+      auto it = views.find(j);
+      if (it != views.end() && j != rid) nbs.push_back(&it->second);
+    }
+    cv::Mat& ref_used = used[rid];
+    for (int y = 0; y < ref.depth.rows; ++y) {
+      for (int x = 0; x < ref.depth.cols; ++x) {
+        const float d = ref.depth.at<float>(y, x);
+        if (!(d > 0) || ref_used.at<uint8_t>(y, x)) continue;
+        ++st.candidates;
+        const Eigen::Vector3d X = ref.geom.Unproject({x + 0.5, y + 0.5}, d);
+        const Eigen::Vector3f n_ref = NormalAt(ref, x, y);
+        hits.clear();
+        hits.push_back({&ref, x, y, true});
+        int conflicts = 0;
+        for (const FusionView* nb : nbs) {
+          Eigen::Vector2d uv;
+          double z;
+          if (!nb->geom.Project(X, &uv, &z)) continue;
+          const int u = static_cast<int>(std::floor(uv.x())), v = static_cast<int>(std::floor(uv.y()));
+          if (u < 0 || v < 0 || u >= nb->depth.cols || v >= nb->depth.rows) continue;
+          const float dj = nb->depth.at<float>(v, u);
+          if (!(dj > 0)) continue;
+          const double rel = (dj - z) / z;
+          if (std::abs(rel) <= opt.max_depth_error) {
+            if (NormalAt(*nb, u, v).dot(n_ref) >= cos_max)
+              hits.push_back({nb, u, v, used[nb->geom.image_id].at<uint8_t>(v, u) == 0});
+          } else if (rel > opt.visibility_margin) {
+            ++conflicts;
+          }
+        }
+        const int support = static_cast<int>(hits.size());
+        if (support < opt.min_views) {
+          ++st.rejected_support;
+          continue;
+        }
+        if (opt.visibility_filter && conflicts > support - 1) {
+          ++st.rejected_visibility;
+          continue;
+        }
+        Eigen::Vector3d pos = Eigen::Vector3d::Zero();
+        Eigen::Vector3f nrm = Eigen::Vector3f::Zero(), col = Eigen::Vector3f::Zero();
+        int fresh = 0;
+        std::vector<uint32_t> vis;
+        vis.reserve(hits.size());
+        for (const Hit& h : hits) {
+          vis.push_back(h.view->geom.image_id);
+          if (!h.fresh) continue;
+          pos += h.view->geom.Unproject({h.x + 0.5, h.y + 0.5}, h.view->depth.at<float>(h.y, h.x));
+          nrm += NormalAt(*h.view, h.x, h.y);
+          const cv::Vec3b c = h.view->color.at<cv::Vec3b>(h.y, h.x);
+          col += Eigen::Vector3f(c[2], c[1], c[0]);
+          used[h.view->geom.image_id].at<uint8_t>(h.y, h.x) = 1;
+          ++fresh;
+        }
+        pos /= fresh;
+        col /= static_cast<float>(fresh);
+        if (nrm.norm() < 1e-6f) nrm = n_ref;
+        cloud.positions.push_back(pos);
+        cloud.normals.push_back(nrm.normalized());
+        cloud.colors.push_back(io::Rgb8(static_cast<uint8_t>(std::lround(col.x())),
+                                        static_cast<uint8_t>(std::lround(col.y())),
+                                        static_cast<uint8_t>(std::lround(col.z()))));
+        cloud.visibility.push_back(std::move(vis));
+        ++st.views_histogram[support];
+      }
+    }
+  }
+  if (stats) *stats = st;
+  return cloud;
+}
+
+}  // namespace fmv3d::mvs

@@ -1,0 +1,468 @@
+#include "fmv3d/mvs/patch_match.h"
+
+#include <Eigen/Dense>
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <opencv2/imgproc.hpp>
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+
+#include "fmv3d/core/error.h"
+
+namespace fmv3d::mvs {
+namespace {
+
+constexpr float kMaxCost = 2.0f;
+constexpr int kMaxSamples = 64;  // (2·radius/step + 1)² for the allowed options
+
+// Counter-based random numbers: a pixel's draws depend only on (seed, pixel, round), so results do not depend
+// on thread scheduling.
+struct Rng {
+  uint64_t s;
+  explicit Rng(uint64_t seed) : s(seed) {}
+  uint64_t Next() {
+    uint64_t z = (s += 0x9E3779B97F4A7C15ull);
+    z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ull;
+    z = (z ^ (z >> 27)) * 0x94D049BB133111EBull;
+    return z ^ (z >> 31);
+  }
+  float Uniform() { return static_cast<float>(Next() >> 40) * (1.0f / 16777216.0f); }  // [0, 1)
+  float Symmetric() { return 2 * Uniform() - 1; }                                       // [-1, 1)
+};
+
+struct Source {
+  const float* img = nullptr;
+  int w = 0, h = 0;
+  size_t stride = 0;               // floats per row
+  Eigen::Matrix3f K;
+  Eigen::Matrix3f R;               // reference camera frame → source camera frame
+  Eigen::Vector3f t;
+  const DepthMap* map = nullptr;   // geometric pass only (at the source's working resolution)
+  Eigen::Matrix3f map_K, map_Kinv; // intrinsics of that map
+};
+
+// One resolution level of the problem.
+struct Level {
+  cv::Mat ref;  // CV_32F grey
+  int w = 0, h = 0;
+  Eigen::Matrix3f K, Kinv;
+  std::vector<cv::Mat> images;  // owned source images (resized)
+  std::vector<Source> sources;
+};
+
+struct RefPatch {
+  float v[kMaxSamples];
+  float w[kMaxSamples];  // normalised to sum 1
+  float mean = 0, var = 0;
+};
+
+class Solver {
+ public:
+  Solver(const Level& level, const PatchMatchOptions& opt, double dmin, double dmax, uint64_t seed)
+      : L_(level), opt_(opt), dmin_(static_cast<float>(dmin)), dmax_(static_cast<float>(dmax)), seed_(seed) {
+    side_ = 2 * (opt.window_radius / opt.window_step) + 1;
+    n_samples_ = side_ * side_;
+    const int r = (side_ / 2) * opt.window_step;
+    radius_ = r;
+    spatial_.resize(n_samples_);
+    for (int j = 0; j < side_; ++j)
+      for (int i = 0; i < side_; ++i) {
+        const float dx = static_cast<float>(-r + i * opt.window_step), dy = static_cast<float>(-r + j * opt.window_step);
+        spatial_[j * side_ + i] = -(dx * dx + dy * dy) / static_cast<float>(2 * opt.sigma_spatial * opt.sigma_spatial);
+      }
+    inv_2sc2_ = static_cast<float>(1.0 / (2 * opt.sigma_color * opt.sigma_color));
+    const size_t n = static_cast<size_t>(L_.w) * L_.h;
+    depth_.assign(n, 0);
+    normal_.assign(n, Eigen::Vector3f(0, 0, -1));
+    cost_.assign(n, kMaxCost);
+    photo_.assign(n, kMaxCost);
+  }
+
+  std::vector<float> depth_, cost_, photo_;
+  std::vector<Eigen::Vector3f> normal_;
+
+  Eigen::Vector3f Ray(int x, int y) const {
+    return L_.Kinv * Eigen::Vector3f(static_cast<float>(x) + 0.5f, static_cast<float>(y) + 0.5f, 1.f);
+  }
+
+  Eigen::Vector3f RandomNormal(Rng& rng, const Eigen::Vector3f& ray) const {
+    const Eigen::Vector3f dir = ray.normalized();
+    for (int tries = 0; tries < 16; ++tries) {
+      Eigen::Vector3f n(rng.Symmetric(), rng.Symmetric(), rng.Symmetric());
+      const float len = n.norm();
+      if (len > 1 || len < 1e-3f) continue;
+      n /= len;
+      float c = n.dot(dir);
+      if (c > 0) n = -n, c = -c;
+      if (c < -0.1f) return n;  // not grazing
+    }
+    return -dir;
+  }
+
+  float RandomDepth(Rng& rng) const { return dmin_ + rng.Uniform() * (dmax_ - dmin_); }
+
+  void ComputeRefPatch(int x, int y, RefPatch* p) const {
+    const float* img = L_.ref.ptr<float>(0);
+    const size_t stride = L_.ref.step1();
+    const float centre = img[y * stride + x];
+    float sum_w = 0;
+    for (int j = 0, k = 0; j < side_; ++j) {
+      const int yy = std::clamp(y - radius_ + j * opt_.window_step, 0, L_.h - 1);
+      for (int i = 0; i < side_; ++i, ++k) {
+        const int xx = std::clamp(x - radius_ + i * opt_.window_step, 0, L_.w - 1);
+        const float v = img[yy * stride + xx];
+        const float d = v - centre;
+        const float w = std::exp(spatial_[k] - d * d * inv_2sc2_);
+        p->v[k] = v;
+        p->w[k] = w;
+        sum_w += w;
+      }
+    }
+    float mean = 0, sq = 0;
+    for (int k = 0; k < n_samples_; ++k) {
+      p->w[k] /= sum_w;
+      mean += p->w[k] * p->v[k];
+      sq += p->w[k] * p->v[k] * p->v[k];
+    }
+    p->mean = mean;
+    p->var = std::max(sq - mean * mean, 0.f);
+  }
+
+  // 1 − weighted NCC of the reference patch against source s through homography H; kMaxCost when the patch
+  // leaves the source image.
+  float Ncc(const RefPatch& rp, int x, int y, const Eigen::Matrix3f& H, const Source& s) const {
+    const float u0 = static_cast<float>(x - radius_) + 0.5f, v0 = static_cast<float>(y - radius_) + 0.5f;
+    Eigen::Vector3f row = H * Eigen::Vector3f(u0, v0, 1.f);
+    const Eigen::Vector3f sx = H.col(0) * static_cast<float>(opt_.window_step);
+    const Eigen::Vector3f sy = H.col(1) * static_cast<float>(opt_.window_step);
+    const float wmax = static_cast<float>(s.w - 1), hmax = static_cast<float>(s.h - 1);
+    float sw_s = 0, sw_ss = 0, sw_rs = 0;
+    for (int j = 0, k = 0; j < side_; ++j, row += sy) {
+      Eigen::Vector3f p = row;
+      for (int i = 0; i < side_; ++i, ++k, p += sx) {
+        if (!(p.z() > 0)) return kMaxCost;
+        const float iz = 1.f / p.z();
+        const float fx = p.x() * iz - 0.5f, fy = p.y() * iz - 0.5f;
+        if (!(fx >= 0 && fy >= 0 && fx < wmax && fy < hmax)) return kMaxCost;
+        const int ix = static_cast<int>(fx), iy = static_cast<int>(fy);
+        const float ax = fx - static_cast<float>(ix), ay = fy - static_cast<float>(iy);
+        const float* r0 = s.img + static_cast<size_t>(iy) * s.stride + ix;
+        const float top = r0[0] + ax * (r0[1] - r0[0]);
+        const float bot = r0[s.stride] + ax * (r0[s.stride + 1] - r0[s.stride]);
+        const float v = top + ay * (bot - top);
+        const float wv = rp.w[k] * v;
+        sw_s += wv;
+        sw_ss += wv * v;
+        sw_rs += wv * rp.v[k];
+      }
+    }
+    const float var_s = std::max(sw_ss - sw_s * sw_s, 0.f);
+    const float cov = sw_rs - rp.mean * sw_s;
+    constexpr float kEps = 1e-6f;
+    const float ncc = cov / std::sqrt(std::max(rp.var, kEps) * std::max(var_s, kEps));
+    return std::clamp(1.f - ncc, 0.f, kMaxCost);
+  }
+
+  // Forward–backward reprojection error (pixels) of the reference point X through source s's depth map.
+  float ReprojectionError(int x, int y, const Eigen::Vector3f& X, const Source& s) const {
+    const float maxe = static_cast<float>(opt_.geom_max_error_px);
+    const Eigen::Vector3f xs = s.R * X + s.t;
+    if (!(xs.z() > 0)) return maxe;
+    const Eigen::Vector3f q = s.map_K * xs;
+    const float qx = q.x() / q.z(), qy = q.y() / q.z();
+    const int ix = static_cast<int>(std::floor(qx)), iy = static_cast<int>(std::floor(qy));
+    if (ix < 0 || iy < 0 || ix >= s.map->width() || iy >= s.map->height()) return maxe;
+    const float zs = s.map->depth.at<float>(iy, ix);
+    if (!(zs > 0)) return maxe;
+    const Eigen::Vector3f xs2 = zs * (s.map_Kinv * Eigen::Vector3f(qx, qy, 1.f));
+    const Eigen::Vector3f xr = s.R.transpose() * (xs2 - s.t);
+    if (!(xr.z() > 0)) return maxe;
+    const Eigen::Vector3f pr = L_.K * xr;
+    const float ex = pr.x() / pr.z() - (static_cast<float>(x) + 0.5f);
+    const float ey = pr.y() / pr.z() - (static_cast<float>(y) + 0.5f);
+    return std::min(std::sqrt(ex * ex + ey * ey), maxe);
+  }
+
+  // Aggregated cost of plane (depth d, normal n) at pixel (x, y); *photo gets the photometric part.
+  float Cost(const RefPatch& rp, int x, int y, float d, const Eigen::Vector3f& n, float* photo) const {
+    *photo = kMaxCost;
+    if (!(d >= dmin_ && d <= dmax_)) return kMaxCost + 1;
+    const Eigen::Vector3f X = d * Ray(x, y);
+    const float c = n.dot(X);
+    if (!(c < 0)) return kMaxCost + 1;  // plane seen from behind
+    const Eigen::RowVector3f nKinv = n.transpose() * L_.Kinv / c;
+    float costs[16], totals[16];
+    const int ns = static_cast<int>(std::min<size_t>(L_.sources.size(), 16));
+    for (int i = 0; i < ns; ++i) {
+      const Source& s = L_.sources[i];
+      const Eigen::Matrix3f H = s.K * (s.R * L_.Kinv + s.t * nKinv);
+      costs[i] = Ncc(rp, x, y, H, s);
+      totals[i] = costs[i];
+      if (s.map) totals[i] += static_cast<float>(opt_.geom_weight) * ReprojectionError(x, y, X, s);
+    }
+    // Mean of the best top_k totals (per-pixel view selection).
+    int order[16];
+    for (int i = 0; i < ns; ++i) order[i] = i;
+    std::sort(order, order + ns, [&](int a, int b) { return totals[a] < totals[b]; });
+    const int k = std::max(1, std::min(opt_.top_k, ns));
+    float sum_t = 0, sum_p = 0;
+    for (int i = 0; i < k; ++i) {
+      sum_t += totals[order[i]];
+      sum_p += costs[order[i]];
+    }
+    *photo = sum_p / static_cast<float>(k);
+    return sum_t / static_cast<float>(k);
+  }
+
+  uint64_t PixelSeed(int x, int y, int round) const {
+    return seed_ ^ (static_cast<uint64_t>(round + 1) * 0x2545F4914F6CDD1Dull) ^
+           (static_cast<uint64_t>(y) * L_.w + x) * 0x9E3779B97F4A7C15ull;
+  }
+
+  // Random planes everywhere (or the given initial planes), then the sparse seeds, then all costs.
+  void Initialise(const std::vector<Eigen::Vector3f>* seeds_cam, bool keep_existing) {
+    tbb::parallel_for(tbb::blocked_range<int>(0, L_.h, 4), [&](const tbb::blocked_range<int>& rows) {
+      for (int y = rows.begin(); y < rows.end(); ++y)
+        for (int x = 0; x < L_.w; ++x) {
+          const size_t i = static_cast<size_t>(y) * L_.w + x;
+          if (keep_existing && depth_[i] > 0) continue;
+          Rng rng(PixelSeed(x, y, -1));
+          depth_[i] = RandomDepth(rng);
+          normal_[i] = RandomNormal(rng, Ray(x, y));
+        }
+    });
+    if (seeds_cam) {
+      for (const auto& Xc : *seeds_cam) {
+        if (!(Xc.z() > 0)) continue;
+        const Eigen::Vector3f p = L_.K * Xc;
+        const int cx = static_cast<int>(std::floor(p.x() / p.z())), cy = static_cast<int>(std::floor(p.y() / p.z()));
+        for (int y = cy - 1; y <= cy + 1; ++y)
+          for (int x = cx - 1; x <= cx + 1; ++x) {
+            if (x < 0 || y < 0 || x >= L_.w || y >= L_.h) continue;
+            const Eigen::Vector3f ray = Ray(x, y);
+            const Eigen::Vector3f n = -Xc.normalized();  // fronto-parallel; refinement tilts it
+            const float d = n.dot(Xc) / n.dot(ray);
+            if (d >= dmin_ && d <= dmax_) {
+              depth_[static_cast<size_t>(y) * L_.w + x] = d;
+              normal_[static_cast<size_t>(y) * L_.w + x] = n;
+            }
+          }
+      }
+    }
+    tbb::parallel_for(tbb::blocked_range<int>(0, L_.h, 4), [&](const tbb::blocked_range<int>& rows) {
+      RefPatch rp;
+      for (int y = rows.begin(); y < rows.end(); ++y)
+        for (int x = 0; x < L_.w; ++x) {
+          const size_t i = static_cast<size_t>(y) * L_.w + x;
+          ComputeRefPatch(x, y, &rp);
+          cost_[i] = Cost(rp, x, y, depth_[i], normal_[i], &photo_[i]);
+        }
+    });
+  }
+
+  // One round: red pixels, then black pixels. `round` sets the refinement range (halved every round).
+  void Iterate(int round) {
+    for (int colour = 0; colour < 2; ++colour) {
+      tbb::parallel_for(tbb::blocked_range<int>(0, L_.h, 2), [&](const tbb::blocked_range<int>& rows) {
+        RefPatch rp;
+        for (int y = rows.begin(); y < rows.end(); ++y)
+          for (int x = (y + colour) & 1; x < L_.w; x += 2) UpdatePixel(x, y, round, &rp);
+      });
+    }
+  }
+
+  void UpdatePixel(int x, int y, int round, RefPatch* rp) {
+    const size_t i = static_cast<size_t>(y) * L_.w + x;
+    ComputeRefPatch(x, y, rp);
+    float best_d = depth_[i], best_cost = cost_[i], best_photo = photo_[i];
+    Eigen::Vector3f best_n = normal_[i];
+    const Eigen::Vector3f ray = Ray(x, y);
+    auto trial = [&](float d, const Eigen::Vector3f& n) {
+      float photo;
+      const float c = Cost(*rp, x, y, d, n, &photo);
+      if (c < best_cost) best_cost = c, best_photo = photo, best_d = d, best_n = n;
+    };
+    // Propagation: the planes of the opposite colour at distance 1 and 5 (both odd: the other colour).
+    static const int kOff[8][2] = {{-1, 0}, {1, 0}, {0, -1}, {0, 1}, {-5, 0}, {5, 0}, {0, -5}, {0, 5}};
+    for (const auto& o : kOff) {
+      const int nx = x + o[0], ny = y + o[1];
+      if (nx < 0 || ny < 0 || nx >= L_.w || ny >= L_.h) continue;
+      const size_t j = static_cast<size_t>(ny) * L_.w + nx;
+      const Eigen::Vector3f& n = normal_[j];
+      const float den = n.dot(ray);
+      if (!(den < 0)) continue;
+      const float d = n.dot(depth_[j] * Ray(nx, ny)) / den;  // neighbour's plane through this pixel's ray
+      trial(d, n);
+    }
+    // Random refinement around the best plane, the range halving each round.
+    Rng rng(PixelSeed(x, y, round));
+    const float scale = std::pow(0.5f, static_cast<float>(round));
+    auto perturb_normal = [&](const Eigen::Vector3f& n, float amount) {
+      Eigen::Vector3f p = n + amount * Eigen::Vector3f(rng.Symmetric(), rng.Symmetric(), rng.Symmetric());
+      p.normalize();
+      return p.dot(ray) < 0 ? p : n;
+    };
+    const float dp = 0.05f * scale, np = 0.5f * scale;
+    trial(RandomDepth(rng), best_n);
+    trial(best_d, RandomNormal(rng, ray));
+    trial(best_d * (1 + dp * rng.Symmetric()), perturb_normal(best_n, np));
+    trial(best_d * (1 + dp * rng.Symmetric()), best_n);
+    trial(best_d, perturb_normal(best_n, np));
+    depth_[i] = best_d;
+    normal_[i] = best_n;
+    cost_[i] = best_cost;
+    photo_[i] = best_photo;
+  }
+
+ private:
+  const Level& L_;
+  const PatchMatchOptions& opt_;
+  float dmin_, dmax_;
+  uint64_t seed_;
+  int side_ = 0, n_samples_ = 0, radius_ = 0;
+  std::vector<float> spatial_;
+  float inv_2sc2_ = 0;
+};
+
+Eigen::Matrix3f ScaledK(const Eigen::Matrix3d& K, double sx, double sy) {
+  Eigen::Matrix3d k = K;
+  k.row(0) *= sx;
+  k.row(1) *= sy;
+  return k.cast<float>();
+}
+
+// Builds a level at `factor` of each view's working resolution (1 = full).
+Level MakeLevel(const PatchMatchInput& in, double factor) {
+  Level L;
+  auto resize = [&](const cv::Mat& img) {
+    if (factor == 1.0) return img;
+    cv::Mat out;
+    cv::resize(img, out, cv::Size(std::max(8, static_cast<int>(std::lround(img.cols * factor))),
+                                  std::max(8, static_cast<int>(std::lround(img.rows * factor)))),
+               0, 0, cv::INTER_AREA);
+    return out;
+  };
+  const ViewGeometry& rg = in.ref->geom;
+  L.ref = resize(in.ref->gray);
+  L.w = L.ref.cols;
+  L.h = L.ref.rows;
+  L.K = ScaledK(rg.K, static_cast<double>(L.w) / rg.width, static_cast<double>(L.h) / rg.height);
+  L.Kinv = L.K.inverse();
+  L.images.reserve(in.sources.size());
+  for (size_t i = 0; i < in.sources.size(); ++i) {
+    const View* v = in.sources[i];
+    L.images.push_back(resize(v->gray));
+    const cv::Mat& img = L.images.back();
+    Source s;
+    s.img = img.ptr<float>(0);
+    s.w = img.cols;
+    s.h = img.rows;
+    s.stride = img.step1();
+    s.K = ScaledK(v->geom.K, static_cast<double>(s.w) / v->geom.width, static_cast<double>(s.h) / v->geom.height);
+    const Eigen::Matrix3d R = v->geom.R * rg.R.transpose();
+    s.R = R.cast<float>();
+    s.t = (v->geom.t - R * rg.t).cast<float>();
+    if (i < in.source_maps.size() && in.source_maps[i] && factor == 1.0) {
+      s.map = in.source_maps[i];
+      s.map_K = ScaledK(v->geom.K, static_cast<double>(s.map->width()) / v->geom.width,
+                        static_cast<double>(s.map->height()) / v->geom.height);
+      s.map_Kinv = s.map_K.inverse();
+    }
+    L.sources.push_back(s);
+  }
+  return L;
+}
+
+}  // namespace
+
+void PatchMatchOptions::Check() const {
+  if (window_radius < 1 || window_step < 1 || window_step > window_radius)
+    throw Error("patch match: need window_radius >= 1 and 1 <= window_step <= window_radius");
+  const int side = 2 * (window_radius / window_step) + 1;
+  if (side * side > kMaxSamples)
+    throw Error("patch match: window too large (at most " + std::to_string(kMaxSamples) +
+                " samples; raise window_step)");
+  if (!(sigma_color > 0 && sigma_spatial > 0)) throw Error("patch match: sigmas must be positive");
+  if (iterations < 1 || geom_iterations < 0) throw Error("patch match: iterations must be >= 1");
+  if (top_k < 1) throw Error("patch match: top_k must be >= 1");
+  if (!(geom_weight >= 0 && geom_max_error_px > 0)) throw Error("patch match: bad geometric weight / max error");
+  if (!(max_cost > 0 && max_cost <= 2)) throw Error("patch match: max_cost must be in (0, 2]");
+}
+
+DepthMap RunPatchMatch(const PatchMatchInput& in, const PatchMatchOptions& opt, PatchMatchStats* stats) {
+  opt.Check();
+  const auto start = std::chrono::steady_clock::now();
+  if (!in.ref) throw Error("patch match: no reference view");
+  if (in.sources.empty()) throw Error("patch match: view '" + in.ref->geom.name + "' has no source views");
+  if (in.sources.size() > 16) throw Error("patch match: at most 16 source views");
+  if (!(in.depth_min > 0 && in.depth_max > in.depth_min))
+    throw Error("patch match: view '" + in.ref->geom.name + "' has an empty depth range");
+  const ViewGeometry& rg = in.ref->geom;
+  const uint64_t seed = opt.seed * 0x100000001B3ull + rg.image_id;
+
+  std::vector<Eigen::Vector3f> seeds_cam;
+  for (const auto& X : in.seeds) seeds_cam.push_back((rg.R * X + rg.t).cast<float>());
+
+  const Level fine = MakeLevel(in, 1.0);
+  Solver solver(fine, opt, in.depth_min, in.depth_max, seed);
+  const bool geometric = in.init != nullptr;
+  if (geometric) {
+    // Geometric pass: start from the photometric planes, refine with small perturbations only.
+    for (int y = 0; y < fine.h; ++y)
+      for (int x = 0; x < fine.w; ++x) {
+        const size_t i = static_cast<size_t>(y) * fine.w + x;
+        solver.depth_[i] = in.init->depth.at<float>(y, x);
+        const cv::Vec3f n = in.init->normal.at<cv::Vec3f>(y, x);
+        solver.normal_[i] = Eigen::Vector3f(n[0], n[1], n[2]);
+      }
+    solver.Initialise(nullptr, true);
+    for (int r = 0; r < opt.geom_iterations; ++r) solver.Iterate(r + 3);
+  } else if (opt.coarse_to_fine && std::max(fine.w, fine.h) >= opt.coarse_min_size) {
+    const Level coarse = MakeLevel(in, 0.5);
+    Solver cs(coarse, opt, in.depth_min, in.depth_max, seed ^ 0xC0A25Eull);
+    cs.Initialise(&seeds_cam, false);
+    for (int r = 0; r < opt.iterations; ++r) cs.Iterate(r);
+    for (int y = 0; y < fine.h; ++y)
+      for (int x = 0; x < fine.w; ++x) {
+        const int cx = std::min(coarse.w - 1, x * coarse.w / fine.w), cy = std::min(coarse.h - 1, y * coarse.h / fine.h);
+        const size_t i = static_cast<size_t>(y) * fine.w + x, j = static_cast<size_t>(cy) * coarse.w + cx;
+        // The coarse plane, re-intersected with this pixel's ray.
+        const Eigen::Vector3f& n = cs.normal_[j];
+        const float den = n.dot(solver.Ray(x, y));
+        const Eigen::Vector3f Xc = cs.depth_[j] * cs.Ray(cx, cy);
+        const float d = den < 0 ? n.dot(Xc) / den : cs.depth_[j];
+        solver.depth_[i] = d;
+        solver.normal_[i] = n;
+      }
+    solver.Initialise(nullptr, true);
+    const int fine_rounds = std::max(2, opt.iterations - 2);
+    for (int r = 0; r < fine_rounds; ++r) solver.Iterate(r + 2);
+  } else {
+    solver.Initialise(&seeds_cam, false);
+    for (int r = 0; r < opt.iterations; ++r) solver.Iterate(r);
+  }
+
+  DepthMap out;
+  out.depth.create(fine.h, fine.w, CV_32F);
+  out.normal.create(fine.h, fine.w, CV_32FC3);
+  out.cost.create(fine.h, fine.w, CV_32F);
+  int valid = 0;
+  for (int y = 0; y < fine.h; ++y)
+    for (int x = 0; x < fine.w; ++x) {
+      const size_t i = static_cast<size_t>(y) * fine.w + x;
+      const bool ok = solver.photo_[i] <= opt.max_cost && solver.depth_[i] > 0;
+      out.depth.at<float>(y, x) = ok ? solver.depth_[i] : 0.f;
+      const Eigen::Vector3f& n = solver.normal_[i];
+      out.normal.at<cv::Vec3f>(y, x) = cv::Vec3f(n.x(), n.y(), n.z());
+      out.cost.at<float>(y, x) = solver.photo_[i];
+      valid += ok;
+    }
+  if (stats) {
+    stats->seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    stats->valid_pixels = valid;
+  }
+  return out;
+}
+
+}  // namespace fmv3d::mvs

@@ -1,0 +1,152 @@
+#include "fmv3d/mvs/view_selection.h"
+
+#include <Eigen/Dense>
+#include <algorithm>
+#include <cmath>
+#include <tbb/parallel_for.h>
+
+#include "fmv3d/core/error.h"
+
+namespace fmv3d::mvs {
+namespace {
+
+constexpr double kDeg = M_PI / 180.0;
+
+double Percentile(std::vector<double> v, double q) {
+  if (v.empty()) return 0;
+  const size_t k = std::min(v.size() - 1, static_cast<size_t>(q * (v.size() - 1) + 0.5));
+  std::nth_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(k), v.end());
+  return v[k];
+}
+
+// Least-squares point closest to every optical axis: where an orbit or an object-centred capture looks.
+// Returns false when the axes are (nearly) parallel, e.g. a nadir survey.
+bool AxisConvergence(const std::map<uint32_t, ViewGeometry>& geoms, Eigen::Vector3d* point) {
+  Eigen::Matrix3d A = Eigen::Matrix3d::Zero();
+  Eigen::Vector3d b = Eigen::Vector3d::Zero();
+  for (const auto& [id, g] : geoms) {
+    const Eigen::Vector3d d = g.R.row(2).transpose().normalized();
+    const Eigen::Matrix3d P = Eigen::Matrix3d::Identity() - d * d.transpose();
+    A += P;
+    b += P * g.Centre();
+  }
+  Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es(A);
+  if (es.eigenvalues()(0) < 1e-3 * es.eigenvalues()(2)) return false;
+  *point = A.ldlt().solve(b);
+  return point->allFinite();
+}
+
+}  // namespace
+
+void ViewSelectionOptions::Check() const {
+  if (max_neighbours < 1) throw Error("view selection: max_neighbours must be at least 1");
+  if (min_shared_points < 1) throw Error("view selection: min_shared_points must be at least 1");
+  if (!(min_angle_deg >= 0 && min_angle_deg < max_angle_deg && max_angle_deg <= 180))
+    throw Error("view selection: need 0 <= min_angle_deg < max_angle_deg <= 180");
+  if (!(good_angle_deg > 0)) throw Error("view selection: good_angle_deg must be positive");
+}
+
+std::map<uint32_t, ReferenceSelection> SelectViews(const core::Reconstruction& rec,
+                                                   const std::map<uint32_t, ViewGeometry>& geoms,
+                                                   const ViewSelectionOptions& options) {
+  options.Check();
+  std::vector<uint32_t> ids;
+  for (const auto& [id, g] : geoms) ids.push_back(id);
+  // Sparse points observed by each image.
+  std::map<uint32_t, std::vector<const core::Point3D*>> observed;
+  for (const auto& [pid, p] : rec.points) {
+    for (const auto& te : p.track)
+      if (geoms.count(te.image_id)) observed[te.image_id].push_back(&p);
+  }
+  Eigen::Vector3d convergence;
+  const bool has_convergence = AxisConvergence(geoms, &convergence);
+
+  std::vector<ReferenceSelection> out(ids.size());
+  tbb::parallel_for(size_t{0}, ids.size(), [&](size_t ri) {
+    const ViewGeometry& ref = geoms.at(ids[ri]);
+    ReferenceSelection& sel = out[ri];
+    const Eigen::Vector3d cr = ref.Centre();
+    const double fr = ref.K(1, 1);
+    // The reference's points: sparse points it sees, or stand-ins at the convergence depth.
+    std::vector<Eigen::Vector3d> pts;
+    std::vector<const core::Point3D*> sparse;
+    auto obs = observed.find(ref.image_id);
+    if (obs != observed.end() && obs->second.size() >= static_cast<size_t>(options.min_shared_points)) {
+      for (const auto* p : obs->second) {
+        Eigen::Vector2d uv;
+        if (ref.Project(p->xyz, &uv)) {
+          pts.push_back(p->xyz);
+          sparse.push_back(p);
+        }
+      }
+      sel.from_sparse_points = true;
+    }
+    std::vector<double> depths;
+    if (sel.from_sparse_points) {
+      for (const auto& X : pts) depths.push_back((ref.R * X + ref.t).z());
+      const double lo = Percentile(depths, 0.01), hi = Percentile(depths, 0.99);
+      sel.depth_min = 0.6 * lo;
+      sel.depth_max = 1.6 * hi;
+    } else {
+      double z0 = 0;
+      if (has_convergence) z0 = (ref.R * convergence + ref.t).z();
+      if (!(z0 > 0)) {
+        sel.problem = "no sparse points and no common viewing target to estimate a depth range";
+        return;
+      }
+      sel.depth_min = z0 / 3;
+      sel.depth_max = z0 * 3;
+      for (int gy = 0; gy < 9; ++gy)
+        for (int gx = 0; gx < 16; ++gx)
+          pts.push_back(ref.Unproject({(gx + 0.5) * ref.width / 16.0, (gy + 0.5) * ref.height / 9.0}, z0));
+    }
+    std::vector<Neighbour> cands;
+    for (uint32_t jd : ids) {
+      if (jd == ref.image_id) continue;
+      const ViewGeometry& src = geoms.at(jd);
+      const Eigen::Vector3d cj = src.Centre();
+      const double fj = src.K(1, 1);
+      Neighbour nb;
+      nb.image_id = jd;
+      std::vector<double> angles;
+      for (size_t k = 0; k < pts.size(); ++k) {
+        const Eigen::Vector3d& X = pts[k];
+        if (sel.from_sparse_points) {
+          const auto& tr = sparse[k]->track;
+          if (std::none_of(tr.begin(), tr.end(), [&](const core::TrackElement& te) { return te.image_id == jd; }))
+            continue;
+        } else {
+          Eigen::Vector2d uv;
+          if (!src.Project(X, &uv) || uv.x() < 0 || uv.y() < 0 || uv.x() > src.width || uv.y() > src.height)
+            continue;
+        }
+        const Eigen::Vector3d a = cr - X, b = cj - X;
+        const double alpha = std::atan2(a.cross(b).norm(), a.dot(b));
+        angles.push_back(alpha);
+        if (alpha < options.min_angle_deg * kDeg || alpha > options.max_angle_deg * kDeg) continue;
+        const double w_angle = std::min(1.0, std::pow(alpha / (options.good_angle_deg * kDeg), 2));
+        const double s = (a.norm() / fr) / (b.norm() / fj);
+        const double w_scale = s < 1 ? s : (s > 2 ? 2 / s : 1.0);
+        nb.score += w_angle * w_scale;
+      }
+      nb.shared_points = static_cast<int>(angles.size());
+      if (nb.shared_points < options.min_shared_points || nb.score <= 0) continue;
+      nb.median_angle_deg = Percentile(angles, 0.5) / kDeg;
+      if (nb.median_angle_deg < options.min_angle_deg || nb.median_angle_deg > options.max_angle_deg) continue;
+      cands.push_back(nb);
+    }
+    std::sort(cands.begin(), cands.end(), [](const Neighbour& a, const Neighbour& b) {
+      return a.score != b.score ? a.score > b.score : a.image_id < b.image_id;
+    });
+    if (cands.size() > static_cast<size_t>(options.max_neighbours)) cands.resize(options.max_neighbours);
+    sel.neighbours = std::move(cands);
+    if (sel.neighbours.empty())
+      sel.problem = "no other view shares enough of its surface at a triangulation angle in [" +
+                    std::to_string(options.min_angle_deg) + ", " + std::to_string(options.max_angle_deg) + "] deg";
+  });
+  std::map<uint32_t, ReferenceSelection> result;
+  for (size_t i = 0; i < ids.size(); ++i) result[ids[i]] = std::move(out[i]);
+  return result;
+}
+
+}  // namespace fmv3d::mvs

@@ -1,0 +1,243 @@
+// Dense stereo on small synthetic flights rendered with exact cameras (`fmv3d synth`'s library entry): the
+// true model is the sparse model, so depth maps and fused points are checked against the true depth and mesh.
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <filesystem>
+#include <fstream>
+
+#include "fmv3d/core/error.h"
+#include "fmv3d/core/files.h"
+#include "fmv3d/geometry/mesh_distance.h"
+#include "fmv3d/io/colmap_model.h"
+#include "fmv3d/io/image_io.h"
+#include "fmv3d/io/obj_io.h"
+#include "fmv3d/io/point_cloud.h"
+#include "fmv3d/mvs/dense_stage.h"
+#include "fmv3d/mvs/depth_map.h"
+#include "fmv3d/mvs/evaluation.h"
+#include "fmv3d/mvs/patch_match.h"
+#include "fmv3d/mvs/view_selection.h"
+#include "fmv3d/synth/synth.h"
+#include "test_util.h"
+
+namespace fmv3d::mvs {
+namespace {
+
+namespace fs = std::filesystem;
+
+// Renders a small orbit around the single building once per test binary; the workspace is frames/ +
+// sparse/ (= the exact truth/ model with its sample tracks).
+struct Flight {
+  fs::path dir;
+  synth::SynthResult result;
+};
+
+const Flight& SmallFlight() {
+  static test::TempDir* tmp = new test::TempDir("mvs_flight");  // lives for the whole binary
+  static Flight flight = [] {
+    synth::SynthOptions so;
+    so.scene = "building";
+    so.width = 320;
+    so.height = 240;
+    so.flight.frames = 10;
+    so.flight.jitter_deg = 0.2;
+    so.detail = 0.5;
+    so.truth_points = 1500;
+    so.write_depth = true;
+    so.output = tmp->path() / "synth";
+    Flight f;
+    f.dir = so.output;
+    f.result = synth::RunSynth(so);
+    return f;
+  }();
+  return flight;
+}
+
+fs::path MakeWorkspace(const test::TempDir& dir, const Flight& flight) {
+  const fs::path ws = dir / "ws";
+  fs::create_directories(ws / "sparse");
+  fs::copy(flight.dir / "frames", ws / "frames", fs::copy_options::recursive);
+  io::WriteColmapText(flight.result.truth, ws / "sparse");
+  return ws;
+}
+
+TEST(PatchMatch, DepthMatchesRenderedTruth) {
+  const Flight& flight = SmallFlight();
+  const auto& rec = flight.result.truth;
+  std::map<uint32_t, ViewGeometry> geoms;
+  for (const auto& [id, im] : rec.images) geoms[id] = MakeViewGeometry(rec, id, 0);
+  const auto sel = SelectViews(rec, geoms, {});
+  const uint32_t ref_id = rec.images.begin()->first;
+  const auto& rs = sel.at(ref_id);
+  ASSERT_TRUE(rs.problem.empty()) << rs.problem;
+  ASSERT_GE(rs.neighbours.size(), 3u);
+  const View ref = LoadView(rec, geoms.at(ref_id), flight.dir / "frames");
+  std::vector<View> srcs;
+  for (size_t k = 0; k < 4 && k < rs.neighbours.size(); ++k)
+    srcs.push_back(LoadView(rec, geoms.at(rs.neighbours[k].image_id), flight.dir / "frames"));
+  PatchMatchInput in;
+  in.ref = &ref;
+  for (const auto& s : srcs) in.sources.push_back(&s);
+  in.depth_min = rs.depth_min;
+  in.depth_max = rs.depth_max;
+  PatchMatchOptions opt;
+  const DepthMap map = RunPatchMatch(in, opt);
+  ASSERT_EQ(map.width(), 320);
+  ASSERT_EQ(map.height(), 240);
+
+  // Truth depth of the same (undistorted, full-size) pixels.
+  const auto& name = rec.images.at(ref_id).name;
+  const cv::Mat truth = cv::imread((flight.dir / "depth" / (fs::path(name).stem().string() + ".tiff")).string(),
+                                   cv::IMREAD_UNCHANGED);
+  ASSERT_EQ(truth.type(), CV_32F);
+  int seen = 0, valid = 0, good = 0;
+  for (int y = 0; y < truth.rows; ++y)
+    for (int x = 0; x < truth.cols; ++x) {
+      const float t = truth.at<float>(y, x), d = map.depth.at<float>(y, x);
+      if (!(t > 0)) continue;
+      ++seen;
+      if (!(d > 0)) continue;
+      ++valid;
+      good += std::abs(d - t) <= 0.01f * t;
+    }
+  ASSERT_GT(seen, 1000);
+  EXPECT_GT(static_cast<double>(valid) / seen, 0.7) << valid << " of " << seen;
+  EXPECT_GT(static_cast<double>(good) / valid, 0.9) << good << " of " << valid << " within 1% of the true depth";
+}
+
+TEST(DenseStage, FusedPointsLieOnTheTrueSurface) {
+  const Flight& flight = SmallFlight();
+  test::TempDir dir("mvs_stage");
+  const fs::path ws = MakeWorkspace(dir, flight);
+  DenseStageOptions opt;
+  opt.max_size = 0;
+  const auto report = RunDenseStage(ws, opt);
+  EXPECT_EQ(report.at("views_used").get<int>(), 10);
+  ASSERT_TRUE(fs::exists(ws / "dense" / "fused.ply"));
+  ASSERT_TRUE(fs::exists(ws / "report" / "dense.json"));
+  const std::string first = MapFileStem(flight.result.truth.images.begin()->second.name);
+  EXPECT_TRUE(fs::exists(ws / "dense" / "maps" / (first + ".dmap")));
+  EXPECT_TRUE(fs::exists(ws / "dense" / "maps" / (first + ".depth.png")));
+  EXPECT_FALSE(fs::exists(ws / "dense" / "maps" / (first + ".photometric.dmap")));
+
+  const io::OrientedPointCloud cloud = io::ReadPointCloudPly(ws / "dense" / "fused.ply");
+  ASSERT_GT(cloud.size(), 20000u);
+  EXPECT_EQ(cloud.size(), report.at("points").get<size_t>());
+  ASSERT_TRUE(cloud.has_normals());
+  ASSERT_TRUE(cloud.has_colors());
+  ASSERT_TRUE(cloud.has_visibility());
+  const auto& images = flight.result.truth.images;
+  for (size_t i = 0; i < cloud.size(); i += 97) {
+    ASSERT_GE(cloud.visibility[i].size(), static_cast<size_t>(opt.fusion.min_views));
+    for (uint32_t id : cloud.visibility[i]) ASSERT_TRUE(images.count(id)) << id;
+    EXPECT_NEAR(cloud.normals[i].norm(), 1.0, 1e-3);
+    // The normal faces the cameras that see the point.
+    const Eigen::Vector3d to_cam = images.at(cloud.visibility[i][0]).pose.Centre() - cloud.positions[i];
+    EXPECT_GT(cloud.normals[i].cast<double>().dot(to_cam), 0);
+  }
+
+  const io::TexturedMesh scene = io::ReadObj(flight.dir / "scene.obj", false);
+  const auto ev = EvaluateDense(cloud, flight.result.truth, flight.result.truth, scene,
+                                flight.result.characteristic_length);
+  // At 320x240 a pixel covers ~0.2 m of the 30 m building: points within a fraction of a pixel.
+  EXPECT_LT(ev.median_fraction(), 0.004) << ev.ToJson().dump();
+  EXPECT_LT(ev.p90_fraction(), 0.015) << ev.ToJson().dump();
+  EXPECT_GT(ev.completeness, 0.6) << ev.ToJson().dump();
+}
+
+TEST(DenseStage, ViewWithoutNeighboursIsSkipped) {
+  const Flight& flight = SmallFlight();
+  test::TempDir dir("mvs_skip");
+  const fs::path ws = MakeWorkspace(dir, flight);
+  // An extra image looking straight up: it shares no surface with the others.
+  core::Reconstruction rec = flight.result.truth;
+  core::Image sky = rec.images.begin()->second;
+  sky.id = 1000;
+  sky.name = "sky.png";
+  sky.points2d.clear();
+  sky.point3d_ids.clear();
+  sky.pose = core::Pose::LookAt(Eigen::Vector3d(0, 0, 200), Eigen::Vector3d(0, 0, 400), Eigen::Vector3d::UnitY());
+  rec.images[sky.id] = sky;
+  io::WriteColmapText(rec, ws / "sparse");
+  fs::copy_file(ws / "frames" / rec.images.begin()->second.name, ws / "frames" / "sky.png");
+  DenseStageOptions opt;
+  opt.max_size = 160;
+  opt.geometric = false;
+  const auto report = RunDenseStage(ws, opt);
+  EXPECT_EQ(report.at("views_used").get<int>(), 10);
+  ASSERT_EQ(report.at("views_skipped").size(), 1u);
+  EXPECT_EQ(report.at("views_skipped")[0].at("image").get<std::string>(), "sky.png");
+}
+
+TEST(DenseStage, BadInputGivesClearErrors) {
+  const Flight& flight = SmallFlight();
+  test::TempDir dir("mvs_bad");
+  const fs::path ws = dir / "ws";
+  fs::create_directories(ws);
+  try {
+    RunDenseStage(ws, {});
+    FAIL() << "no sparse model accepted";
+  } catch (const Error& e) {
+    EXPECT_NE(std::string(e.what()).find("fmv3d sparse"), std::string::npos) << e.what();
+  }
+  core::Reconstruction one = flight.result.truth;
+  while (one.images.size() > 1) one.images.erase(std::prev(one.images.end()));
+  one.points.clear();
+  io::WriteColmapText(one, ws / "sparse");
+  try {
+    RunDenseStage(ws, {});
+    FAIL() << "single-view model accepted";
+  } catch (const Error& e) {
+    EXPECT_NE(std::string(e.what()).find("at least 2"), std::string::npos) << e.what();
+  }
+  // Two registered images but their frames are missing.
+  core::Reconstruction two = flight.result.truth;
+  while (two.images.size() > 2) two.images.erase(std::prev(two.images.end()));
+  two.points.clear();
+  io::WriteColmapText(two, ws / "sparse");
+  try {
+    RunDenseStage(ws, {});
+    FAIL() << "missing frames accepted";
+  } catch (const Error& e) {
+    EXPECT_NE(std::string(e.what()).find("not found"), std::string::npos) << e.what();
+  }
+  DenseStageOptions bad;
+  bad.max_sources = 0;
+  EXPECT_THROW(bad.Check(), Error);
+  bad = {};
+  bad.patch_match.window_step = 0;
+  EXPECT_THROW(bad.Check(), Error);
+}
+
+TEST(DepthMapFile, RoundTripAndCorruption) {
+  test::TempDir dir("mvs_dmap");
+  DepthMap m;
+  m.depth = cv::Mat(7, 5, CV_32F);
+  m.normal = cv::Mat(7, 5, CV_32FC3);
+  m.cost = cv::Mat(7, 5, CV_32F);
+  cv::randu(m.depth, 0, 10);
+  cv::randu(m.normal, -1, 1);
+  cv::randu(m.cost, 0, 2);
+  WriteDepthMap(m, dir / "a.dmap");
+  const DepthMap r = ReadDepthMap(dir / "a.dmap");
+  ASSERT_EQ(r.width(), 5);
+  ASSERT_EQ(r.height(), 7);
+  EXPECT_EQ(cv::norm(m.depth, r.depth, cv::NORM_INF), 0);
+  EXPECT_EQ(cv::norm(m.normal, r.normal, cv::NORM_INF), 0);
+  EXPECT_EQ(cv::norm(m.cost, r.cost, cv::NORM_INF), 0);
+  // Truncated file.
+  fs::resize_file(dir / "a.dmap", fs::file_size(dir / "a.dmap") - 4);
+  EXPECT_THROW(ReadDepthMap(dir / "a.dmap"), Error);
+  // Not a depth map.
+  core::WriteTextFile(dir / "b.dmap", "hello, this is not a depth map at all");
+  try {
+    ReadDepthMap(dir / "b.dmap");
+    FAIL();
+  } catch (const Error& e) {
+    EXPECT_NE(std::string(e.what()).find("not an fmv3d depth map"), std::string::npos);
+  }
+}
+
+}  // namespace
+}  // namespace fmv3d::mvs
