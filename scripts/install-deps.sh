@@ -5,7 +5,7 @@ set -euo pipefail
 
 PACKAGES=(
   build-essential cmake ninja-build pkg-config
-  libopencv-dev libceres-dev libeigen3-dev libopen3d-dev libgdal-dev
+  libopencv-dev libceres-dev libeigen3-dev libopen3d-dev libgdal-dev libproj-dev
   libcli11-dev libspdlog-dev nlohmann-json3-dev libgtest-dev libgmock-dev libbenchmark-dev libtbb-dev
   libavformat-dev libavcodec-dev libavutil-dev libswscale-dev
   libtinygltf-dev

@@ -1,33 +1,23 @@
-// `fmv3d demo`: for now, renders the default synthetic flight (building scene, orbit, 48 frames, 960x540,
-// H.264 mp4) with its ground truth and says where the files are. The full pipeline will extend it.
-#include <iostream>
+// `fmv3d demo`: render a synthetic flight around the CAD building, reconstruct it, measure it against the
+// truth (pipeline/demo.h). The README's first command.
+#include <memory>
 
 #include "command.h"
-#include "fmv3d/synth/synth.h"
+#include "fmv3d/pipeline/demo.h"
 
 namespace fmv3d::app {
 namespace {
 
 void Add(CLI::App& app) {
-  auto* cmd = app.add_subcommand("demo", "Render the default synthetic flight (later: run the whole pipeline)");
+  auto* cmd = app.add_subcommand("demo", "Render a synthetic flight, reconstruct it and print its accuracy");
+  auto o = std::make_shared<pipeline::DemoOptions>();
   auto out = std::make_shared<std::string>("demo");
-  cmd->add_option("-o,--output", *out, "Output folder")->capture_default_str();
-  cmd->callback([out] {
-    synth::SynthOptions o;
-    o.scene = "building";
-    o.flight.path = "orbit";
-    o.flight.frames = 48;
-    o.width = 960;
-    o.height = 540;
-    o.format = "mp4";
-    o.render.noise_sigma = 1.5;
-    o.output = *out;
-    const auto r = synth::RunSynth(o);
-    std::cout << "demo: synthetic flight of " << r.frames << " frames\n"
-              << "  video:        " << (o.output / "flight.mp4").string() << "\n"
-              << "  ground truth: " << (o.output / "truth").string() << " (COLMAP text model), "
-              << (o.output / "truth.json").string() << "\n"
-              << "  scene mesh:   " << (o.output / "scene.obj").string() << "\n";
+  cmd->add_option("-o,--output", *out, "Output folder (re-running resumes)")->capture_default_str();
+  cmd->add_option("--frames", o->frames, "Frames in the flight")->capture_default_str();
+  cmd->add_option("--seed", o->seed, "Flight jitter and sensor noise seed")->capture_default_str();
+  cmd->callback([o, out] {
+    o->output = *out;
+    pipeline::RunDemo(*o);
   });
 }
 

@@ -19,7 +19,14 @@ void Add(CLI::App& app) {
   };
   auto a = std::make_shared<Args>();
   cmd->add_option("WS", a->ws, "Workspace folder (with frames/ and features/)")->required();
-  cmd->add_option("--pairs", a->pairs, "auto | exhaustive | sequential | spatial (auto: exhaustive up to 50 images)")
+  cmd->add_option("--pairs", a->pairs, "auto | exhaustive | sequential | spatial (auto: exhaustive up to 50 images; spatial: "
+                  "overlapping ground footprints from the frames' telemetry)")
+      ->capture_default_str();
+  cmd->add_option("--spatial-overlap", a->opt.pairs.spatial_overlap_factor,
+                  "spatial: pair frames whose footprint centres are closer than this times the radii sum")
+      ->capture_default_str();
+  cmd->add_option("--spatial-neighbours", a->opt.pairs.spatial_max_neighbours,
+                  "spatial: nearest overlapping frames kept per frame")
       ->capture_default_str();
   cmd->add_option("--overlap", a->opt.pairs.overlap, "sequential: match each frame with the next N")
       ->capture_default_str();

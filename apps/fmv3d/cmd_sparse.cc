@@ -33,6 +33,19 @@ void Add(CLI::App& app) {
                   "Test freeing the principal point from this model size on")
       ->capture_default_str();
   cmd->add_flag("--tangential", m.refine_tangential, "Also refine p1, p2");
+  cmd->add_option("--local-ba-iterations", m.local_ba_max_iterations, "Local BA: maximum iterations")
+      ->capture_default_str();
+  cmd->add_option("--global-ba-iterations", m.global_ba_max_iterations,
+                  "Intermediate global BA: maximum iterations")
+      ->capture_default_str();
+  cmd->add_option("--global-ba-ratio", m.global_ba_growth_ratio,
+                  "Global BA whenever the model has grown by this factor")
+      ->capture_default_str();
+  cmd->add_option("--final-ba-iterations", m.final_ba_max_iterations, "Final global BA: maximum iterations")
+      ->capture_default_str();
+  cmd->add_option("--final-ba-tolerance", m.final_ba_function_tolerance,
+                  "Final global BA: relative cost decrease at which it stops")
+      ->capture_default_str();
   cmd->add_option("--max-models", m.max_models, "Maximum number of disconnected models")->capture_default_str();
   cmd->add_option("--seed", m.seed, "Random seed")->capture_default_str();
   cmd->callback([a] {

@@ -79,6 +79,8 @@ void Add(CLI::App& app) {
       "  scene.obj scene.mtl *.png      the scene mesh in world metres (z up) with textures\n"
       "  truth.json                     characteristic_length (tallest building, m), bounds, seed, fps, options\n"
       "  depth/flight-NNNNNN.tiff       with --depth: float32 depth maps (camera z, metres; 0 = sky)\n"
+      "With --klv, flight.ts carries one MISB ST 0601 packet per frame (noisy GPS / attitude of the truth\n"
+      "cameras) and truth.json states geo_origin: the world is the local East-North-Up frame of that point.\n"
       "A --scene is a fixed world; --seed varies only the flight's jitter and the sensor noise.");
   auto o = std::make_shared<synth::SynthOptions>();
   auto size = std::make_shared<std::string>("1280x720");
@@ -121,7 +123,7 @@ void Add(CLI::App& app) {
       ->check(CLI::Range(0.0, 19.0))
       ->capture_default_str();
   cmd->add_option("--seed", o->flight.seed, "Seed for the flight jitter and sensor noise")->capture_default_str();
-  cmd->add_option("--format", o->format, "Output: png | jpg | mp4 | ts")
+  auto* format_opt = cmd->add_option("--format", o->format, "Output: png | jpg | mp4 | ts")
       ->check(CLI::IsMember({"png", "jpg", "mp4", "ts"}))
       ->capture_default_str();
   cmd->add_option("--fps", o->fps, "Frame rate (video and truth.json)")->check(CLI::PositiveNumber)->capture_default_str();
@@ -132,6 +134,19 @@ void Add(CLI::App& app) {
       ->check(CLI::NonNegativeNumber)
       ->capture_default_str();
   cmd->add_flag("--depth", o->write_depth, "Also write float depth maps to DIR/depth/");
+  auto* klv_opt = cmd->add_flag("--klv", o->klv,
+                                "Write flight.ts with a MISB ST 0601 KLV telemetry stream (implies --format ts)");
+  auto geo_origin = std::make_shared<std::string>("38.16,-77.35,60");
+  cmd->add_option("--geo-origin", *geo_origin, "With --klv: WGS84 LAT,LON,ALT of the world origin (ellipsoidal m)")
+      ->check(kList3)
+      ->capture_default_str();
+  cmd->add_option("--gps-noise", o->klv_options.gps_noise, "With --klv: GPS position noise, metres (1 sigma per axis)")
+      ->check(CLI::Range(0.0, 1000.0))
+      ->capture_default_str();
+  cmd->add_option("--attitude-noise", o->klv_options.attitude_noise,
+                  "With --klv: platform heading/pitch/roll noise, degrees (1 sigma)")
+      ->check(CLI::Range(0.0, 30.0))
+      ->capture_default_str();
   cmd->add_flag("!--no-scene", o->write_scene, "Do not write scene.obj and its textures");
   cmd->add_option("-o,--output", *output, "Output folder")->required();
   cmd->callback([=] {
@@ -147,6 +162,11 @@ void Add(CLI::App& app) {
     if (!look_at->empty()) {
       const auto p = ParseList(*look_at);
       opts.flight.look_at = Eigen::Vector3d(p[0], p[1], p[2]);
+    }
+    if (klv_opt->count()) {
+      const auto g = ParseList(*geo_origin);
+      opts.klv_options.origin = {g[0], g[1], g[2]};
+      if (!format_opt->count()) opts.format = "ts";
     }
     opts.output = *output;
     const auto r = synth::RunSynth(opts);

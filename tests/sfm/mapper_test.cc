@@ -2,6 +2,8 @@
 #include <gtest/gtest.h>
 #include <spdlog/spdlog.h>
 
+#include <Eigen/Geometry>
+#include <map>
 #include <random>
 
 #include "fmv3d/core/error.h"
@@ -124,6 +126,123 @@ TEST(IncrementalMapper, BadInputIsLeftOutWithAReason) {
   EXPECT_EQ(result.left_out.size(), 4u);
   const auto ev = EvaluateSparse(result.models[0], scene.truth);
   EXPECT_LE(ev.centre_rmse_fraction, 0.001);
+}
+
+// Views from one camera centre (a pan/tilt of a hovering platform): each pair of them is a pure rotation.
+// Appends `n` such images (ids from first_id), all looking at the scene's points, with exact correspondences
+// between consecutive ones and, when with_image1, to image 1.
+void AddPureRotationImages(SyntheticScene* scene, uint32_t first_id, int n, const Eigen::Vector3d& centre,
+                           bool with_image1) {
+  auto& in = scene->input;
+  const core::Camera cam = in.cameras.at(1).camera;
+  std::vector<std::map<uint64_t, uint32_t>> seen;  // point id → keypoint index, per added image
+  // Looks at the centroid of the truth points, panned by a few degrees per image.
+  Eigen::Vector3d target = Eigen::Vector3d::Zero();
+  for (const auto& [pid, p] : scene->truth.points) target += p.xyz;
+  target /= std::max<size_t>(1, scene->truth.points.size());
+  // The true camera (with its distortion) when the views join a synthetic flight; the prior otherwise, so a
+  // rotation-only set is exactly a pure rotation under the model the mapper starts from.
+  const core::Camera truth_cam = with_image1 ? scene->truth.cameras.begin()->second : cam;
+  for (int k = 0; k < n; ++k) {
+    const Eigen::Vector3d z = (target - centre).normalized();
+    const Eigen::Vector3d pan = Eigen::AngleAxisd(0.04 * (k - n / 2.0), Eigen::Vector3d::UnitZ()) * z;
+    const Eigen::Vector3d x = pan.cross(Eigen::Vector3d::UnitZ()).normalized(), y = pan.cross(x);
+    Eigen::Matrix3d R;
+    R.row(0) = x;
+    R.row(1) = y;
+    R.row(2) = pan;
+    const core::Pose pose(Eigen::Quaterniond(R), -R * centre);
+    MapperImage im;
+    im.id = first_id + k;
+    im.name = "rotation-" + std::to_string(k) + ".png";
+    std::map<uint64_t, uint32_t> ids;
+    for (const auto& [pid, p] : scene->truth.points) {
+      const Eigen::Vector3d xc = pose.Transform(p.xyz);
+      if (xc.z() <= 0) continue;
+      const Eigen::Vector2d uv = truth_cam.Project(xc);
+      if (uv.x() < 0 || uv.y() < 0 || uv.x() > cam.width || uv.y() > cam.height) continue;
+      ids[pid] = static_cast<uint32_t>(im.keypoints.size());
+      im.keypoints.push_back(uv);
+    }
+    in.images.push_back(im);
+    seen.push_back(ids);
+  }
+  auto pair_of = [&](uint32_t id1, const std::map<uint64_t, uint32_t>& a, uint32_t id2,
+                     const std::map<uint64_t, uint32_t>& b) {
+    features::VerifiedPair vp;
+    vp.image_id1 = id1;
+    vp.image_id2 = id2;
+    for (const auto& [pid, ka] : a)
+      if (auto it = b.find(pid); it != b.end()) vp.inliers.push_back({ka, it->second});
+    vp.num_inliers_H = static_cast<uint32_t>(vp.inliers.size());  // a homography explains every match
+    vp.geometry = features::PairGeometry::kPlanarOrRotation;
+    if (vp.inliers.size() >= 30) in.pairs.push_back(vp);
+  };
+  for (int k = 0; k + 1 < n; ++k)
+    for (int j = k + 1; j < n && j <= k + 3; ++j) pair_of(first_id + k, seen[k], first_id + j, seen[j]);
+  if (with_image1) {
+    // Image 1's keypoints are shuffled: find each point's keypoint by its true projection (noise is 0.5 px).
+    const auto& pose1 = scene->truth.images.at(1).pose;
+    const auto& kps1 = in.images.front().keypoints;
+    std::map<uint64_t, uint32_t> ids1;
+    for (const auto& [pid, p] : scene->truth.points) {
+      const Eigen::Vector3d xc = pose1.Transform(p.xyz);
+      if (xc.z() <= 0) continue;
+      const Eigen::Vector2d uv = truth_cam.Project(xc);
+      for (uint32_t kp = 0; kp < kps1.size(); ++kp)
+        if ((kps1[kp] - uv).norm() < 2.5) {
+          ids1[pid] = kp;
+          break;
+        }
+    }
+    for (int k = 0; k < n; ++k) pair_of(1, ids1, first_id + k, seen[k]);
+  }
+}
+
+// A pure-rotation segment within a flight: its frames see triangulated points, so they register by absolute
+// pose even though no pair among them has a baseline; the rest of the flight is unaffected.
+TEST(IncrementalMapper, PureRotationSegmentRegistersByAbsolutePose) {
+  SyntheticSceneOptions so;
+  so.num_cameras = 12;
+  so.num_points = 600;
+  so.guess_focal_factor = 0;
+  auto scene = MakeSyntheticScene(so);
+  const Eigen::Vector3d c1 = scene.truth.images.at(1).pose.Centre();
+  AddPureRotationImages(&scene, 200, 5, c1, true);
+  MapperResult result;
+  ASSERT_NO_THROW(result = RunIncrementalMapper(scene.input, {}));
+  ASSERT_FALSE(result.models.empty());
+  const auto& rec = result.models[0];
+  EXPECT_EQ(rec.images.size(), 17u);
+  for (const auto& [id, why] : result.left_out) ADD_FAILURE() << id << ": " << why;
+  const auto ev = EvaluateSparse(rec, scene.truth);  // truth has the 12 orbit cameras
+  EXPECT_LE(ev.centre_rmse_fraction, 0.001);
+  // The rotation frames sit at image 1's centre.
+  for (uint32_t id = 200; id < 205; ++id)
+    if (rec.images.count(id)) {
+      const double d = (rec.images.at(id).pose.Centre() - rec.images.at(1).pose.Centre()).norm();
+      const double extent = (rec.images.at(1).pose.Centre() - rec.images.at(7).pose.Centre()).norm();
+      EXPECT_LT(d, 0.01 * extent) << id;
+    }
+}
+
+// Nothing but a pure rotation: no pair has a baseline, so no model can be made. The mapper must say so for every
+// frame and return, not throw or loop.
+TEST(IncrementalMapper, OnlyPureRotationGivesNoModelAndReasons) {
+  SyntheticSceneOptions so;
+  so.num_cameras = 12;
+  so.num_points = 600;
+  so.guess_focal_factor = 0;
+  auto scene = MakeSyntheticScene(so);
+  SyntheticScene rot;
+  rot.truth = scene.truth;
+  rot.input.cameras = scene.input.cameras;
+  AddPureRotationImages(&rot, 1, 8, scene.truth.images.at(1).pose.Centre(), false);
+  MapperResult result;
+  ASSERT_NO_THROW(result = RunIncrementalMapper(rot.input, {}));
+  EXPECT_TRUE(result.models.empty());
+  EXPECT_EQ(result.left_out.size(), 8u);
+  for (const auto& [id, why] : result.left_out) EXPECT_FALSE(why.empty()) << id;
 }
 
 TEST(IncrementalMapper, NothingToReconstruct) {

@@ -11,6 +11,7 @@
 #include "fmv3d/core/files.h"
 #include "fmv3d/core/logging.h"
 #include "fmv3d/features/feature_io.h"
+#include "fmv3d/features/spatial_pairs.h"
 #include "fmv3d/io/frames_index.h"
 
 namespace fmv3d::features {
@@ -119,7 +120,9 @@ MatchStageStats RunMatchStage(const fs::path& workspace, const MatchStageOptions
   std::vector<const Descriptors*> descs(n);
   for (size_t i = 0; i < n; ++i) descs[i] = &features[i].descriptors;
   PairMode mode = PairMode::kAuto;
-  const auto pairs = SelectPairs(descs, options.pairs, &mode, &stats.loop_closure_pairs);
+  std::vector<Footprint> footprints;
+  if (options.pairs.mode == PairMode::kSpatial) footprints = FootprintsFromTelemetry(index);
+  const auto pairs = SelectPairs(descs, options.pairs, &mode, &stats.loop_closure_pairs, &footprints);
   stats.pairs_tried = pairs.size();
   stats.seconds_pairs = Since(t_pairs);
   spdlog::info("match: {} images, {} pairs ({}{})", n, pairs.size(), PairModeName(mode),

@@ -8,7 +8,10 @@
 #include <opencv2/core.hpp>
 #include <set>
 
+#include <spdlog/spdlog.h>
+
 #include "fmv3d/core/error.h"
+#include "fmv3d/features/spatial_pairs.h"
 
 namespace fmv3d::features {
 
@@ -35,6 +38,8 @@ void PairOptions::Check() const {
   if (loop_closure_candidates < 0) throw Error("match: --loop-closure must be >= 0");
   if (vocabulary_size < 2) throw Error("match: vocabulary size must be >= 2");
   if (vocabulary_samples_per_image < 1) throw Error("match: vocabulary samples must be >= 1");
+  if (!(spatial_overlap_factor > 0)) throw Error("match: spatial overlap factor must be > 0");
+  if (spatial_max_neighbours < 1) throw Error("match: spatial max neighbours must be >= 1");
 }
 
 std::vector<ImagePair> ExhaustivePairs(size_t n) {
@@ -139,16 +144,48 @@ std::vector<ImagePair> LoopClosurePairs(const std::vector<std::vector<float>>& g
 }
 
 std::vector<ImagePair> SelectPairs(const std::vector<const Descriptors*>& images, const PairOptions& o,
-                                   PairMode* used_mode, size_t* num_loop_closure_pairs) {
+                                   PairMode* used_mode, size_t* num_loop_closure_pairs,
+                                   const std::vector<Footprint>* footprints) {
   o.Check();
   PairMode mode = o.mode;
-  if (mode == PairMode::kAuto)
-    mode = images.size() <= static_cast<size_t>(o.auto_exhaustive_max_images) ? PairMode::kExhaustive
-                                                                              : PairMode::kSequential;
-  if (used_mode) *used_mode = mode;
+  const PairMode by_count = images.size() <= static_cast<size_t>(o.auto_exhaustive_max_images)
+                                ? PairMode::kExhaustive
+                                : PairMode::kSequential;
+  if (mode == PairMode::kAuto) mode = by_count;
   if (num_loop_closure_pairs) *num_loop_closure_pairs = 0;
-  if (mode == PairMode::kSpatial)
-    throw Error("match: --pairs spatial (telemetry priors) is not implemented yet; use sequential or exhaustive");
+  if (mode == PairMode::kSpatial) {
+    size_t valid = 0;
+    std::string why = "no footprints given";
+    if (footprints) {
+      if (footprints->size() != images.size())
+        throw Error("match: " + std::to_string(footprints->size()) + " footprints for " +
+                    std::to_string(images.size()) + " images");
+      for (const auto& f : *footprints) {
+        valid += f.valid;
+        if (!f.valid) why = f.why_invalid;
+      }
+    }
+    if (valid == 0) {
+      spdlog::warn("match: --pairs spatial needs per-frame telemetry (sensor latitude/longitude and altitude in "
+                   "frames.json) and none of the {} frames has it ({}); falling back to {} pairs",
+                   images.size(), why, PairModeName(by_count));
+      mode = by_count;
+    } else {
+      if (used_mode) *used_mode = mode;
+      std::set<ImagePair> s;
+      for (const auto& p : SpatialPairs(*footprints, o.spatial_overlap_factor, o.spatial_max_neighbours)) s.insert(p);
+      // Frames without a footprint: their sequential neighbours (the index is in flight order for video).
+      const auto seq = SequentialPairs(images.size(), o.overlap, false);
+      for (const auto& p : seq)
+        if (!(*footprints)[p.first].valid || !(*footprints)[p.second].valid) s.insert(p);
+      if (valid < images.size())
+        spdlog::warn("match: {} of {} frames have no telemetry footprint ({}); paired with their {} sequential "
+                     "neighbours",
+                     images.size() - valid, images.size(), why, o.overlap);
+      return {s.begin(), s.end()};
+    }
+  }
+  if (used_mode) *used_mode = mode;
   if (mode == PairMode::kExhaustive) return ExhaustivePairs(images.size());
   auto seq = SequentialPairs(images.size(), o.overlap, o.quadratic);
   if (o.loop_closure_candidates > 0 && images.size() > static_cast<size_t>(o.overlap) + 1) {

@@ -1,7 +1,7 @@
 // Which image pairs to match: exhaustive (small sets), sequential (video: each frame with the next N and, with
 // `quadratic`, frames 2^k ahead), plus loop-closure candidates from a global image descriptor (bag of visual
 // words with tf-idf weights on a small k-means vocabulary) so an orbit that comes back to its start is closed.
-// `spatial` (telemetry priors) is not implemented yet.
+// `spatial`: frames whose ground footprints (from per-frame telemetry) overlap, see spatial_pairs.h.
 #pragma once
 
 #include <cstdint>
@@ -25,9 +25,13 @@ struct PairOptions {
   int loop_closure_candidates = 5;      // sequential: most similar non-neighbouring frames per frame (0 = off)
   int vocabulary_size = 128;            // visual words for the global descriptor
   int vocabulary_samples_per_image = 100;
+  double spatial_overlap_factor = 0.8;  // spatial: pair when centre distance < factor · (r1 + r2)
+  int spatial_max_neighbours = 30;      // spatial: nearest overlapping footprints kept per frame
   uint64_t seed = 0;
   void Check() const;
 };
+
+struct Footprint;  // spatial_pairs.h
 
 using ImagePair = std::pair<uint32_t, uint32_t>;  // 0-based indices, first < second
 
@@ -44,7 +48,11 @@ std::vector<std::vector<float>> GlobalDescriptors(const std::vector<const Descri
 std::vector<ImagePair> LoopClosurePairs(const std::vector<std::vector<float>>& global, int k, int min_gap);
 
 // The pairs for the given mode (kAuto resolved by image count). `used_mode` receives the resolved mode.
+// kSpatial needs `footprints` (one per image): frames without a valid footprint are paired sequentially with
+// their neighbours; when no frame has one, it falls back (with a warning naming what is missing) to what kAuto
+// would choose.
 std::vector<ImagePair> SelectPairs(const std::vector<const Descriptors*>& images, const PairOptions& options,
-                                   PairMode* used_mode = nullptr, size_t* num_loop_closure_pairs = nullptr);
+                                   PairMode* used_mode = nullptr, size_t* num_loop_closure_pairs = nullptr,
+                                   const std::vector<Footprint>* footprints = nullptr);
 
 }  // namespace fmv3d::features

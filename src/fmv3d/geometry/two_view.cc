@@ -344,10 +344,23 @@ TwoViewResult VerifyTwoView(const Points2& x1, const Points2& x2, const core::Ca
     }
   }
 
+  // RANSAC for H and E on F's inliers when F found enough: their inliers lie (almost) within F's, and a sample
+  // set with few outliers ends RANSAC after tens of iterations instead of thousands. Inliers are then counted
+  // over all correspondences. When F failed (pure rotation can starve it), H searches everything.
+  const bool f_ok = res.num_inliers_F >= options.min_inliers;
+  std::vector<cv::Point2d> f1, f2;
+  if (f_ok)
+    for (size_t i = 0; i < n; ++i)
+      if (res.inliers_F[i]) {
+        f1.push_back(p1[i]);
+        f2.push_back(p2[i]);
+      }
+
   // --- H (planar scene or pure rotation test).
   {
     cv::Mat mask;
-    cv::Mat Hcv = cv::findHomography(p1, p2, cv::RANSAC, thr, mask, options.max_iterations, options.confidence);
+    cv::Mat Hcv = cv::findHomography(f_ok ? f1 : p1, f_ok ? f2 : p2, cv::RANSAC, thr, mask, options.max_iterations,
+                                     options.confidence);
     if (Hcv.rows == 3 && Hcv.cols == 3) {
       cv::cv2eigen(Hcv, res.H);
       res.inliers_H.assign(n, 0);
@@ -370,7 +383,12 @@ TwoViewResult VerifyTwoView(const Points2& x1, const Points2& x2, const core::Ca
       n1[i] = camera1.Unproject(x1[i]).hnormalized();
       n2[i] = camera2.Unproject(x2[i]).hnormalized();
     }
-    const auto c1 = ToCv(n1), c2 = ToCv(n2);
+    std::vector<cv::Point2d> c1, c2;
+    for (size_t i = 0; i < n; ++i)
+      if (res.inliers_F[i]) {
+        c1.emplace_back(n1[i].x(), n1[i].y());
+        c2.emplace_back(n2[i].x(), n2[i].y());
+      }
     cv::Mat mask;
     cv::Mat Ecv;
     try {
@@ -387,11 +405,13 @@ TwoViewResult VerifyTwoView(const Points2& x1, const Points2& x2, const core::Ca
       Eigen::Vector3d t;
       cv::cv2eigen(Rcv, R);
       cv::cv2eigen(tcv, t);
-      std::vector<char> m(n, 0);
-      for (size_t i = 0; i < n; ++i) m[i] = mask.at<uchar>(static_cast<int>(i)) != 0;
       if (options.refine && in_front > 0) {
         Points2 y1, y2;
-        Select(n1, n2, m, &y1, &y2);
+        for (int i = 0; i < mask.rows; ++i)
+          if (mask.at<uchar>(i)) {
+            y1.emplace_back(c1[i].x, c1[i].y);
+            y2.emplace_back(c2[i].x, c2[i].y);
+          }
         RefineRelativePose(y1, y2, focal, &R, &t);
       }
       res.E = Skew(t) * R;

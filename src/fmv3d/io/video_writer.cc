@@ -10,6 +10,8 @@ extern "C" {
 
 #include <spdlog/spdlog.h>
 
+#include <algorithm>
+
 #include "fmv3d/core/error.h"
 
 namespace fmv3d::io {
@@ -35,6 +37,8 @@ struct VideoWriter::Impl {
   AVFormatContext* fmt = nullptr;
   AVCodecContext* enc = nullptr;
   AVStream* stream = nullptr;
+  AVStream* klv = nullptr;  // optional KLV data stream
+  int64_t last_klv_pts = -1;
   AVFrame* frame = nullptr;
   AVPacket* pkt = nullptr;
   SwsContext* sws = nullptr;
@@ -120,6 +124,18 @@ VideoWriter::VideoWriter(const fs::path& path, int width, int height, const Vide
   if (ret < 0) m.Fail("cannot set stream parameters", ret);
   m.stream->time_base = m.enc->time_base;
   m.stream->avg_frame_rate = rate;
+  if (o.klv_stream) {
+    if (!ts) throw Error(path.string() + ": a KLV data stream needs an MPEG-TS container (.ts)");
+    m.klv = avformat_new_stream(m.fmt, nullptr);
+    if (!m.klv) m.Fail("out of memory", 0);
+    m.klv->codecpar->codec_type = AVMEDIA_TYPE_DATA;
+    m.klv->codecpar->codec_id = AV_CODEC_ID_SMPTE_KLV;
+    // Asynchronous carriage (stream type 0x06, no ISO 13818-1 metadata AU cell header), but every PES still has
+    // the frame's PTS. (FFmpeg 5.1's muxer writes synchronous 0x15 streams without the AU cell header that
+    // its own demuxer then strips, cutting 5 bytes off every packet.)
+    m.klv->codecpar->profile = FF_PROFILE_KLVA_ASYNC;
+    m.klv->time_base = m.enc->time_base;
+  }
   if (!(m.fmt->oformat->flags & AVFMT_NOFILE)) {
     ret = avio_open(&m.fmt->pb, path.string().c_str(), AVIO_FLAG_WRITE);
     if (ret < 0) m.Fail("cannot create file", ret);
@@ -136,7 +152,6 @@ VideoWriter::VideoWriter(const fs::path& path, int width, int height, const Vide
   m.sws = sws_getContext(width, height, AV_PIX_FMT_BGR24, width, height, AV_PIX_FMT_YUV420P,
                          SWS_BICUBIC | SWS_ACCURATE_RND | SWS_BITEXACT, nullptr, nullptr, nullptr);
   if (!m.sws) m.Fail("cannot create the colour converter", 0);
-  (void)ts;
 }
 
 VideoWriter::~VideoWriter() {
@@ -161,6 +176,30 @@ void VideoWriter::Write(const cv::Mat& bgr) {
   sws_scale(m.sws, src, stride, 0, m.height, m.frame->data, m.frame->linesize);
   m.frame->pts = m.next_pts++;
   m.Drain(false);
+}
+
+void VideoWriter::WriteKlv(const std::vector<uint8_t>& bytes, int64_t frame_index) {
+  Impl& m = *impl_;
+  if (!m.klv) throw Error(m.path.string() + ": no KLV stream (set VideoWriterOptions::klv_stream)");
+  if (m.closed) throw Error(m.path.string() + ": write after close");
+  if (bytes.empty()) throw Error(m.path.string() + ": empty KLV packet");
+  if (frame_index < 0 || frame_index < m.last_klv_pts)
+    throw Error(m.path.string() + ": KLV packets must come in frame order");
+  AVPacket* p = av_packet_alloc();
+  if (!p) m.Fail("out of memory", 0);
+  int ret = av_new_packet(p, static_cast<int>(bytes.size()));
+  if (ret < 0) {
+    av_packet_free(&p);
+    m.Fail("out of memory", ret);
+  }
+  std::copy(bytes.begin(), bytes.end(), p->data);
+  p->pts = p->dts = frame_index;
+  av_packet_rescale_ts(p, m.enc->time_base, m.klv->time_base);
+  p->stream_index = m.klv->index;
+  m.last_klv_pts = frame_index;
+  ret = av_interleaved_write_frame(m.fmt, p);
+  av_packet_free(&p);
+  if (ret < 0) m.Fail("writing KLV failed", ret);
 }
 
 void VideoWriter::Close() {

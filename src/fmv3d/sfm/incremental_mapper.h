@@ -65,8 +65,12 @@ struct MapperOptions {
   double filter_min_angle_deg = 1.5;
   // Bundle adjustment.
   int local_ba_num_images = 6;
+  int local_ba_max_iterations = 15;
   double global_ba_growth_ratio = 1.1;  // global BA when the model grew by 10%
   int global_ba_every_image_below = 12; // ... and after every image while the model is small
+  int global_ba_max_iterations = 30;    // intermediate global BAs: near the optimum is enough
+  int final_ba_max_iterations = 200;
+  double final_ba_function_tolerance = 1e-9;
   int refine_focal_min_images = 3;
   int refine_k2_min_images = 6;
   int refine_principal_point_min_images = 8;  // from then on the final BA tests freeing it (Δχ²)

@@ -38,6 +38,10 @@ void SynthOptions::Check() const {
   if (!(detail > 0 && detail <= 4)) throw Error("synth: detail must be in (0, 4]");
   if (truth_points < 0) throw Error("synth: truth points must be >= 0");
   if (output.empty()) throw Error("synth: an output folder is required");
+  if (klv) {
+    if (format != "ts") throw Error("synth: --klv writes an MPEG-TS: use --format ts (got '" + format + "')");
+    klv_options.Check();
+  }
 }
 
 nlohmann::json SynthOptions::ToJson() const {
@@ -66,6 +70,12 @@ nlohmann::json SynthOptions::ToJson() const {
   j["detail"] = detail;
   j["truth_points"] = truth_points;
   j["write_depth"] = write_depth;
+  j["klv"] = klv;
+  if (klv) {
+    j["geo_origin"] = {{"lat", klv_options.origin.lat}, {"lon", klv_options.origin.lon}, {"alt", klv_options.origin.alt}};
+    j["gps_noise"] = klv_options.gps_noise;
+    j["attitude_noise"] = klv_options.attitude_noise;
+  }
   return j;
 }
 
@@ -134,11 +144,18 @@ SynthResult RunSynth(const SynthOptions& o) {
     io::VideoWriterOptions vo;
     vo.fps = o.fps;
     vo.gop = std::max(1, static_cast<int>(std::lround(o.fps)));
+    vo.klv_stream = o.klv;
     // Write to a temporary and rename at the end, so an interrupted run leaves no truncated video.
     video = std::make_unique<io::VideoWriter>(o.output / ("flight.partial." + o.format), o.width, o.height, vo);
   }
 
   SynthResult result;
+  if (o.klv) {
+    KlvTelemetryOptions ko = o.klv_options;
+    ko.fps = o.fps;
+    ko.seed = o.flight.seed;
+    result.klv = MakeKlvTelemetry(poses, camera, 0.0, ko);  // ground plane z = 0 for the frame centre
+  }
   core::Reconstruction& rec = result.truth;
   core::Camera cam = camera;
   cam.id = 1;
@@ -154,6 +171,7 @@ SynthResult RunSynth(const SynthOptions& o) {
     const render::RenderResult frame = renderer.Render(camera, poses[k], ro);
     if (video) {
       video->Write(frame.image);
+      if (o.klv) video->WriteKlv(io::klv::EncodeSt0601Packet(result.klv[k]), static_cast<int64_t>(k));
     } else {
       const fs::path path = frames_dir / FrameName(static_cast<int>(k), o.format);
       std::vector<int> params;
@@ -252,6 +270,11 @@ SynthResult RunSynth(const SynthOptions& o) {
     j["buildings"].push_back({{"name", b.name}, {"base", {b.base.x(), b.base.y(), b.base.z()}}, {"width", b.width},
                               {"depth", b.depth}, {"eave_height", b.eave_height}, {"ridge_height", b.ridge_height},
                               {"heading_deg", b.heading_deg}});
+  if (o.klv) {
+    const GeoPoint& g = o.klv_options.origin;
+    j["geo_origin"] = {{"lat", g.lat}, {"lon", g.lon}, {"alt", g.alt}};
+    j["geo_frame"] = "world x = east, y = north, z = up (metres) at geo_origin; alt = WGS84 ellipsoidal height";
+  }
   j["options"] = o.ToJson();
   core::WriteJson(o.output / "truth.json", j);
   result.characteristic_length = scene.characteristic_length;

@@ -12,7 +12,10 @@
 //   depth/flight-NNNNNN.tiff       (with write_depth) 32-bit float depth maps: camera z in metres, 0 = sky
 //   scene.obj, scene.mtl, *.png    the scene mesh in world metres (z up) with its textures
 //   truth.json                     characteristic_length (tallest building, m), scene bounds, seed, frame
-//                                  rate, flight geometry, camera and every option
+//                                  rate, flight geometry, camera and every option; with klv also
+//                                  "geo_origin": {"lat","lon","alt"} (the world is that origin's ENU frame)
+//   flight.ts with klv             + a MISB ST 0601 KLV data stream, one packet per frame at the
+//                                  frame's PTS, from the truth cameras with GPS/attitude noise (telemetry.h)
 #pragma once
 
 #include <array>
@@ -26,6 +29,7 @@
 #include "fmv3d/render/renderer.h"
 #include "fmv3d/synth/flight.h"
 #include "fmv3d/synth/scene.h"
+#include "fmv3d/synth/telemetry.h"
 
 namespace fmv3d::synth {
 
@@ -48,6 +52,9 @@ struct SynthOptions {
   int truth_points = 3000;                    // surface points sampled for points3D.txt (0: none)
   bool write_scene = true;                    // scene.obj + textures
   bool write_depth = false;
+  bool klv = false;                           // MPEG-TS with ST 0601 telemetry (needs format ts)
+  KlvTelemetryOptions klv_options;            // geo origin, GPS / attitude noise (fps and seed are set from
+                                              // this struct's fps and flight.seed)
   std::filesystem::path output;
 
   void Check() const;
@@ -66,6 +73,7 @@ struct SynthResult {
   core::Reconstruction truth;
   double characteristic_length = 0;
   int frames = 0;
+  std::vector<io::klv::St0601Record> klv;  // what the KLV stream carries (with klv), one per frame
 };
 
 // Renders and writes everything (see the layout above). Throws fmv3d::Error on bad options or I/O errors.

@@ -1,0 +1,67 @@
+// `fmv3d align WS_A WS_B ... -o WS_MERGED`: bring independent reconstructions of one target into one frame
+// (no GPS needed) and merge them (align/tracks.h, align/merge.h).
+#include <fmt/format.h>
+
+#include <iostream>
+
+#include "command.h"
+#include "fmv3d/align/merge.h"
+
+namespace fmv3d::app {
+namespace {
+
+void Add(CLI::App& app) {
+  auto* cmd = app.add_subcommand("align", "Align and merge reconstructions of one target from several flights");
+  cmd->footer(
+      "Each WS needs sparse/ (fmv3d sparse), features/ and frames/; dense/fused.ply is used for the fine ICP\n"
+      "when every track has one. The largest track is the reference frame. Output: WS_MERGED/sparse (COLMAP\n"
+      "model of all tracks), frames/, dense/fused.ply (when dense clouds exist), report/align.json.\n"
+      "Tracks that share nothing: \"no overlap found between A and B\", exit 1, nothing written.");
+  struct Args {
+    std::vector<std::string> ws;
+    std::string out;
+    align::TrackAlignOptions opt;
+    bool no_icp = false;
+  };
+  auto a = std::make_shared<Args>();
+  cmd->add_option("WS", a->ws, "Workspaces to align (two or more)")->required()->expected(2, -1)
+      ->check(CLI::ExistingDirectory);
+  cmd->add_option("-o,--output", a->out, "Merged workspace")->required();
+  cmd->add_option("--candidates", a->opt.candidates_per_image,
+                  "Cross-track image pairs per image by global descriptor (large tracks)")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
+  cmd->add_option("--exhaustive-pairs", a->opt.exhaustive_max_pairs,
+                  "Match every cross-track image pair when there are at most this many")
+      ->capture_default_str();
+  cmd->add_option("--min-inliers", a->opt.min_inliers, "Consistent 3D correspondences needed for overlap")
+      ->check(CLI::Range(3, 1000000))
+      ->capture_default_str();
+  cmd->add_option("--ransac-error", a->opt.ransac_max_error,
+                  "3D RANSAC inlier distance, fraction of the reference scene's radius")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
+  cmd->add_flag("--no-icp", a->no_icp, "Skip the fine ICP on dense clouds");
+  cmd->add_option("--seed", a->opt.seed, "Random seed")->capture_default_str();
+  cmd->callback([a] {
+    a->opt.icp = !a->no_icp;
+    std::vector<std::filesystem::path> ws(a->ws.begin(), a->ws.end());
+    const auto report = align::RunAlignStage(ws, a->out, a->opt);
+    std::cout << fmt::format("align: {} tracks merged into {} (reference {})\n", ws.size(), a->out,
+                             report.at("reference").get<std::string>());
+    for (const auto& e : report.at("tree"))
+      std::cout << fmt::format("  {} -> {}: scale {:.6g}, {} 3D inliers, overlap {:.0f}%, residual RMS {:.4g} -> {:.4g}\n",
+                               e.at("moving").get<std::string>(), e.at("reference").get<std::string>(),
+                               e.at("similarity").at("scale").get<double>(), e.at("inliers_3d").get<size_t>(),
+                               100 * e.at("overlap_fraction").get<double>(), e.at("residual_rms_before").get<double>(),
+                               e.at("residual_rms_after").get<double>());
+    const auto& m = report.at("merged");
+    std::cout << fmt::format("  merged: {} images, {} points, {} dense points\n", m.at("images").get<size_t>(),
+                             m.at("points").get<size_t>(), m.at("dense_points").get<size_t>());
+  });
+}
+
+const RegisterCommand reg(820, Add);
+
+}  // namespace
+}  // namespace fmv3d::app

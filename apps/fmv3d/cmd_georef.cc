@@ -1,0 +1,43 @@
+// `fmv3d georef WS [--origin LAT,LON,ALT]`: robust similarity from the sparse model's camera centres to the
+// frames' telemetry positions → WS/geo/sparse_enu/ (COLMAP text model in local ENU metres) and
+// WS/geo/georef.json (origin, similarity, residuals, UTM zone / EPSG, PROJ pipelines).
+#include <cstdio>
+#include <sstream>
+
+#include "command.h"
+#include "fmv3d/core/error.h"
+#include "fmv3d/geo/georef.h"
+
+namespace fmv3d::app {
+namespace {
+
+void Add(CLI::App& app) {
+  auto* cmd = app.add_subcommand("georef", "Georeference the sparse model with telemetry (WS/geo/georef.json, sparse_enu/)");
+  struct Args {
+    std::string ws, origin;
+    geo::GeorefOptions opt;
+  };
+  auto a = std::make_shared<Args>();
+  cmd->add_option("WS", a->ws, "Workspace folder (with frames/frames.json carrying telemetry, and sparse/)")->required();
+  cmd->add_option("--origin", a->origin, "Local ENU origin LAT,LON,ALT (default: centroid of the telemetry positions)");
+  cmd->add_option("--seed", a->opt.seed, "Random seed of the robust fit")->capture_default_str();
+  cmd->callback([a] {
+    if (!a->origin.empty()) {
+      geo::GeoPoint g;
+      char extra = 0;
+      if (std::sscanf(a->origin.c_str(), "%lf,%lf,%lf%c", &g.lat, &g.lon, &g.alt, &extra) != 3)
+        throw CLI::ValidationError("--origin", "expected LAT,LON,ALT, e.g. 38.16,-77.35,60");
+      a->opt.origin = g;
+    }
+    const auto j = geo::RunGeorefStage(a->ws, a->opt);
+    std::printf("georef: %d/%d cameras inliers, residual RMS %.3f m, scale %.5f, %s (EPSG:%d)\n",
+                j["inliers"].get<int>(), j["cameras"].get<int>(), j["residuals"]["rms_m"].get<double>(),
+                j["similarity"]["scale"].get<double>(), j["utm"]["name"].get<std::string>().c_str(),
+                j["utm"]["epsg"].get<int>());
+  });
+}
+
+const RegisterCommand reg(700, Add);
+
+}  // namespace
+}  // namespace fmv3d::app

@@ -1,0 +1,295 @@
+#include "fmv3d/align/compare.h"
+
+#include <spdlog/spdlog.h>
+#include <tbb/parallel_for.h>
+
+#include <algorithm>
+#include <cmath>
+
+#include "fmv3d/align/compare_plots.h"
+#include "fmv3d/core/error.h"
+#include "fmv3d/core/files.h"
+#include "fmv3d/core/logging.h"
+#include "fmv3d/geometry/mesh_distance.h"
+#include "fmv3d/io/colmap_model.h"
+#include "fmv3d/io/obj_io.h"
+#include "fmv3d/render/renderer.h"
+
+namespace fmv3d::align {
+namespace {
+
+double Percentile(std::vector<double>& v, double q) {
+  if (v.empty()) return 0;
+  const size_t k = std::min(v.size() - 1, static_cast<size_t>(std::floor(q * (v.size() - 1) + 0.5)));
+  std::nth_element(v.begin(), v.begin() + k, v.end());
+  return v[k];
+}
+
+ErrorStats Stats(const std::vector<double>& values) {
+  ErrorStats s;
+  if (values.empty()) return s;
+  double sum = 0, sum2 = 0;
+  for (double v : values) {
+    sum += v;
+    sum2 += v * v;
+  }
+  const double n = values.size();
+  s.mean = sum / n;
+  s.rms = std::sqrt(sum2 / n);
+  s.std = std::sqrt(std::max(0.0, sum2 / n - s.mean * s.mean));
+  std::vector<double> a(values.size());
+  for (size_t i = 0; i < values.size(); ++i) a[i] = std::abs(values[i]);
+  s.p50 = Percentile(a, 0.5);
+  s.p90 = Percentile(a, 0.9);
+  s.p99 = Percentile(a, 0.99);
+  return s;
+}
+
+// Per CAD sample: seen by at least min_views cameras of the model (in front, inside the image, facing the
+// camera, not hidden by the CAD itself in a depth map rendered at reduced resolution).
+std::vector<char> SeenSamples(const io::TexturedMesh& cad, const std::vector<Eigen::Vector3d>& samples,
+                              const std::vector<Eigen::Vector3d>& sample_normals,
+                              const core::Reconstruction& cameras, double length, const CompareOptions& o) {
+  std::vector<int> views(samples.size(), 0);
+  render::Renderer renderer(cad);
+  render::RenderOptions ro;
+  ro.supersample = 1;
+  ro.shading = false;
+  ro.cull_backfaces = false;  // a CAD model need not be closed or consistently wound
+  core::Progress progress("visibility", cameras.images.size());
+  for (const auto& [id, image] : cameras.images) {
+    core::Camera cam = cameras.cameras.at(image.camera_id);
+    const double k = std::min(1.0, double(o.max_render_size) / std::max(cam.width, 1));
+    if (k < 1) {  // same field of view, fewer pixels
+      cam.width = std::max(1, int(std::lround(cam.width * k)));
+      cam.height = std::max(1, int(std::lround(cam.height * k)));
+      cam.f *= k;
+      cam.u0 *= k;
+      cam.v0 *= k;
+    }
+    const render::RenderResult rr = renderer.Render(cam, image.pose, ro);
+    const Eigen::Vector3d centre = image.pose.Centre();
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, samples.size(), 4096), [&](const tbb::blocked_range<size_t>& r) {
+      for (size_t i = r.begin(); i < r.end(); ++i) {
+        const Eigen::Vector3d xc = image.pose.Transform(samples[i]);
+        if (xc.z() <= ro.near_plane) continue;
+        if (sample_normals[i].dot(centre - samples[i]) <= 0) continue;  // back side
+        const Eigen::Vector2d uv = cam.Project(xc);
+        if (!cam.InImage(uv, 0.5)) continue;
+        const int col = std::min(cam.width - 1, int(uv.x())), row = std::min(cam.height - 1, int(uv.y()));
+        const float d = rr.depth.at<float>(row, col);
+        // The pixel's depth is of its centre: allow the surface slope across a pixel plus a little.
+        const double tol = std::max(0.005 * length, 0.01 * xc.z());
+        if (d > 0 && xc.z() <= d + tol) ++views[i];
+      }
+    });
+    progress.Add();
+  }
+  progress.Finish();
+  std::vector<char> seen(samples.size());
+  for (size_t i = 0; i < samples.size(); ++i) seen[i] = views[i] >= o.min_views;
+  return seen;
+}
+
+}  // namespace
+
+IcpOptions CompareOptions::DefaultIcpOptions() {
+  IcpOptions o;
+  o.trim_fraction = 0.9;  // the crop already removed most of what is not the object
+  return o;
+}
+
+void CompareOptions::Check() const {
+  if (!(length > 0)) throw Error("compare: --length (the characteristic length H, CAD units) must be > 0");
+  if (!(crop_margin >= 0)) throw Error("compare: crop margin must be >= 0");
+  if (!(ground_cut >= 0 && ground_cut < 1)) throw Error("compare: ground cut must be in [0, 1)");
+  if (!(completeness_threshold > 0)) throw Error("compare: completeness threshold must be > 0");
+  if (!(sample_spacing > 0)) throw Error("compare: sample spacing must be > 0");
+  if (min_views < 1) throw Error("compare: min_views must be >= 1");
+  if (max_render_size < 16) throw Error("compare: max_render_size must be >= 16");
+  icp_options.Check();
+  global_options.Check();
+}
+
+nlohmann::json ErrorStats::ToJson() const {
+  return {{"mean_percent", 100 * mean}, {"std_percent", 100 * std}, {"rms_percent", 100 * rms},
+          {"p50_abs_percent", 100 * p50}, {"p90_abs_percent", 100 * p90}, {"p99_abs_percent", 100 * p99}};
+}
+
+nlohmann::json CompareResult::ToJson() const {
+  nlohmann::json j;
+  j["length"] = length;
+  j["units"] = "percent of length (H)";
+  j["transform"] = Sim3ToJson(transform);
+  j["coarse_alignment"] = coarse;
+  if (icp) {
+    j["icp"] = {{"estimation", icp->estimation}, {"converged", icp->converged}, {"iterations", icp->iterations},
+                {"fitness", icp->fitness}, {"rmse_before", icp->initial_rmse}, {"rmse_after", icp->rmse},
+                {"correspondences", icp->correspondences}};
+  } else {
+    j["icp"] = nullptr;
+  }
+  j["points"] = {{"total", points_total}, {"measured", points_measured}, {"cropped", points_cropped}};
+  j["error"] = {{"x", x.ToJson()}, {"y", y.ToJson()}, {"z", z.ToJson()}, {"total", total.ToJson()}};
+  j["completeness_percent"] = 100 * completeness;
+  j["completeness_threshold_percent"] = 100 * completeness_threshold;
+  j["completeness_samples"] = surface_samples;
+  j["completeness_seen_only"] = completeness_seen_only;
+  return j;
+}
+
+CompareResult CompareToCad(const CompareOptions& options) {
+  options.Check();
+  if (!std::filesystem::exists(options.reconstruction))
+    throw Error(options.reconstruction.string() + ": no such file");
+  if (!std::filesystem::exists(options.cad)) throw Error(options.cad.string() + ": no such file");
+  const io::OrientedPointCloud recon = io::ReadPointCloudPly(options.reconstruction);
+  const io::TexturedMesh cad = io::ReadObj(options.cad, /*load_textures=*/false);
+  if (cad.faces.empty()) throw Error(options.cad.string() + ": no faces");
+  return CompareToCad(recon, cad, options);
+}
+
+CompareResult CompareToCad(const io::OrientedPointCloud& recon_in, const io::TexturedMesh& cad,
+                           const CompareOptions& o) {
+  o.Check();
+  if (recon_in.empty()) throw Error("compare: the reconstruction has no points");
+  cad.Validate();
+  if (cad.faces.empty()) throw Error("compare: the CAD model has no faces");
+  const double H = o.length;
+  CompareResult res;
+  res.length = H;
+  res.points_total = recon_in.size();
+
+  const geometry::MeshDistance cad_distance(cad);
+  std::vector<int> sample_faces;
+  const std::vector<Eigen::Vector3d> samples = cad_distance.SampleSurface(o.sample_spacing * H, &sample_faces, 7);
+  if (samples.size() < 10) throw Error("compare: the CAD surface is too small for --length " + std::to_string(H));
+  std::vector<Eigen::Vector3d> sample_normals(samples.size());
+  for (size_t i = 0; i < samples.size(); ++i) sample_normals[i] = cad_distance.Normal(sample_faces[i]);
+
+  // 1. Coarse alignment.
+  core::Sim3 T;
+  if (o.transform) {
+    T = *o.transform;
+    res.coarse = "transform";
+  } else {
+    io::OrientedPointCloud cad_cloud;
+    cad_cloud.positions = samples;
+    const GlobalRegistrationResult g = GlobalRegistration(recon_in, cad_cloud, o.global_options);
+    T = g.transform;
+    res.coarse = "global:" + g.method;
+    spdlog::info("compare: global registration ({}), {:.1f}% of the points land on the CAD", g.method,
+                 100 * g.inlier_fraction);
+  }
+
+  const Eigen::AlignedBox3d cad_box = cad.Bounds();
+  auto crop = [&](const core::Sim3& sim, double margin, io::OrientedPointCloud* out) {
+    const Eigen::Vector3d m = Eigen::Vector3d::Constant(margin);
+    Eigen::AlignedBox3d box(cad_box.min() - m, cad_box.max() + m);
+    box.min().z() = cad_box.min().z() + o.ground_cut * H;
+    *out = io::OrientedPointCloud();
+    for (size_t i = 0; i < recon_in.size(); ++i) {
+      const Eigen::Vector3d p = sim.Apply(recon_in.positions[i]);
+      if (!box.contains(p)) continue;
+      out->positions.push_back(p);
+      if (recon_in.has_normals()) out->normals.push_back((sim.q.cast<float>() * recon_in.normals[i]).normalized());
+    }
+  };
+
+  // 2. ICP against CAD surface samples, on the points near the CAD (a wider box: the start may be off).
+  if (o.icp) {
+    io::OrientedPointCloud near;
+    crop(T, std::max(o.crop_margin, 0.1) * H, &near);
+    if (near.size() < 10)
+      throw Error("compare: only " + std::to_string(near.size()) +
+                  " reconstructed points near the CAD model after the coarse alignment — check --transform");
+    io::OrientedPointCloud cad_cloud;
+    cad_cloud.positions = samples;
+    for (const auto& n : sample_normals) cad_cloud.normals.push_back(n.cast<float>());
+    const IcpTarget target(cad_cloud);
+    IcpResult r = ScaledIcp(near, target, core::Sim3(), o.icp_options);
+    spdlog::info("compare: ICP {} after {} iterations, RMS {:.4g} → {:.4g} ({:.3f}% → {:.3f}% of H), scale ×{:.6f}",
+                 r.converged ? "converged" : "stopped", r.iterations, r.initial_rmse, r.rmse,
+                 100 * r.initial_rmse / H, 100 * r.rmse / H, r.transform.s);
+    T = ComposeSim3(r.transform, T);
+    res.icp = r;
+  }
+  res.transform = T;
+
+  // 3. Errors of the points inside the crop box.
+  io::OrientedPointCloud pts;
+  crop(T, o.crop_margin * H, &pts);
+  res.points_measured = pts.size();
+  res.points_cropped = res.points_total - pts.size();
+  if (pts.empty()) throw Error("compare: no reconstructed point lies within the CAD model's bounding box");
+  std::vector<double> ex(pts.size()), ey(pts.size()), ez(pts.size()), ed(pts.size());
+  tbb::parallel_for(tbb::blocked_range<size_t>(0, pts.size(), 1024), [&](const tbb::blocked_range<size_t>& r) {
+    for (size_t i = r.begin(); i < r.end(); ++i) {
+      const geometry::ClosestPoint c = cad_distance.Closest(pts.positions[i]);
+      const Eigen::Vector3d e = (pts.positions[i] - c.point) / H;
+      ex[i] = e.x();
+      ey[i] = e.y();
+      ez[i] = e.z();
+      ed[i] = c.signed_distance / H;
+    }
+  });
+  res.x = Stats(ex);
+  res.y = Stats(ey);
+  res.z = Stats(ez);
+  res.total = Stats(ed);
+
+  // 4. Completeness.
+  std::vector<char> counted(samples.size(), 1);
+  const double ground_z = cad_box.min().z() + o.ground_cut * H;
+  for (size_t i = 0; i < samples.size(); ++i) counted[i] = samples[i].z() >= ground_z;
+  if (!o.cameras.empty()) {
+    const core::Reconstruction cams = io::ReadColmapText(o.cameras);
+    if (cams.images.empty()) throw Error(o.cameras.string() + ": the model has no images");
+    const std::vector<char> seen = SeenSamples(cad, samples, sample_normals, cams, H, o);
+    for (size_t i = 0; i < samples.size(); ++i) counted[i] = counted[i] && seen[i];
+    res.completeness_seen_only = true;
+  }
+  const PointIndex index(pts.positions);
+  const double thr2 = std::pow(o.completeness_threshold * H, 2);
+  std::vector<char> covered(samples.size(), 0);
+  tbb::parallel_for(tbb::blocked_range<size_t>(0, samples.size(), 2048), [&](const tbb::blocked_range<size_t>& r) {
+    for (size_t i = r.begin(); i < r.end(); ++i) {
+      if (!counted[i]) continue;
+      double d2 = 0;
+      covered[i] = index.Nearest(samples[i], &d2) >= 0 && d2 <= thr2;
+    }
+  });
+  size_t n_counted = 0, n_covered = 0;
+  for (size_t i = 0; i < samples.size(); ++i) {
+    n_counted += counted[i] != 0;
+    n_covered += covered[i] != 0;
+  }
+  res.surface_samples = n_counted;
+  res.completeness_threshold = o.completeness_threshold;
+  res.completeness = n_counted ? double(n_covered) / n_counted : 0;
+
+  spdlog::info("compare: {} of {} points measured; RMS {:.3f}% of H (x {:.3f}%, y {:.3f}%, z {:.3f}%), "
+               "completeness {:.1f}%",
+               res.points_measured, res.points_total, 100 * res.total.rms, 100 * res.x.rms, 100 * res.y.rms,
+               100 * res.z.rms, 100 * res.completeness);
+
+  // 5. Outputs.
+  if (!o.output_dir.empty()) {
+    core::EnsureDirectory(o.output_dir);
+    PlotInput plot{cad, pts.positions, ex, ey, ez, ed, H};
+    WriteHistogramPlot(plot, o.output_dir / "histograms.png");
+    WriteErrorView(plot, ViewDirection::kTop, o.output_dir / "top.png");
+    WriteErrorView(plot, ViewDirection::kSide, o.output_dir / "side.png");
+    nlohmann::json j = res.ToJson();
+    j["reconstruction"] = o.reconstruction.string();
+    j["cad"] = o.cad.string();
+    j["crop_margin_percent"] = 100 * o.crop_margin;
+    j["ground_cut_percent"] = 100 * o.ground_cut;
+    if (!o.cameras.empty()) j["cameras"] = o.cameras.string();
+    core::WriteJson(o.output_dir / "compare.json", j);
+    WriteCompareHtml(j, o.output_dir / "compare.html");
+  }
+  return res;
+}
+
+}  // namespace fmv3d::align

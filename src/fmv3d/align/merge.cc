@@ -1,0 +1,213 @@
+#include "fmv3d/align/merge.h"
+
+#include <spdlog/spdlog.h>
+
+#include <set>
+
+#include "fmv3d/align/sim3_json.h"
+#include "fmv3d/core/error.h"
+#include "fmv3d/core/files.h"
+#include "fmv3d/io/colmap_model.h"
+#include "fmv3d/io/frames_index.h"
+#include "fmv3d/sfm/sparse_stage.h"
+
+namespace fmv3d::align {
+namespace {
+
+namespace fs = std::filesystem;
+
+// Reference first, then the others in the order given.
+std::vector<size_t> MergeOrder(size_t n, size_t reference) {
+  std::vector<size_t> order = {reference};
+  for (size_t k = 0; k < n; ++k)
+    if (k != reference) order.push_back(k);
+  return order;
+}
+
+// Per track, the prefix its image names get ("" = unchanged): only when some name occurs in two tracks.
+std::vector<std::string> NamePrefixes(const std::vector<Track>& tracks, size_t reference) {
+  std::map<std::string, int> count;
+  for (const auto& t : tracks) {
+    std::set<std::string> names;
+    for (const auto& [id, im] : t.sparse.images) names.insert(im.name);
+    for (const auto& n : names) ++count[n];
+  }
+  bool clash = false;
+  for (const auto& [n, c] : count) clash |= c > 1;
+  std::vector<std::string> prefix(tracks.size());
+  if (!clash) return prefix;
+  std::set<std::string> used;
+  for (size_t k = 0; k < tracks.size(); ++k) {
+    if (k == reference) continue;
+    std::string p = tracks[k].name.empty() ? "track" : tracks[k].name;
+    if (!used.insert(p).second) p += "_" + std::to_string(k);
+    used.insert(p);
+    prefix[k] = p + "-";
+  }
+  return prefix;
+}
+
+void LinkOrCopy(const fs::path& from, const fs::path& to) {
+  std::error_code ec;
+  fs::create_directories(to.parent_path(), ec);
+  fs::remove(to, ec);
+  fs::create_hard_link(from, to, ec);
+  if (ec) {
+    ec.clear();
+    fs::copy_file(from, to, fs::copy_options::overwrite_existing, ec);
+    if (ec) throw Error(to.string() + ": cannot copy " + from.string() + ": " + ec.message());
+  }
+}
+
+}  // namespace
+
+MergedModel MergeTracks(const std::vector<Track>& tracks, const MultiTrackAlignment& alignment) {
+  if (alignment.to_reference.size() != tracks.size()) throw Error("merge: alignment does not match the tracks");
+  MergedModel m;
+  m.image_ids.resize(tracks.size());
+  m.image_names.resize(tracks.size());
+  m.camera_ids.resize(tracks.size());
+  const auto prefix = NamePrefixes(tracks, alignment.reference);
+  m.name_prefix = prefix;
+  uint32_t next_camera = 1, next_image = 1;
+  uint64_t next_point = 1;
+  for (size_t k : MergeOrder(tracks.size(), alignment.reference)) {
+    core::Reconstruction rec = tracks[k].sparse;
+    rec.Transform(alignment.to_reference[k]);
+    for (auto& [id, cam] : rec.cameras) {
+      m.camera_ids[k][id] = next_camera;
+      cam.id = next_camera;
+      m.sparse.cameras[next_camera++] = cam;
+    }
+    std::map<uint64_t, uint64_t> point_ids;
+    for (const auto& [id, pt] : rec.points) point_ids[id] = next_point++;
+    for (auto& [id, im] : rec.images) {
+      m.image_ids[k][id] = next_image;
+      m.image_names[k][im.name] = prefix[k] + im.name;
+      core::Image out = im;
+      out.id = next_image;
+      out.camera_id = m.camera_ids[k].at(im.camera_id);
+      out.name = prefix[k] + im.name;
+      for (auto& p : out.point3d_ids)
+        if (p != core::kNoPoint3D) {
+          const auto it = point_ids.find(static_cast<uint64_t>(p));
+          p = it == point_ids.end() ? core::kNoPoint3D : static_cast<int64_t>(it->second);
+        }
+      m.sparse.images[next_image++] = std::move(out);
+    }
+    for (const auto& [id, pt] : rec.points) {
+      core::Point3D out = pt;
+      out.id = point_ids.at(id);
+      for (auto& el : out.track) el.image_id = m.image_ids[k].at(el.image_id);
+      m.sparse.points[out.id] = std::move(out);
+    }
+    // Dense points: moved, normals rotated, visibility re-mapped (ids unknown to the sparse model dropped).
+    const io::OrientedPointCloud& d = tracks[k].dense;
+    if (d.empty()) continue;
+    const core::Sim3& T = alignment.to_reference[k];
+    io::OrientedPointCloud moved;
+    moved.positions.reserve(d.size());
+    for (const auto& p : d.positions) moved.positions.push_back(T.Apply(p));
+    if (d.has_normals())
+      for (const auto& n : d.normals) moved.normals.push_back((T.q.cast<float>() * n).normalized());
+    moved.colors = d.colors;
+    if (d.has_visibility()) {
+      moved.visibility.resize(d.size());
+      for (size_t i = 0; i < d.size(); ++i)
+        for (uint32_t id : d.visibility[i]) {
+          const auto it = m.image_ids[k].find(id);
+          if (it != m.image_ids[k].end()) moved.visibility[i].push_back(it->second);
+        }
+    }
+    m.dense.Append(moved);
+  }
+  return m;
+}
+
+nlohmann::json RunAlignStage(const std::vector<fs::path>& workspaces, const fs::path& output,
+                             const TrackAlignOptions& options) {
+  options.Check();
+  if (workspaces.size() < 2) throw Error("align: give at least two workspaces");
+  for (const auto& ws : workspaces)
+    if (fs::exists(output) && fs::exists(ws) && fs::equivalent(ws, output))
+      throw Error("align: the output " + output.string() + " is one of the inputs");
+  std::vector<Track> tracks;
+  for (const auto& ws : workspaces) tracks.push_back(LoadTrack(ws));
+  const MultiTrackAlignment alignment = AlignTracks(tracks, options);
+  const MergedModel merged = MergeTracks(tracks, alignment);
+  merged.sparse.Validate();
+
+  // Everything is computed: write.
+  core::EnsureDirectory(output / "sparse");
+  io::WriteColmapText(merged.sparse, output / "sparse");
+  sfm::WritePointsPly(merged.sparse, output / "sparse" / "sparse.ply");
+
+  // Frames and their index.
+  io::FramesIndex index;
+  size_t frames_linked = 0, frames_missing = 0;
+  for (size_t k : MergeOrder(tracks.size(), alignment.reference)) {
+    const fs::path frames = tracks[k].workspace / "frames";
+    for (const auto& [old_name, new_name] : merged.image_names[k]) {
+      if (fs::exists(frames / old_name)) {
+        LinkOrCopy(frames / old_name, output / "frames" / new_name);
+        ++frames_linked;
+      } else {
+        ++frames_missing;
+      }
+    }
+    if (!fs::exists(frames / "frames.json")) continue;
+    const io::FramesIndex in = io::ReadFramesIndex(frames / "frames.json");
+    for (const auto& cam : in.cameras) {
+      const auto it = merged.camera_ids[k].find(cam.camera.id);
+      if (it == merged.camera_ids[k].end()) continue;
+      io::CameraPrior c = cam;
+      c.camera.id = it->second;
+      index.cameras.push_back(c);
+    }
+    for (const auto& f : in.frames) {
+      const auto it = merged.image_names[k].find(f.name);
+      const auto cit = merged.camera_ids[k].find(f.camera_id);
+      if (it == merged.image_names[k].end() || cit == merged.camera_ids[k].end()) continue;
+      io::FrameRecord r = f;
+      r.name = it->second;
+      r.camera_id = cit->second;
+      index.frames.push_back(r);
+    }
+  }
+  if (!index.frames.empty()) io::WriteFramesIndex(index, output / "frames" / "frames.json");
+  if (frames_missing) spdlog::warn("align: {} frame images not found in the input workspaces", frames_missing);
+  if (!merged.dense.empty()) {
+    core::EnsureDirectory(output / "dense");
+    io::WritePointCloudPly(merged.dense, output / "dense" / "fused.ply");
+  }
+
+  nlohmann::json report;
+  report["reference"] = tracks[alignment.reference].name;
+  for (size_t k = 0; k < tracks.size(); ++k) {
+    const auto& t = tracks[k];
+    report["tracks"].push_back({{"name", t.name},
+                                {"workspace", t.workspace.string()},
+                                {"images", t.sparse.images.size()},
+                                {"points", t.sparse.points.size()},
+                                {"dense_points", t.dense.size()},
+                                {"to_reference", Sim3ToJson(alignment.to_reference[k])},
+                                {"image_name_prefix", merged.name_prefix[k]}});
+  }
+  for (const auto& p : alignment.pairs) report["pairs"].push_back(p.ToJson(tracks));
+  for (const auto& p : alignment.tree) report["tree"].push_back(p.ToJson(tracks));
+  report["merged"] = {{"cameras", merged.sparse.cameras.size()},
+                      {"images", merged.sparse.images.size()},
+                      {"points", merged.sparse.points.size()},
+                      {"dense_points", merged.dense.size()},
+                      {"frames_linked", frames_linked},
+                      {"frames_missing", frames_missing}};
+  report["notes"] =
+      "residual_rms_*: fine step 'correspondences' — RMS of the inlier 3D-3D distances with the RANSAC model "
+      "(before) and the robust refit (after); 'icp-dense' — ICP point-to-plane RMS at the start and end. "
+      "Units of the reference model.";
+  core::EnsureDirectory(output / "report");
+  core::WriteJson(output / "report" / "align.json", report);
+  return report;
+}
+
+}  // namespace fmv3d::align

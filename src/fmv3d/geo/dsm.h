@@ -1,0 +1,60 @@
+// Terrain products of a georeferenced workspace (`fmv3d dsm WS`, `fmv3d ortho WS`).
+//
+// Surface, first found: WS/mesh/poisson.ply (triangles rasterised), WS/dense/fused.ply, the sparse model's
+// points (WS/sparse/). Everything is mapped sparse frame → ENU (georef.json's similarity) → UTM (the zone of
+// georef.json); heights keep georef.json's vertical datum.
+//
+// dsm:   WS/geo/dsm.tif        Float32 GeoTIFF, highest surface per cell (points: their median height per
+//                              cell, see RasteriseDsm), nodata (-9999) where unseen
+//        WS/geo/hillshade.png  for viewing
+//        WS/geo/points.las     LAS 1.4 with the UTM CRS: the dense points, else the sparse points
+//        WS/geo/dsm.json       grid, source, counts
+// ortho: WS/geo/ortho.tif      RGBA GeoTIFF on the DSM's grid: WS/mesh/textured.obj seen from straight above
+//                              (orthographic, the top-most surface per cell), else the top-most coloured point
+//                              per cell; alpha 0 where nothing is seen
+//
+// Ground sample distance (dsm, unless given): for a mesh the median plan length of its edges; for points
+// √2 × the mean point spacing over the occupied area (about two points per cell), at least 1 cm; widened when
+// the grid would exceed max_cells.
+#pragma once
+
+#include <filesystem>
+#include <nlohmann/json.hpp>
+#include <optional>
+#include <vector>
+
+#include "fmv3d/geo/georef.h"
+#include "fmv3d/geo/raster.h"
+#include "fmv3d/io/point_cloud.h"
+
+namespace fmv3d::geo {
+
+struct DsmOptions {
+  std::optional<double> gsd;  // metres
+  double max_cells = 64e6;
+  bool write_las = true;
+  void Check() const;
+};
+
+// The surface a DSM is made of, in UTM (E, N, h).
+struct UtmSurface {
+  std::string source;                      // the file used
+  std::vector<Eigen::Vector3d> vertices;   // mesh vertices or points
+  std::vector<Eigen::Vector3i> triangles;  // empty for points
+  std::vector<io::Rgb8> colors;            // per vertex / point, may be empty
+};
+
+// Loads the first available surface (see above) and maps it to UTM. Throws fmv3d::Error when none exists.
+UtmSurface LoadUtmSurface(const std::filesystem::path& workspace, const Georef& georef);
+
+// Height per cell; NaN where nothing lands. A mesh gives the highest surface: triangles cover the cells whose
+// centres they contain, and their vertices mark their own cells (so thin or steep triangles still count).
+// Points give the median of the points in the cell (robust to their noise, which a maximum would pick up).
+cv::Mat RasteriseDsm(const UtmSurface& surface, const GridSpec& grid);
+// See the header comment.
+double ChooseGsd(const UtmSurface& surface);
+
+nlohmann::json RunDsmStage(const std::filesystem::path& workspace, const DsmOptions& options = {});
+nlohmann::json RunOrthoStage(const std::filesystem::path& workspace);
+
+}  // namespace fmv3d::geo

@@ -1,0 +1,145 @@
+#include "fmv3d/geo/evaluation.h"
+
+#include <cmath>
+
+#include "fmv3d/core/error.h"
+#include "fmv3d/core/files.h"
+#include "fmv3d/core/reconstruction.h"
+#include "fmv3d/geo/dsm.h"
+#include "fmv3d/geo/georef.h"
+#include "fmv3d/geometry/mesh_distance.h"
+#include "fmv3d/io/colmap_model.h"
+#include "fmv3d/io/frames_index.h"
+#include "fmv3d/io/obj_io.h"
+
+namespace fmv3d::geo {
+namespace fs = std::filesystem;
+
+namespace {
+
+struct Stats {
+  double sum = 0, sq = 0;
+  size_t n = 0;
+  void Add(double v) { sum += v, sq += v * v, ++n; }
+  double Rms() const { return n ? std::sqrt(sq / n) : 0; }
+  double Mean() const { return n ? sum / n : 0; }
+  double CentredRms() const { return n ? std::sqrt(std::max(0.0, sq / n - Mean() * Mean())) : 0; }
+};
+
+}  // namespace
+
+nlohmann::json EvaluateGeoAgainstSynth(const fs::path& ws, const fs::path& synth) {
+  const nlohmann::json truth = core::ReadJson(synth / "truth.json");
+  if (!truth.contains("geo_origin"))
+    throw Error((synth / "truth.json").string() + ": no geo_origin (render the flight with `fmv3d synth --klv`)");
+  const GeoPoint to{truth["geo_origin"]["lat"].get<double>(), truth["geo_origin"]["lon"].get<double>(),
+                    truth["geo_origin"]["alt"].get<double>()};
+  const double building = truth.at("characteristic_length").get<double>();
+  const Georef g = ReadGeoref(ws);
+  const LocalFrame fg(g.origin, g.utm), ft(to, g.utm);
+  auto to_ws = [&](const Eigen::Vector3d& x) { return fg.ToEnu(ft.ToGeodetic(x)); };
+
+  nlohmann::json j;
+  j["building_height_m"] = building;
+  // Cameras.
+  const core::Reconstruction est = io::ReadColmapText(ws / "geo" / "sparse_enu");
+  const core::Reconstruction tru = io::ReadColmapText(synth / "truth");
+  Stats c3, ch, cv_;
+  Eigen::Vector3d bias = Eigen::Vector3d::Zero();
+  for (const auto& [id, img] : est.images) {
+    const core::Image* t = tru.FindImageByName(img.name);
+    if (!t) continue;
+    const Eigen::Vector3d d = img.pose.Centre() - to_ws(t->pose.Centre());
+    c3.Add(d.norm());
+    ch.Add(d.head<2>().norm());
+    cv_.Add(d.z());
+    bias += d;
+  }
+  if (c3.n == 0) throw Error(ws.string() + ": no camera of geo/sparse_enu matches the truth by name");
+  bias /= static_cast<double>(c3.n);
+  j["cameras"] = {{"matched", c3.n},
+                  {"centre_rms_m", c3.Rms()},
+                  {"horizontal_rms_m", ch.Rms()},
+                  {"vertical_rms_m", cv_.Rms()},
+                  {"bias_enu_m", {bias.x(), bias.y(), bias.z()}},
+                  {"bias_m", bias.norm()}};
+  // The floor set by the telemetry itself: the mean of (telemetry − true) camera positions, which a
+  // position-only georeference cannot see past (its translation error tends to exactly this).
+  const fs::path frames_json = ws / "frames" / "frames.json";
+  if (fs::exists(frames_json)) {
+    const io::FramesIndex index = io::ReadFramesIndex(frames_json);
+    Stats tx, ty, tz;
+    Eigen::Vector3d mean = Eigen::Vector3d::Zero();
+    for (const auto& f : index.frames) {
+      const core::Image* t = tru.FindImageByName(f.name);
+      const auto& tel = f.telemetry;
+      if (!t || !tel.is_object() || !tel.contains("sensor_latitude") || !tel.contains("sensor_longitude")) continue;
+      const char* alt = tel.contains("sensor_altitude_hae") ? "sensor_altitude_hae" : "sensor_altitude_msl";
+      if (!tel.contains(alt)) continue;
+      const GeoPoint p{tel["sensor_latitude"].get<double>(), tel["sensor_longitude"].get<double>(), tel[alt].get<double>()};
+      const Eigen::Vector3d d = fg.ToEnu(p) - to_ws(t->pose.Centre());
+      tx.Add(d.x()), ty.Add(d.y()), tz.Add(d.z());
+      mean += d;
+    }
+    if (tx.n) {
+      mean /= static_cast<double>(tx.n);
+      j["telemetry"] = {{"frames", tx.n},
+                        {"error_rms_per_axis_m", {tx.Rms(), ty.Rms(), tz.Rms()}},
+                        {"mean_error_enu_m", {mean.x(), mean.y(), mean.z()}},
+                        {"mean_error_m", mean.norm()}};
+      j["cameras"]["bias_minus_telemetry_mean_m"] = (bias - mean).norm();
+    }
+  }
+  // Points against the true mesh.
+  io::TexturedMesh mesh = io::ReadObj(synth / "scene.obj", false);
+  for (auto& v : mesh.vertices) v = to_ws(v);
+  const geometry::MeshDistance dist(mesh);
+  Stats pd;
+  std::vector<double> all;
+  for (const auto& [id, p] : est.points) {
+    const double d = dist.Closest(p.xyz).distance;
+    pd.Add(d);
+    all.push_back(d);
+  }
+  std::sort(all.begin(), all.end());
+  j["points"] = {{"count", pd.n}, {"rms_m", pd.Rms()}, {"median_m", all.empty() ? 0.0 : all[all.size() / 2]}};
+  // DSM.
+  const fs::path dsm_path = ws / "geo" / "dsm.tif";
+  if (fs::exists(dsm_path)) {
+    GridSpec grid;
+    const cv::Mat h = ReadHeightGeoTiff(dsm_path, &grid);
+    UtmSurface ts;
+    ts.vertices = mesh.vertices;
+    fg.EnuToUtm(&ts.vertices);
+    for (const auto& f : mesh.faces) ts.triangles.emplace_back(f.v[0], f.v[1], f.v[2]);
+    const cv::Mat th = RasteriseDsm(ts, grid);
+    const double flat = std::max(0.01 * building, 0.05);
+    Stats dz;
+    size_t seen = 0;
+    for (int r = 1; r + 1 < h.rows; ++r)
+      for (int c = 1; c + 1 < h.cols; ++c) {
+        const float v = h.at<float>(r, c);
+        if (!std::isfinite(v)) continue;
+        ++seen;
+        float lo = INFINITY, hi = -INFINITY;
+        for (int dr = -1; dr <= 1; ++dr)
+          for (int dc = -1; dc <= 1; ++dc) {
+            const float t = th.at<float>(r + dr, c + dc);
+            lo = std::min(lo, t), hi = std::max(hi, t);
+          }
+        if (!std::isfinite(lo) || !std::isfinite(hi) || hi - lo > flat) continue;
+        dz.Add(v - th.at<float>(r, c));
+      }
+    j["dsm"] = {{"cells_seen", seen},
+                {"cells_compared", dz.n},
+                {"flat_tolerance_m", flat},
+                {"height_rms_m", dz.Rms()},
+                {"height_bias_m", dz.Mean()},
+                {"height_rms_without_bias_m", dz.CentredRms()},
+                {"height_rms_percent_of_building", 100 * dz.Rms() / building},
+                {"height_rms_without_bias_percent_of_building", 100 * dz.CentredRms() / building}};
+  }
+  return j;
+}
+
+}  // namespace fmv3d::geo

@@ -1,0 +1,20 @@
+// Accuracy of a georeferenced workspace against a `fmv3d synth --klv` ground truth (truth.json's geo_origin,
+// truth/ cameras, scene.obj), all compared in the workspace's georef ENU frame (through WGS84, so the two
+// origins may differ):
+//   cameras   absolute camera-centre error (RMS 3D, horizontal, vertical, bias) of geo/sparse_enu/
+//   telemetry the telemetry's own error at the cameras (RMS per axis, and its mean: the floor of a
+//             position-only georeference's translation error)
+//   points    distance of geo/sparse_enu/'s points to the true mesh (RMS, median)
+//   dsm       geo/dsm.tif against the true mesh rasterised on the same grid, on cells that are seen and whose
+//             true surface is flat around them (a height step inside a cell has no single true height):
+//             RMS, bias (mean), RMS after removing the bias, and RMS as % of the building height
+#pragma once
+
+#include <filesystem>
+#include <nlohmann/json.hpp>
+
+namespace fmv3d::geo {
+
+nlohmann::json EvaluateGeoAgainstSynth(const std::filesystem::path& workspace, const std::filesystem::path& synth_dir);
+
+}  // namespace fmv3d::geo

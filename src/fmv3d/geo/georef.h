@@ -1,0 +1,58 @@
+// Geo-registration (`fmv3d georef WS`): a robust similarity from the sparse model's camera centres to the
+// telemetry positions that frames.json carries per frame, expressed in a local East-North-Up frame.
+//
+// Inputs:  WS/sparse/ (COLMAP text model), WS/frames/frames.json (per-frame "telemetry": sensor_latitude,
+//          sensor_longitude, sensor_altitude_hae or else sensor_altitude_msl).
+// Outputs: WS/geo/sparse_enu/   the model transformed into ENU metres at the origin (x east, y north, z up)
+//          WS/geo/georef.json   {"origin": {lat, lon, alt}, "vertical_datum", "similarity": {scale, rotation
+//                               (quaternion wxyz and 3x3), translation, matrix 4x4; maps sparse → ENU},
+//                               "residuals": {rms, median, max, sigma per axis, per image}, "inliers",
+//                               "attitude": {used, frames, scatter, disagreement}, "utm": {zone, epsg, name},
+//                               "proj": {enu, utm pipelines}, "wkt_utm"}
+//
+// Estimation: least median of squares over minimal 3-camera samples (deterministic), inliers within 3.5 robust
+// sigmas, Umeyama on the inliers (refined twice). A nearly straight track leaves the roll about it free: it is
+// taken from the sparse points' ground plane (level in ENU). When the telemetry states the full ST 0601 angle
+// chain, the frames' attitudes are fused with the positions' rotation (information-weighted; skipped when they
+// disagree beyond their uncertainties) and scale/translation refitted. With GPS noise σ per axis and N
+// cameras, the translation is known to about σ·√(3/N) (3D) — georef.json's expected_translation_error_m.
+#pragma once
+
+#include <filesystem>
+#include <nlohmann/json.hpp>
+#include <optional>
+
+#include "fmv3d/core/pose.h"
+#include "fmv3d/geo/geodesy.h"
+
+namespace fmv3d::geo {
+
+struct GeorefOptions {
+  std::optional<GeoPoint> origin;  // default: the centroid of the telemetry positions used
+  int min_cameras = 3;              // with telemetry and registered
+  int max_samples = 2000;           // LMedS minimal samples
+  double min_inlier_threshold = 0.05;  // metres: floor of the 3σ inlier bound (noise-free telemetry)
+  uint64_t seed = 42;
+  void Check() const;
+};
+
+// The georeference that later stages read.
+struct Georef {
+  GeoPoint origin;
+  std::string vertical_datum;  // "WGS84 ellipsoid" or "MSL"
+  core::Sim3 sparse_to_enu;
+  UtmZone utm;
+};
+// Reads WS/geo/georef.json; throws fmv3d::Error ("WS: no geo/georef.json — run `fmv3d georef` first").
+Georef ReadGeoref(const std::filesystem::path& workspace);
+
+// Robust similarity src → dst (see above). Returns the inlier mask; throws fmv3d::Error when fewer than
+// 3 non-collinear pairs exist.
+core::Sim3 RobustSimilarity(const std::vector<Eigen::Vector3d>& src, const std::vector<Eigen::Vector3d>& dst,
+                            const GeorefOptions& options, std::vector<char>* inliers, double* sigma);
+
+// Runs the stage; returns georef.json's content. Throws fmv3d::Error on missing inputs, too few frames with
+// telemetry, or degenerate (collinear) camera centres.
+nlohmann::json RunGeorefStage(const std::filesystem::path& workspace, const GeorefOptions& options = {});
+
+}  // namespace fmv3d::geo

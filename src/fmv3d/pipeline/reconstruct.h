@@ -1,0 +1,41 @@
+// `fmv3d reconstruct INPUT... -o WS`: the whole chain frames → features → match → sparse → dense → mesh →
+// texture in one workspace (DESIGN.md "The data flow"), resumable (stage_runner.h), with
+// WS/project.json (inputs, options, versions) and WS/report/report.json + report.html at the end.
+#pragma once
+
+#include <filesystem>
+#include <string>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include "fmv3d/calib/priors.h"
+#include "fmv3d/features/match_stage.h"
+#include "fmv3d/features/sift.h"
+#include "fmv3d/io/frames.h"
+#include "fmv3d/pipeline/stage_runner.h"
+#include "fmv3d/sfm/sparse_stage.h"
+
+namespace fmv3d::pipeline {
+
+struct ReconstructOptions {
+  std::vector<std::filesystem::path> inputs;
+  std::filesystem::path workspace;
+  io::IngestOptions frames;           // .workspace and .prior are filled from the fields above / below
+  calib::PriorOptions prior;
+  features::SiftOptions sift;
+  features::MatchStageOptions match;
+  sfm::SparseStageOptions sparse;
+  RunnerOptions runner;               // --from / --until
+  bool report = true;                 // write report/report.html (renders take a few seconds)
+  // Throws fmv3d::Error naming the bad option (no inputs, missing file, stage options).
+  void Check() const;
+};
+
+// The stage list for a workspace (exposed for tests and for `fmv3d demo`).
+std::vector<Stage> ReconstructStages(const ReconstructOptions& options);
+
+// Runs the stages and writes the report; returns report.json's content.
+nlohmann::json RunReconstruct(const ReconstructOptions& options);
+
+}  // namespace fmv3d::pipeline

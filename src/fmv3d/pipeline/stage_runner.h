@@ -1,0 +1,39 @@
+// The stage runner behind `fmv3d reconstruct`: each stage declares the files it reads and the one file that
+// marks it complete (written last, atomically, by the stage itself). A stage whose marker exists and is newer
+// than all its inputs is skipped, so an interrupted run resumes at the first unfinished stage and a changed
+// input re-runs everything downstream of it (the later markers become older than the new outputs).
+#pragma once
+
+#include <filesystem>
+#include <functional>
+#include <string>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+namespace fmv3d::pipeline {
+
+struct Stage {
+  std::string name;                                // "frames", "features", ... (also --until / --from)
+  std::function<std::vector<std::filesystem::path>()> inputs;  // evaluated when the stage is reached
+  std::filesystem::path marker;                   // the output that proves the stage finished
+  std::function<nlohmann::json()> run;            // runs the stage, returns its summary
+};
+
+struct StageResult {
+  std::string name;
+  bool skipped = false;
+  double seconds = 0;
+  nlohmann::json summary;  // the stage's summary (null when skipped)
+};
+
+struct RunnerOptions {
+  std::string from;   // force re-running from this stage on (empty: resume by timestamps)
+  std::string until;  // stop after this stage (empty: all)
+};
+
+// Runs the stages in order. Throws fmv3d::Error for an unknown --from/--until name, and lets a stage's
+// error propagate (after logging which stage failed) so the CLI exits non-zero.
+std::vector<StageResult> RunStages(const std::vector<Stage>& stages, const RunnerOptions& options);
+
+}  // namespace fmv3d::pipeline

@@ -1,0 +1,116 @@
+#include "fmv3d/surface/texture_stage.h"
+
+#include <spdlog/spdlog.h>
+#include <tbb/parallel_for.h>
+
+#include <chrono>
+
+#include "fmv3d/core/error.h"
+#include "fmv3d/core/files.h"
+#include "fmv3d/io/colmap_model.h"
+#include "fmv3d/io/image_io.h"
+#include "fmv3d/io/obj_io.h"
+#include "fmv3d/surface/gltf_writer.h"
+
+namespace fmv3d::surface {
+
+namespace fs = std::filesystem;
+using Clock = std::chrono::steady_clock;
+
+std::vector<TextureView> LoadTextureViews(const core::Reconstruction& model, const fs::path& frames_dir) {
+  std::vector<TextureView> views;
+  for (const auto& [id, im] : model.images) {
+    TextureView v;
+    v.image_id = id;
+    v.name = im.name;
+    v.camera = model.cameras.at(im.camera_id);
+    v.pose = im.pose;
+    views.push_back(std::move(v));
+  }
+  for (const auto& v : views)
+    if (!fs::exists(frames_dir / v.name)) throw Error((frames_dir / v.name).string() + ": registered frame is missing");
+  tbb::parallel_for(size_t{0}, views.size(), [&](size_t i) { views[i].image = io::ReadImage(frames_dir / views[i].name); });
+  for (const auto& v : views)
+    if (v.image.cols != v.camera.width || v.image.rows != v.camera.height)
+      throw Error((frames_dir / v.name).string() + ": image is " + std::to_string(v.image.cols) + "x" +
+                  std::to_string(v.image.rows) + " but its camera is " + std::to_string(v.camera.width) + "x" +
+                  std::to_string(v.camera.height));
+  return views;
+}
+
+TexturedModel TextureMesh(const ColoredMesh& mesh, const std::vector<TextureView>& views,
+                          const TextureStageOptions& options) {
+  options.Check();
+  if (mesh.empty()) throw Error("texture: the mesh has no faces");
+  if (views.empty()) throw Error("texture: no registered views");
+  const auto start = Clock::now();
+  ColoredMesh m = mesh;
+  if (m.normals.size() != m.vertices.size()) m.ComputeVertexNormals();
+  const std::vector<Eigen::Vector3i> adjacency = FaceAdjacency(m.triangles);
+  const ViewSelection selection = SelectViews(m, adjacency, views, options.selection);
+  const auto atlas_start = Clock::now();
+  TexturedModel model = BuildTextureAtlas(m, adjacency, views, selection.labels, options.atlas);
+  model.stats["seconds"] = std::chrono::duration<double>(Clock::now() - atlas_start).count();
+  nlohmann::json st;
+  st["selection"] = selection.stats;
+  st["atlas"] = std::move(model.stats);
+  st["seconds"] = std::chrono::duration<double>(Clock::now() - start).count();
+  model.stats = std::move(st);
+  return model;
+}
+
+nlohmann::json RunTextureStage(const fs::path& workspace, const TextureStageOptions& options) {
+  options.Check();
+  const auto start = Clock::now();
+  if (!fs::exists(workspace)) throw Error(workspace.string() + ": no such workspace folder");
+  const fs::path mesh_path = workspace / "mesh" / "poisson.ply";
+  const fs::path sparse = workspace / "sparse";
+  if (!fs::exists(sparse / "images.txt"))
+    throw Error(workspace.string() + ": no sparse/images.txt — run `fmv3d sparse " + workspace.string() + "` first");
+  if (!fs::exists(mesh_path))
+    throw Error(workspace.string() + ": no mesh/poisson.ply — run `fmv3d mesh " + workspace.string() + "` first");
+  const ColoredMesh mesh = ReadMeshPly(mesh_path);
+  const core::Reconstruction model = io::ReadColmapText(sparse);
+  if (model.images.empty()) throw Error((sparse / "images.txt").string() + ": no registered images");
+  const std::vector<TextureView> views = LoadTextureViews(model, workspace / "frames");
+  const double load_seconds = std::chrono::duration<double>(Clock::now() - start).count();
+
+  TexturedModel textured = TextureMesh(mesh, views, options);
+
+  const auto write_start = Clock::now();
+  const fs::path dir = workspace / "mesh";
+  // Atlas pages of an earlier run with more pages must not linger beside the new OBJ.
+  for (size_t p = textured.mesh.materials.size();; ++p) {
+    const fs::path old = dir / ("textured_atlas_" + std::to_string(p) + ".png");
+    if (!fs::exists(old)) break;
+    fs::remove(old);
+  }
+  io::WriteObj(textured.mesh, dir / "textured.obj");
+  WriteGlb(textured.mesh, dir / "model.glb");
+  ColoredMesh colored;
+  colored.vertices = textured.mesh.vertices;
+  colored.normals = textured.mesh.normals;
+  colored.colors = textured.vertex_colors;
+  colored.triangles.reserve(textured.mesh.faces.size());
+  for (const auto& f : textured.mesh.faces) colored.triangles.emplace_back(f.v[0], f.v[1], f.v[2]);
+  WriteMeshPly(colored, dir / "textured.ply");
+
+  nlohmann::json report = textured.stats;
+  report["input"] = "mesh/poisson.ply";
+  report["outputs"] = {"mesh/textured.obj", "mesh/textured.mtl", "mesh/model.glb", "mesh/textured.ply"};
+  for (size_t p = 0; p < textured.mesh.materials.size(); ++p)
+    report["outputs"].push_back("mesh/textured_" + textured.mesh.materials[p].name + ".png");
+  report["views"] = views.size();
+  report["faces"] = textured.mesh.faces.size();
+  report["seconds"] = {{"load", load_seconds},
+                       {"texturing", textured.stats["seconds"]},
+                       {"write", std::chrono::duration<double>(Clock::now() - write_start).count()},
+                       {"total", std::chrono::duration<double>(Clock::now() - start).count()}};
+  core::EnsureDirectory(workspace / "report");
+  core::WriteJson(workspace / "report" / "texture.json", report);
+  spdlog::info("texture: {} faces from {} views → {}", textured.mesh.faces.size(), views.size(),
+               (dir / "textured.obj").string());
+  return report;
+}
+
+}  // namespace fmv3d::surface

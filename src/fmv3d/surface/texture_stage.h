@@ -1,0 +1,41 @@
+// The `fmv3d texture WS` stage: WS/mesh/poisson.ply + the registered images (WS/sparse COLMAP model,
+// pixels from WS/frames/<name>) → per-face view selection (view_selection.h) → texture atlas
+// (texture_atlas.h) →
+//   WS/mesh/textured.obj + textured.mtl + textured_atlas_<i>.png   Wavefront OBJ with the atlas pages
+//   WS/mesh/model.glb                                               binary glTF, textures embedded
+//   WS/mesh/textured.ply                                            the mesh with colours from the texture
+//   WS/report/texture.json                                          views, candidates, patches, pages, timings
+#pragma once
+
+#include <filesystem>
+#include <nlohmann/json.hpp>
+#include <vector>
+
+#include "fmv3d/core/reconstruction.h"
+#include "fmv3d/surface/texture_atlas.h"
+#include "fmv3d/surface/view_selection.h"
+
+namespace fmv3d::surface {
+
+struct TextureStageOptions {
+  ViewSelectionOptions selection;
+  AtlasOptions atlas;
+  void Check() const {
+    selection.Check();
+    atlas.Check();
+  }
+};
+
+// The registered images of `model` with their pixels from `frames_dir`. Throws fmv3d::Error naming a
+// missing or unreadable frame, or one whose size differs from its camera's.
+std::vector<TextureView> LoadTextureViews(const core::Reconstruction& model, const std::filesystem::path& frames_dir);
+
+// View selection + atlas for a mesh (the library entry without files).
+TexturedModel TextureMesh(const ColoredMesh& mesh, const std::vector<TextureView>& views,
+                          const TextureStageOptions& options);
+
+// Returns the summary also written to WS/report/texture.json. Throws fmv3d::Error naming the missing input
+// and the command that makes it.
+nlohmann::json RunTextureStage(const std::filesystem::path& workspace, const TextureStageOptions& options);
+
+}  // namespace fmv3d::surface

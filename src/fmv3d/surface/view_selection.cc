@@ -1,0 +1,302 @@
+#include "fmv3d/surface/view_selection.h"
+
+#include <spdlog/spdlog.h>
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+
+#include "fmv3d/core/error.h"
+#include "fmv3d/core/logging.h"
+#include "fmv3d/render/renderer.h"
+
+namespace fmv3d::surface {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+struct Candidate {
+  int face;
+  int view;
+  float quality;
+  Eigen::Vector3f color;  // BGR mean over the face's pixels
+};
+
+// Bilinear BGR colour at a continuous pixel position (pixel centres at +0.5), clamped to the image.
+Eigen::Vector3f SampleBilinear(const cv::Mat& img, double u, double v) {
+  const double x = std::clamp(u - 0.5, 0.0, img.cols - 1.0), y = std::clamp(v - 0.5, 0.0, img.rows - 1.0);
+  const int x0 = static_cast<int>(x), y0 = static_cast<int>(y);
+  const int x1 = std::min(x0 + 1, img.cols - 1), y1 = std::min(y0 + 1, img.rows - 1);
+  const float ax = static_cast<float>(x - x0), ay = static_cast<float>(y - y0);
+  Eigen::Vector3f c = Eigen::Vector3f::Zero();
+  const auto add = [&](int xx, int yy, float w) {
+    const cv::Vec3b p = img.at<cv::Vec3b>(yy, xx);
+    c += w * Eigen::Vector3f(p[0], p[1], p[2]);
+  };
+  add(x0, y0, (1 - ax) * (1 - ay));
+  add(x1, y0, ax * (1 - ay));
+  add(x0, y1, (1 - ax) * ay);
+  add(x1, y1, ax * ay);
+  return c;
+}
+
+// All candidates of one view, in face order.
+std::vector<Candidate> ViewCandidates(const ColoredMesh& mesh, const std::vector<Eigen::Vector3d>& face_normals,
+                                      const render::Renderer& renderer, const TextureView& view, int view_index,
+                                      const ViewSelectionOptions& options) {
+  const core::Camera& cam = view.camera;
+  const double s = options.visibility_scale;
+  core::Camera small = cam;
+  small.width = std::max(1, static_cast<int>(std::lround(cam.width * s)));
+  small.height = std::max(1, static_cast<int>(std::lround(cam.height * s)));
+  const double sx = static_cast<double>(small.width) / cam.width, sy = static_cast<double>(small.height) / cam.height;
+  small.f = cam.f * sy;
+  small.aspect = cam.aspect * sx / sy;
+  small.u0 = cam.u0 * sx;
+  small.v0 = cam.v0 * sy;
+  render::RenderOptions ro;
+  ro.supersample = 1;
+  ro.shading = false;
+  ro.cull_backfaces = true;
+  const render::RenderResult r = renderer.Render(small, view.pose, ro);
+
+  // Pixel counts and colour sums of every face the raster shows.
+  const size_t nf = mesh.triangles.size();
+  std::vector<int> count(nf, 0);
+  std::vector<Eigen::Vector3f> sum(nf, Eigen::Vector3f::Zero());
+  for (int y = 0; y < small.height; ++y) {
+    const int32_t* fr = r.face.ptr<int32_t>(y);
+    const int iy = std::min(cam.height - 1, static_cast<int>((y + 0.5) / sy));
+    const cv::Vec3b* ir = view.image.ptr<cv::Vec3b>(iy);
+    for (int x = 0; x < small.width; ++x) {
+      const int f = fr[x];
+      if (f < 0) continue;
+      const cv::Vec3b& p = ir[std::min(cam.width - 1, static_cast<int>((x + 0.5) / sx))];
+      ++count[f];
+      sum[f] += Eigen::Vector3f(p[0], p[1], p[2]);
+    }
+  }
+
+  const double min_cos = std::cos(options.max_angle_deg * M_PI / 180.0);
+  const Eigen::Vector3d centre = view.pose.Centre();
+  constexpr size_t kChunks = 64;  // fixed chunks keep the output order independent of scheduling
+  std::vector<std::vector<Candidate>> parts(kChunks);
+  tbb::parallel_for(size_t{0}, kChunks, [&](size_t c) {
+    const size_t begin = nf * c / kChunks, end = nf * (c + 1) / kChunks;
+    for (size_t f = begin; f < end; ++f) {
+      const auto& t = mesh.triangles[f];
+      const Eigen::Vector3d centroid = (mesh.vertices[t[0]] + mesh.vertices[t[1]] + mesh.vertices[t[2]]) / 3.0;
+      const Eigen::Vector3d to_cam = centre - centroid;
+      const double dist = to_cam.norm();
+      if (!(dist > 0) || face_normals[f].dot(to_cam) < min_cos * dist) continue;
+      Eigen::Vector2d uv[3];
+      bool inside = true;
+      for (int k = 0; k < 3 && inside; ++k) {
+        const Eigen::Vector3d x = view.pose.Transform(mesh.vertices[t[k]]);
+        inside = x.z() > 0 && cam.InImage(uv[k] = cam.Project(x), 0.5);
+      }
+      if (!inside) continue;
+      const double area = 0.5 * std::abs((uv[1] - uv[0]).x() * (uv[2] - uv[0]).y() -
+                                         (uv[1] - uv[0]).y() * (uv[2] - uv[0]).x());
+      const double area_small = area * sx * sy;
+      Candidate cand{static_cast<int>(f), view_index, static_cast<float>(area), Eigen::Vector3f::Zero()};
+      if (count[f] > 0) {
+        cand.color = sum[f] / static_cast<float>(count[f]);
+        // Partly hidden faces show fewer pixels than their projected area (small faces' counts are too noisy).
+        if (area_small >= 8) cand.quality *= static_cast<float>(std::min(1.0, count[f] / area_small));
+      } else {
+        if (area_small >= 2) continue;  // a face of several pixels that shows none is hidden
+        // Sub-pixel face: depth test of its centroid against the rendered surface.
+        const Eigen::Vector3d xc = view.pose.Transform(centroid);
+        const Eigen::Vector2d pc = small.Project(xc);
+        const int px = std::clamp(static_cast<int>(pc.x()), 0, small.width - 1);
+        const int py = std::clamp(static_cast<int>(pc.y()), 0, small.height - 1);
+        const float d = r.depth.at<float>(py, px);
+        const double footprint = xc.z() / small.f;
+        if (!(d > 0) || std::abs(xc.z() - d) > 0.01 * xc.z() + 3 * footprint) continue;
+        const Eigen::Vector2d pf = cam.Project(xc);
+        cand.color = SampleBilinear(view.image, pf.x(), pf.y());
+      }
+      parts[c].push_back(cand);
+    }
+  });
+  std::vector<Candidate> out;
+  for (auto& p : parts) out.insert(out.end(), p.begin(), p.end());
+  return out;
+}
+
+}  // namespace
+
+void ViewSelectionOptions::Check() const {
+  if (!(max_angle_deg > 0 && max_angle_deg < 90)) throw Error("texture: max view angle must be in (0, 90) degrees");
+  if (!(consistency_threshold > 0)) throw Error("texture: consistency threshold must be positive");
+  if (!(smoothness >= 0)) throw Error("texture: smoothness must be >= 0");
+  if (smoothing_iterations < 0) throw Error("texture: smoothing iterations must be >= 0");
+  if (!(visibility_scale > 0 && visibility_scale <= 1)) throw Error("texture: visibility scale must be in (0, 1]");
+}
+
+std::vector<Eigen::Vector3i> FaceAdjacency(const std::vector<Eigen::Vector3i>& triangles) {
+  struct HalfEdge {
+    int a, b, face, slot;
+  };
+  std::vector<HalfEdge> edges;
+  edges.reserve(triangles.size() * 3);
+  for (size_t f = 0; f < triangles.size(); ++f)
+    for (int k = 0; k < 3; ++k) {
+      const int a = triangles[f][k], b = triangles[f][(k + 1) % 3];
+      edges.push_back({std::min(a, b), std::max(a, b), static_cast<int>(f), k});
+    }
+  std::sort(edges.begin(), edges.end(), [](const HalfEdge& x, const HalfEdge& y) {
+    return x.a != y.a ? x.a < y.a : x.b != y.b ? x.b < y.b : x.face < y.face;
+  });
+  std::vector<Eigen::Vector3i> adj(triangles.size(), Eigen::Vector3i::Constant(-1));
+  for (size_t i = 0; i < edges.size();) {
+    size_t j = i;
+    while (j < edges.size() && edges[j].a == edges[i].a && edges[j].b == edges[i].b) ++j;
+    if (j - i == 2) {  // manifold edge: exactly two faces
+      adj[edges[i].face][edges[i].slot] = edges[i + 1].face;
+      adj[edges[i + 1].face][edges[i + 1].slot] = edges[i].face;
+    }
+    i = j;
+  }
+  return adj;
+}
+
+ViewSelection SelectViews(const ColoredMesh& mesh, const std::vector<Eigen::Vector3i>& adjacency,
+                          const std::vector<TextureView>& views, const ViewSelectionOptions& options) {
+  options.Check();
+  const auto start = Clock::now();
+  const size_t nf = mesh.triangles.size();
+  ViewSelection result;
+  result.labels.assign(nf, -1);
+  if (nf == 0 || views.empty()) return result;
+
+  // 1. Candidates of every view, gathered into per-face lists (CSR, ordered by view).
+  const io::TexturedMesh geometry = mesh.ToTexturedMesh();
+  const render::Renderer renderer(geometry);
+  std::vector<Eigen::Vector3d> face_normals(nf);
+  for (size_t f = 0; f < nf; ++f) face_normals[f] = geometry.FaceNormal(f);
+  std::vector<std::vector<Candidate>> per_view(views.size());
+  {
+    core::Progress progress("texture: visibility", views.size());
+    for (size_t v = 0; v < views.size(); ++v) {
+      per_view[v] = ViewCandidates(mesh, face_normals, renderer, views[v], static_cast<int>(v), options);
+      progress.Add();
+    }
+  }
+  std::vector<size_t> offset(nf + 1, 0);
+  for (const auto& pv : per_view)
+    for (const auto& c : pv) ++offset[c.face + 1];
+  for (size_t f = 0; f < nf; ++f) offset[f + 1] += offset[f];
+  std::vector<Candidate> cand(offset[nf]);
+  {
+    std::vector<size_t> fill(offset.begin(), offset.end() - 1);
+    for (auto& pv : per_view) {
+      for (const auto& c : pv) cand[fill[c.face]++] = c;
+      std::vector<Candidate>().swap(pv);
+    }
+  }
+  const double seconds_visibility = std::chrono::duration<double>(Clock::now() - start).count();
+  auto find = [&](int f, int view) -> const Candidate* {
+    for (size_t i = offset[f]; i < offset[f + 1]; ++i)
+      if (cand[i].view == view) return &cand[i];
+    return nullptr;
+  };
+
+  // 2. Photo-consistency on neighbourhood-averaged colours.
+  std::vector<char> consistent(cand.size(), 1);
+  std::vector<size_t> rejected_per_chunk(64, 0);
+  tbb::parallel_for(size_t{0}, size_t{64}, [&](size_t chunk) {
+    std::vector<Eigen::Vector3f> colors;
+    std::vector<float> channel, dist;
+    for (size_t f = nf * chunk / 64; f < nf * (chunk + 1) / 64; ++f) {
+      const size_t n = offset[f + 1] - offset[f];
+      if (n < 3) continue;
+      colors.clear();
+      for (size_t i = offset[f]; i < offset[f + 1]; ++i) {
+        Eigen::Vector3f c = cand[i].color;
+        int m = 1;
+        for (int k = 0; k < 3; ++k)
+          if (adjacency[f][k] >= 0)
+            if (const Candidate* o = find(adjacency[f][k], cand[i].view)) c += o->color, ++m;
+        colors.push_back(c / static_cast<float>(m));
+      }
+      Eigen::Vector3f median;
+      for (int ch = 0; ch < 3; ++ch) {
+        channel.clear();
+        for (const auto& c : colors) channel.push_back(c[ch]);
+        std::nth_element(channel.begin(), channel.begin() + n / 2, channel.end());
+        median[ch] = channel[n / 2];
+      }
+      dist.clear();
+      for (const auto& c : colors) dist.push_back((c - median).norm());
+      std::vector<float> sorted = dist;
+      std::nth_element(sorted.begin(), sorted.begin() + n / 2, sorted.end());
+      const float limit = std::max(static_cast<float>(options.consistency_threshold), 3.0f * sorted[n / 2]);
+      for (size_t k = 0; k < n; ++k)
+        if (dist[k] > limit) {
+          consistent[offset[f] + k] = 0;
+          ++rejected_per_chunk[chunk];
+        }
+    }
+  });
+  size_t rejected = 0;
+  for (size_t r : rejected_per_chunk) rejected += r;
+
+  // 3. Initial labels: the best consistent candidate; then label voting.
+  std::vector<float> best_quality(nf, 0);
+  for (size_t f = 0; f < nf; ++f)
+    for (size_t i = offset[f]; i < offset[f + 1]; ++i)
+      if (consistent[i] && cand[i].quality > best_quality[f]) {
+        best_quality[f] = cand[i].quality;
+        result.labels[f] = cand[i].view;
+      }
+  std::vector<int>& labels = result.labels;
+  nlohmann::json changes = nlohmann::json::array();
+  for (int it = 0; it < options.smoothing_iterations && options.smoothness > 0; ++it) {
+    size_t changed = 0;
+    // Gauss–Seidel sweep in face order: deterministic, and converges in a few sweeps.
+    for (size_t f = 0; f < nf; ++f) {
+      if (labels[f] < 0) continue;
+      double best = -1;
+      int best_view = labels[f];
+      for (size_t i = offset[f]; i < offset[f + 1]; ++i) {
+        if (!consistent[i]) continue;
+        int agree = 0;
+        for (int k = 0; k < 3; ++k) agree += adjacency[f][k] >= 0 && labels[adjacency[f][k]] == cand[i].view;
+        const double score = cand[i].quality / best_quality[f] + options.smoothness * agree;
+        if (score > best + 1e-12) {
+          best = score;
+          best_view = cand[i].view;
+        }
+      }
+      if (best_view != labels[f]) {
+        labels[f] = best_view;
+        ++changed;
+      }
+    }
+    changes.push_back(changed);
+    if (changed == 0) break;
+  }
+
+  size_t labelled = 0;
+  for (int l : labels) labelled += l >= 0;
+  auto& st = result.stats;
+  st["faces"] = nf;
+  st["views"] = views.size();
+  st["candidates"] = cand.size();
+  st["mean_candidates_per_face"] = static_cast<double>(cand.size()) / nf;
+  st["inconsistent_candidates"] = rejected;
+  st["labelled_faces"] = labelled;
+  st["labelled_share"] = static_cast<double>(labelled) / nf;
+  st["smoothing_changes"] = changes;
+  st["seconds_visibility"] = seconds_visibility;
+  st["seconds"] = std::chrono::duration<double>(Clock::now() - start).count();
+  spdlog::info("texture: {} of {} faces seen ({:.1f} candidate views per face, {} inconsistent dropped)", labelled,
+               nf, st["mean_candidates_per_face"].get<double>(), rejected);
+  return result;
+}
+
+}  // namespace fmv3d::surface

@@ -1,0 +1,134 @@
+#include "fmv3d/synth/telemetry.h"
+
+#include <fmt/format.h>
+
+#include <cmath>
+#include <random>
+
+#include "fmv3d/core/error.h"
+
+namespace fmv3d::synth {
+namespace {
+
+constexpr double kA = 6378137.0;                // WGS84 semi-major axis
+constexpr double kF = 1 / 298.257223563;        // flattening
+constexpr double kE2 = kF * (2 - kF);           // first eccentricity squared
+constexpr double kDeg = M_PI / 180;
+
+// Rotation whose rows are the local East, North, Up unit vectors in ECEF.
+Eigen::Matrix3d EnuFromEcef(const GeoPoint& o) {
+  const double sl = std::sin(o.lat * kDeg), cl = std::cos(o.lat * kDeg);
+  const double so = std::sin(o.lon * kDeg), co = std::cos(o.lon * kDeg);
+  Eigen::Matrix3d m;
+  m << -so, co, 0, -sl * co, -sl * so, cl, cl * co, cl * so, sl;
+  return m;
+}
+
+// Same portable normal as the flight's (std::normal_distribution differs between standard libraries).
+struct Normal {
+  std::mt19937_64 rng;
+  explicit Normal(uint64_t seed) : rng(seed * 0xD1B54A32D192ED03ull + 0x2545F4914F6CDD1Dull) {}
+  double operator()() {
+    const double u1 = (static_cast<double>(rng() >> 11) + 0.5) / 9007199254740992.0;
+    const double u2 = static_cast<double>(rng() >> 11) / 9007199254740992.0;
+    return std::sqrt(-2 * std::log(u1)) * std::cos(2 * M_PI * u2);
+  }
+};
+
+}  // namespace
+
+Eigen::Vector3d GeodeticToEcef(const GeoPoint& p) {
+  const double sl = std::sin(p.lat * kDeg), cl = std::cos(p.lat * kDeg);
+  const double n = kA / std::sqrt(1 - kE2 * sl * sl);
+  return {(n + p.alt) * cl * std::cos(p.lon * kDeg), (n + p.alt) * cl * std::sin(p.lon * kDeg),
+          (n * (1 - kE2) + p.alt) * sl};
+}
+
+GeoPoint EcefToGeodetic(const Eigen::Vector3d& x) {
+  GeoPoint g;
+  const double p = std::hypot(x.x(), x.y());
+  g.lon = std::atan2(x.y(), x.x()) / kDeg;
+  // Fixed-point iteration on latitude; converges to machine precision in a few steps away from the poles.
+  double lat = std::atan2(x.z(), p * (1 - kE2)), h = 0;
+  for (int i = 0; i < 10; ++i) {
+    const double sl = std::sin(lat);
+    const double n = kA / std::sqrt(1 - kE2 * sl * sl);
+    h = p / std::cos(lat) - n;
+    lat = std::atan2(x.z(), p * (1 - kE2 * n / (n + h)));
+  }
+  g.lat = lat / kDeg;
+  g.alt = h;
+  return g;
+}
+
+GeoPoint EnuToGeodetic(const Eigen::Vector3d& enu, const GeoPoint& origin) {
+  return EcefToGeodetic(GeodeticToEcef(origin) + EnuFromEcef(origin).transpose() * enu);
+}
+
+Eigen::Vector3d GeodeticToEnu(const GeoPoint& p, const GeoPoint& origin) {
+  return EnuFromEcef(origin) * (GeodeticToEcef(p) - GeodeticToEcef(origin));
+}
+
+void KlvTelemetryOptions::Check() const {
+  if (!(std::abs(origin.lat) <= 85)) throw Error(fmt::format("synth: geo origin latitude {} must be in [-85, 85]", origin.lat));
+  if (!(std::abs(origin.lon) <= 180)) throw Error(fmt::format("synth: geo origin longitude {} must be in [-180, 180]", origin.lon));
+  if (!(origin.alt >= -400 && origin.alt <= 9000))
+    throw Error(fmt::format("synth: geo origin altitude {} must be in [-400, 9000] m", origin.alt));
+  if (!(gps_noise >= 0 && gps_noise <= 1000)) throw Error("synth: --gps-noise must be in [0, 1000] metres");
+  if (!(attitude_noise >= 0 && attitude_noise <= 30)) throw Error("synth: --attitude-noise must be in [0, 30] degrees");
+  if (!(fps > 0)) throw Error("synth: fps must be positive");
+}
+
+std::vector<io::klv::St0601Record> MakeKlvTelemetry(const std::vector<core::Pose>& poses, const core::Camera& camera,
+                                                    double ground_z, const KlvTelemetryOptions& o) {
+  o.Check();
+  Normal normal(o.seed);
+  std::vector<io::klv::St0601Record> out;
+  const size_t n = poses.size();
+  for (size_t k = 0; k < n; ++k) {
+    const Eigen::Vector3d c = poses[k].Centre();
+    const Eigen::Matrix3d cam_to_enu = poses[k].R().transpose();
+    // Platform heading: horizontal direction of flight (central difference), else the horizontal view direction.
+    Eigen::Vector3d v = poses[std::min(k + 1, n - 1)].Centre() - poses[k > 0 ? k - 1 : 0].Centre();
+    v.z() = 0;
+    if (v.norm() < 1e-6) v = Eigen::Vector3d(cam_to_enu(0, 2), cam_to_enu(1, 2), 0);
+    if (v.norm() < 1e-6) v = Eigen::Vector3d::UnitY();
+    const double heading = std::atan2(v.x(), v.y()) / kDeg;  // clockwise from north
+    io::klv::St0601Attitude a = io::klv::St0601FromCameraToEnu(cam_to_enu, heading, 0, 0);
+    // The stated platform attitude is noisy; the sensor angles stay as measured against the true platform.
+    a.platform_heading += o.attitude_noise * normal();
+    a.platform_pitch += o.attitude_noise * normal();
+    a.platform_roll += o.attitude_noise * normal();
+    const Eigen::Vector3d noisy = c + o.gps_noise * Eigen::Vector3d(normal(), normal(), normal());
+    const GeoPoint g = EnuToGeodetic(noisy, o.origin);
+
+    io::klv::St0601Record r;
+    r.unix_time_us = o.start_unix_us + static_cast<uint64_t>(std::llround(1e6 * k / o.fps));
+    r.sensor_latitude = g.lat;
+    r.sensor_longitude = g.lon;
+    r.sensor_true_altitude = g.alt;
+    r.sensor_ellipsoid_height = g.alt;
+    r.platform_heading = a.platform_heading;
+    r.platform_pitch = a.platform_pitch;
+    r.platform_roll = a.platform_roll;
+    r.sensor_relative_azimuth = a.sensor_relative_azimuth;
+    r.sensor_relative_elevation = a.sensor_relative_elevation;
+    r.sensor_relative_roll = a.sensor_relative_roll;
+    r.horizontal_fov = 2 * std::atan(0.5 * camera.width / camera.fx()) / kDeg;
+    r.vertical_fov = 2 * std::atan(0.5 * camera.height / camera.fy()) / kDeg;
+    // Frame centre from the true pose: where the optical axis meets the ground plane.
+    const Eigen::Vector3d d = cam_to_enu.col(2);
+    if (d.z() < -1e-6 && c.z() > ground_z) {
+      const double s = (ground_z - c.z()) / d.z();
+      const GeoPoint fc = EnuToGeodetic(c + s * d, o.origin);
+      r.slant_range = s;
+      r.frame_center_latitude = fc.lat;
+      r.frame_center_longitude = fc.lon;
+      r.frame_center_elevation = fc.alt;
+    }
+    out.push_back(r);
+  }
+  return out;
+}
+
+}  // namespace fmv3d::synth

@@ -1,0 +1,404 @@
+// geo/: PROJ frames against the independent closed-form geodesy of synth/, the robust georeference on
+// synthetic models with known similarities (noise, an outlier, a straight track), DSM / orthophoto rasters on
+// a known mesh, GeoTIFF and LAS read back.
+#include <gtest/gtest.h>
+
+#include <Eigen/Geometry>
+#include <cmath>
+#include <gdal_priv.h>
+#include <gdal_utils.h>
+#include <fstream>
+#include <open3d/geometry/TriangleMesh.h>
+#include <open3d/io/TriangleMeshIO.h>
+#include <random>
+
+#include "fmv3d/core/error.h"
+#include "fmv3d/core/files.h"
+#include "fmv3d/core/reconstruction.h"
+#include "fmv3d/geo/dsm.h"
+#include "fmv3d/geo/geodesy.h"
+#include "fmv3d/geo/georef.h"
+#include "fmv3d/geo/las.h"
+#include "fmv3d/geo/raster.h"
+#include "fmv3d/io/colmap_model.h"
+#include "fmv3d/io/frames_index.h"
+#include "fmv3d/io/klv_st0601_writer.h"
+#include "fmv3d/io/obj_io.h"
+#include "fmv3d/synth/telemetry.h"
+#include "test_util.h"
+
+namespace fmv3d::geo {
+namespace {
+
+// What `gdalinfo FILE` prints (GDAL's own library entry point for it).
+std::string GdalInfo(const std::filesystem::path& path) {
+  GDALAllRegister();
+  GDALDatasetH ds = GDALOpen(path.c_str(), GA_ReadOnly);
+  if (!ds) return "";
+  char* text = GDALInfo(ds, nullptr);
+  std::string out = text ? text : "";
+  CPLFree(text);
+  GDALClose(ds);
+  return out;
+}
+
+// Pixel (band b, row r, col c) of a GeoTIFF.
+int Pixel(const std::filesystem::path& path, int band, int r, int c) {
+  GDALAllRegister();
+  GDALDataset* ds = static_cast<GDALDataset*>(GDALOpen(path.c_str(), GA_ReadOnly));
+  if (!ds) return -1;
+  uint8_t v = 0;
+  const CPLErr err = ds->GetRasterBand(band)->RasterIO(GF_Read, c, r, 1, 1, &v, 1, 1, GDT_Byte, 0, 0);
+  GDALClose(ds);
+  return err == CE_None ? v : -1;
+}
+
+namespace fs = std::filesystem;
+const GeoPoint kOrigin{38.16, -77.35, 60};
+
+TEST(Geodesy, ProjAgreesWithClosedFormEnu) {
+  const LocalFrame frame(kOrigin);
+  const synth::GeoPoint so{kOrigin.lat, kOrigin.lon, kOrigin.alt};
+  for (const Eigen::Vector3d& enu : {Eigen::Vector3d(0, 0, 0), Eigen::Vector3d(120, -340, 95),
+                                    Eigen::Vector3d(-3000, 2500, 800)}) {
+    const auto g = synth::EnuToGeodetic(enu, so);
+    const Eigen::Vector3d back = frame.ToEnu({g.lat, g.lon, g.alt});
+    EXPECT_LT((back - enu).norm(), 1e-6) << enu.transpose();
+    const GeoPoint p = frame.ToGeodetic(enu);
+    EXPECT_NEAR(p.lat, g.lat, 1e-10);
+    EXPECT_NEAR(p.lon, g.lon, 1e-10);
+    EXPECT_NEAR(p.alt, g.alt, 1e-6);
+  }
+}
+
+TEST(Geodesy, UtmZoneAndCentralMeridian) {
+  EXPECT_EQ(UtmZoneOf(38.16, -77.35).zone, 18);
+  EXPECT_EQ(UtmZoneOf(38.16, -77.35).Epsg(), 32618);
+  EXPECT_EQ(UtmZoneOf(-33.9, 18.4).Epsg(), 32734);
+  EXPECT_EQ(UtmZoneOf(60, 5).zone, 32);  // Norway exception
+  EXPECT_THROW(UtmZoneOf(89, 0), Error);
+  const LocalFrame frame(kOrigin);
+  // On the zone's central meridian (75° W) the easting is the false easting, 500 km; at the equator N = 0.
+  const Eigen::Vector3d e = frame.GeodeticToUtm({0, -75, 10});
+  EXPECT_NEAR(e.x(), 500000, 1e-6);
+  EXPECT_NEAR(e.y(), 0, 1e-6);
+  EXPECT_NEAR(e.z(), 10, 1e-9);
+  // Round trip, and the UTM scale (~0.9996 near the central meridian, more 2.35° off it) over 1 km east.
+  const Eigen::Vector3d a = frame.EnuToUtm({0, 0, 0}), b = frame.EnuToUtm({1000, 0, 0});
+  EXPECT_NEAR((b - a).head<2>().norm(), 1000, 1.0);
+  const GeoPoint back = frame.UtmToGeodetic(a);
+  EXPECT_NEAR(back.lat, kOrigin.lat, 1e-9);
+  EXPECT_NEAR(back.lon, kOrigin.lon, 1e-9);
+  std::vector<Eigen::Vector3d> batch = {{0, 0, 0}, {1000, 0, 0}};
+  frame.EnuToUtm(&batch);
+  EXPECT_LT((batch[0] - a).norm(), 1e-6);
+  EXPECT_LT((batch[1] - b).norm(), 1e-6);
+  EXPECT_NE(UtmWkt(frame.utm_zone()).find("UTM zone 18N"), std::string::npos);
+}
+
+// A workspace with a model that is the truth under a known similarity, and telemetry = noisy truth.
+struct GeorefCase {
+  test::TempDir dir{"georef"};
+  std::vector<Eigen::Vector3d> true_centres;  // ENU
+  core::Sim3 true_to_model;
+};
+
+// attitude_noise < 0: no attitude in the telemetry; heading_offset: a systematic heading error (degrees).
+void MakeGeorefCase(GeorefCase* g, int n, double noise, bool straight, int outlier, double attitude_noise = -1,
+                    double heading_offset = 0, double radius = 200) {
+  std::mt19937_64 rng(5);
+  std::normal_distribution<double> N(0, 1);
+  std::mt19937_64 rng_att(9);  // separate, so positions are the same with and without attitude
+  std::normal_distribution<double> Na(0, 1);
+  core::Reconstruction rec;
+  rec.cameras[1] = core::Camera::Pinhole(640, 360, 500);
+  rec.cameras[1].id = 1;
+  g->true_to_model.s = 0.05;
+  g->true_to_model.q = Eigen::Quaterniond(Eigen::AngleAxisd(0.7, Eigen::Vector3d(0.3, -0.5, 0.8).normalized()));
+  g->true_to_model.t = Eigen::Vector3d(1, -2, 3);
+  io::FramesIndex index;
+  index.cameras.push_back({rec.cameras[1], "guess", "flight.ts"});
+  const LocalFrame frame(kOrigin);
+  for (int k = 0; k < n; ++k) {
+    Eigen::Vector3d c;
+    if (straight) c = Eigen::Vector3d(-300 + 600.0 * k / (n - 1), -150, 120);
+    else c = Eigen::Vector3d(radius * std::cos(2 * M_PI * k / n), radius * std::sin(2 * M_PI * k / n), 120 + 10 * std::sin(3.0 * k));
+    g->true_centres.push_back(c);
+    core::Image img;
+    img.id = k + 1;
+    img.camera_id = 1;
+    img.name = fmt::format("flight-{:06d}.png", k);
+    img.pose = g->true_to_model.Apply(core::Pose::LookAt(c, {0, 0, 0}));
+    rec.images[img.id] = img;
+    io::FrameRecord f;
+    f.name = img.name;
+    f.frame_index = k;
+    Eigen::Vector3d noisy = c + noise * Eigen::Vector3d(N(rng), N(rng), N(rng));
+    if (k == outlier) noisy += Eigen::Vector3d(150, -80, 40);
+    const GeoPoint p = frame.ToGeodetic(noisy);
+    f.telemetry = {{"time", k * 0.1}, {"source", "ST0601"}, {"sensor_latitude", p.lat}, {"sensor_longitude", p.lon},
+                   {"sensor_altitude_hae", p.alt}, {"sensor_altitude_msl", p.alt}};
+    if (attitude_noise >= 0) {
+      // Split the true attitude for a nominal platform, then state a noisy (and offset) platform, as synth does:
+      // the telemetry's camera attitude is off by about attitude_noise per axis (and by heading_offset).
+      const Eigen::Matrix3d cam_to_enu = core::Pose::LookAt(c, {0, 0, 0}).R().transpose();
+      const auto a = io::klv::St0601FromCameraToEnu(cam_to_enu, 90, 0, 0);
+      f.telemetry["platform_heading"] = 90 + heading_offset + attitude_noise * Na(rng_att);
+      f.telemetry["platform_pitch"] = attitude_noise * Na(rng_att);
+      f.telemetry["platform_roll"] = attitude_noise * Na(rng_att);
+      f.telemetry["sensor_relative_azimuth"] = a.sensor_relative_azimuth;
+      f.telemetry["sensor_relative_elevation"] = a.sensor_relative_elevation;
+      f.telemetry["sensor_relative_roll"] = a.sensor_relative_roll;
+    }
+    index.frames.push_back(f);
+  }
+  // Ground points (a plane with small bumps) so the model has a ground.
+  for (int i = 0; i < 400; ++i) {
+    core::Point3D pt;
+    pt.id = i + 1;
+    pt.xyz = g->true_to_model.Apply(Eigen::Vector3d(-200 + 20.0 * (i % 20), -200 + 20.0 * (i / 20), 0.5 * N(rng)));
+    rec.points[pt.id] = pt;
+  }
+  core::EnsureDirectory(g->dir / "frames");
+  io::WriteFramesIndex(index, g->dir / "frames/frames.json");
+  io::WriteColmapText(rec, g->dir / "sparse");
+}
+
+double CentreRms(const GeorefCase& g) {
+  const core::Reconstruction enu = io::ReadColmapText(g.dir / "geo/sparse_enu");
+  double sq = 0;
+  for (const auto& [id, img] : enu.images) sq += (img.pose.Centre() - g.true_centres[id - 1]).squaredNorm();
+  return std::sqrt(sq / enu.images.size());
+}
+
+TEST(Georef, ExactTelemetryRecoversTheSimilarity) {
+  GeorefCase g;
+  MakeGeorefCase(&g, 20, 0.0, false, -1);
+  GeorefOptions o;
+  o.origin = kOrigin;
+  const auto j = RunGeorefStage(g.dir.path(), o);
+  EXPECT_LT(CentreRms(g), 1e-3);
+  EXPECT_NEAR(j["similarity"]["scale"].get<double>(), 1 / g.true_to_model.s, 1e-6);
+  EXPECT_EQ(j["utm"]["epsg"].get<int>(), 32618);
+  const Georef back = ReadGeoref(g.dir.path());
+  EXPECT_NEAR(back.sparse_to_enu.s, 1 / g.true_to_model.s, 1e-6);
+  EXPECT_EQ(back.vertical_datum, "WGS84 ellipsoid");
+}
+
+TEST(Georef, NoisyTelemetryWithAnOutlier) {
+  GeorefCase g;
+  const int n = 80;
+  MakeGeorefCase(&g, n, 3.0, false, 7);
+  GeorefOptions o;
+  o.origin = kOrigin;
+  const auto j = RunGeorefStage(g.dir.path(), o);
+  // The outlier is rejected, the rest kept; the frame is known to ~σ·√(3/N) ≈ 0.6 m (3D), cameras likewise.
+  const auto& per = j["residuals"]["per_image"];
+  EXPECT_FALSE(per[7]["inlier"].get<bool>());
+  EXPECT_GE(j["inliers"].get<int>(), n - 3);
+  EXPECT_NEAR(j["residuals"]["sigma_per_axis_m"].get<double>(), 3.0, 0.6);
+  EXPECT_LT(CentreRms(g), 1.5);
+}
+
+// The fusion weighs each source by its information: precise positions on a wide orbit are not pulled off by
+// 1° attitudes; noisy positions on a tight orbit (rotation known to ~1.4°) are sharpened by 0.2° attitudes.
+double RotationErrorDeg(const GeorefCase& g) {
+  const Georef r = ReadGeoref(g.dir.path());
+  return core::RotationAngle(r.sparse_to_enu.q * g.true_to_model.q, Eigen::Quaterniond::Identity()) * 180 / M_PI;
+}
+
+TEST(Georef, AttitudeFusionWeighsBothSources) {
+  {
+    GeorefCase g;
+    MakeGeorefCase(&g, 40, 0.01, false, -1, 1.0);
+    const auto j = RunGeorefStage(g.dir.path(), {});
+    EXPECT_TRUE(j["attitude"]["used"].get<bool>()) << j["attitude"].dump();
+    EXPECT_LT(RotationErrorDeg(g), 0.005);
+  }
+  double err[2];
+  for (int use = 0; use < 2; ++use) {
+    GeorefCase g;
+    MakeGeorefCase(&g, 40, 3.0, false, -1, use ? 0.2 : -1, 0, 20);
+    const auto j = RunGeorefStage(g.dir.path(), {});
+    EXPECT_EQ(j["attitude"]["used"].get<bool>(), use == 1) << j["attitude"].dump();
+    err[use] = RotationErrorDeg(g);
+  }
+  EXPECT_LT(err[1], 0.15) << "positions only: " << err[0];
+}
+
+TEST(Georef, InconsistentAttitudeIsNotUsed) {
+  GeorefCase g;
+  MakeGeorefCase(&g, 40, 1.0, false, -1, 0.2, 20.0);  // every attitude 20° off in heading
+  const auto j = RunGeorefStage(g.dir.path(), {});
+  EXPECT_FALSE(j["attitude"]["used"].get<bool>()) << j["attitude"].dump();
+  EXPECT_NEAR(j["attitude"]["disagreement_deg"].get<double>(), 20, 1);
+}
+
+TEST(Georef, StraightTrackTakesItsRollFromTheGround) {
+  GeorefCase g;
+  MakeGeorefCase(&g, 30, 1.0, true, -1);
+  const auto j = RunGeorefStage(g.dir.path(), {});  // origin: the telemetry centroid
+  EXPECT_NE(j["rotation_about_track_from"].get<std::string>().find("ground"), std::string::npos);
+  // Rotation error: the model's rotation composed with the recovered one should be the identity.
+  const Georef r = ReadGeoref(g.dir.path());
+  const double angle = core::RotationAngle(r.sparse_to_enu.q * g.true_to_model.q, Eigen::Quaterniond::Identity());
+  EXPECT_LT(angle * 180 / M_PI, 1.0);
+}
+
+TEST(Georef, ClearErrors) {
+  test::TempDir dir("georef-err");
+  EXPECT_THROW(RunGeorefStage(dir.path()), Error);
+  GeorefCase g;
+  MakeGeorefCase(&g, 10, 0, false, -1);
+  io::FramesIndex index = io::ReadFramesIndex(g.dir / "frames/frames.json");
+  for (auto& f : index.frames) f.telemetry = nullptr;
+  io::WriteFramesIndex(index, g.dir / "frames/frames.json");
+  try {
+    RunGeorefStage(g.dir.path());
+    FAIL() << "no telemetry must be an error";
+  } catch (const Error& e) {
+    EXPECT_NE(std::string(e.what()).find("telemetry"), std::string::npos) << e.what();
+  }
+}
+
+// A 20 x 10 m box of height 12 m on a 100 x 100 m ground plane, written as WS/mesh/poisson.ply in a
+// workspace georeferenced with a known similarity.
+void MakeDsmWorkspace(const test::TempDir& dir, const core::Sim3& enu_to_model) {
+  open3d::geometry::TriangleMesh mesh;
+  auto quad = [&](Eigen::Vector3d a, Eigen::Vector3d b, Eigen::Vector3d c, Eigen::Vector3d d) {
+    const int i = static_cast<int>(mesh.vertices_.size());
+    for (const auto& v : {a, b, c, d}) mesh.vertices_.push_back(enu_to_model.Apply(v));
+    mesh.triangles_.push_back({i, i + 1, i + 2});
+    mesh.triangles_.push_back({i, i + 2, i + 3});
+  };
+  // Ground (with a hole under the box is unnecessary: the roof is higher and wins).
+  for (int x = -50; x < 50; x += 10)
+    for (int y = -50; y < 50; y += 10) quad({x * 1.0, y * 1.0, 0}, {x + 10.0, y * 1.0, 0}, {x + 10.0, y + 10.0, 0}, {x * 1.0, y + 10.0, 0});
+  quad({-10, -5, 12}, {10, -5, 12}, {10, 5, 12}, {-10, 5, 12});  // roof
+  quad({-10, -5, 0}, {10, -5, 0}, {10, -5, 12}, {-10, -5, 12});  // a wall
+  core::EnsureDirectory(dir / "mesh");
+  ASSERT_TRUE(open3d::io::WriteTriangleMesh((dir / "mesh/poisson.ply").string(), mesh));
+  // A sparse model with a few coloured points (for the LAS and the ortho fallback).
+  core::Reconstruction rec;
+  for (int i = 0; i < 100; ++i) {
+    core::Point3D p;
+    p.id = i + 1;
+    p.xyz = enu_to_model.Apply(Eigen::Vector3d(-45 + i * 0.9, 10, 0));
+    p.rgb << 200, 100, 50;
+    rec.points[p.id] = p;
+  }
+  io::WriteColmapText(rec, dir / "sparse");
+  const core::Sim3 model_to_enu = enu_to_model.Inverse();
+  const Eigen::Quaterniond q = model_to_enu.q;
+  nlohmann::json j;
+  j["origin"] = {{"lat", kOrigin.lat}, {"lon", kOrigin.lon}, {"alt", kOrigin.alt}};
+  j["vertical_datum"] = "WGS84 ellipsoid";
+  j["similarity"] = {{"scale", model_to_enu.s},
+                     {"rotation_wxyz", {q.w(), q.x(), q.y(), q.z()}},
+                     {"translation", {model_to_enu.t.x(), model_to_enu.t.y(), model_to_enu.t.z()}}};
+  j["utm"] = {{"zone", 18}, {"north", true}};
+  core::EnsureDirectory(dir / "geo");
+  core::WriteJson(dir / "geo/georef.json", j);
+}
+
+TEST(Dsm, MeshRasterisedToHighestSurfaceInUtm) {
+  test::TempDir dir("dsm");
+  core::Sim3 enu_to_model;
+  enu_to_model.s = 0.2;
+  enu_to_model.q = Eigen::Quaterniond(Eigen::AngleAxisd(0.4, Eigen::Vector3d::UnitZ()));
+  enu_to_model.t = Eigen::Vector3d(5, 6, 7);
+  MakeDsmWorkspace(dir, enu_to_model);
+  DsmOptions o;
+  o.gsd = 0.5;
+  const auto j = RunDsmStage(dir.path(), o);
+  EXPECT_EQ(j["epsg"].get<int>(), 32618);
+  GridSpec grid;
+  const cv::Mat h = ReadHeightGeoTiff(dir / "geo/dsm.tif", &grid);
+  EXPECT_EQ(grid.zone.Epsg(), 32618);
+  EXPECT_DOUBLE_EQ(grid.gsd, 0.5);
+  // Sample the roof centre and open ground through the ENU → UTM mapping.
+  const LocalFrame frame(kOrigin);
+  auto height_at = [&](const Eigen::Vector3d& enu) {
+    const Eigen::Vector3d u = frame.EnuToUtm(enu);
+    const int r = static_cast<int>(grid.Row(u.y())), c = static_cast<int>(grid.Col(u.x()));
+    return h.at<float>(r, c);
+  };
+  // Ellipsoidal heights: origin alt + z, less the Earth's curvature (< 1 mm within 50 m).
+  EXPECT_NEAR(height_at({0, 0, 12}), 72.0, 0.01);
+  EXPECT_NEAR(height_at({3, -2, 12}), 72.0, 0.01);
+  EXPECT_NEAR(height_at({30, 30, 0}), 60.0, 0.01);
+  EXPECT_NEAR(height_at({-40, 20, 0}), 60.0, 0.01);
+  // Outside the mesh: no data.
+  EXPECT_TRUE(std::isnan(h.at<float>(0, 0)));
+  const std::string info = GdalInfo(dir / "geo/dsm.tif");
+  EXPECT_NE(info.find("UTM zone 18N"), std::string::npos) << info;
+  EXPECT_NE(info.find("NoData Value=-9999"), std::string::npos) << info;
+  EXPECT_TRUE(std::filesystem::exists(dir / "geo/hillshade.png"));
+  // LAS: the sparse points with the UTM CRS, at the right place.
+  const LasInfo las = ReadLas(dir / "geo/points.las", true);
+  EXPECT_EQ(las.version_minor, 4);
+  EXPECT_EQ(las.point_format, 7);
+  EXPECT_EQ(las.num_points, 100u);
+  EXPECT_NE(las.wkt.find("UTM zone 18N"), std::string::npos);
+  const Eigen::Vector3d first = frame.EnuToUtm({-45, 10, 0});
+  EXPECT_LT((las.points[0] - first).norm(), 0.002);
+  // Orthophoto: no textured mesh, so the coloured points; the grid is the DSM's.
+  const auto oj = RunOrthoStage(dir.path());
+  EXPECT_GT(oj["valid_cells"].get<int>(), 50);
+  EXPECT_EQ(oj["width"].get<int>(), grid.width);
+}
+
+TEST(Dsm, OrthoFromTexturedMesh) {
+  test::TempDir dir("ortho");
+  MakeDsmWorkspace(dir, core::Sim3());
+  RunDsmStage(dir.path(), {});
+  // A single textured quad over the box's footprint: left half red, right half blue.
+  io::TexturedMesh mesh;
+  mesh.vertices = {{-10, -5, 20}, {10, -5, 20}, {10, 5, 20}, {-10, 5, 20}};
+  mesh.uvs = {{0, 0}, {1, 0}, {1, 1}, {0, 1}};
+  io::Material m;
+  m.name = "tex";
+  m.texture_file = "tex.png";
+  m.texture = cv::Mat(8, 8, CV_8UC3, cv::Scalar(255, 0, 0));
+  m.texture(cv::Rect(0, 0, 4, 8)).setTo(cv::Scalar(0, 0, 255));
+  mesh.materials.push_back(m);
+  io::Face f1, f2;
+  f1.v[0] = 0, f1.v[1] = 1, f1.v[2] = 2, f1.vt[0] = 0, f1.vt[1] = 1, f1.vt[2] = 2, f1.material = 0;
+  f2.v[0] = 0, f2.v[1] = 2, f2.v[2] = 3, f2.vt[0] = 0, f2.vt[1] = 2, f2.vt[2] = 3, f2.material = 0;
+  mesh.faces = {f1, f2};
+  io::WriteObj(mesh, dir / "mesh/textured.obj");
+  const auto j = RunOrthoStage(dir.path());
+  EXPECT_GT(j["valid_cells"].get<int>(), 0);
+  EXPECT_EQ(j["source"].get<std::string>(), (dir / "mesh/textured.obj").string());
+  // West half red, east half blue (the texture's left and right), transparent outside the quad.
+  GridSpec grid;
+  ReadHeightGeoTiff(dir / "geo/dsm.tif", &grid);
+  const LocalFrame frame(kOrigin);
+  auto cell = [&](double e, double n) {
+    const Eigen::Vector3d u = frame.EnuToUtm({e, n, 20});
+    return std::pair<int, int>(static_cast<int>(grid.Row(u.y())), static_cast<int>(grid.Col(u.x())));
+  };
+  const fs::path ortho = dir / "geo/ortho.tif";
+  const auto [rw, cw] = cell(-5, 0);
+  const auto [re, ce] = cell(5, 0);
+  const auto [ro, co] = cell(30, 30);
+  EXPECT_EQ(Pixel(ortho, 1, rw, cw), 255);
+  EXPECT_EQ(Pixel(ortho, 3, rw, cw), 0);
+  EXPECT_EQ(Pixel(ortho, 1, re, ce), 0);
+  EXPECT_EQ(Pixel(ortho, 3, re, ce), 255);
+  EXPECT_EQ(Pixel(ortho, 4, re, ce), 255);
+  EXPECT_EQ(Pixel(ortho, 4, ro, co), 0);
+}
+
+TEST(Dsm, NeedsGeoref) {
+  test::TempDir dir("dsm-err");
+  try {
+    RunDsmStage(dir.path(), {});
+    FAIL();
+  } catch (const Error& e) {
+    EXPECT_NE(std::string(e.what()).find("fmv3d georef"), std::string::npos) << e.what();
+  }
+}
+
+}  // namespace
+}  // namespace fmv3d::geo
