@@ -19,6 +19,8 @@ void ReconstructOptions::Check() const {
   if (workspace.empty()) throw Error("reconstruct: no workspace folder (-o WS)");
   match.Check();
   sparse.Check();
+  dense.Check();
+  mesh.Check();
 }
 
 std::vector<Stage> ReconstructStages(const ReconstructOptions& o) {
@@ -57,6 +59,10 @@ std::vector<Stage> ReconstructStages(const ReconstructOptions& o) {
   stages.push_back({"sparse",
                     [ws] { return std::vector<fs::path>{features::MatchesSummaryPath(ws.matches_dir())}; },
                     ws.sparse_dir() / "images.txt", [o, root] { return sfm::RunSparseStage(root, o.sparse); }});
+  stages.push_back({"dense", [ws] { return std::vector<fs::path>{ws.sparse_dir() / "images.txt"}; },
+                    ws.dense_dir() / "fused.ply", [o, root] { return mvs::RunDenseStage(root, o.dense); }});
+  stages.push_back({"mesh", [ws] { return std::vector<fs::path>{ws.dense_dir() / "fused.ply"}; },
+                    ws.mesh_dir() / "poisson.ply", [o, root] { return surface::RunMeshStage(root, o.mesh); }});
   return stages;
 }
 

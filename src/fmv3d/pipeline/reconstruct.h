@@ -13,8 +13,10 @@
 #include "fmv3d/features/match_stage.h"
 #include "fmv3d/features/sift.h"
 #include "fmv3d/io/frames.h"
+#include "fmv3d/mvs/dense_stage.h"
 #include "fmv3d/pipeline/stage_runner.h"
 #include "fmv3d/sfm/sparse_stage.h"
+#include "fmv3d/surface/mesh_stage.h"
 
 namespace fmv3d::pipeline {
 
@@ -26,6 +28,8 @@ struct ReconstructOptions {
   features::SiftOptions sift;
   features::MatchStageOptions match;
   sfm::SparseStageOptions sparse;
+  mvs::DenseStageOptions dense;
+  surface::MeshStageOptions mesh;
   RunnerOptions runner;               // --from / --until
   bool report = true;                 // write report/report.html (renders take a few seconds)
   // Throws fmv3d::Error naming the bad option (no inputs, missing file, stage options).

@@ -15,6 +15,7 @@
 #include "fmv3d/io/point_cloud.h"
 #include "fmv3d/pipeline/preview.h"
 #include "fmv3d/pipeline/workspace.h"
+#include "fmv3d/surface/colored_mesh.h"
 
 namespace fmv3d::pipeline {
 
@@ -111,12 +112,14 @@ nlohmann::json WriteReport(const fs::path& root, const nlohmann::json& timings) 
           WritePng(ws.report_dir() / "dense.png", RenderPoints(dense, view, 1));
           images.push_back({{"file", "dense.png"}, {"title", "Dense oriented points"}});
         }
-        for (const auto& [file, title] : {std::pair<const char*, const char*>{"textured.obj", "Textured mesh"}}) {
-          const fs::path obj = ws.mesh_dir() / file;
-          if (!fs::exists(obj)) continue;
-          const io::TexturedMesh mesh = io::ReadObj(obj);
-          WritePng(ws.report_dir() / "mesh.png", RenderMesh(mesh, view));
-          images.push_back({{"file", "mesh.png"}, {"title", title}});
+        // The textured mesh when there is one, else the Poisson surface (shaded).
+        const fs::path obj = ws.mesh_dir() / "textured.obj", ply = ws.mesh_dir() / "poisson.ply";
+        if (fs::exists(obj)) {
+          WritePng(ws.report_dir() / "mesh.png", RenderMesh(io::ReadObj(obj), view));
+          images.push_back({{"file", "mesh.png"}, {"title", "Textured mesh"}});
+        } else if (fs::exists(ply)) {
+          WritePng(ws.report_dir() / "mesh.png", RenderMesh(surface::ReadMeshPly(ply).ToTexturedMesh(), view));
+          images.push_back({{"file", "mesh.png"}, {"title", "Poisson surface"}});
         }
       }
     }
