@@ -46,8 +46,9 @@ struct Georef {
 // Reads WS/geo/georef.json; throws fmv3d::Error ("WS: no geo/georef.json — run `fmv3d georef` first").
 Georef ReadGeoref(const std::filesystem::path& workspace);
 
-// Robust similarity src → dst (see above). Returns the inlier mask; throws fmv3d::Error when fewer than
-// 3 non-collinear pairs exist.
+// Robust similarity src → dst (see above), with the inlier mask and the per-axis residual sigma. A collinear
+// src is fitted along its line (the roll about it is left for the caller to fix); throws fmv3d::Error with
+// fewer than 3 pairs or when no sample gives a similarity.
 core::Sim3 RobustSimilarity(const std::vector<Eigen::Vector3d>& src, const std::vector<Eigen::Vector3d>& dst,
                             const GeorefOptions& options, std::vector<char>* inliers, double* sigma);
 
