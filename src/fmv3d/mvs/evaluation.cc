@@ -114,16 +114,23 @@ DenseEvaluation EvaluateDense(const io::OrientedPointCloud& cloud, const core::R
   ev.p90_error = Quantile(dist, 0.9);
 
   // Completeness over the surface two or more true cameras see.
+  // Sample only the triangles of the region (their centroid inside it).
+  std::vector<Eigen::Vector3i> region_tris;
   double area = 0;
   for (size_t f = 0; f < mesh.num_triangles(); ++f) {
     const auto& tri = mesh.triangles()[f];
     const Eigen::Vector3d c = (mesh.vertices()[tri[0]] + mesh.vertices()[tri[1]] + mesh.vertices()[tri[2]]) / 3;
-    if (opt.region.isEmpty() || opt.region.contains(c)) area += mesh.Area(static_cast<int>(f));
+    if (opt.region.isEmpty() || opt.region.contains(c)) {
+      area += mesh.Area(static_cast<int>(f));
+      region_tris.push_back(tri);
+    }
   }
+  if (region_tris.empty()) throw Error("evaluate-dense: no surface of the true mesh inside the evaluation region");
+  const geometry::MeshDistance region_mesh(mesh.vertices(), region_tris);
   ev.sample_spacing = std::max(opt.min_spacing_fraction * characteristic_length,
                                std::sqrt(area / static_cast<double>(opt.max_surface_samples)));
   std::vector<int> faces;
-  const auto samples = mesh.SampleSurface(ev.sample_spacing, &faces, 7);
+  const auto samples = region_mesh.SampleSurface(ev.sample_spacing, &faces, 7);
   std::vector<std::atomic<uint16_t>> seen(samples.size());
   for (auto& s : seen) s = 0;
   const render::Renderer renderer(scene);
@@ -147,7 +154,7 @@ DenseEvaluation EvaluateDense(const io::OrientedPointCloud& cloud, const core::R
       const Eigen::Vector3d xc = im.pose.Transform(samples[i]);
       if (!(xc.z() > 0)) return;
       const Eigen::Vector3d view_dir = (im.pose.Centre() - samples[i]).normalized();
-      if (mesh.Normal(faces[i]).dot(view_dir) <= 0) return;  // back side of the face
+      if (region_mesh.Normal(faces[i]).dot(view_dir) <= 0) return;  // back side of the face
       const Eigen::Vector2d uv = cam.Project(xc);
       const int u = static_cast<int>(std::floor(uv.x())), v = static_cast<int>(std::floor(uv.y()));
       if (u < 0 || v < 0 || u >= w || v >= h) return;
@@ -162,7 +169,6 @@ DenseEvaluation EvaluateDense(const io::OrientedPointCloud& cloud, const core::R
   std::atomic<size_t> n_seen{0}, n_complete{0};
   tbb::parallel_for(size_t{0}, samples.size(), [&](size_t i) {
     if (seen[i] < opt.min_cameras) return;
-    if (!opt.region.isEmpty() && !opt.region.contains(samples[i])) return;
     n_seen++;
     if (grid.AnyWithin(samples[i], radius)) n_complete++;
   });
