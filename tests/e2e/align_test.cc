@@ -7,6 +7,8 @@
 // angle of E, |scale − 1|, and the displacement E moves the centroid of B's points by, as a fraction of the
 // scene size (the largest distance between two true camera centres of A, the same extent issue 4 uses).
 // Note the yardstick: S_A and S_B carry each model's own error (centre RMSE of a few 0.01% of the extent).
+// Measured (2 shared cores, ~4 min of flights + ~1 min align): rotation 0.018°, scale 0.045%, translation
+// 0.018% of the scene size; the models' centre RMSE 0.014% and 0.010%.
 //
 // Set FMV3D_E2E_ALIGN_DIR to keep the flights and reuse them on the next run (development only).
 #include <gtest/gtest.h>
@@ -45,9 +47,11 @@ TEST(E2eAlign, TwoSyntheticFlightsOfOneScene) {
     tmp = std::make_unique<TempDir>("fmv3d-e2e-align");
     root = tmp->path();
   }
-  ASSERT_NO_FATAL_FAILURE(Flight(root, "A", "--path orbit --frames 24 --size 640x360 --seed 1"));
+  // 36 frames each: with 24 frames at 640x360 the models themselves are only good to ~0.08% (centre RMSE),
+  // and the yardstick then fails the bounds (measured 0.087°, 0.16%, 0.057%).
+  ASSERT_NO_FATAL_FAILURE(Flight(root, "A", "--path orbit --frames 36 --size 960x540 --seed 1"));
   ASSERT_NO_FATAL_FAILURE(Flight(root, "B",
-                                 "--path orbit --frames 24 --size 800x450 --focal 700 --distortion -0.06,0.01,0,0 "
+                                 "--path orbit --frames 36 --size 1024x576 --focal 900 --distortion -0.06,0.01,0,0 "
                                  "--altitude 45 --radius 70 --sun-azimuth 250 --exposure 0.8 --seed 2"));
   fs::remove_all(root / "AB");
   Cli("-q align " + (root / "A").string() + " " + (root / "B").string() + " -o " + (root / "AB").string());
