@@ -14,7 +14,8 @@ void Add(CLI::App& app) {
   auto* cmd = app.add_subcommand("compare", "Distance of a reconstruction (PLY points or mesh) to a CAD model (OBJ)");
   cmd->footer(
       "Alignment: --transform (JSON {\"scale\": s, \"rotation\": [[3x3]], \"translation\": [x,y,z]} mapping the\n"
-      "reconstruction into the CAD frame), else global registration (assumes both cover about the same\n"
+      "reconstruction into the CAD frame; WS/report/sparse_eval.json of `fmv3d evaluate-sparse` works too),\n"
+      "else global registration (assumes both cover about the same\n"
       "extent); then scaled point-to-plane ICP unless --no-icp. Errors are fractions of --length H: X, Y, Z\n"
       "components of (point - closest CAD point) and the signed distance; completeness is the share of the\n"
       "CAD surface with a point within --threshold (restricted to the surface seen by >= 2 cameras with\n"

@@ -126,6 +126,13 @@ TEST(CompareToCad, Sim3JsonRoundTripAndErrors) {
   EXPECT_LT(core::RotationAngle(back.q, f.to_recon.q), 1e-12);
   EXPECT_LT((back.t - f.to_recon.t).norm(), 1e-12);
   EXPECT_THROW(Sim3FromJson(nlohmann::json{{"scale", 1}}), Error);
+  // The shape of evaluate-sparse's report.
+  const Eigen::Quaterniond& q = f.to_recon.q;
+  const nlohmann::json report = {{"alignment", {{"scale", f.to_recon.s}, {"q_wxyz", {q.w(), q.x(), q.y(), q.z()}},
+                                                {"t", {f.to_recon.t.x(), f.to_recon.t.y(), f.to_recon.t.z()}}}}};
+  const core::Sim3 from_report = Sim3FromJson(report);
+  EXPECT_LT(core::RotationAngle(from_report.q, f.to_recon.q), 1e-12);
+  EXPECT_LT((from_report.t - f.to_recon.t).norm(), 1e-12);
   nlohmann::json bad = Sim3ToJson(f.to_recon);
   bad["rotation"][0][0] = 2.0;
   EXPECT_THROW(Sim3FromJson(bad), Error);
