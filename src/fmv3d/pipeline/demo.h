@@ -14,8 +14,9 @@ namespace fmv3d::pipeline {
 
 struct DemoOptions {
   std::filesystem::path output = "demo";
-  int frames = 40;
+  int frames = 30;
   int width = 960, height = 540;
+  int dense_max_size = 480;  // dense working resolution (longer side): keeps the demo to minutes on 2 cores
   uint64_t seed = 1;
   void Check() const;
 };

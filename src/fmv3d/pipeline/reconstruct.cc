@@ -2,9 +2,12 @@
 
 #include <spdlog/spdlog.h>
 
+#include <algorithm>
+
 #include "fmv3d/core/error.h"
 #include "fmv3d/core/files.h"
 #include "fmv3d/features/feature_io.h"
+#include "fmv3d/io/frames_index.h"
 #include "fmv3d/pipeline/report.h"
 #include "fmv3d/pipeline/workspace.h"
 
@@ -21,6 +24,9 @@ void ReconstructOptions::Check() const {
   sparse.Check();
   dense.Check();
   mesh.Check();
+  texture.Check();
+  georef.Check();
+  dsm.Check();
 }
 
 std::vector<Stage> ReconstructStages(const ReconstructOptions& o) {
@@ -63,6 +69,37 @@ std::vector<Stage> ReconstructStages(const ReconstructOptions& o) {
                     ws.dense_dir() / "fused.ply", [o, root] { return mvs::RunDenseStage(root, o.dense); }});
   stages.push_back({"mesh", [ws] { return std::vector<fs::path>{ws.dense_dir() / "fused.ply"}; },
                     ws.mesh_dir() / "poisson.ply", [o, root] { return surface::RunMeshStage(root, o.mesh); }});
+  // report/texture.json is written after the OBJ, GLB and PLY: it marks the stage complete.
+  stages.push_back({"texture", [ws] { return std::vector<fs::path>{ws.mesh_dir() / "poisson.ply"}; },
+                    ws.report_dir() / "texture.json",
+                    [o, root] { return surface::RunTextureStage(root, o.texture); }});
+  // Terrain products need telemetry (KLV, DJI SRT, EXIF GPS): without it these stages say so and write
+  // nothing (their markers stay absent, so adding telemetry later and re-running makes them).
+  auto with_telemetry = [ws](const char* stage, std::function<nlohmann::json()> run) {
+    return [ws, stage, run] {
+      const io::FramesIndex index = io::ReadFramesIndex(ws.frames_json());
+      const bool any = std::any_of(index.frames.begin(), index.frames.end(),
+                                   [](const io::FrameRecord& f) { return !f.telemetry.is_null(); });
+      if (!any) {
+        spdlog::info("{}: no telemetry in frames.json (KLV, SRT or GPS), no georeferenced products", stage);
+        return nlohmann::json{{"skipped", "no telemetry"}};
+      }
+      return run();
+    };
+  };
+  stages.push_back({"georef", [ws] { return std::vector<fs::path>{ws.sparse_dir() / "images.txt"}; },
+                    ws.geo_dir() / "georef.json",
+                    with_telemetry("georef", [o, root] { return geo::RunGeorefStage(root, o.georef); })});
+  stages.push_back({"dsm",
+                    [ws] {
+                      return std::vector<fs::path>{ws.geo_dir() / "georef.json", ws.mesh_dir() / "poisson.ply"};
+                    },
+                    ws.geo_dir() / "dsm.json", with_telemetry("dsm", [o, root] { return geo::RunDsmStage(root, o.dsm); })});
+  stages.push_back({"ortho",
+                    [ws] {
+                      return std::vector<fs::path>{ws.geo_dir() / "dsm.json", ws.report_dir() / "texture.json"};
+                    },
+                    ws.geo_dir() / "ortho.tif", with_telemetry("ortho", [root] { return geo::RunOrthoStage(root); })});
   return stages;
 }
 
@@ -85,9 +122,8 @@ nlohmann::json RunReconstruct(const ReconstructOptions& o) {
   const auto results = RunStages(ReconstructStages(o), o.runner);
   nlohmann::json timings = nlohmann::json::object();
   for (const auto& r : results) timings[r.name] = r.skipped ? nlohmann::json("skipped") : nlohmann::json(r.seconds);
-  nlohmann::json report;
-  if (o.report) report = WriteReport(ws.root(), timings);
-  return report;
+  RecordTimings(ws.root(), timings);
+  return o.report ? WriteReport(ws.root()) : nlohmann::json();
 }
 
 }  // namespace fmv3d::pipeline

@@ -1,5 +1,5 @@
 // `fmv3d reconstruct INPUT... -o WS`: the whole chain frames → features → match → sparse → dense → mesh →
-// texture in one workspace (DESIGN.md "The data flow"), resumable (stage_runner.h), with
+// texture (→ georef → dsm → ortho when the frames carry telemetry) in one workspace (DESIGN.md "The data flow"), resumable (stage_runner.h), with
 // WS/project.json (inputs, options, versions) and WS/report/report.json + report.html at the end.
 #pragma once
 
@@ -12,11 +12,14 @@
 #include "fmv3d/calib/priors.h"
 #include "fmv3d/features/match_stage.h"
 #include "fmv3d/features/sift.h"
+#include "fmv3d/geo/dsm.h"
+#include "fmv3d/geo/georef.h"
 #include "fmv3d/io/frames.h"
 #include "fmv3d/mvs/dense_stage.h"
 #include "fmv3d/pipeline/stage_runner.h"
 #include "fmv3d/sfm/sparse_stage.h"
 #include "fmv3d/surface/mesh_stage.h"
+#include "fmv3d/surface/texture_stage.h"
 
 namespace fmv3d::pipeline {
 
@@ -30,6 +33,9 @@ struct ReconstructOptions {
   sfm::SparseStageOptions sparse;
   mvs::DenseStageOptions dense;
   surface::MeshStageOptions mesh;
+  surface::TextureStageOptions texture;
+  geo::GeorefOptions georef;  // georef / dsm / ortho run only when the frames carry telemetry
+  geo::DsmOptions dsm;
   RunnerOptions runner;               // --from / --until
   bool report = true;                 // write report/report.html (renders take a few seconds)
   // Throws fmv3d::Error naming the bad option (no inputs, missing file, stage options).
@@ -39,7 +45,7 @@ struct ReconstructOptions {
 // The stage list for a workspace (exposed for tests and for `fmv3d demo`).
 std::vector<Stage> ReconstructStages(const ReconstructOptions& options);
 
-// Runs the stages and writes the report; returns report.json's content.
+// Runs the stages and writes the report; returns report.json's content (null when options.report is off).
 nlohmann::json RunReconstruct(const ReconstructOptions& options);
 
 }  // namespace fmv3d::pipeline

@@ -64,14 +64,21 @@ std::string Num(const nlohmann::json& j, int precision = 3) {
 
 }  // namespace
 
-nlohmann::json WriteReport(const fs::path& root, const nlohmann::json& timings) {
+void RecordTimings(const fs::path& root, const nlohmann::json& timings) {
+  const Workspace ws(root);
+  core::EnsureDirectory(ws.report_dir());
+  nlohmann::json all = ReadIfPresent(ws.report_dir() / "timings.json");
+  if (!all.is_object()) all = nlohmann::json::object();
+  for (auto it = timings.begin(); it != timings.end(); ++it)
+    if (!it.value().is_string() || !all.contains(it.key())) all[it.key()] = it.value();
+  core::WriteJson(ws.report_dir() / "timings.json", all);
+}
+
+nlohmann::json WriteReport(const fs::path& root) {
   const Workspace ws(root);
   core::EnsureDirectory(ws.report_dir());
   nlohmann::json all_timings = ReadIfPresent(ws.report_dir() / "timings.json");
   if (!all_timings.is_object()) all_timings = nlohmann::json::object();
-  for (auto it = timings.begin(); it != timings.end(); ++it)
-    if (!it.value().is_string() || !all_timings.contains(it.key())) all_timings[it.key()] = it.value();
-  core::WriteJson(ws.report_dir() / "timings.json", all_timings);
 
   nlohmann::json report;
   report["workspace"] = fs::absolute(root).string();

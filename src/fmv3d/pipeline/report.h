@@ -10,9 +10,13 @@
 
 namespace fmv3d::pipeline {
 
-// timings: stage name → seconds (or "skipped"); merged with report/timings.json of earlier runs so a resumed
-// run still reports every stage's time. Returns report.json's content. Pictures that cannot be made (e.g. no
-// dense cloud yet) are left out with a note, never an error.
-nlohmann::json WriteReport(const std::filesystem::path& workspace, const nlohmann::json& timings);
+// Merges this run's stage timings (stage name → seconds, or "skipped") into WS/report/timings.json, so a
+// resumed run still reports the time of every stage that ran in an earlier run.
+void RecordTimings(const std::filesystem::path& workspace, const nlohmann::json& timings);
+
+// Writes report.json + report.html from whatever the workspace holds (timings from report/timings.json).
+// Returns report.json's content. Pictures that cannot be made (e.g. no dense cloud yet) are left out with a
+// note, never an error.
+nlohmann::json WriteReport(const std::filesystem::path& workspace);
 
 }  // namespace fmv3d::pipeline
