@@ -160,6 +160,24 @@ TEST(TextureStage, GlbHoldsTheMeshAndItsPages) {
   EXPECT_EQ(indices, 3 * report["faces"].get<size_t>());
   EXPECT_EQ(model.images.size(), report["atlas"]["pages"].get<size_t>());
   for (const auto& img : model.images) EXPECT_GT(img.width, 0);
+
+  // glTF is +y up: the GLB's bounds are the OBJ's z-up bounds turned (x, y, z) -> (x, z, -y).
+  Eigen::Vector3d lo = Eigen::Vector3d::Constant(1e300), hi = -lo;
+  for (const auto& prim : model.meshes[0].primitives) {
+    const auto& a = model.accessors[prim.attributes.at("POSITION")];
+    ASSERT_EQ(a.minValues.size(), 3u);
+    for (int k = 0; k < 3; ++k) lo[k] = std::min(lo[k], a.minValues[k]), hi[k] = std::max(hi[k], a.maxValues[k]);
+  }
+  const io::TexturedMesh obj = io::ReadObj(ws / "mesh/textured.obj", false);
+  Eigen::Vector3d olo = Eigen::Vector3d::Constant(1e300), ohi = -olo;
+  for (const auto& v : obj.vertices) olo = olo.cwiseMin(v), ohi = ohi.cwiseMax(v);
+  const double tol = 1e-3 * (ohi - olo).norm();
+  EXPECT_NEAR(lo.x(), olo.x(), tol);
+  EXPECT_NEAR(hi.x(), ohi.x(), tol);
+  EXPECT_NEAR(lo.y(), olo.z(), tol);  // glTF up = our up
+  EXPECT_NEAR(hi.y(), ohi.z(), tol);
+  EXPECT_NEAR(lo.z(), -ohi.y(), tol);
+  EXPECT_NEAR(hi.z(), -olo.y(), tol);
 }
 
 TEST(TextureStage, CliSplitsTheAtlasIntoSmallPages) {

@@ -81,12 +81,13 @@ void WriteGlb(const io::TexturedMesh& mesh, const fs::path& path) {
         auto [it, fresh] = index.emplace(key, static_cast<uint32_t>(index.size()));
         if (fresh) {
           const auto& v = mesh.vertices[f.v[k]];
-          pos.insert(pos.end(), {static_cast<float>(v.x()), static_cast<float>(v.y()), static_cast<float>(v.z())});
+          // glTF is +y up: rotate our z-up metres by -90 deg about x, (x, y, z) -> (x, z, -y).
+          pos.insert(pos.end(), {static_cast<float>(v.x()), static_cast<float>(v.z()), static_cast<float>(-v.y())});
           const auto& t = mesh.uvs[f.vt[k]];
           tex.insert(tex.end(), {t.x(), 1.0f - t.y()});  // glTF: v = 0 at the top row
           if (all_normals) {
             const Eigen::Vector3f n = mesh.normals[f.vn[k]].normalized();
-            nrm.insert(nrm.end(), {n.x(), n.y(), n.z()});
+            nrm.insert(nrm.end(), {n.x(), n.z(), -n.y()});
           }
         }
         indices.push_back(it->second);
