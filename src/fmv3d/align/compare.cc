@@ -162,7 +162,18 @@ CompareResult CompareToCad(const io::OrientedPointCloud& recon_in, const io::Tex
 
   const geometry::MeshDistance cad_distance(cad);
   std::vector<int> sample_faces;
-  const std::vector<Eigen::Vector3d> samples = cad_distance.SampleSurface(o.sample_spacing * H, &sample_faces, 7);
+  // A CAD much larger than H (a whole site) would need billions of samples at the requested spacing: cap
+  // the count so memory stays bounded, and say so.
+  double area = 0;
+  for (size_t f = 0; f < cad_distance.num_triangles(); ++f) area += cad_distance.Area(static_cast<int>(f));
+  constexpr double kMaxSamples = 4e6;
+  double spacing = o.sample_spacing * H;
+  if (area / (spacing * spacing) > kMaxSamples) {
+    spacing = std::sqrt(area / kMaxSamples);
+    spdlog::warn("compare: the CAD surface ({:.0f} m²) is large for --length {}: surface samples {:.3f} apart "
+                 "instead of {:.3f} (completeness is coarser)", area, H, spacing, o.sample_spacing * H);
+  }
+  const std::vector<Eigen::Vector3d> samples = cad_distance.SampleSurface(spacing, &sample_faces, 7);
   if (samples.size() < 10) throw Error("compare: the CAD surface is too small for --length " + std::to_string(H));
   std::vector<Eigen::Vector3d> sample_normals(samples.size());
   for (size_t i = 0; i < samples.size(); ++i) sample_normals[i] = cad_distance.Normal(sample_faces[i]);

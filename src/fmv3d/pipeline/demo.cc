@@ -2,12 +2,14 @@
 
 #include <spdlog/spdlog.h>
 
+#include <algorithm>
 #include <cstdio>
 
 #include "fmv3d/align/compare.h"
 #include "fmv3d/core/error.h"
 #include "fmv3d/core/files.h"
 #include "fmv3d/io/colmap_model.h"
+#include "fmv3d/io/obj_io.h"
 #include "fmv3d/pipeline/reconstruct.h"
 #include "fmv3d/pipeline/report.h"
 #include "fmv3d/sfm/evaluation.h"
@@ -64,9 +66,29 @@ nlohmann::json RunDemo(const DemoOptions& o) {
   demo["sparse"] = ev.ToJson();
   demo["sparse"]["mean_reprojection_error_px"] = model.MeanReprojectionError();
   // The Poisson mesh against the CAD model, brought into its frame by the camera alignment (+ scaled ICP).
+  // The CAD model is the building itself (scene.obj's building_* materials), not the terrain around it.
+  const io::TexturedMesh scene = io::ReadObj(o.output / "scene.obj", /*load_textures=*/false);
+  // Only its own vertices are kept, so the CAD's bounds (compare's crop box) are the building's.
+  io::TexturedMesh cad;
+  std::vector<int> remap(scene.vertices.size(), -1);
+  for (const auto& f : scene.faces)
+    if (f.material >= 0 && scene.materials[f.material].name.rfind("building", 0) == 0) {
+      io::Face g;
+      for (int k = 0; k < 3; ++k) {
+        int& id = remap[f.v[k]];
+        if (id < 0) {
+          id = static_cast<int>(cad.vertices.size());
+          cad.vertices.push_back(scene.vertices[f.v[k]]);
+        }
+        g.v[k] = id;
+      }
+      cad.faces.push_back(g);
+    }
+  if (cad.faces.empty()) throw Error((o.output / "scene.obj").string() + ": no building faces");
+  io::WriteObj(cad, o.output / "cad.obj");
   align::CompareOptions c;
   c.reconstruction = r.workspace / "mesh" / "poisson.ply";
-  c.cad = o.output / "scene.obj";
+  c.cad = o.output / "cad.obj";
   c.length = height;
   c.transform = ev.alignment;
   c.cameras = o.output / "truth";
