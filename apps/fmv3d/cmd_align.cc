@@ -16,12 +16,15 @@ void Add(CLI::App& app) {
       "Each WS needs sparse/ (fmv3d sparse), features/ and frames/; dense/fused.ply is used for the fine ICP\n"
       "when every track has one. The largest track is the reference frame. Output: WS_MERGED/sparse (COLMAP\n"
       "model of all tracks), frames/, dense/fused.ply (when dense clouds exist), report/align.json.\n"
+      "Then one bundle adjustment of all tracks over the fused cross-track points (--no-joint-ba to skip);\n"
+      "`fmv3d mesh` / `texture` run on WS_MERGED.\n"
       "Tracks that share nothing: \"no overlap found between A and B\", exit 1, nothing written.");
   struct Args {
     std::vector<std::string> ws;
     std::string out;
     align::TrackAlignOptions opt;
     bool no_icp = false;
+    align::MergeOptions merge;
   };
   auto a = std::make_shared<Args>();
   cmd->add_option("WS", a->ws, "Workspaces to align (two or more)")->required()->expected(2, -1)
@@ -42,11 +45,13 @@ void Add(CLI::App& app) {
       ->check(CLI::PositiveNumber)
       ->capture_default_str();
   cmd->add_flag("--no-icp", a->no_icp, "Skip the fine ICP on dense clouds");
+  cmd->add_flag("!--no-joint-ba", a->merge.joint_bundle_adjustment,
+                "Skip the joint bundle adjustment of all tracks over the fused cross-track points");
   cmd->add_option("--seed", a->opt.seed, "Random seed")->capture_default_str();
   cmd->callback([a] {
     a->opt.icp = !a->no_icp;
     std::vector<std::filesystem::path> ws(a->ws.begin(), a->ws.end());
-    const auto report = align::RunAlignStage(ws, a->out, a->opt);
+    const auto report = align::RunAlignStage(ws, a->out, a->opt, a->merge);
     std::cout << fmt::format("align: {} tracks merged into {} (reference {})\n", ws.size(), a->out,
                              report.at("reference").get<std::string>());
     for (const auto& e : report.at("tree"))
@@ -55,6 +60,13 @@ void Add(CLI::App& app) {
                                e.at("similarity").at("scale").get<double>(), e.at("inliers_3d").get<size_t>(),
                                100 * e.at("overlap_fraction").get<double>(), e.at("residual_rms_before").get<double>(),
                                e.at("residual_rms_after").get<double>());
+    if (report.contains("joint_bundle_adjustment")) {
+      const auto& j = report.at("joint_bundle_adjustment");
+      std::cout << fmt::format("  joint bundle adjustment: {} of {} cross-track links fused, reprojection RMS {:.3f} -> {:.3f} px\n",
+                               j.at("links_fused").get<size_t>(), j.at("links").get<size_t>(),
+                               j.at("reprojection_rms_before_px").get<double>(),
+                               j.at("reprojection_rms_after_px").get<double>());
+    }
     const auto& m = report.at("merged");
     std::cout << fmt::format("  merged: {} images, {} points, {} dense points\n", m.at("images").get<size_t>(),
                              m.at("points").get<size_t>(), m.at("dense_points").get<size_t>());

@@ -123,7 +123,12 @@ TEST(AlignTracks, RecoversKnownSimilarityAndMerges) {
   EXPECT_NE(merged.FindImageByName("flight-100003.png"), nullptr);
   const core::Reconstruction a = io::ReadColmapText(dir / "A/sparse");
   const core::Reconstruction b = io::ReadColmapText(dir / "B/sparse");
-  EXPECT_EQ(merged.points.size(), a.points.size() + b.points.size());
+  // The joint bundle adjustment fused every consistent cross-track link into one point.
+  const auto& joint = report.at("joint_bundle_adjustment");
+  const size_t fused = joint.at("links_fused").get<size_t>();
+  EXPECT_GT(fused, 300u);
+  EXPECT_EQ(merged.points.size(), a.points.size() + b.points.size() - fused);
+  EXPECT_LT(joint.at("reprojection_rms_after_px").get<double>(), 1e-3);
   // Every merged B camera sits where A's frame puts it.
   for (const auto& [id, im] : b.images) {
     const core::Image* m = merged.FindImageByName("B-" + im.name);
@@ -133,6 +138,48 @@ TEST(AlignTracks, RecoversKnownSimilarityAndMerges) {
   }
   EXPECT_NO_THROW(merged.Validate());
   EXPECT_TRUE(fs::exists(dir / "M/report/align.json"));
+}
+
+// A merge from a slightly wrong similarity (0.15°, 0.4% scale, a shift of 0.2% of the scene): the joint
+// bundle adjustment over the fused cross-track points pulls B's cameras back onto A's frame.
+TEST(AlignTracks, JointBundleAdjustmentCorrectsAnImperfectAlignment) {
+  test::TempDir dir("fmv3d-tracks-joint");
+  const World world(3);
+  WriteTrack(world, dir / "A", FrameA(), 10, 30, 15, 0);
+  WriteTrack(world, dir / "B", FrameB(), 8, 26, 22, 0.3);
+  const std::vector<Track> tracks = {LoadTrack(dir / "A"), LoadTrack(dir / "B")};
+  MultiTrackAlignment alignment = AlignTracks(tracks, TrackAlignOptions());
+  ASSERT_EQ(alignment.reference, 0u);
+  core::Sim3 error;
+  error.s = 1.004;
+  error.q = Eigen::AngleAxisd(0.15 * M_PI / 180, Eigen::Vector3d(0.3, 1, 0.2).normalized());
+  error.t = Eigen::Vector3d(0.02, -0.01, 0.015) * tracks[0].radius;
+  alignment.to_reference[1] = ComposeSim3(error, alignment.to_reference[1]);
+  MergedModel merged = MergeTracks(tracks, alignment);
+
+  const core::Reconstruction b = io::ReadColmapText(dir / "B/sparse");
+  auto centre_error = [&](const core::Reconstruction& rec) {
+    double worst = 0;
+    for (const auto& [id, im] : b.images) {
+      const core::Image* m = rec.FindImageByName("B-" + im.name);
+      const Eigen::Vector3d expected = FrameA().Apply(FrameB().Inverse().Apply(im.pose.Centre()));
+      worst = std::max(worst, (m->pose.Centre() - expected).norm() / tracks[0].radius);
+    }
+    return worst;
+  };
+  const double before = centre_error(merged.sparse);
+  const JointAdjustmentResult r = JointBundleAdjust(&merged, alignment, 10.0);
+  const double after = centre_error(merged.sparse);
+  EXPECT_GT(r.links_fused, 200u);
+  EXPECT_GT(r.rms_before_px, 0.5);
+  EXPECT_LT(r.rms_after_px, 0.01);
+  EXPECT_GT(before, 5e-3);
+  EXPECT_LT(after, 1e-4) << "before " << before;
+  EXPECT_NO_THROW(merged.sparse.Validate());
+  // B's part of the merged dense cloud would follow the same motion; its recovered correction undoes `error`.
+  const core::Sim3 undo = ComposeSim3(r.track_motion[1], error);
+  EXPECT_NEAR(undo.s, 1, 1e-4);
+  EXPECT_LT(core::RotationAngle(undo.q, Eigen::Quaterniond::Identity()) * 180 / M_PI, 0.005);
 }
 
 TEST(AlignTracks, NoOverlapIsAnErrorAndWritesNothing) {

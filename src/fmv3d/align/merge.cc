@@ -2,6 +2,7 @@
 
 #include <spdlog/spdlog.h>
 
+#include <optional>
 #include <set>
 
 #include "fmv3d/align/sim3_json.h"
@@ -9,6 +10,7 @@
 #include "fmv3d/core/files.h"
 #include "fmv3d/io/colmap_model.h"
 #include "fmv3d/io/frames_index.h"
+#include "fmv3d/sfm/bundle_adjustment.h"
 #include "fmv3d/sfm/sparse_stage.h"
 
 namespace fmv3d::align {
@@ -67,6 +69,8 @@ MergedModel MergeTracks(const std::vector<Track>& tracks, const MultiTrackAlignm
   m.image_ids.resize(tracks.size());
   m.image_names.resize(tracks.size());
   m.camera_ids.resize(tracks.size());
+  m.point_ids.resize(tracks.size());
+  m.dense_ranges.assign(tracks.size(), {0, 0});
   const auto prefix = NamePrefixes(tracks, alignment.reference);
   m.name_prefix = prefix;
   uint32_t next_camera = 1, next_image = 1;
@@ -79,7 +83,7 @@ MergedModel MergeTracks(const std::vector<Track>& tracks, const MultiTrackAlignm
       cam.id = next_camera;
       m.sparse.cameras[next_camera++] = cam;
     }
-    std::map<uint64_t, uint64_t> point_ids;
+    std::map<uint64_t, uint64_t>& point_ids = m.point_ids[k];
     for (const auto& [id, pt] : rec.points) point_ids[id] = next_point++;
     for (auto& [id, im] : rec.images) {
       m.image_ids[k][id] = next_image;
@@ -119,13 +123,94 @@ MergedModel MergeTracks(const std::vector<Track>& tracks, const MultiTrackAlignm
           if (it != m.image_ids[k].end()) moved.visibility[i].push_back(it->second);
         }
     }
+    m.dense_ranges[k] = {m.dense.size(), m.dense.size() + moved.size()};
     m.dense.Append(moved);
   }
   return m;
 }
 
+nlohmann::json JointAdjustmentResult::ToJson() const {
+  nlohmann::json motion = nlohmann::json::array();
+  for (const auto& s : track_motion) motion.push_back(Sim3ToJson(s));
+  return {{"links", links},
+          {"links_fused", links_fused},
+          {"iterations", iterations},
+          {"reprojection_rms_before_px", rms_before_px},
+          {"reprojection_rms_after_px", rms_after_px},
+          {"seconds", seconds},
+          {"track_motion", motion}};
+}
+
+JointAdjustmentResult JointBundleAdjust(MergedModel* merged, const MultiTrackAlignment& alignment,
+                                        double max_link_error_px) {
+  core::Reconstruction& rec = merged->sparse;
+  JointAdjustmentResult res;
+  // 1. Fuse each link (one-to-one) into the reference-side point, at the midpoint of the two.
+  std::set<uint64_t> used;
+  for (const auto& edge : alignment.tree)
+    for (const auto& [ra, mb] : edge.links) {
+      ++res.links;
+      const auto ia = merged->point_ids[edge.reference].find(ra);
+      const auto ib = merged->point_ids[edge.moving].find(mb);
+      if (ia == merged->point_ids[edge.reference].end() || ib == merged->point_ids[edge.moving].end()) continue;
+      const uint64_t pa = ia->second, pb = ib->second;
+      if (used.count(pa) || used.count(pb) || !rec.points.count(pa) || !rec.points.count(pb)) continue;
+      core::Point3D& a = rec.points.at(pa);
+      const core::Point3D& b = rec.points.at(pb);
+      const Eigen::Vector3d mid = 0.5 * (a.xyz + b.xyz);
+      bool ok = true;
+      for (const core::Point3D* p : {static_cast<const core::Point3D*>(&a), &b})
+        for (const auto& el : p->track) ok = ok && sfm::ObservationError(rec, el.image_id, el.point2d_idx, mid) <= max_link_error_px;
+      if (!ok) continue;
+      used.insert(pa);
+      used.insert(pb);
+      a.xyz = mid;
+      for (const auto& el : b.track) {
+        a.track.push_back(el);
+        rec.images.at(el.image_id).point3d_ids[el.point2d_idx] = static_cast<int64_t>(pa);
+      }
+      rec.points.erase(pb);
+      ++res.links_fused;
+    }
+  spdlog::info("align: joint bundle adjustment, {} of {} cross-track links fused", res.links_fused, res.links);
+
+  // 2. One bundle adjustment of everything; the gauge is the two lowest image ids (the reference track's).
+  std::map<uint32_t, Eigen::Vector3d> before;
+  for (const auto& [id, im] : rec.images) before[id] = im.pose.Centre();
+  sfm::BundleAdjustmentOptions bo;
+  bo.max_iterations = 50;
+  const sfm::BundleAdjustmentSummary s = sfm::BundleAdjust(&rec, sfm::BundleAdjustmentConfig{}, bo);
+  if (!s.success) throw Error("align: the joint bundle adjustment failed");
+  res.iterations = s.num_iterations;
+  res.rms_before_px = s.initial_rms_px;
+  res.rms_after_px = s.final_rms_px;
+  res.seconds = s.seconds;
+
+  // 3. Each track's dense points follow its cameras.
+  res.track_motion.assign(merged->image_ids.size(), core::Sim3());
+  for (size_t k = 0; k < merged->image_ids.size(); ++k) {
+    std::vector<Eigen::Vector3d> src, dst;
+    for (const auto& [old_id, id] : merged->image_ids[k]) {
+      src.push_back(before.at(id));
+      dst.push_back(rec.images.at(id).pose.Centre());
+    }
+    core::Sim3 motion;
+    if (src.size() < 3 || !WeightedUmeyama(src, dst, std::vector<double>(src.size(), 1.0), true, &motion)) continue;
+    res.track_motion[k] = motion;
+    const auto [begin, end] = merged->dense_ranges[k];
+    const Eigen::Quaternionf q = motion.q.cast<float>();
+    for (size_t i = begin; i < end; ++i) {
+      merged->dense.positions[i] = motion.Apply(merged->dense.positions[i]);
+      if (merged->dense.has_normals()) merged->dense.normals[i] = (q * merged->dense.normals[i]).normalized();
+    }
+  }
+  spdlog::info("align: joint bundle adjustment {} iterations, reprojection RMS {:.3f} → {:.3f} px", res.iterations,
+               res.rms_before_px, res.rms_after_px);
+  return res;
+}
+
 nlohmann::json RunAlignStage(const std::vector<fs::path>& workspaces, const fs::path& output,
-                             const TrackAlignOptions& options) {
+                             const TrackAlignOptions& options, const MergeOptions& merge_options) {
   options.Check();
   if (workspaces.size() < 2) throw Error("align: give at least two workspaces");
   for (const auto& ws : workspaces)
@@ -134,8 +219,13 @@ nlohmann::json RunAlignStage(const std::vector<fs::path>& workspaces, const fs::
   std::vector<Track> tracks;
   for (const auto& ws : workspaces) tracks.push_back(LoadTrack(ws));
   const MultiTrackAlignment alignment = AlignTracks(tracks, options);
-  const MergedModel merged = MergeTracks(tracks, alignment);
+  MergedModel merged = MergeTracks(tracks, alignment);
   merged.sparse.Validate();
+  std::optional<JointAdjustmentResult> joint;
+  if (merge_options.joint_bundle_adjustment) {
+    joint = JointBundleAdjust(&merged, alignment, merge_options.max_link_error_px);
+    merged.sparse.Validate();
+  }
 
   // Everything is computed: write.
   core::EnsureDirectory(output / "sparse");
@@ -191,6 +281,9 @@ nlohmann::json RunAlignStage(const std::vector<fs::path>& workspaces, const fs::
                                 {"points", t.sparse.points.size()},
                                 {"dense_points", t.dense.size()},
                                 {"to_reference", Sim3ToJson(alignment.to_reference[k])},
+                                {"to_reference_after_joint_ba",
+                                 Sim3ToJson(joint ? ComposeSim3(joint->track_motion[k], alignment.to_reference[k])
+                                                  : alignment.to_reference[k])},
                                 {"image_name_prefix", merged.name_prefix[k]}});
   }
   for (const auto& p : alignment.pairs) report["pairs"].push_back(p.ToJson(tracks));
@@ -201,6 +294,7 @@ nlohmann::json RunAlignStage(const std::vector<fs::path>& workspaces, const fs::
                       {"dense_points", merged.dense.size()},
                       {"frames_linked", frames_linked},
                       {"frames_missing", frames_missing}};
+  if (joint) report["joint_bundle_adjustment"] = joint->ToJson();
   report["notes"] =
       "residual_rms_*: fine step 'correspondences' — RMS of the inlier 3D-3D distances with the RANSAC model "
       "(before) and the robust refit (after); 'icp-dense' — ICP point-to-plane RMS at the start and end. "

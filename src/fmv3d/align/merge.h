@@ -6,7 +6,14 @@
 //                               and frames.json (camera priors and frame records of all tracks, renumbered)
 //   WS_MERGED/dense/fused.ply   union of the tracks' dense clouds in the reference frame, visibility lists
 //                               re-mapped to the merged image ids (only when at least one track has one)
-//   WS_MERGED/report/align.json the similarities, overlap, inliers, residual RMS before / after per pair
+//   WS_MERGED/report/align.json the similarities, overlap, inliers, residual RMS before / after per pair, and
+//                               the joint bundle adjustment's reprojection RMS before / after
+// Joint bundle adjustment (optional, on by default): the cross-track 3D–3D links the coarse alignment found
+// consistent are fused into single points (when their reprojection errors in every image of both tracks stay
+// small at the midpoint), then one bundle adjustment refines every camera, intrinsics and point of all
+// tracks together; the reference track's first two images fix the gauge, so the result stays in its frame.
+// Each track's dense cloud follows its cameras: the similarity of its camera centres before → after the
+// adjustment is applied to its points (dense clouds are not recomputed).
 // Frame names are kept unless two tracks share a name (e.g. two synthetic flights): then every image of a
 // non-reference track is renamed "<track name>-<name>".
 // Nothing is written unless the alignment succeeded.
@@ -29,16 +36,39 @@ struct MergedModel {
   std::vector<std::map<uint32_t, uint32_t>> image_ids;
   std::vector<std::map<std::string, std::string>> image_names;
   std::vector<std::map<uint32_t, uint32_t>> camera_ids;
+  std::vector<std::map<uint64_t, uint64_t>> point_ids;       // per track: old 3D point id → merged id
+  std::vector<std::pair<size_t, size_t>> dense_ranges;       // per track: [begin, end) in `dense`
   std::vector<std::string> name_prefix;  // per track, "" when its names are kept
 };
 
 // Moves every track by alignment.to_reference and unions the models (see the header comment).
 MergedModel MergeTracks(const std::vector<Track>& tracks, const MultiTrackAlignment& alignment);
 
+struct JointAdjustmentResult {
+  size_t links = 0, links_fused = 0;   // cross-track 3D links offered / fused into one point
+  int iterations = 0;
+  double rms_before_px = 0, rms_after_px = 0;  // reprojection RMS of all observations
+  double seconds = 0;
+  std::vector<core::Sim3> track_motion;  // per track: camera centres before → after (applied to its dense points)
+  nlohmann::json ToJson() const;
+};
+
+// Fuses the cross-track links of the alignment tree in `merged` and bundle-adjusts all tracks together
+// (see the header comment). max_link_error_px: a link is fused only when every observation of the fused
+// point reprojects within this many pixels. Throws fmv3d::Error when the adjustment fails.
+JointAdjustmentResult JointBundleAdjust(MergedModel* merged, const MultiTrackAlignment& alignment,
+                                        double max_link_error_px = 4.0);
+
+struct MergeOptions {
+  bool joint_bundle_adjustment = true;
+  double max_link_error_px = 4.0;
+};
+
 // `fmv3d align WS_A WS_B ... -o WS_MERGED`: load, align, merge, write. Returns the report (also written to
 // WS_MERGED/report/align.json). Throws fmv3d::Error — writing nothing — when a track cannot be loaded or
 // overlaps no other ("no overlap found between A and B").
 nlohmann::json RunAlignStage(const std::vector<std::filesystem::path>& workspaces,
-                             const std::filesystem::path& output, const TrackAlignOptions& options);
+                             const std::filesystem::path& output, const TrackAlignOptions& options,
+                             const MergeOptions& merge_options = {});
 
 }  // namespace fmv3d::align

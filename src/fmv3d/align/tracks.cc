@@ -185,7 +185,8 @@ PairAlignment AlignPair(const std::vector<Track>& tracks, size_t ri, size_t mi, 
   }
   res.correspondences = links.size();
   std::vector<Eigen::Vector3d> src, dst;
-  for (const auto& [a, b] : links) {
+  const std::vector<std::pair<uint64_t, uint64_t>> link_list(links.begin(), links.end());
+  for (const auto& [a, b] : link_list) {
     dst.push_back(ref.sparse.points.at(a).xyz);
     src.push_back(mov.sparse.points.at(b).xyz);
   }
@@ -236,6 +237,8 @@ PairAlignment AlignPair(const std::vector<Track>& tracks, size_t ri, size_t mi, 
     return n ? std::sqrt(sum / n) : 0.0;
   };
   res.inliers = std::count(mask.begin(), mask.end(), 1);
+  for (size_t i = 0; i < link_list.size(); ++i)
+    if (mask[i]) res.links.push_back(link_list[i]);
   res.rms_before = inlier_rms(coarse);
   res.rms_after = inlier_rms(sim);
   res.fine = "correspondences";

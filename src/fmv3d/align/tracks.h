@@ -65,6 +65,8 @@ struct PairAlignment {
   double overlap_fraction = 0;       // share of the moving track's points with a reference point nearby
   double rms_before = 0, rms_after = 0;  // fine step's residual RMS before / after (reference units)
   std::string fine;                  // "icp-dense" or "correspondences"
+  // The consistent 3D–3D links (reference point id, moving point id), for the merge's joint bundle adjustment.
+  std::vector<std::pair<uint64_t, uint64_t>> links;
   nlohmann::json ToJson(const std::vector<Track>& tracks) const;
 };
 
