@@ -182,6 +182,43 @@ TEST(AlignTracks, JointBundleAdjustmentCorrectsAnImperfectAlignment) {
   EXPECT_LT(core::RotationAngle(undo.q, Eigen::Quaterniond::Identity()) * 180 / M_PI, 0.005);
 }
 
+// Two tracks' dense clouds on one plane, overlapping on 1 <= x <= 2; track 0 was seen from 10 m, track 1
+// from 20 m (a coarser footprint): in the overlap only track 0's points stay, elsewhere both tracks' do.
+TEST(AlignTracks, KeepFinerInOverlapDropsTheCoarserDuplicates) {
+  MergedModel m;
+  m.sparse.cameras[1] = core::Camera::Pinhole(640, 480, 500);
+  for (uint32_t id : {1u, 2u}) {
+    core::Image im;
+    im.id = id;
+    im.camera_id = 1;
+    im.name = std::to_string(id) + ".png";
+    im.pose = core::Pose::LookAt(Eigen::Vector3d(1.5, 1, id == 1 ? 10 : 20), Eigen::Vector3d(1.5, 1, 0));
+    m.sparse.images[id] = im;
+  }
+  auto add = [&](double x0, double x1, uint32_t image) {
+    const size_t begin = m.dense.size();
+    for (double x = x0; x <= x1 + 1e-9; x += 0.05)
+      for (double y = 0; y <= 2 + 1e-9; y += 0.05) {
+        m.dense.positions.push_back({x, y, 0});
+        m.dense.normals.push_back(Eigen::Vector3f::UnitZ());
+        m.dense.visibility.push_back({image});
+      }
+    m.dense_ranges.push_back({begin, m.dense.size()});
+  };
+  add(0, 2, 1);
+  add(1.025, 3.025, 2);  // offset half a spacing: no exact duplicates
+  const size_t first = m.dense_ranges[0].second;
+  const size_t dropped = KeepFinerInOverlap(&m, 2.0);
+  EXPECT_EQ(m.dense_ranges[0].second - m.dense_ranges[0].first, first) << "the finer track keeps every point";
+  EXPECT_GT(dropped, 0u);
+  for (size_t i = m.dense_ranges[1].first; i < m.dense_ranges[1].second; ++i)
+    EXPECT_GT(m.dense.positions[i].x(), 2.0) << "a coarse point in the overlap survived";
+  size_t beyond = 0;
+  for (const auto& p : m.dense.positions) beyond += p.x() > 2.15;
+  EXPECT_EQ(beyond, 18u * 41u) << "the coarse track's own surface (x > 2.15) is kept";
+  EXPECT_NO_THROW(m.dense.Validate());
+}
+
 TEST(AlignTracks, NoOverlapIsAnErrorAndWritesNothing) {
   test::TempDir dir("fmv3d-tracks-none");
   WriteTrack(World(1), dir / "A", FrameA(), 8, 30, 15, 0);

@@ -2,6 +2,10 @@
 
 #include <spdlog/spdlog.h>
 
+#include <tbb/parallel_for.h>
+
+#include <limits>
+#include <memory>
 #include <optional>
 #include <set>
 
@@ -129,6 +133,65 @@ MergedModel MergeTracks(const std::vector<Track>& tracks, const MultiTrackAlignm
   return m;
 }
 
+size_t KeepFinerInOverlap(MergedModel* merged, double radius_spacings) {
+  io::OrientedPointCloud& d = merged->dense;
+  if (!d.has_visibility()) return 0;
+  const core::Reconstruction& rec = merged->sparse;
+  std::vector<double> footprint(d.size(), std::numeric_limits<double>::infinity());
+  for (size_t i = 0; i < d.size(); ++i)
+    for (uint32_t id : d.visibility[i]) {
+      const auto it = rec.images.find(id);
+      if (it == rec.images.end()) continue;
+      const double f = rec.cameras.at(it->second.camera_id).f;
+      footprint[i] = std::min(footprint[i], (d.positions[i] - it->second.pose.Centre()).norm() / f);
+    }
+  struct Part {
+    size_t begin, end;
+    std::unique_ptr<PointIndex> index;
+    double radius;
+  };
+  std::vector<Part> parts;
+  for (const auto& [begin, end] : merged->dense_ranges) {
+    if (end - begin < 2) continue;
+    std::vector<Eigen::Vector3d> pts(d.positions.begin() + begin, d.positions.begin() + end);
+    auto index = std::make_unique<PointIndex>(pts);
+    const double r = radius_spacings * MedianSpacing(pts, *index);
+    parts.push_back({begin, end, std::move(index), r});
+  }
+  std::vector<char> drop(d.size(), 0);
+  for (const auto& own : parts)
+    tbb::parallel_for(tbb::blocked_range<size_t>(own.begin, own.end), [&](const tbb::blocked_range<size_t>& r) {
+      for (size_t i = r.begin(); i < r.end(); ++i)
+        for (const auto& other : parts) {
+          if (&other == &own) continue;
+          double d2 = 0;
+          const int j = other.index->Nearest(d.positions[i], &d2);
+          if (j >= 0 && d2 <= own.radius * own.radius && footprint[other.begin + j] < footprint[i]) {
+            drop[i] = 1;
+            break;
+          }
+        }
+    });
+  io::OrientedPointCloud kept;
+  std::vector<std::pair<size_t, size_t>> ranges;
+  for (const auto& [begin, end] : merged->dense_ranges) {
+    const size_t start = kept.positions.size();
+    for (size_t i = begin; i < end; ++i) {
+      if (drop[i]) continue;
+      kept.positions.push_back(d.positions[i]);
+      if (d.has_normals()) kept.normals.push_back(d.normals[i]);
+      if (d.has_colors()) kept.colors.push_back(d.colors[i]);
+      kept.visibility.push_back(d.visibility[i]);
+    }
+    ranges.push_back({start, kept.positions.size()});
+  }
+  const size_t dropped = d.size() - kept.size();
+  d = std::move(kept);
+  merged->dense_ranges = ranges;
+  spdlog::info("align: {} dense points dropped where a finer track covers the same surface", dropped);
+  return dropped;
+}
+
 nlohmann::json JointAdjustmentResult::ToJson() const {
   nlohmann::json motion = nlohmann::json::array();
   for (const auto& s : track_motion) motion.push_back(Sim3ToJson(s));
@@ -226,6 +289,8 @@ nlohmann::json RunAlignStage(const std::vector<fs::path>& workspaces, const fs::
     joint = JointBundleAdjust(&merged, alignment, merge_options.max_link_error_px);
     merged.sparse.Validate();
   }
+  const size_t dense_before_overlap = merged.dense.size();
+  const size_t overlap_dropped = merge_options.keep_finer_in_overlap ? KeepFinerInOverlap(&merged) : 0;
 
   // Everything is computed: write.
   core::EnsureDirectory(output / "sparse");
@@ -292,6 +357,8 @@ nlohmann::json RunAlignStage(const std::vector<fs::path>& workspaces, const fs::
                       {"images", merged.sparse.images.size()},
                       {"points", merged.sparse.points.size()},
                       {"dense_points", merged.dense.size()},
+                      {"dense_points_union", dense_before_overlap},
+                      {"dense_points_dropped_in_overlap", overlap_dropped},
                       {"frames_linked", frames_linked},
                       {"frames_missing", frames_missing}};
   if (joint) report["joint_bundle_adjustment"] = joint->ToJson();

@@ -59,9 +59,16 @@ struct JointAdjustmentResult {
 JointAdjustmentResult JointBundleAdjust(MergedModel* merged, const MultiTrackAlignment& alignment,
                                         double max_link_error_px = 4.0);
 
+// Where two tracks' dense clouds cover the same surface, keeps the finer one: a point is dropped when another
+// track has a point within `radius_spacings` of its own cloud's median spacing whose footprint (the finest
+// pixel size on the surface among the cameras that see it: distance / focal) is smaller. Both surfaces stay
+// where only one track saw them. Needs visibility lists (the dense stage writes them); returns points dropped.
+size_t KeepFinerInOverlap(MergedModel* merged, double radius_spacings = 2.0);
+
 struct MergeOptions {
   bool joint_bundle_adjustment = true;
   double max_link_error_px = 4.0;
+  bool keep_finer_in_overlap = false;
 };
 
 // `fmv3d align WS_A WS_B ... -o WS_MERGED`: load, align, merge, write. Returns the report (also written to
