@@ -124,14 +124,12 @@ void BM_PatchMatchGeometric960(benchmark::State& state) {
   auto in = ref_in;
   for (auto& m : maps) in.source_maps.push_back(&m);
   in.init = &ref_map;
+  // No accuracy counter here: the stand-in source maps are not the sources' geometry.
   const double cpu0 = ProcessCpuSeconds();
-  double good = 0;
   for (auto _ : state) {
     auto map = mvs::RunPatchMatch(in, opt);
-    good = GoodFraction(v, map);
     benchmark::DoNotOptimize(map.depth.data);
   }
-  state.counters["within_0.5%_of_truth"] = good;
   state.counters["cpu_s_per_view"] = (ProcessCpuSeconds() - cpu0) / state.iterations();
   state.SetLabel(std::to_string(ns) + " sources");
 }

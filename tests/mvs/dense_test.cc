@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <cstdio>
 #include <filesystem>
 #include <fstream>
 #include <opencv2/imgcodecs.hpp>
@@ -153,6 +154,8 @@ TEST(PatchMatch, SourcesWithOtherGainAndBiasMatchAsWell) {
     g8.convertTo(v->gray, CV_32F, 1.0 / 255);
   });
   ASSERT_GT(relit.seen, 1000);
+  std::printf("equal light: valid %d/%d, within 1%% %d, median %.5f | relit: valid %d/%d, within 1%% %d, median %.5f\n",
+              same.valid, same.seen, same.good, same.median, relit.valid, relit.seen, relit.good, relit.median);
   const double valid_same = static_cast<double>(same.valid) / same.seen;
   const double valid_relit = static_cast<double>(relit.valid) / relit.seen;
   EXPECT_GT(valid_relit, valid_same - 0.05) << relit.valid << " of " << relit.seen;
