@@ -33,6 +33,9 @@ void Add(CLI::App& app) {
       ->capture_default_str();
   cmd->add_option("--max-depth-error", o.fusion.max_depth_error, "Fusion: relative depth agreement")
       ->capture_default_str();
+  cmd->add_option("--max-reproj-error", o.fusion.max_reproj_error_px,
+                  "Fusion: forward-backward reprojection agreement, pixels")
+      ->capture_default_str();
   cmd->add_option("--max-normal-error", o.fusion.max_normal_error_deg, "Fusion: normal agreement, degrees")
       ->capture_default_str();
   cmd->add_option("--seed", o.patch_match.seed, "Random seed")->capture_default_str();
@@ -40,6 +43,7 @@ void Add(CLI::App& app) {
   cmd->add_flag("--no-coarse", a->no_coarse, "No half-resolution first pass");
   cmd->add_flag("--no-visibility-filter", a->no_visibility, "Keep points that other views see through");
   cmd->add_flag("--no-previews", a->no_previews, "Do not write PNG previews of the maps");
+  cmd->add_flag("--fuse-only", o.fuse_only, "Only fuse the maps already in WS/dense/maps (other fusion options)");
   cmd->add_flag("--keep-photometric", o.keep_photometric, "Keep the photometric-pass maps");
   cmd->callback([a] {
     a->opt.geometric = !a->no_geometric;

@@ -66,6 +66,16 @@ void Add(CLI::App& app) {
     std::printf("%-34s %13.2f%%\n", "points within 1% of length", 100 * ev.within_1_percent);
     std::printf("%-34s %13.2f%%  (%zu of %zu samples seen by >=%d cameras)\n", "completeness (1% of length)",
                 100 * ev.completeness, ev.complete_samples, ev.seen_samples, a->opt.min_cameras);
+    std::printf("\n%-42s %10s %8s %8s %16s\n", "breakdown", "points", "p50 %", "p90 %", "completeness");
+    for (const auto& b : ev.breakdown) {
+      if (b.points > 0)
+        std::printf("%-42s %10zu %8.3f %8.3f\n", b.name.c_str(), b.points, 100 * b.median_error / length,
+                    100 * b.p90_error / length);
+      else if (b.seen_samples > 0)
+        std::printf("%-42s %10s %8s %8s %7.2f%% of %zu\n", b.name.c_str(), "", "", "",
+                    100.0 * static_cast<double>(b.complete_samples) / static_cast<double>(b.seen_samples),
+                    b.seen_samples);
+    }
   });
 }
 

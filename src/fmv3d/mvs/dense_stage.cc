@@ -83,10 +83,15 @@ nlohmann::json RunDenseStage(const fs::path& workspace, const DenseStageOptions&
   for (const auto& [pid, p] : rec.points)
     for (const auto& te : p.track) seeds[te.image_id].push_back(p.xyz);
 
+  if (options.fuse_only)
+    for (uint32_t id : usable)
+      if (!fs::exists(map_path(id, ".dmap")))
+        throw Error(map_path(id, ".dmap").string() + ": no depth map to fuse — run `fmv3d dense` without --fuse-only");
+
   // --- Photometric pass.
   const auto t_photo = Clock::now();
   double pm_seconds = 0;
-  {
+  if (!options.fuse_only) {
     core::Progress progress("dense: photometric depth maps", usable.size());
     for (uint32_t id : usable) {
       PatchMatchInput in;
@@ -112,7 +117,7 @@ nlohmann::json RunDenseStage(const fs::path& workspace, const DenseStageOptions&
   // --- Geometric-consistency pass.
   const auto t_geom = Clock::now();
   double geom_pm_seconds = 0;
-  if (options.geometric) {
+  if (options.geometric && !options.fuse_only) {
     core::Progress progress("dense: geometric depth maps", usable.size());
     const std::set<uint32_t> usable_set(usable.begin(), usable.end());
     for (uint32_t id : usable) {
@@ -160,7 +165,7 @@ nlohmann::json RunDenseStage(const fs::path& workspace, const DenseStageOptions&
     core::Progress progress("dense: loading maps for fusion", usable.size());
     for (uint32_t id : usable) {
       const DepthMap map = ReadDepthMap(map_path(id, ".dmap"));
-      if (options.previews) WriteDepthPreview(map, map_path(id, ".depth.png"), map_path(id, ".normal.png"));
+      if (options.previews && !options.fuse_only) WriteDepthPreview(map, map_path(id, ".depth.png"), map_path(id, ".normal.png"));
       valid_pixels += static_cast<size_t>(map.CountValid());
       total_pixels += map.depth.total();
       const auto view = cache.Get(id);

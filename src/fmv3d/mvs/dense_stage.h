@@ -28,6 +28,7 @@ struct DenseStageOptions {
   bool previews = true;        // write the PNG previews of every map
   bool keep_photometric = false;  // keep the photometric-pass maps (<name>.photometric.dmap)
   int cache_views = 16;        // undistorted views kept in memory
+  bool fuse_only = false;      // reuse the final maps already in WS/dense/maps (e.g. to re-fuse with other options)
   ViewSelectionOptions selection;
   PatchMatchOptions patch_match;
   FusionOptions fusion;

@@ -81,6 +81,17 @@ nlohmann::json DenseEvaluation::ToJson() const {
             {"seen_by_2_cameras", seen_samples},
             {"complete_samples", complete_samples},
             {"sample_spacing", sample_spacing}}},
+          {"breakdown", [&] {
+             nlohmann::json b = nlohmann::json::array();
+             for (const auto& d : breakdown)
+               b.push_back({{"part", d.name},
+                            {"points", d.points},
+                            {"median_percent_of_length", 100 * d.median_error / characteristic_length},
+                            {"p90_percent_of_length", 100 * d.p90_error / characteristic_length},
+                            {"seen_samples", d.seen_samples},
+                            {"complete_samples", d.complete_samples}});
+             return b;
+           }()},
           {"alignment", {{"scale", alignment.s}, {"translation", {alignment.t.x(), alignment.t.y(), alignment.t.z()}}}}};
 }
 
@@ -101,7 +112,26 @@ DenseEvaluation EvaluateDense(const io::OrientedPointCloud& cloud, const core::R
   const geometry::MeshDistance mesh(scene);
   const size_t stride = (pts.size() + opt.max_accuracy_points - 1) / opt.max_accuracy_points;
   std::vector<double> dist((pts.size() + stride - 1) / stride);
-  tbb::parallel_for(size_t{0}, dist.size(), [&](size_t k) { dist[k] = mesh.Closest(pts[k * stride]).distance; });
+  std::vector<int> part_of(dist.size());  // breakdown part of each evaluated point
+  auto horizontal = [](const Eigen::Vector3d& n) { return std::abs(n.z()) >= 0.8; };
+  tbb::parallel_for(size_t{0}, dist.size(), [&](size_t k) {
+    const auto c = mesh.Closest(pts[k * stride]);
+    dist[k] = c.distance;
+    const bool inside = opt.region.isEmpty() || opt.region.contains(c.point);
+    part_of[k] = (inside ? 0 : 2) + (c.face >= 0 && horizontal(mesh.Normal(c.face)) ? 0 : 1);
+  });
+  ev.breakdown = {{"points inside, horizontal surface"}, {"points inside, vertical/slanted surface"},
+                  {"points outside region, horizontal"}, {"points outside region, vertical/slanted"},
+                  {"samples horizontal"}, {"samples vertical/slanted"},
+                  {"samples seen by 2-3 cameras"}, {"samples seen by 4-7 cameras"}, {"samples seen by 8+ cameras"}};
+  for (int part = 0; part < 4; ++part) {
+    std::vector<double> d;
+    for (size_t k = 0; k < dist.size(); ++k)
+      if (part_of[k] == part) d.push_back(dist[k]);
+    ev.breakdown[part].points = d.size() * stride;
+    ev.breakdown[part].median_error = Quantile(d, 0.5);
+    ev.breakdown[part].p90_error = Quantile(d, 0.9);
+  }
   double sum = 0;
   size_t within = 0;
   for (double d : dist) {
@@ -167,11 +197,21 @@ DenseEvaluation EvaluateDense(const io::OrientedPointCloud& cloud, const core::R
   const double radius = opt.completeness_fraction * characteristic_length;
   const PointGrid grid(pts, radius);
   std::atomic<size_t> n_seen{0}, n_complete{0};
+  std::vector<uint8_t> complete(samples.size(), 0);
   tbb::parallel_for(size_t{0}, samples.size(), [&](size_t i) {
     if (seen[i] < opt.min_cameras) return;
     n_seen++;
-    if (grid.AnyWithin(samples[i], radius)) n_complete++;
+    if (grid.AnyWithin(samples[i], radius)) n_complete++, complete[i] = 1;
   });
+  for (size_t i = 0; i < samples.size(); ++i) {
+    if (seen[i] < opt.min_cameras) continue;
+    const int by_orientation = horizontal(region_mesh.Normal(faces[i])) ? 4 : 5;
+    const int by_cameras = seen[i] <= 3 ? 6 : (seen[i] <= 7 ? 7 : 8);
+    for (int part : {by_orientation, by_cameras}) {
+      ev.breakdown[part].seen_samples++;
+      ev.breakdown[part].complete_samples += complete[i];
+    }
+  }
   ev.surface_samples = samples.size();
   ev.seen_samples = n_seen;
   ev.complete_samples = n_complete;

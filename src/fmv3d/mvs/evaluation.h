@@ -11,6 +11,8 @@
 
 #include <Eigen/Geometry>
 #include <cstddef>
+#include <string>
+#include <vector>
 #include <nlohmann/json.hpp>
 
 #include "fmv3d/core/pose.h"
@@ -33,6 +35,16 @@ struct DenseEvaluationOptions {
   void Check() const;
 };
 
+// Figures of one part of the scene, to see where accuracy and completeness are lost: points by the surface
+// they lie nearest (horizontal = ground and flat roofs, |n_z| >= 0.8; else facades and pitched roofs; inside or
+// outside the evaluation region), surface samples by orientation and by how many true cameras see them.
+struct DenseBreakdown {
+  std::string name;
+  size_t points = 0;
+  double median_error = 0, p90_error = 0;
+  size_t seen_samples = 0, complete_samples = 0;
+};
+
 struct DenseEvaluation {
   size_t points = 0;
   double characteristic_length = 0;
@@ -42,6 +54,7 @@ struct DenseEvaluation {
   double completeness = 0;
   double sample_spacing = 0;
   core::Sim3 alignment;  // model → truth
+  std::vector<DenseBreakdown> breakdown;
   double median_fraction() const { return median_error / characteristic_length; }
   double p90_fraction() const { return p90_error / characteristic_length; }
   nlohmann::json ToJson() const;

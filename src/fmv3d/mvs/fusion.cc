@@ -13,6 +13,7 @@ void FusionOptions::Check() const {
   if (!(max_depth_error > 0 && max_depth_error < 1)) throw Error("fusion: max_depth_error must be in (0, 1)");
   if (!(max_normal_error_deg > 0 && max_normal_error_deg <= 180))
     throw Error("fusion: max_normal_error_deg must be in (0, 180]");
+  if (!(max_reproj_error_px > 0)) throw Error("fusion: max_reproj_error_px must be positive");
   if (!(visibility_margin > 0)) throw Error("fusion: visibility_margin must be positive");
 }
 
@@ -54,6 +55,7 @@ io::OrientedPointCloud FuseDepthMaps(const std::map<uint32_t, FusionView>& views
   std::map<uint32_t, cv::Mat> used;
   for (const auto& [id, v] : views) used[id] = cv::Mat::zeros(v.depth.size(), CV_8U);
   const float cos_max = static_cast<float>(std::cos(opt.max_normal_error_deg * M_PI / 180));
+  const double max_reproj2 = opt.max_reproj_error_px * opt.max_reproj_error_px;
 
   struct Hit {
     const FusionView* view;
@@ -88,6 +90,11 @@ io::OrientedPointCloud FuseDepthMaps(const std::map<uint32_t, FusionView>& views
           if (!(dj > 0)) continue;
           const double rel = (dj - z) / z;
           if (std::abs(rel) <= opt.max_depth_error) {
+            // j's surface point on the same ray, seen from the reference.
+            Eigen::Vector2d back;
+            if (!ref.geom.Project(nb->geom.Unproject(uv, dj), &back) ||
+                (back - Eigen::Vector2d(x + 0.5, y + 0.5)).squaredNorm() > max_reproj2)
+              continue;
             if (NormalAt(*nb, u, v).dot(n_ref) >= cos_max)
               hits.push_back({nb, u, v, used[nb->geom.image_id].at<uint8_t>(v, u) == 0});
           } else if (rel > opt.visibility_margin) {

@@ -1,8 +1,10 @@
 // Fusion of per-view depth maps into oriented points (position, normal, colour, visibility list).
 //
 // Every pixel with a depth is lifted to a 3D point X and checked in the reference's neighbour views:
-//  - consistent in view j: X projects onto a pixel whose depth agrees (relative error ≤ max_depth_error) and
-//    whose normal agrees (angle ≤ max_normal_error_deg);
+//  - consistent in view j: X projects onto a pixel whose depth agrees (relative error ≤ max_depth_error, and
+//    j's point at that depth reprojects into the reference within max_reproj_error_px: the depth agreement
+//    measured in pixels, which is what the matching resolved) and whose normal agrees (angle ≤
+//    max_normal_error_deg);
 //  - conflict in view j (the PMVS visibility filter): view j sees a surface clearly *behind* X through that
 //    pixel, i.e. X floats in space that j sees through.
 // A point is kept when at least min_views views (the reference included) are consistent and conflicts do not
@@ -24,6 +26,7 @@ namespace fmv3d::mvs {
 struct FusionOptions {
   int min_views = 3;                  // consistent views per point, the reference included
   double max_depth_error = 0.01;      // relative depth difference for agreement
+  double max_reproj_error_px = 2.0;   // forward–backward reprojection error for agreement, reference pixels
   double max_normal_error_deg = 15;
   double visibility_margin = 0.03;    // relative depth beyond which a source "sees through" the point
   bool visibility_filter = true;
