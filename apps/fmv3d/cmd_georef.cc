@@ -1,6 +1,7 @@
 // `fmv3d georef WS [--origin LAT,LON,ALT]`: robust similarity from the sparse model's camera centres to the
 // frames' telemetry positions → WS/geo/sparse_enu/ (COLMAP text model in local ENU metres) and
-// WS/geo/georef.json (origin, similarity, residuals, UTM zone / EPSG, PROJ pipelines).
+// WS/geo/georef.json (origin, similarity, residuals, UTM zone / EPSG, PROJ pipelines). With frames/telemetry.json
+// every packet is fitted against the model trajectory at its time (see geo/georef.h).
 #include <cstdio>
 #include <sstream>
 
@@ -21,7 +22,10 @@ void Add(CLI::App& app) {
   cmd->add_option("WS", a->ws, "Workspace folder (with frames/frames.json carrying telemetry, and sparse/)")->required();
   cmd->add_option("--origin", a->origin, "Local ENU origin LAT,LON,ALT (default: centroid of the telemetry positions)");
   cmd->add_option("--seed", a->opt.seed, "Random seed of the robust fit")->capture_default_str();
-  cmd->callback([a] {
+  auto* kf_only = cmd->add_flag("--keyframes-only",
+                                "Fit only the registered keyframes' telemetry, not every packet of frames/telemetry.json");
+  cmd->callback([a, kf_only] {
+    a->opt.use_track = kf_only->count() == 0;
     if (!a->origin.empty()) {
       geo::GeoPoint g;
       char extra = 0;
@@ -30,8 +34,11 @@ void Add(CLI::App& app) {
       a->opt.origin = g;
     }
     const auto j = geo::RunGeorefStage(a->ws, a->opt);
-    std::printf("georef: %d/%d cameras inliers, residual RMS %.3f m, scale %.5f, %s (EPSG:%d)\n",
+    std::printf("georef: fit on %d %s, %d/%d keyframes inliers, residual RMS %.3f m, expected translation error "
+                "%.2f m, scale %.5f, %s (EPSG:%d)\n",
+                j["fit"]["inliers"].get<int>(), j["fit"]["used"].get<bool>() ? "telemetry packets" : "keyframes",
                 j["inliers"].get<int>(), j["cameras"].get<int>(), j["residuals"]["rms_m"].get<double>(),
+                j["expected_translation_error_m"].get<double>(),
                 j["similarity"]["scale"].get<double>(), j["utm"]["name"].get<std::string>().c_str(),
                 j["utm"]["epsg"].get<int>());
   });

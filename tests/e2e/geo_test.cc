@@ -1,14 +1,15 @@
-// End to end with telemetry: `fmv3d synth --klv` renders an orbit whose MPEG-TS carries ST 0601 packets with
-// GPS noise σ = 3 m (per axis) and attitude noise σ = 1°; frames (every frame, with its telemetry) → features →
-// match → sparse → georef → dsm → ortho, then evaluate-geo compares with the truth in absolute terms.
+// End to end with telemetry: `fmv3d synth --klv` renders a 10 s orbit at 30 fps (300 frames) whose MPEG-TS carries
+// one ST 0601 packet per frame with GPS noise σ = 3 m (per axis) and attitude noise σ = 1°; frames (keyframes,
+// plus the whole telemetry track) → features → match → sparse → georef → dsm → ortho, then evaluate-geo compares
+// with the truth in absolute terms.
 //
-// What bounds hold: positions alone fix the georeference's translation only to the mean of the N telemetry
-// errors (σ·√(3/N) in 3D, 0.87 m expected for these 36 frames; this seed's realisation is 1.35 m), and its scale
-// and tilt to ~σ/(R·√N) — which a DSM 80 m below the cameras turns into ~0.5-1 m of height. So this test checks
-// that the georeference reaches that floor (camera bias = telemetry mean error within 0.2 m, every frame an
-// inlier, the noise level recovered) and bounds the absolute errors it implies: camera centres ≤ 2 m RMS
-// (measured 1.61), DSM heights on flat cells ≤ 1.5 m RMS (measured 1.13 with sparse points). The issue's
-// 0.5 m needs N ≳ 110 frames at σ = 3 m (see the closing note for the sweep with a perfect model).
+// What bounds hold: positions fix the georeference's translation only to the mean of the N telemetry errors
+// (σ·√(3/N) in 3D). Fitting every packet against the model trajectory (N ≈ 290) instead of the ~25 keyframes
+// brings that floor from ~1 m to ~0.3 m expected (this seed's realisation: 0.47 m over the 300 packets). The
+// test checks that the georeference reaches that floor (camera bias within 0.3 m of the packets' mean error;
+// measured 0.18) and bounds the figure, the absolute error over the true surface: ≤ 0.6 m RMS
+// (measured 0.53; the keyframes-only fit of the same model: 1.4 m). DSM from the sparse points: ≤ 1 m RMS on
+// flat cells (measured 0.65). See bench/RESULTS.md "Session 3 — geo" for the sweep over flight lengths.
 #include <gtest/gtest.h>
 
 #include "fmv3d/core/files.h"
@@ -27,28 +28,40 @@ void Cli(const std::string& args) {
 TEST(E2eGeo, KlvFlightGeoreferencedDsm) {
   TempDir dir("fmv3d-e2e-geo");
   const std::string synth = (dir / "synth").string(), ws = (dir / "ws").string();
-  Cli("-q synth --scene building --path orbit --frames 36 --size 640x360 --klv --gps-noise 3 --attitude-noise 1"
-      " --seed 3 -o " + synth);
-  Cli("-q frames " + synth + "/flight.ts --all-frames -o " + ws);
+  Cli("-q synth --scene building --path orbit --frames 300 --fps 30 --size 640x360 --klv --gps-noise 3"
+      " --attitude-noise 1 --seed 3 -o " + synth);
+  Cli("-q frames " + synth + "/flight.ts -o " + ws);
+  ASSERT_TRUE(std::filesystem::exists(dir / "ws/frames/telemetry.json"));
   Cli("-q features " + ws);
   Cli("-q match " + ws);
   Cli("-q sparse " + ws);
+  // The keyframes' telemetry alone, for comparison.
+  Cli("-q georef " + ws + " --keyframes-only");
+  Cli("-q evaluate-geo " + ws + " --truth " + synth);
+  const double keyframes_only = core::ReadJson(dir / "ws/report/geo_eval.json").at("surface").at("rms_m").get<double>();
   Cli("-q georef " + ws);
   Cli("-q dsm " + ws);
   Cli("-q ortho " + ws);
   Cli("-q evaluate-geo " + ws + " --truth " + synth);
   const auto georef = core::ReadJson(dir / "ws/geo/georef.json");
   const auto eval = core::ReadJson(dir / "ws/report/geo_eval.json");
-  std::cout << eval.dump(2) << "\n";
+  std::cout << georef.at("fit").dump(2) << "\n" << eval.dump(2) << "\nkeyframes only: surface RMS " << keyframes_only
+            << " m\n";
   EXPECT_EQ(georef.at("utm").at("epsg").get<int>(), 32618);
-  EXPECT_EQ(georef.at("inliers").get<int>(), 36);
-  EXPECT_NEAR(georef.at("residuals").at("sigma_per_axis_m").get<double>(), 3.0, 1.0);
-  EXPECT_EQ(eval.at("cameras").at("matched").get<int>(), 36);
-  EXPECT_LE(eval.at("cameras").at("bias_minus_telemetry_mean_m").get<double>(), 0.2);
-  EXPECT_NEAR(eval.at("telemetry").at("error_rms_per_axis_m")[0].get<double>(), 3.0, 1.2);
-  EXPECT_LE(eval.at("cameras").at("centre_rms_m").get<double>(), 2.0);
-  EXPECT_GT(eval.at("dsm").at("cells_compared").get<int>(), 200);
-  EXPECT_LE(eval.at("dsm").at("height_rms_m").get<double>(), 1.5);
+  const int registered = eval.at("cameras").at("matched").get<int>();
+  EXPECT_GE(registered, 20);
+  EXPECT_EQ(georef.at("inliers").get<int>(), registered);
+  EXPECT_TRUE(georef.at("fit").at("used").get<bool>());
+  EXPECT_GE(georef.at("fit").at("inliers").get<int>(), 270);
+  EXPECT_NEAR(georef.at("residuals").at("sigma_per_axis_m").get<double>(), 3.0, 0.5);
+  EXPECT_EQ(eval.at("telemetry_track").at("packets").get<int>(), 300);
+  EXPECT_LE(eval.at("cameras").at("bias_minus_track_mean_m").get<double>(), 0.3);
+  EXPECT_LE(eval.at("surface").at("rms_m").get<double>(), 0.6);
+  EXPECT_LT(eval.at("surface").at("rms_m").get<double>(), keyframes_only);
+  EXPECT_GT(eval.at("surface").at("samples").get<int>(), 10000);
+  EXPECT_LE(eval.at("cameras").at("centre_rms_m").get<double>(), 0.8);
+  EXPECT_GT(eval.at("dsm").at("cells_compared").get<int>(), 1000);
+  EXPECT_LE(eval.at("dsm").at("height_rms_m").get<double>(), 1.0);
   // The products open: a UTM GeoTIFF, a LAS 1.4 with the CRS.
   geo::GridSpec grid;
   geo::ReadHeightGeoTiff(dir / "ws/geo/dsm.tif", &grid);

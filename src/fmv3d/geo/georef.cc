@@ -20,6 +20,8 @@
 #include "fmv3d/io/colmap_model.h"
 #include "fmv3d/io/frames_index.h"
 #include "fmv3d/io/klv_st0601_writer.h"
+#include "fmv3d/io/telemetry.h"
+#include "fmv3d/geo/trajectory.h"
 
 namespace fmv3d::geo {
 namespace fs = std::filesystem;
@@ -137,20 +139,65 @@ Eigen::Vector3d LogRotation(const Eigen::Matrix3d& R) {
   return aa.angle() * aa.axis();
 }
 
-// Telemetry camera-to-ENU rotation of a frame with the full ST 0601 angle chain, else nullopt.
-std::optional<Eigen::Matrix3d> TelemetryAttitude(const nlohmann::json& t) {
-  const char* keys[] = {"platform_heading", "platform_pitch", "platform_roll", "sensor_relative_azimuth",
-                        "sensor_relative_elevation", "sensor_relative_roll"};
-  for (const char* k : keys)
-    if (!t.contains(k) || !t[k].is_number()) return std::nullopt;
+// Telemetry camera-to-ENU rotation of a sample with the full ST 0601 angle chain, else nullopt.
+std::optional<Eigen::Matrix3d> TelemetryAttitude(const io::TelemetrySample& t) {
+  if (!t.platform_heading || !t.platform_pitch || !t.platform_roll || !t.sensor_relative_azimuth ||
+      !t.sensor_relative_elevation || !t.sensor_relative_roll)
+    return std::nullopt;
   io::klv::St0601Attitude a;
-  a.platform_heading = t["platform_heading"].get<double>();
-  a.platform_pitch = t["platform_pitch"].get<double>();
-  a.platform_roll = t["platform_roll"].get<double>();
-  a.sensor_relative_azimuth = t["sensor_relative_azimuth"].get<double>();
-  a.sensor_relative_elevation = t["sensor_relative_elevation"].get<double>();
-  a.sensor_relative_roll = t["sensor_relative_roll"].get<double>();
+  a.platform_heading = *t.platform_heading;
+  a.platform_pitch = *t.platform_pitch;
+  a.platform_roll = *t.platform_roll;
+  a.sensor_relative_azimuth = *t.sensor_relative_azimuth;
+  a.sensor_relative_elevation = *t.sensor_relative_elevation;
+  a.sensor_relative_roll = *t.sensor_relative_roll;
   return io::klv::CameraToEnuFromSt0601(a);
+}
+
+bool HasPosition(const io::TelemetrySample& s) {
+  return s.sensor_latitude && s.sensor_longitude && (s.sensor_altitude_hae || s.sensor_altitude_msl);
+}
+
+// One (model camera, telemetry) correspondence: a keyframe (named) or a telemetry packet paired with the
+// model trajectory at its time (unnamed).
+struct Pair {
+  std::string name;
+  Eigen::Vector3d centre;        // model camera centre
+  Eigen::Quaterniond rotation;   // model world-to-camera
+  GeoPoint pos;                  // alt set once the vertical datum is chosen
+  std::optional<double> hae, msl;
+  std::optional<Eigen::Matrix3d> attitude;  // telemetry camera-to-ENU
+  double time = 0;
+  int track = -1;  // video of a packet pair; -1 for keyframes
+};
+
+Pair MakePair(const std::string& name, const Eigen::Vector3d& centre, const Eigen::Quaterniond& rotation,
+              const io::TelemetrySample& s) {
+  Pair p;
+  p.name = name;
+  p.centre = centre;
+  p.rotation = rotation;
+  p.pos.lat = *s.sensor_latitude;
+  p.pos.lon = *s.sensor_longitude;
+  p.hae = s.sensor_altitude_hae;
+  p.msl = s.sensor_altitude_msl;
+  p.attitude = TelemetryAttitude(s);
+  p.time = s.time;
+  return p;
+}
+
+// Lag-1 autocorrelation of consecutive residual vectors along each track: GPS errors that persist over
+// several packets (a receiver updating slower than the video, multipath) count as fewer independent samples.
+double ResidualAutocorrelation(const std::vector<Pair>& pairs, const std::vector<Eigen::Vector3d>& residual,
+                               const std::vector<char>& inliers) {
+  double num = 0, den = 0;
+  for (size_t i = 0; i < pairs.size(); ++i) {
+    if (!inliers[i]) continue;
+    den += residual[i].squaredNorm();
+    if (i + 1 < pairs.size() && inliers[i + 1] && pairs[i + 1].track == pairs[i].track)
+      num += residual[i].dot(residual[i + 1]);
+  }
+  return den > 0 ? std::clamp(num / den, 0.0, 0.999) : 0.0;
 }
 
 }  // namespace
@@ -257,38 +304,62 @@ nlohmann::json RunGeorefStage(const fs::path& ws, const GeorefOptions& o) {
   const io::FramesIndex index = io::ReadFramesIndex(frames_json);
   core::Reconstruction rec = io::ReadColmapText(sparse);
 
-  // Pairs (model camera centre, telemetry position). Heights: ellipsoidal when every used frame states it.
-  struct Pair {
-    std::string name;
-    Eigen::Vector3d centre;
-    GeoPoint pos;
-    const nlohmann::json* telemetry = nullptr;
-  };
-  std::vector<Pair> pairs;
-  size_t with_telemetry = 0, hae = 0;
+  // Pairs (model camera, telemetry): the registered keyframes' own telemetry, and — when frames/telemetry.json
+  // holds the videos' whole tracks — every packet paired with the model trajectory at its time.
+  std::vector<Pair> keyframe_pairs, track_pairs;
+  size_t with_telemetry = 0;
+  std::map<std::string, std::vector<TrajectoryKnot>> knots_by_source;
   for (const auto& f : index.frames) {
-    const auto& t = f.telemetry;
-    if (!t.is_object() || !t.contains("sensor_latitude") || !t.contains("sensor_longitude")) continue;
-    if (!t.contains("sensor_altitude_hae") && !t.contains("sensor_altitude_msl")) continue;
-    ++with_telemetry;
     const core::Image* img = rec.FindImageByName(f.name);
+    if (img) knots_by_source[f.source].push_back({f.timestamp, img->pose.Centre(), img->pose.q});
+    if (!f.telemetry.is_object()) continue;
+    nlohmann::json t = f.telemetry;
+    if (!t.contains("time")) t["time"] = f.timestamp;
+    io::TelemetrySample s;
+    try {
+      s = io::TelemetryFromJson(t);
+    } catch (const Error& e) {
+      throw Error(frames_json.string() + ": frame " + f.name + ": " + e.what());
+    }
+    if (!HasPosition(s)) continue;
+    ++with_telemetry;
     if (!img) continue;
-    Pair p;
-    p.name = f.name;
-    p.centre = img->pose.Centre();
-    p.pos.lat = t.at("sensor_latitude").get<double>();
-    p.pos.lon = t.at("sensor_longitude").get<double>();
-    p.telemetry = &t;
-    if (t.contains("sensor_altitude_hae")) ++hae;
-    pairs.push_back(p);
+    keyframe_pairs.push_back(MakePair(f.name, img->pose.Centre(), img->pose.q, s));
   }
   if (with_telemetry == 0)
     throw Error(frames_json.string() + ": no frame carries a telemetry position (georef needs KLV, DJI SRT or GPS)");
-  if (static_cast<int>(pairs.size()) < o.min_cameras)
-    throw Error(fmt::format("georef: only {} registered frames have telemetry positions ({} needed)", pairs.size(),
-                            o.min_cameras));
-  const bool use_hae = hae == pairs.size();  // else MSL for all: one vertical datum for every frame
-  for (auto& p : pairs) p.pos.alt = p.telemetry->at(use_hae ? "sensor_altitude_hae" : "sensor_altitude_msl").get<double>();
+  if (static_cast<int>(keyframe_pairs.size()) < o.min_cameras)
+    throw Error(fmt::format("georef: only {} registered frames have telemetry positions ({} needed)",
+                            keyframe_pairs.size(), o.min_cameras));
+  nlohmann::json track_json = {{"used", false}};
+  const fs::path tracks_path = ws / "frames" / "telemetry.json";
+  if (o.use_track && fs::exists(tracks_path)) {
+    size_t spanned = 0, samples = 0;
+    for (const auto& track : io::ReadTelemetryTracks(tracks_path)) {
+      const auto it = knots_by_source.find(track.source);
+      if (it == knots_by_source.end() || it->second.size() < 2) continue;
+      const CameraTrajectory traj(it->second);
+      for (const auto& s : track.samples) {
+        if (!HasPosition(s)) continue;
+        ++samples;
+        const auto k = traj.At(s.time);
+        if (!k) continue;
+        ++spanned;
+        track_pairs.push_back(MakePair("", k->centre, k->rotation, s));
+        track_pairs.back().time = s.time;
+        track_pairs.back().track = static_cast<int>(std::distance(knots_by_source.begin(), it));
+      }
+    }
+    track_json = {{"samples", samples}, {"inside_registered_span", spanned}, {"used", false}};
+    if (track_pairs.size() <= keyframe_pairs.size()) track_pairs.clear();  // nothing gained over the keyframes
+  }
+  const bool use_track = !track_pairs.empty();
+  std::vector<Pair>& pairs = use_track ? track_pairs : keyframe_pairs;
+  if (use_track) track_json["used"] = true;
+  // One vertical datum for every pair: ellipsoidal heights when every used sample states them, else MSL.
+  const bool use_hae = std::all_of(pairs.begin(), pairs.end(), [](const Pair& p) { return p.hae.has_value(); });
+  for (auto* set : {&keyframe_pairs, &track_pairs})
+    for (auto& p : *set) p.pos.alt = use_hae && p.hae ? *p.hae : (p.msl ? *p.msl : *p.hae);
 
   GeoPoint origin;
   if (o.origin) {
@@ -340,10 +411,9 @@ nlohmann::json RunGeorefStage(const fs::path& ws, const GeorefOptions& o) {
     std::vector<Eigen::Matrix3d> rel;
     for (size_t i = 0; i < pairs.size(); ++i) {
       if (!inliers[i]) continue;
-      const auto ra = TelemetryAttitude(*pairs[i].telemetry);
-      if (!ra) continue;
-      const core::Image* img = rec.FindImageByName(pairs[i].name);
-      rel.push_back(*ra * img->pose.R());  // camera-to-ENU · model-to-camera = model-to-ENU rotation
+      if (!pairs[i].attitude) continue;
+      // camera-to-ENU · model-to-camera = model-to-ENU rotation
+      rel.push_back(*pairs[i].attitude * pairs[i].rotation.toRotationMatrix());
     }
     if (rel.size() >= 3) {
       // Chordal mean, then the scatter about it.
@@ -422,14 +492,24 @@ nlohmann::json RunGeorefStage(const fs::path& ws, const GeorefOptions& o) {
   j["similarity"] = SimJson(sim);
   j["rotation_about_track_from"] = roll_source;
   j["attitude"] = attitude_json;
+  // Residuals of the keyframes (the cameras later stages use); a keyframe is an inlier within the fit's bound.
+  const double bound = std::max(o.min_inlier_threshold, 3.5 * sigma);
   std::vector<double> res;
   nlohmann::json per = nlohmann::json::array();
   size_t n_in = 0;
-  for (size_t i = 0; i < pairs.size(); ++i) {
-    const Eigen::Vector3d d = sim.Apply(src[i]) - dst[i];
-    per.push_back({{"name", pairs[i].name}, {"residual_m", d.norm()}, {"enu_error", {d.x(), d.y(), d.z()}},
-                   {"inlier", static_cast<bool>(inliers[i])}});
-    if (inliers[i]) res.push_back(d.norm()), ++n_in;
+  for (const auto& p : keyframe_pairs) {
+    const Eigen::Vector3d d = sim.Apply(p.centre) - frame.ToEnu(p.pos);
+    const bool in = use_track ? d.norm() <= bound : true;
+    per.push_back({{"name", p.name}, {"residual_m", d.norm()}, {"enu_error", {d.x(), d.y(), d.z()}}, {"inlier", in}});
+    if (in) res.push_back(d.norm()), ++n_in;
+  }
+  if (!use_track)  // the keyframes are the fit: its own inlier mask
+    for (size_t i = 0; i < per.size(); ++i) per[i]["inlier"] = static_cast<bool>(inliers[i]);
+  if (!use_track) {
+    res.clear();
+    n_in = 0;
+    for (size_t i = 0; i < per.size(); ++i)
+      if (inliers[i]) res.push_back(per[i]["residual_m"].get<double>()), ++n_in;
   }
   double sq = 0;
   for (double r : res) sq += r * r;
@@ -438,10 +518,23 @@ nlohmann::json RunGeorefStage(const fs::path& ws, const GeorefOptions& o) {
                     {"max_m", res.empty() ? 0.0 : *std::max_element(res.begin(), res.end())},
                     {"sigma_per_axis_m", sigma},
                     {"per_image", per}};
-  j["cameras"] = pairs.size();
+  j["cameras"] = keyframe_pairs.size();
   j["inliers"] = n_in;
-  // Expected 3D error of the frame's position from N independent noisy positions (σ per axis).
-  j["expected_translation_error_m"] = sigma * std::sqrt(3.0 / static_cast<double>(std::max<size_t>(1, n_in)));
+  // The fit itself: N pairs of which n inliers; their residuals' lag-1 autocorrelation ρ along the track turns
+  // n into n·(1−ρ)/(1+ρ) independent samples (ρ ≈ 0 for white GPS noise, → 1 for a slow receiver repeated
+  // per packet). Expected 3D error of the translation from them: σ·√(3/n_eff) (σ per axis).
+  std::vector<Eigen::Vector3d> fit_res(pairs.size());
+  size_t fit_in = 0;
+  for (size_t i = 0; i < pairs.size(); ++i) fit_res[i] = sim.Apply(src[i]) - dst[i], fit_in += inliers[i] ? 1 : 0;
+  const double rho = use_track ? ResidualAutocorrelation(pairs, fit_res, inliers) : 0.0;
+  const double n_eff = std::max(1.0, static_cast<double>(fit_in) * (1 - rho) / (1 + rho));
+  track_json["pairs"] = pairs.size();
+  track_json["inliers"] = fit_in;
+  track_json["residual_autocorrelation"] = rho;
+  track_json["effective_samples"] = n_eff;
+  j["fit"] = track_json;
+  j["fit"]["from"] = use_track ? "every telemetry packet vs the model trajectory at its time" : "keyframes";
+  j["expected_translation_error_m"] = sigma * std::sqrt(3.0 / n_eff);
   const UtmZone zone = frame.utm_zone();
   j["utm"] = {{"zone", zone.zone}, {"north", zone.north}, {"epsg", zone.Epsg()}, {"name", zone.Name()}};
   j["proj"] = {{"enu_from_wgs84", frame.EnuPipeline()}, {"utm_from_wgs84", frame.UtmPipeline()},
@@ -449,8 +542,10 @@ nlohmann::json RunGeorefStage(const fs::path& ws, const GeorefOptions& o) {
   j["to_wgs84"] = "WGS84 (lon, lat, h) = inverse of proj.enu_from_wgs84 applied to X_enu";
   j["wkt_utm"] = UtmWkt(zone);
   core::WriteJson(geo_dir / "georef.json", j);
-  spdlog::info("georef: {} of {} cameras inliers, residual RMS {:.2f} m, scale {:.4f} → {}", n_in, pairs.size(),
-               j["residuals"]["rms_m"].get<double>(), sim.s, (geo_dir / "georef.json").string());
+  spdlog::info("georef: fit on {} {} ({} inliers, σ {:.2f} m per axis, expected translation error {:.2f} m); "
+               "{} of {} keyframes inliers, scale {:.4f} → {}", pairs.size(), use_track ? "telemetry packets" : "keyframes",
+               fit_in, sigma, j["expected_translation_error_m"].get<double>(), n_in, keyframe_pairs.size(), sim.s,
+               (geo_dir / "georef.json").string());
   return j;
 }
 

@@ -2,7 +2,8 @@
 // telemetry positions that frames.json carries per frame, expressed in a local East-North-Up frame.
 //
 // Inputs:  WS/sparse/ (COLMAP text model), WS/frames/frames.json (per-frame "telemetry": sensor_latitude,
-//          sensor_longitude, sensor_altitude_hae or else sensor_altitude_msl).
+//          sensor_longitude, sensor_altitude_hae or else sensor_altitude_msl), and when present
+//          WS/frames/telemetry.json (every packet of each video, io/telemetry.h).
 // Outputs: WS/geo/sparse_enu/   the model transformed into ENU metres at the origin (x east, y north, z up)
 //          WS/geo/georef.json   {"origin": {lat, lon, alt}, "vertical_datum", "similarity": {scale, rotation
 //                               (quaternion wxyz and 3x3), translation, matrix 4x4; maps sparse → ENU},
@@ -10,12 +11,18 @@
 //                               "attitude": {used, frames, scatter, disagreement}, "utm": {zone, epsg, name},
 //                               "proj": {enu, utm pipelines}, "wkt_utm"}
 //
+// Pairs: with telemetry.json, every packet inside the registered span of its video is paired with the model's
+// camera at that time (CameraTrajectory through the registered keyframes: cubic in position, slerp in rotation,
+// never across a gap) — 30 packets a second instead of ~2 keyframes, so white GPS noise averages ~4x further;
+// else (stills, or no track) the keyframes' own telemetry.
 // Estimation: least median of squares over minimal 3-camera samples (deterministic), inliers within 3.5 robust
 // sigmas, Umeyama on the inliers (refined twice). A nearly straight track leaves the roll about it free: it is
 // taken from the sparse points' ground plane (level in ENU). When the telemetry states the full ST 0601 angle
 // chain, the frames' attitudes are fused with the positions' rotation (information-weighted; skipped when they
 // disagree beyond their uncertainties) and scale/translation refitted. With GPS noise σ per axis and N
-// cameras, the translation is known to about σ·√(3/N) (3D) — georef.json's expected_translation_error_m.
+// independent pairs, the translation is known to about σ·√(3/N) (3D) — georef.json's
+// expected_translation_error_m, with N discounted by the residuals' autocorrelation along the track ("fit").
+// "cameras"/"inliers"/"residuals" describe the registered keyframes.
 #pragma once
 
 #include <filesystem>
@@ -33,6 +40,7 @@ struct GeorefOptions {
   int max_samples = 2000;           // LMedS minimal samples
   double min_inlier_threshold = 0.05;  // metres: floor of the 3σ inlier bound (noise-free telemetry)
   uint64_t seed = 42;
+  bool use_track = true;  // fit every packet of frames/telemetry.json (else the keyframes' telemetry only)
   void Check() const;
 };
 

@@ -151,6 +151,7 @@ FramesIndex IngestFrames(const std::vector<fs::path>& inputs, const IngestOption
   std::vector<CameraGroup> groups;  // parallel to index.cameras
   std::map<ImageCameraKey, uint32_t> image_cameras;
   NameRegistry names;
+  std::vector<TelemetryTrack> tracks;  // every video's whole telemetry → frames/telemetry.json
 
   auto add_camera = [&](CameraGroup g) {
     CameraPrior c;
@@ -255,6 +256,7 @@ FramesIndex IngestFrames(const std::vector<fs::path>& inputs, const IngestOption
       spdlog::warn("{}: interlaced video; frames are used as decoded (no deinterlacing), fast motion will comb",
                    file.string());
     const std::vector<TelemetrySample> telemetry = LoadTelemetry(file);
+    if (!telemetry.empty()) tracks.push_back({file.string(), telemetry});
     core::Progress progress("decode " + stem, static_cast<size_t>(std::max<int64_t>(info.frame_count_hint, 0)));
     std::vector<Keyframe> kept;
     tbb::task_group writers;
@@ -359,6 +361,7 @@ FramesIndex IngestFrames(const std::vector<fs::path>& inputs, const IngestOption
                  c.prior_source, c.source);
 
   WriteFramesIndex(index, staging.dir / "frames.json");
+  if (!tracks.empty()) WriteTelemetryTracks(tracks, staging.dir / "telemetry.json");
 
   // Swap the complete staging folder in place of frames/.
   std::error_code ec;

@@ -4,6 +4,8 @@
 // - Images keep their file name (GIFs are converted to <stem>.png, since later stages read with OpenCV);
 //   each distinct (size, EXIF make/model/focal) is one camera. Folders are read non-recursively, by name.
 // - Each video is one camera; its keyframes (keyframes.h) are written as <video-stem>-<index, 6 digits>.png.
+//   Each kept frame carries the telemetry interpolated at its time; a video's whole telemetry (every packet)
+//   goes to frames/telemetry.json (telemetry.h, TelemetryTrack), absent when no video has any.
 // - The intrinsics prior of each camera comes from options.prior (the CLI wires calib::PriorFromSources:
 //   --camera file, sensor database, EXIF), else f = 1.2 · max(w, h) marked "guess".
 // - Nothing is written half-way: everything goes to WS/.frames-staging-<pid>/ and replaces WS/frames/ only

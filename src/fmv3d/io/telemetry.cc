@@ -13,6 +13,7 @@ extern "C" {
 #include <map>
 
 #include "fmv3d/core/error.h"
+#include "fmv3d/core/files.h"
 #include "fmv3d/io/klv_eg0104.h"
 #include "fmv3d/io/klv_st0601.h"
 
@@ -273,6 +274,51 @@ nlohmann::json ToJson(const TelemetrySample& s) {
     if (const auto& v = s.*(f.field)) j[f.name] = *v;
   if (s.unix_time_us) j["unix_time_us"] = *s.unix_time_us;
   return j;
+}
+
+TelemetrySample TelemetryFromJson(const nlohmann::json& j) {
+  if (!j.is_object() || !j.contains("time") || !j["time"].is_number())
+    throw Error("telemetry sample without a numeric \"time\"");
+  TelemetrySample s;
+  s.time = j["time"].get<double>();
+  if (j.contains("source") && j["source"].is_string()) s.source = j["source"].get<std::string>();
+  for (const auto& f : kFields) {
+    if (!j.contains(f.name)) continue;
+    if (!j[f.name].is_number()) throw Error(std::string("telemetry field \"") + f.name + "\" is not a number");
+    s.*(f.field) = j[f.name].get<double>();
+  }
+  if (j.contains("unix_time_us") && j["unix_time_us"].is_number_unsigned())
+    s.unix_time_us = j["unix_time_us"].get<uint64_t>();
+  return s;
+}
+
+void WriteTelemetryTracks(const std::vector<TelemetryTrack>& tracks, const std::filesystem::path& path) {
+  nlohmann::json j = {{"version", 1}, {"tracks", nlohmann::json::array()}};
+  for (const auto& t : tracks) {
+    nlohmann::json samples = nlohmann::json::array();
+    for (const auto& s : t.samples) samples.push_back(ToJson(s));
+    j["tracks"].push_back({{"source", t.source}, {"samples", std::move(samples)}});
+  }
+  core::WriteJson(path, j);
+}
+
+std::vector<TelemetryTrack> ReadTelemetryTracks(const std::filesystem::path& path) {
+  const nlohmann::json j = core::ReadJson(path);
+  std::vector<TelemetryTrack> out;
+  try {
+    if (!j.contains("tracks") || !j["tracks"].is_array()) throw Error("no \"tracks\" list");
+    for (const auto& t : j["tracks"]) {
+      TelemetryTrack track;
+      track.source = t.at("source").get<std::string>();
+      for (const auto& s : t.at("samples")) track.samples.push_back(TelemetryFromJson(s));
+      std::stable_sort(track.samples.begin(), track.samples.end(),
+                       [](const TelemetrySample& a, const TelemetrySample& b) { return a.time < b.time; });
+      out.push_back(std::move(track));
+    }
+  } catch (const std::exception& e) {
+    throw Error(path.string() + ": malformed telemetry track file (" + e.what() + ") — run `fmv3d frames` again");
+  }
+  return out;
 }
 
 }  // namespace fmv3d::io

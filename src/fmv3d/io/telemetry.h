@@ -73,5 +73,20 @@ std::optional<TelemetrySample> InterpolateTelemetry(const std::vector<TelemetryS
 
 // {"time": .., "source": "ST0601", "sensor_latitude": ..., ...}; absent fields are omitted.
 nlohmann::json ToJson(const TelemetrySample& s);
+// The inverse of ToJson; unknown keys are ignored. Throws fmv3d::Error when "time" is missing or a known
+// field is not a number.
+TelemetrySample TelemetryFromJson(const nlohmann::json& j);
+
+// The whole telemetry of a video (every packet, not only the kept frames'), so that later stages can use all
+// of it: georef fits the model's trajectory to every position (frames.json only carries the keyframes').
+// frames/telemetry.json: {"version": 1, "tracks": [{"source": "flight.ts", "samples": [ToJson, ...]}]};
+// "source" is the video path exactly as frames.json's frames state it.
+struct TelemetryTrack {
+  std::string source;
+  std::vector<TelemetrySample> samples;  // sorted by time
+};
+void WriteTelemetryTracks(const std::vector<TelemetryTrack>& tracks, const std::filesystem::path& path);
+// Throws fmv3d::Error naming the file when it is unreadable or malformed.
+std::vector<TelemetryTrack> ReadTelemetryTracks(const std::filesystem::path& path);
 
 }  // namespace fmv3d::io
