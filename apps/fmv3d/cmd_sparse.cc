@@ -47,6 +47,14 @@ void Add(CLI::App& app) {
                   "Final global BA: relative cost decrease at which it stops")
       ->capture_default_str();
   cmd->add_option("--max-models", m.max_models, "Maximum number of disconnected models")->capture_default_str();
+  cmd->add_option("--focal", a->opt.focal_px, "Focal prior in pixels for every camera (overrides frames.json)")
+      ->check(CLI::PositiveNumber);
+  cmd->add_option("--hfov", a->opt.hfov_deg, "Focal prior from the horizontal field of view, degrees")
+      ->check(CLI::Range(0.0, 180.0));
+  cmd->add_flag("--fix-focal", m.fix_known_focal,
+                "Keep a known focal (calibration, sensor database, EXIF, --focal/--hfov) fixed in BA");
+  cmd->add_option("--focal-scan-pairs", m.focal_scan_pairs, "Guessed focal: pairs the focal scan uses")
+      ->capture_default_str();
   cmd->add_option("--seed", m.seed, "Random seed")->capture_default_str();
   cmd->callback([a] {
     a->opt.mapper.filter_max_error_px = a->opt.mapper.tri_max_error_px;

@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <limits>
 #include <numeric>
 #include <opencv2/calib3d.hpp>
 #include <opencv2/core/eigen.hpp>
@@ -15,6 +16,7 @@
 #include "fmv3d/geometry/triangulation.h"
 #include "fmv3d/sfm/bundle_adjustment.h"
 #include "fmv3d/sfm/correspondence_graph.h"
+#include "fmv3d/sfm/focal_scan.h"
 
 namespace fmv3d::sfm {
 
@@ -32,6 +34,8 @@ void MapperOptions::Check() const {
   if (!(global_ba_growth_ratio > 1)) throw Error("mapper: global_ba_growth_ratio must be > 1");
   if (min_model_size < 2) throw Error("mapper: min_model_size must be ≥ 2");
   if (max_models < 1) throw Error("mapper: max_models must be ≥ 1");
+  if (focal_scan_pairs < 1) throw Error("mapper: focal_scan_pairs must be ≥ 1");
+  if (!(narrow_field_max_radius >= 0)) throw Error("mapper: narrow_field_max_radius must be ≥ 0");
 }
 
 namespace {
@@ -77,7 +81,9 @@ class ModelBuilder {
     return cam.Unproject(uv).head<2>();
   }
   void EvaluatePair(PairCandidate* c) const;
-  double ScanFocal(const features::VerifiedPair& pair) const;
+  void ChooseFocal(const std::vector<PairCandidate>& cands);
+  void TryFreeFocal();
+  void DollyZoomFocalScan();
   bool TryInitialPair(const PairCandidate& c);
   void AddImage(uint32_t id, const core::Pose& pose);
   void AddObservation(uint64_t pid, uint32_t image_id, uint32_t kp);
@@ -106,6 +112,9 @@ class ModelBuilder {
   const CorrespondenceGraph& graph_;
   uint64_t next_point_id_ = 1;
   double init_focal_scale_ = 1;
+  // Focal held through growth: a trusted prior the user wants kept, or a telephoto scan's lower bound (then
+  // tested once at the end, see TryFreeFocal). Narrow field: distortion is unobservable and stays fixed.
+  bool focal_fixed_ = false, focal_from_plateau_ = false, narrow_field_ = false, dolly_done_ = false;
   // Angle thresholds of this model: the options', lowered for narrow-baseline (telephoto) models, see Initialize.
   double tri_min_angle_deg_ = 0, filter_min_angle_deg_ = 0;  // set in the constructor body
   const MapperOptions& opt_;
@@ -120,46 +129,45 @@ class ModelBuilder {
   int num_global_ba_ = 0;
 };
 
-// A guessed focal can be far off (telephoto video: tens of times longer than 1.2·max(w, h)), and the essential
-// matrix of a wrong focal explains the matches worse. Scans multiples of the guess and returns the one whose E
-// has most inliers (ties within 2%: the one nearest the guess).
-double ModelBuilder::ScanFocal(const features::VerifiedPair& pair) const {
-  const MapperImage& im1 = *images_.at(pair.image_id1);
-  const MapperImage& im2 = *images_.at(pair.image_id2);
-  core::Camera cam1 = input_.cameras.at(im1.camera_id).camera;
-  core::Camera cam2 = input_.cameras.at(im2.camera_id).camera;
-  const double f1 = cam1.f, f2 = cam2.f;
-  std::vector<std::pair<double, int>> scores;
-  std::vector<cv::Point2d> p1, p2;
-  for (double k : {0.5, 0.7, 1.0, 1.4, 2.0, 3.0, 4.0, 6.0, 8.0, 12.0, 16.0, 24.0, 32.0, 48.0, 64.0}) {
-    cam1.f = f1 * k;
-    cam2.f = f2 * k;
-    p1.clear();
-    p2.clear();
-    for (const auto& m : pair.inliers) {
-      const Eigen::Vector2d a = Normalized(cam1, im1.keypoints[m.idx1]);
-      const Eigen::Vector2d b = Normalized(cam2, im2.keypoints[m.idx2]);
-      p1.emplace_back(a.x(), a.y());
-      p2.emplace_back(b.x(), b.y());
-    }
-    cv::Mat m;
-    try {
-      cv::findEssentialMat(p1, p2, cv::Mat::eye(3, 3, CV_64F), cv::RANSAC, 0.999,
-                           opt_.tri_max_error_px / (0.5 * (cam1.f + cam2.f)), 1000, m);
-    } catch (const cv::Exception&) {
-      continue;
-    }
-    scores.emplace_back(k, m.empty() ? 0 : cv::countNonZero(m));
+void ModelBuilder::ChooseFocal(const std::vector<PairCandidate>& cands) {
+  if (cands.empty()) return;
+  const uint32_t cid = images_.at(cands[0].pair->image_id1)->camera_id;
+  const MapperCamera& mc = input_.cameras.at(cid);
+  auto narrow = [&](double f) {
+    // Radial distortion moves a point by ~k·r³: at r = half-diagonal / f < 0.1 it is far below the noise for any
+    // plausible k, so refining k1/k2 there only lets them wander.
+    return 0.5 * std::hypot(mc.camera.width, mc.camera.height) / f < opt_.narrow_field_max_radius;
+  };
+  if (mc.focal_known) {
+    focal_fixed_ = opt_.fix_known_focal;
+    narrow_field_ = narrow(mc.camera.f);
+    return;
   }
-  int best = 0;
-  for (const auto& sc : scores) best = std::max(best, sc.second);
-  double chosen = 1, dist = 1e9;
-  for (const auto& [k, n] : scores)
-    if (n >= 0.98 * best && std::abs(std::log(k)) < dist) {
-      dist = std::abs(std::log(k));
-      chosen = k;
+  std::vector<FocalScanPair> pairs;
+  for (size_t i = 0; i < cands.size() && static_cast<int>(pairs.size()) < opt_.focal_scan_pairs; ++i) {
+    const auto& pr = *cands[i].pair;
+    const MapperImage& im1 = *images_.at(pr.image_id1);
+    const MapperImage& im2 = *images_.at(pr.image_id2);
+    if (im1.camera_id != cid || im2.camera_id != cid) continue;
+    FocalScanPair fp;
+    for (const auto& m : pr.inliers) {
+      fp.uv1.push_back(im1.keypoints[m.idx1]);
+      fp.uv2.push_back(im2.keypoints[m.idx2]);
     }
-  return chosen;
+    pairs.push_back(std::move(fp));
+  }
+  FocalScanOptions fo;
+  fo.seed = opt_.seed;
+  const FocalScanResult r = ScanFocal(mc.camera, pairs, fo);
+  init_focal_scale_ = r.focal / mc.camera.f;
+  focal_fixed_ = focal_from_plateau_ = r.plateau;
+  narrow_field_ = narrow(r.focal);
+  std::string curve;
+  for (size_t i = 0; i < r.focals.size(); ++i) curve += fmt::format(" {:.0f}:{:.3f}", r.focals[i], r.scores[i]);
+  spdlog::info("focal scan on {} pairs: {:.1f} px ({:.2f} x the guess){}{}", pairs.size(), r.focal,
+               init_focal_scale_, r.plateau ? ", plateau: a lower bound, held until the final test" : "",
+               narrow_field_ ? ", narrow field: distortion fixed" : "");
+  spdlog::debug("focal scan (f: px²):{}", curve);
 }
 
 void ModelBuilder::EvaluatePair(PairCandidate* c) const {
@@ -302,18 +310,7 @@ bool ModelBuilder::Initialize() {
     return a.pair->inliers.size() > b.pair->inliers.size();
   });
   if (static_cast<int>(cands.size()) > opt_.init_max_candidates) cands.resize(opt_.init_max_candidates);
-  // Guessed focal: scan it on the three strongest pairs (median), then use it for every candidate.
-  std::vector<double> scales;
-  for (size_t i = 0; i < cands.size() && i < 3; ++i) {
-    const auto& pr = *cands[i].pair;
-    if (!input_.cameras.at(images_.at(pr.image_id1)->camera_id).focal_known ||
-        !input_.cameras.at(images_.at(pr.image_id2)->camera_id).focal_known)
-      scales.push_back(ScanFocal(pr));
-  }
-  if (!scales.empty()) {
-    std::sort(scales.begin(), scales.end());
-    init_focal_scale_ = scales[scales.size() / 2];
-  }
+  ChooseFocal(cands);
   for (auto& c : cands) EvaluatePair(&c);
   // Strict first (enough angle, not planar), then relax the angle and finally accept planar pairs.
   const std::vector<std::pair<double, bool>> passes = {
@@ -599,9 +596,11 @@ BundleAdjustmentOptions ModelBuilder::BaOptions() const {
   BundleAdjustmentOptions o;
   o.loss_scale_px = opt_.ba_loss_scale_px;
   const int n = static_cast<int>(rec_.images.size());
-  o.refine_focal = n >= opt_.refine_focal_min_images;
-  o.refine_k1 = n >= opt_.refine_focal_min_images;
-  o.refine_k2 = n >= opt_.refine_k2_min_images;
+  o.refine_focal = n >= opt_.refine_focal_min_images && !focal_fixed_;
+  // While the focal is only a telephoto lower bound, distortion would absorb the wrong perspective: hold it.
+  const bool hold_distortion = narrow_field_ || (focal_from_plateau_ && !dolly_done_);
+  o.refine_k1 = n >= opt_.refine_focal_min_images && !hold_distortion;
+  o.refine_k2 = n >= opt_.refine_k2_min_images && !hold_distortion;
   o.refine_principal_point = false;  // only the final model-selection test frees it
   o.refine_tangential = opt_.refine_tangential && n >= opt_.refine_principal_point_min_images;
   return o;
@@ -738,6 +737,96 @@ void ModelBuilder::TryPrincipalPoint() {
   }
 }
 
+// A telephoto scan's focal is the knee of a plateau: longer focals explain the two-view matches as well. With
+// the whole model the perspective effects add up, so free the focal once and keep the result only when the
+// squared error drops by far more than one extra parameter explains for pure noise (Δχ², as for the
+// principal point); otherwise the scan's value stays.
+void ModelBuilder::TryFreeFocal() {
+  BundleAdjustmentOptions o = BaOptions();
+  o.loss = BundleAdjustmentOptions::Loss::kTrivial;
+  o.function_tolerance = std::max(opt_.final_ba_function_tolerance, 1e-6);
+  o.max_iterations = opt_.final_ba_max_iterations;
+  BundleAdjustmentConfig cfg;
+  cfg.gauge_image1 = gauge1_;
+  cfg.gauge_image2 = gauge2_;
+  core::Reconstruction fixed = rec_;
+  o.refine_focal = false;
+  const auto s0 = BundleAdjust(&fixed, cfg, o);
+  core::Reconstruction freed = fixed;
+  o.refine_focal = true;
+  const auto s1 = BundleAdjust(&freed, cfg, o);
+  if (!s0.success || !s1.success) return;
+  const double n = s0.num_residuals;
+  const double ss0 = s0.final_rms_px * s0.final_rms_px * n, ss1 = s1.final_rms_px * s1.final_rms_px * n;
+  const double dof = std::max(1.0, 2 * n - 6.0 * rec_.images.size() - 3.0 * rec_.points.size());
+  const double chi2 = (ss0 - ss1) / std::max(ss0 / dof, 1e-12);
+  const double f0 = fixed.cameras.begin()->second.f, f1 = freed.cameras.begin()->second.f;
+  const bool keep = chi2 > opt_.focal_min_chi2 && f1 > 0;
+  spdlog::info("focal test: Δχ² = {:.1f} → {} (free fit: {:.1f} px, held: {:.1f} px)", chi2,
+               keep ? "refined" : "kept at the scan's value", f1, f0);
+  if (keep) {
+    focal_fixed_ = false;
+    rec_ = std::move(freed);
+    GlobalBundleAdjust(true);
+  }
+}
+
+// Multi-view focal scan for a telephoto model whose two-view scan only gave a lower bound. Lengthening the
+// focal by k while moving every camera back along its axis by (k − 1) times its median depth keeps the
+// projections almost unchanged (a dolly zoom), so each candidate starts near its own optimum and a short BA
+// with the focal held at the candidate measures how well that focal explains all views together — the
+// perspective effects too small to see in one pair add up over the model.
+void ModelBuilder::DollyZoomFocalScan() {
+  dolly_done_ = true;
+  const auto start = Clock::now();
+  BundleAdjustmentConfig cfg;
+  cfg.gauge_image1 = gauge1_;
+  cfg.gauge_image2 = gauge2_;
+  BundleAdjustmentOptions o = BaOptions();
+  o.refine_focal = false;
+  o.refine_k1 = o.refine_k2 = false;  // distortion would absorb the perspective the scan measures
+  o.max_iterations = opt_.global_ba_max_iterations * 2;
+  o.function_tolerance = 1e-6;
+  double best_rms = std::numeric_limits<double>::infinity(), best_k = 1;
+  core::Reconstruction best_rec;
+  std::string curve;
+  // Continuation: each candidate starts from the previous one's optimum (a step of √2), so the BA follows the
+  // valley even when the first model (built at the lower bound) is far from affine.
+  core::Reconstruction m = rec_;
+  const double step = std::sqrt(2.0);
+  for (double k = 1; k <= opt_.focal_dolly_max_factor * 1.0001; k *= step) {
+    const double dk = k == 1 ? 1 : step;
+    for (auto& [cid, cam] : m.cameras) cam.f *= dk;
+    for (auto& [iid, im] : m.images) {
+      std::vector<double> depths;
+      for (int64_t pid : im.point3d_ids)
+        if (pid != core::kNoPoint3D) depths.push_back(im.pose.Transform(m.points.at(static_cast<uint64_t>(pid)).xyz).z());
+      if (depths.empty()) continue;
+      std::nth_element(depths.begin(), depths.begin() + depths.size() / 2, depths.end());
+      im.pose.t.z() += (dk - 1) * depths[depths.size() / 2];
+    }
+    const auto sm = BundleAdjust(&m, cfg, o);
+    if (!sm.success) continue;
+    curve += fmt::format(" {:.0f}:{:.4f}", m.cameras.begin()->second.f, sm.final_rms_px);
+    if (sm.final_rms_px < best_rms) {
+      best_rms = sm.final_rms_px;
+      best_k = k;
+      best_rec = m;
+    }
+  }
+  t_->global_ba += Seconds(start);
+  spdlog::info("focal dolly-zoom scan on {} images: x{:.2f} → {:.1f} px ({:.1f} s); rms px by focal:{}",
+               rec_.images.size(), best_k, best_rec.cameras.empty() ? 0.0 : best_rec.cameras.begin()->second.f,
+               Seconds(start), curve);
+  if (best_k != 1 && !best_rec.images.empty()) {
+    rec_ = std::move(best_rec);
+    narrow_field_ = narrow_field_ || 0.5 * std::hypot(rec_.cameras.begin()->second.width,
+                                                      rec_.cameras.begin()->second.height) /
+                                             rec_.cameras.begin()->second.f < opt_.narrow_field_max_radius;
+    FilterPoints(nullptr);
+  }
+}
+
 void ModelBuilder::Grow() {
   GlobalBundleAdjust(false);
   for (;;) {
@@ -775,6 +864,12 @@ void ModelBuilder::Grow() {
     }
     if (!registered) break;
     const size_t n = rec_.images.size();
+    if (focal_from_plateau_ && !dolly_done_ && static_cast<int>(n) >= opt_.focal_dolly_min_images) {
+      DollyZoomFocalScan();
+      GlobalBundleAdjust(false);
+      Retriangulate();
+      continue;
+    }
     if (static_cast<int>(n) < opt_.global_ba_every_image_below ||
         n >= opt_.global_ba_growth_ratio * images_at_last_global_) {
       GlobalBundleAdjust(false);
@@ -785,6 +880,8 @@ void ModelBuilder::Grow() {
   GlobalBundleAdjust(false);
   Retriangulate();
   GlobalBundleAdjust(true);
+  if (focal_from_plateau_ && static_cast<int>(rec_.images.size()) >= opt_.refine_principal_point_min_images)
+    TryFreeFocal();
   if (static_cast<int>(rec_.images.size()) >= opt_.refine_principal_point_min_images) TryPrincipalPoint();
   UpdatePointErrors(&rec_);
 }

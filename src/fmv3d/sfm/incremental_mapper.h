@@ -78,6 +78,13 @@ struct MapperOptions {
   int refine_k2_min_images = 6;
   int refine_principal_point_min_images = 8;  // from then on the final BA tests freeing it (Δχ²)
   double principal_point_min_chi2 = 1000;  // high: small systematic effects pass a 2-dof test easily
+  // Focal. A guessed prior is replaced by a scan over focal candidates on the strongest pairs (focal_scan.h).
+  int focal_scan_pairs = 5;
+  double focal_min_chi2 = 1000;     // telephoto: free the scan's focal at the end only past this Δχ² (1 dof)
+  int focal_dolly_min_images = 15;     // telephoto: multi-view focal scan once the model has this many images
+  double focal_dolly_max_factor = 64;  // ... over the two-view lower bound times 1 .. this (steps of √2)
+  bool fix_known_focal = false;     // a trusted prior (calibration, telemetry, --focal) stays fixed in BA
+  double narrow_field_max_radius = 0.1;  // half-diagonal / f below this: k1, k2 unobservable, held at the prior
   bool refine_tangential = false;
   double ba_loss_scale_px = 1.0;
   // Models.

@@ -3,6 +3,7 @@
 #include <spdlog/spdlog.h>
 
 #include <chrono>
+#include <cmath>
 #include <fstream>
 
 #include "fmv3d/core/error.h"
@@ -30,6 +31,13 @@ void WritePointsPly(const core::Reconstruction& rec, const fs::path& path) {
     }
     if (!out) throw Error(tmp.string() + ": write failed");
   });
+}
+
+void SparseStageOptions::Check() const {
+  mapper.Check();
+  if (focal_px < 0) throw Error("sparse: --focal must be > 0 pixels");
+  if (hfov_deg < 0 || hfov_deg >= 180) throw Error("sparse: --hfov must be in (0, 180) degrees");
+  if (focal_px > 0 && hfov_deg > 0) throw Error("sparse: give --focal or --hfov, not both");
 }
 
 nlohmann::json RunSparseStage(const fs::path& workspace, const SparseStageOptions& options) {
@@ -60,6 +68,14 @@ nlohmann::json RunSparseStage(const fs::path& workspace, const SparseStageOption
     MapperCamera mc;
     mc.camera = c.camera;
     mc.focal_known = c.prior_source != "guess";
+    if (options.focal_px > 0 || options.hfov_deg > 0) {
+      const double f = options.focal_px > 0 ? options.focal_px
+                                            : 0.5 * mc.camera.width / std::tan(0.5 * options.hfov_deg * M_PI / 180);
+      mc.camera.f = f;
+      mc.focal_known = true;
+      spdlog::info("camera {}: focal prior {:.1f} px from {}", c.camera.id, f,
+                   options.focal_px > 0 ? "--focal" : "--hfov");
+    }
     input.cameras[c.camera.id] = mc;
   }
   std::vector<size_t> num_kp;

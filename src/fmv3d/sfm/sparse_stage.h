@@ -15,7 +15,11 @@ namespace fmv3d::sfm {
 
 struct SparseStageOptions {
   MapperOptions mapper;
-  void Check() const { mapper.Check(); }
+  // Focal prior for every camera, overriding frames.json's (e.g. from a lens spec or the telemetry's horizontal
+  // field of view): focal in pixels, or the horizontal FOV in degrees (f = w / 2 / tan(hfov / 2)). 0 = unset.
+  // Such a prior counts as known (no scan); with mapper.fix_known_focal it also stays fixed in BA.
+  double focal_px = 0, hfov_deg = 0;
+  void Check() const;
 };
 
 // Returns the summary that is also written to WS/report/sparse.json. Throws fmv3d::Error naming the missing

@@ -41,8 +41,11 @@ SyntheticScene MakeSyntheticScene(const SyntheticSceneOptions& o) {
   std::vector<core::Pose> poses(o.num_cameras);
   for (int c = 0; c < o.num_cameras; ++c) {
     if (orbit) {
-      const double a = 2 * M_PI * c / o.num_cameras;
-      const Eigen::Vector3d centre(10 * std::cos(a), 10 * std::sin(a), 3 + 0.5 * std::sin(3 * a));
+      const double a = o.orbit_arc_deg >= 360 ? 2 * M_PI * c / o.num_cameras
+                                               : o.orbit_arc_deg * M_PI / 180 * c / std::max(1, o.num_cameras - 1);
+      const double s = o.orbit_radius / 10;  // the default orbit's wobble, scaled
+      const Eigen::Vector3d centre(o.orbit_radius * std::cos(a), o.orbit_radius * std::sin(a),
+                                   o.orbit_height + 0.5 * s * std::sin(3 * a));
       poses[c] = core::Pose::LookAt(centre, Eigen::Vector3d(0, 0, 0.2 * std::cos(2 * a)));
     } else {
       // Lawn-mower: rows along x, 8 images per row; camera looking straight down with a little jitter.

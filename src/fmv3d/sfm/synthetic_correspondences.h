@@ -24,6 +24,9 @@ struct SyntheticSceneOptions {
   double clutter_ratio = 0.1;       // extra unmatched keypoints per image
   double guess_focal_factor = 1.2;  // prior focal = factor · max(w, h); ≤ 0: prior = true focal, known
   int min_pair_matches = 30;        // pairs sharing fewer points are not reported
+  // Orbit: cameras on an arc of this radius and height around the scene (a disc of radius 3, height ±1.5),
+  // looking at its centre. A large radius with a long focal gives telephoto (near-affine) views.
+  double orbit_radius = 10, orbit_height = 3, orbit_arc_deg = 360;
   int max_pair_gap = 0;             // > 0: only pairs (i, j) with |i − j| ≤ gap (sequential matching)
   uint64_t seed = 1;
 };

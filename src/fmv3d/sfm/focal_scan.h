@@ -1,0 +1,47 @@
+// Focal length from two-view geometry when the prior is only a guess.
+//
+// Why a scan and not self-calibration from F: with a long lens (telephoto video, a field of view of a few
+// degrees or less) every view is close to affine, and the Kruppa / Bougnoux focal from F is undefined or
+// wildly unstable. What still holds: an essential matrix built with a focal that is far too short cannot
+// explain the near-affine motion, its epipolar residuals grow; any focal at or beyond the true one explains
+// the matches about equally well (the affine limit). So we score each candidate focal by how well the best
+// essential matrix explains every pair's matches (truncated squared Sampson error in pixels, MSAC-like), and
+// keep the shortest focal whose score is within a tolerance of the best — the knee of the curve. For ordinary
+// lenses the curve has a clear minimum near the true focal; for telephoto it is a plateau, and the knee is a
+// lower bound of the order of the true focal (the remaining ambiguity is the affine one: focal and depth trade).
+#pragma once
+
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "fmv3d/core/camera.h"
+
+namespace fmv3d::sfm {
+
+struct FocalScanPair {
+  std::vector<Eigen::Vector2d> uv1, uv2;  // matched keypoints (pixels) of one pair, same camera model
+};
+
+struct FocalScanOptions {
+  double min_factor = 0.5, max_factor = 128;  // candidates: guess · factor, geometric steps
+  double step = 1.26;                          // ratio between consecutive candidates (2^(1/3))
+  double threshold_px = 2.0;                   // MSAC truncation and RANSAC inlier threshold
+  double tolerance = 0.05;                     // knee: first candidate with score ≤ (1 + tolerance) · best
+  int ransac_iterations = 1000;
+  uint64_t seed = 1;
+};
+
+struct FocalScanResult {
+  double focal = 0;              // chosen focal (pixels)
+  bool plateau = false;          // the longest candidates score like the best: focal is only a lower bound
+  std::vector<double> focals;    // candidates
+  std::vector<double> scores;    // mean truncated squared Sampson error (px²), summed over pairs
+};
+
+// camera: the prior (principal point, distortion; its f is the guess the factors multiply).
+// Deterministic for a fixed seed. Returns the guess (and empty scores) when no pair has ≥ 8 matches.
+FocalScanResult ScanFocal(const core::Camera& camera, const std::vector<FocalScanPair>& pairs,
+                          const FocalScanOptions& options = {});
+
+}  // namespace fmv3d::sfm
