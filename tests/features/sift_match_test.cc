@@ -2,6 +2,9 @@
 #include <gtest/gtest.h>
 
 #include <Eigen/Dense>
+#include <algorithm>
+#include <climits>
+#include <random>
 #include <opencv2/imgproc.hpp>
 
 #include "fmv3d/core/error.h"
@@ -158,6 +161,55 @@ TEST(SiftMatch, RootSiftAndUprightOptions) {
   SiftOptions bad;
   bad.contrast_threshold = 0;
   EXPECT_THROW(bad.Check(), Error);
+}
+
+// The SIMD brute-force kernels (AVX-512 VNNI or AVX2, whichever this CPU runs) against a plain exact 2-NN with
+// the same ratio and mutual tests: identical matches, including sizes that are not multiples of the 4 x 16 block
+// and descriptor values across the whole 0..255 range (the VNNI kernel stores B minus 128).
+TEST(BruteForce, SimdKernelEqualsExactReference) {
+  std::mt19937 rng(5);
+  for (const auto& [n1, n2] : std::vector<std::pair<int, int>>{{37, 53}, {501, 203}, {1000, 1000}}) {
+    Descriptors a(n1, 128), b(n2, 128);
+    std::uniform_int_distribution<int> any(0, 255), noise(-6, 6);
+    for (int i = 0; i < n2; ++i)
+      for (int k = 0; k < 128; ++k) b(i, k) = static_cast<uint8_t>(any(rng));
+    // Every other descriptor of A is a noisy copy of a distinct one of B (true matches), the rest random.
+    for (int i = 0; i < n1; ++i)
+      for (int k = 0; k < 128; ++k)
+        a(i, k) = i % 2 == 0 && i / 2 < n2 ? static_cast<uint8_t>(std::clamp(b(i / 2, k) + noise(rng), 0, 255))
+                             : static_cast<uint8_t>(any(rng));
+    MatchOptions o;
+    o.type = MatcherType::kBruteForce;
+    ImageDescriptors da(a, 1), db(b, 2);
+    const auto got = MatchDescriptors(da, db, o);
+    // Reference: squared distances, best two per row and per column (first index wins ties, as the kernels).
+    auto dist = [&](int i, int j) {
+      int d = 0;
+      for (int k = 0; k < 128; ++k) d += (int(a(i, k)) - b(j, k)) * (int(a(i, k)) - b(j, k));
+      return d;
+    };
+    std::vector<int> r1(n1, INT_MAX), r2(n1, INT_MAX), ri(n1, -1), c1(n2, INT_MAX), c2(n2, INT_MAX), ci(n2, -1);
+    for (int i = 0; i < n1; ++i)
+      for (int j = 0; j < n2; ++j) {
+        const int d = dist(i, j);
+        if (d < r1[i]) { r2[i] = r1[i]; r1[i] = d; ri[i] = j; } else if (d < r2[i]) { r2[i] = d; }
+        if (d < c1[j]) { c2[j] = c1[j]; c1[j] = d; ci[j] = i; } else if (d < c2[j]) { c2[j] = d; }
+      }
+    const double q = o.ratio * o.ratio;
+    std::vector<FeatureMatch> want;
+    for (int i = 0; i < n1; ++i) {
+      const int j = ri[i];
+      if (j < 0 || !(r1[i] < q * r2[i])) continue;
+      if (!(c1[j] < q * c2[j] && ci[j] == i)) continue;
+      want.push_back({uint32_t(i), uint32_t(j)});
+    }
+    ASSERT_EQ(got.size(), want.size()) << n1 << "x" << n2 << " kernel " << BruteForceKernelName();
+    for (size_t k = 0; k < want.size(); ++k) {
+      EXPECT_EQ(got[k].idx1, want[k].idx1);
+      EXPECT_EQ(got[k].idx2, want[k].idx2);
+    }
+    EXPECT_GT(want.size(), static_cast<size_t>(std::min(n1 / 2, n2) / 2)) << "the copies match";
+  }
 }
 
 TEST(Pairs, ExhaustiveAndSequential) {

@@ -49,15 +49,24 @@ class ImageDescriptors {
  private:
   friend struct BruteForceAccess;
   void BuildInt16();
+  void BuildInt8();
   const Descriptors* u8_;
   uint32_t id_;
-  std::once_flag once_float_, once_index_, once_int16_;
+  std::once_flag once_float_, once_index_, once_int16_, once_int8_;
   cv::Mat data_;
   std::unique_ptr<cv::flann::Index> index_;
   std::vector<int16_t> rows16_;     // n_padded4 x 128, row-major (zero padding rows)
   std::vector<int16_t> blocks16_;   // per 16 descriptors: 64 dim pairs x 16 descriptors x 2 dims
-  std::vector<int32_t> norms_;      // |d|^2 per descriptor (padded with 0)
+  std::vector<int32_t> norms_;      // |d|^2 per descriptor (padding: a huge norm, never a neighbour)
+  // For the AVX-512 VNNI kernel (u8 x s8 dot products, 4 dimensions per 32-bit lane):
+  std::vector<uint8_t> rows8_;      // n_padded4 x 128, row-major (zero padding rows)
+  std::vector<int8_t> blocks8_;     // per 16 descriptors: 32 groups of 4 dims x 16 descriptors x 4, value − 128
+  std::vector<int32_t> sums_;       // sum of the u8 values per descriptor (restores the −128 offset)
 };
+
+// Which brute-force distance kernel this CPU runs ("avx512-vnni", "avx2" or "scalar"); all give identical
+// matches (exact integer distances). For the bench and the logs.
+const char* BruteForceKernelName();
 
 // Ratio-tested (and, with options.mutual, cross-checked) matches from image 1 to image 2, sorted by idx1.
 std::vector<FeatureMatch> MatchDescriptors(ImageDescriptors& image1, ImageDescriptors& image2,
