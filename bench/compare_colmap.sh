@@ -28,15 +28,24 @@ out=${out:-$(mktemp -d /tmp/compare-colmap.XXXX)}
 mkdir -p "$out"
 log() { echo "[compare] $*" >&2; }
 now() { date +%s.%N; }
+# cpu KEY CMD...: runs CMD, adding its user + system CPU seconds to C[KEY] (fair under load, unlike wall time).
+declare -A C
+cpu() {
+  local key=$1; shift
+  local f; f=$(mktemp); local rc=0
+  /usr/bin/time -o "$f" -f "%U %S" "$@" || rc=$?
+  C[$key]=$(python3 -c "a,b=open('$f').read().split()[-2:];print(f'{${C[$key]:-0}+float(a)+float(b):.1f}')")
+  rm -f "$f"; return $rc
+}
 elapsed() { python3 -c "print(f'{$2 - $1:.1f}')"; }
 
 # --- fmv3d ---------------------------------------------------------------------------------------------------
 ws=$out/fmv3d; rm -rf "$ws"
 declare -A T
 t0=$(now); "$FMV3D" -q frames "$input" -o "$ws"; t1=$(now); T[f_frames]=$(elapsed $t0 $t1)
-"$FMV3D" -q features "$ws"; t2=$(now); T[f_features]=$(elapsed $t1 $t2)
-"$FMV3D" -q match "$ws" --pairs "$matcher"; t3=$(now); T[f_match]=$(elapsed $t2 $t3)
-"$FMV3D" -q sparse "$ws"; t4=$(now); T[f_sparse]=$(elapsed $t3 $t4)
+cpu f_features "$FMV3D" -q features "$ws"; t2=$(now); T[f_features]=$(elapsed $t1 $t2)
+cpu f_match "$FMV3D" -q match "$ws" --pairs "$matcher"; t3=$(now); T[f_match]=$(elapsed $t2 $t3)
+cpu f_sparse "$FMV3D" -q sparse "$ws"; t4=$(now); T[f_sparse]=$(elapsed $t3 $t4)
 T[f_total]=$(elapsed $t1 $t4)
 
 # --- COLMAP on the very same frames (ours, so names and pixels match) -------------------------------------------
@@ -47,12 +56,12 @@ if [[ $cm == auto ]]; then
   if (( n <= 50 )); then cm=exhaustive; else cm=sequential; fi
 fi
 t0=$(now)
-colmap feature_extractor --database_path "$cw/db.db" --image_path "$ws/frames" --ImageReader.single_camera 1 \
+cpu c_features colmap feature_extractor --database_path "$cw/db.db" --image_path "$ws/frames" --ImageReader.single_camera 1 \
   --ImageReader.camera_model OPENCV --SiftExtraction.use_gpu 0 >"$cw/extract.log" 2>&1
 t1=$(now); T[c_features]=$(elapsed $t0 $t1)
-colmap ${cm}_matcher --database_path "$cw/db.db" --SiftMatching.use_gpu 0 >"$cw/match.log" 2>&1
+cpu c_match colmap ${cm}_matcher --database_path "$cw/db.db" --SiftMatching.use_gpu 0 >"$cw/match.log" 2>&1
 t2=$(now); T[c_match]=$(elapsed $t1 $t2)
-colmap mapper --database_path "$cw/db.db" --image_path "$ws/frames" --output_path "$cw/sparse" >"$cw/map.log" 2>&1
+cpu c_sparse colmap mapper --database_path "$cw/db.db" --image_path "$ws/frames" --output_path "$cw/sparse" >"$cw/map.log" 2>&1
 t3=$(now); T[c_sparse]=$(elapsed $t2 $t3); T[c_total]=$(elapsed $t0 $t3)
 # Largest COLMAP model (most images) to text.
 best=""; best_n=-1
@@ -74,6 +83,12 @@ printf '%-28s %14s %14s\n' "features (s)" "${T[f_features]}" "${T[c_features]}"
 printf '%-28s %14s %14s\n' "matching (s) [$cm]" "${T[f_match]}" "${T[c_match]}"
 printf '%-28s %14s %14s\n' "mapping (s)" "${T[f_sparse]}" "${T[c_sparse]}"
 printf '%-28s %14s %14s\n' "total (s, excl. frames)" "${T[f_total]}" "${T[c_total]}"
+for k in features match sparse; do
+  printf '%-28s %14s %14s\n' "$k (CPU s)" "${C[f_$k]}" "${C[c_$k]}"
+done
+printf '%-28s %14s %14s\n' "total (CPU s)" \
+  "$(python3 -c "print(f'{${C[f_features]}+${C[f_match]}+${C[f_sparse]}:.1f}')")" \
+  "$(python3 -c "print(f'{${C[c_features]}+${C[c_match]}+${C[c_sparse]}:.1f}')")"
 printf '%-28s %14s %14s\n' "registered" "$f_reg/$nframes" "$c_reg/$nframes"
 printf '%-28s %14s %14s\n' "points" "$f_pts" "$c_pts"
 printf '%-28s %14s %14s\n' "mean reprojection (px)" "$f_err" "$c_err"

@@ -236,29 +236,33 @@ TEST(Pairs, LoopClosureFindsTheReturnOfAnOrbit) {
   }
   std::vector<const Descriptors*> d;
   for (const auto& f : frames) d.push_back(&f.descriptors);
-  PairOptions po;
-  po.mode = PairMode::kSequential;
-  po.overlap = 3;
-  po.loop_closure_candidates = 3;
-  size_t num_loops = 0;
-  PairMode used;
-  const auto pairs = SelectPairs(d, po, &used, &num_loops);
-  EXPECT_EQ(used, PairMode::kSequential);
-  EXPECT_GT(num_loops, 0u);
-  // The start (frames 0-2) must be paired with the end (frames 37-39) through loop closure.
-  int closing = 0;
-  for (const auto& [a, b] : pairs)
-    if (a <= 2 && b >= 37) ++closing;
-  EXPECT_GE(closing, 2);
-  // Precision of the candidates: most loop pairs look at overlapping places (|pos difference| < 360).
-  int loop_total = 0, loop_overlapping = 0;
-  auto pos = [](int k) { return k < 20 ? k * 100 : (39 - k) * 100 + 7; };
-  for (const auto& [a, b] : pairs) {
-    if (int(b) - int(a) <= 3 || (b - a) && ((b - a) & (b - a - 1)) == 0) continue;  // sequential / quadratic
-    ++loop_total;
-    loop_overlapping += std::abs(pos(a) - pos(b)) < 300;
+  // 128 words: the default. 16 words: every word occurs in every frame (plain idf would be 0 everywhere).
+  for (int vocabulary : {128, 16}) {
+    PairOptions po;
+    po.mode = PairMode::kSequential;
+    po.overlap = 3;
+    po.loop_closure_candidates = 3;
+    po.vocabulary_size = vocabulary;
+    size_t num_loops = 0;
+    PairMode used;
+    const auto pairs = SelectPairs(d, po, &used, &num_loops);
+    EXPECT_EQ(used, PairMode::kSequential);
+    EXPECT_GT(num_loops, 0u) << "vocabulary " << vocabulary;
+    // The start (frames 0-2) must be paired with the end (frames 37-39) through loop closure.
+    int closing = 0;
+    for (const auto& [a, b] : pairs)
+      if (a <= 2 && b >= 37) ++closing;
+    EXPECT_GE(closing, 2);
+    // Precision of the candidates: most loop pairs look at overlapping places (|pos difference| < 360).
+    int loop_total = 0, loop_overlapping = 0;
+    auto pos = [](int k) { return k < 20 ? k * 100 : (39 - k) * 100 + 7; };
+    for (const auto& [a, b] : pairs) {
+      if (int(b) - int(a) <= 3 || (b - a) && ((b - a) & (b - a - 1)) == 0) continue;  // sequential / quadratic
+      ++loop_total;
+      loop_overlapping += std::abs(pos(a) - pos(b)) < 300;
+    }
+    EXPECT_GT(loop_overlapping, 0.6 * loop_total) << loop_overlapping << " / " << loop_total << ", vocabulary " << vocabulary;
   }
-  EXPECT_GT(loop_overlapping, 0.6 * loop_total) << loop_overlapping << " / " << loop_total;
 }
 
 }  // namespace

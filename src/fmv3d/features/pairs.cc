@@ -90,7 +90,7 @@ std::vector<std::vector<float>> GlobalDescriptors(const std::vector<const Descri
   cv::kmeans(all, k, labels, cv::TermCriteria(cv::TermCriteria::COUNT | cv::TermCriteria::EPS, 10, 1e-3), 1,
              cv::KMEANS_PP_CENTERS, centres);
 
-  // Word histograms (every descriptor votes for its nearest centre), then tf-idf and unit norm.
+  // Word histograms (every descriptor votes for its nearest centre), then tf-idf, centred, and unit norm.
   std::vector<std::vector<float>> hist(n, std::vector<float>(k, 0.f));
   tbb::parallel_for(size_t{0}, n, [&](size_t i) {
     const auto& d = *images[i];
@@ -101,21 +101,35 @@ std::vector<std::vector<float>> GlobalDescriptors(const std::vector<const Descri
     cv::batchDistance(f, centres, dist, CV_32F, nidx, cv::NORM_L2SQR, 1);
     for (int r = 0; r < nidx.rows; ++r) hist[i][nidx.at<int>(r, 0)] += 1.f;
   });
+  // With thousands of features per frame and a small vocabulary every word occurs in every frame, so plain idf
+  // (log n/df) is 0 everywhere and every descriptor would be zero (no loop closure found at all). Hence the
+  // smoothed idf, log((1 + n)/(1 + df)) + 1, which is never 0, and the centring: each image's weighted word
+  // frequencies minus the collection's mean, so the component every frame shares (the scene's overall texture
+  // statistics) drops out and the cosine compares what is particular to each view.
   std::vector<double> df(k, 0);
   for (const auto& h : hist)
     for (int w = 0; w < k; ++w) df[w] += h[w] > 0;
+  std::vector<std::vector<double>> tfidf(n, std::vector<double>(k, 0.0));
+  std::vector<double> mean(k, 0.0);
+  size_t used = 0;
   for (size_t i = 0; i < n; ++i) {
     const double count = std::accumulate(hist[i].begin(), hist[i].end(), 0.0);
-    double norm = 0;
-    out[i].assign(k, 0.f);
+    if (count == 0) continue;
+    ++used;
     for (int w = 0; w < k; ++w) {
-      if (hist[i][w] == 0) continue;
-      const double v = (hist[i][w] / count) * std::log(double(n) / df[w]);
-      out[i][w] = static_cast<float>(v);
-      norm += v * v;
+      tfidf[i][w] = (hist[i][w] / count) * (std::log((1.0 + n) / (1.0 + df[w])) + 1);
+      mean[w] += tfidf[i][w];
     }
+  }
+  if (used > 0)
+    for (auto& m : mean) m /= used;
+  for (size_t i = 0; i < n; ++i) {
+    out[i].assign(k, 0.f);
+    if (hist[i].empty() || std::accumulate(hist[i].begin(), hist[i].end(), 0.0) == 0) continue;
+    double norm = 0;
+    for (int w = 0; w < k; ++w) norm += (tfidf[i][w] - mean[w]) * (tfidf[i][w] - mean[w]);
     if (norm > 0)
-      for (auto& v : out[i]) v = static_cast<float>(v / std::sqrt(norm));
+      for (int w = 0; w < k; ++w) out[i][w] = static_cast<float>((tfidf[i][w] - mean[w]) / std::sqrt(norm));
   }
   return out;
 }
