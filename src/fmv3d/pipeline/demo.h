@@ -7,10 +7,10 @@
 // two flight frames, which the reconstruction never saw, and the textured model rendered from it) and
 // demo.json (the accuracy table, with each stage's wall and CPU seconds).
 //
-// The demo's own run uses cheaper options than `fmv3d reconstruct`'s defaults, all sound for a 30-frame video
-// orbit: sequential pairs (each frame with the next `pair_overlap`, plus loop-closure candidates) instead of
-// exhaustive matching, at most `max_features` SIFT features per frame, and a lighter PatchMatch (fewer
-// sources and rounds). bench/RESULTS.md has the accuracy and time of both.
+// The demo's own run uses cheaper options than `fmv3d reconstruct`'s defaults, sound for a 30-frame video
+// orbit: at most `max_features` SIFT features per frame and a lighter PatchMatch (fewer sources and rounds).
+// Pairs stay exhaustive: sequential pairs leave the orbit open (their loop-closure candidates came out empty
+// on this flight), which made the cameras ~9x less accurate. bench/RESULTS.md has the figures.
 #pragma once
 
 #include <filesystem>
@@ -29,7 +29,8 @@ struct DemoOptions {
   int width = 960, height = 540;
   int dense_max_size = 480;  // dense working resolution (longer side): keeps the demo to minutes on 2 cores
   int max_features = 4000;   // SIFT features per frame
-  int pair_overlap = 4;      // sequential matching: each frame with the next N (orbit: 12° apart per frame)
+  bool sequential_pairs = false;  // each frame with the next pair_overlap (+ loop closure) instead of all
+  int pair_overlap = 4;
   int dense_sources = 4;     // PatchMatch source views per reference
   int dense_iterations = 3;  // PatchMatch photometric rounds
   int dense_geom_iterations = 1;
