@@ -33,7 +33,7 @@ void DemoOptions::Check() const {
 }
 
 HeldOutResult RenderHeldOut(const fs::path& synth_dir, const fs::path& textured_obj, const core::Sim3& model_to_world,
-                            const fs::path& output_dir) {
+                            const render::RenderOptions& frame_render, const fs::path& output_dir) {
   const core::Reconstruction truth = io::ReadColmapText(synth_dir / "truth");
   if (truth.images.size() < 2) throw Error((synth_dir / "truth").string() + ": fewer than two frames");
   // The viewpoint halfway between the two middle frames of the flight (rotation slerp, centre midpoint).
@@ -49,7 +49,7 @@ HeldOutResult RenderHeldOut(const fs::path& synth_dir, const fs::path& textured_
 
   // The true frame: the scene rendered as `fmv3d synth` renders its frames (sun, noise).
   const io::TexturedMesh scene = io::ReadObj(synth_dir / "scene.obj", /*load_textures=*/true);
-  render::RenderOptions frame_options = synth::SynthOptions().render;
+  render::RenderOptions frame_options = frame_render;
   frame_options.noise_seed = 0x5eed;
   const cv::Mat frame = render::Renderer(scene).Render(camera, pose, frame_options).image;
 
@@ -117,7 +117,7 @@ nlohmann::json RunDemo(const DemoOptions& o) {
   r.dense.max_size = o.dense_max_size;
   r.dense.max_sources = o.dense_sources;
   r.dense.patch_match.iterations = o.dense_iterations;
-  r.dense.patch_match.geom_iterations = o.dense_geom_iterations;
+  r.dense.geometric = o.dense_geometric;
   r.sift.max_features = o.max_features;
   if (o.sequential_pairs) {
     r.match.pairs.mode = features::PairMode::kSequential;
@@ -173,7 +173,7 @@ nlohmann::json RunDemo(const DemoOptions& o) {
   demo["mesh_vs_cad"] = cmp.ToJson();
   // The textured model from a viewpoint the reconstruction never saw, against the true frame there.
   const HeldOutResult held = RenderHeldOut(o.output, r.workspace / "mesh" / "textured.obj", cmp.transform,
-                                           o.output / "heldout");
+                                           synth::SynthOptions().render, o.output / "heldout");
   demo["held_out_view"] = {{"between_frames", held.between},
                            {"psnr_db", held.psnr_db},
                            {"covered_percent", 100 * held.covered_fraction},
@@ -197,7 +197,7 @@ nlohmann::json RunDemo(const DemoOptions& o) {
   demo["options"] = {{"max_features", o.max_features},       {"pairs", o.sequential_pairs ? "sequential" : "exhaustive"},
                      {"pair_overlap", o.pair_overlap},       {"dense_max_size", o.dense_max_size},
                      {"dense_sources", o.dense_sources},     {"dense_iterations", o.dense_iterations},
-                     {"dense_geom_iterations", o.dense_geom_iterations}};
+                     {"dense_geometric_pass", o.dense_geometric}};
   core::WriteJson(o.output / "demo.json", demo);
   WriteReport(r.workspace);
 

@@ -8,7 +8,8 @@
 // demo.json (the accuracy table, with each stage's wall and CPU seconds).
 //
 // The demo's own run uses cheaper options than `fmv3d reconstruct`'s defaults, sound for a 30-frame video
-// orbit: at most `max_features` SIFT features per frame and a lighter PatchMatch (fewer sources and rounds).
+// orbit: at most `max_features` SIFT features per frame and a lighter PatchMatch (fewer sources and rounds,
+// no geometric-consistency pass: fusion's multi-view checks and occluding-edge filter remove the outliers).
 // Pairs stay exhaustive: sequential pairs leave the orbit open (their loop-closure candidates came out empty
 // on this flight), which made the cameras ~9x less accurate. bench/RESULTS.md has the figures.
 #pragma once
@@ -20,6 +21,7 @@
 #include <vector>
 
 #include "fmv3d/core/pose.h"
+#include "fmv3d/render/renderer.h"
 
 namespace fmv3d::pipeline {
 
@@ -33,7 +35,7 @@ struct DemoOptions {
   int pair_overlap = 4;
   int dense_sources = 4;     // PatchMatch source views per reference
   int dense_iterations = 3;  // PatchMatch photometric rounds
-  int dense_geom_iterations = 1;
+  bool dense_geometric = false;  // PatchMatch's geometric pass: on the demo it cost 1/3 of dense for no accuracy
   uint64_t seed = 1;
   void Check() const;
 };
@@ -46,9 +48,11 @@ struct HeldOutResult {
   double covered_fraction = 0;  // of the frame's pixels
   std::vector<std::string> between;  // the two flight frames it lies between
 };
-// Writes truth.png, model.png and difference.png (|difference| x 4) to output_dir unless it is empty.
+// `frame_options`: how synth rendered the flight's frames (sun, noise; its noise seed is replaced). Writes
+// truth.png, model.png and difference.png (|difference| x 4) to output_dir unless it is empty.
 HeldOutResult RenderHeldOut(const std::filesystem::path& synth_dir, const std::filesystem::path& textured_obj,
-                            const core::Sim3& model_to_world, const std::filesystem::path& output_dir);
+                            const core::Sim3& model_to_world, const render::RenderOptions& frame_options,
+                            const std::filesystem::path& output_dir);
 
 // Returns demo.json's content. Re-running resumes: the flight is rendered once, finished stages are skipped.
 nlohmann::json RunDemo(const DemoOptions& options);
