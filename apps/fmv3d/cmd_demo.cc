@@ -15,6 +15,8 @@ void Add(CLI::App& app) {
   cmd->add_option("-o,--output", *out, "Output folder (re-running resumes)")->capture_default_str();
   cmd->add_option("--frames", o->frames, "Frames in the flight")->capture_default_str();
   cmd->add_option("--seed", o->seed, "Flight jitter and sensor noise seed")->capture_default_str();
+  cmd->add_option("--max-features", o->max_features, "SIFT features per frame (more: better cameras, slower)")
+      ->capture_default_str();
   cmd->callback([o, out] {
     o->output = *out;
     pipeline::RunDemo(*o);

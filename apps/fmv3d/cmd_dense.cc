@@ -38,6 +38,11 @@ void Add(CLI::App& app) {
       ->capture_default_str();
   cmd->add_option("--max-normal-error", o.fusion.max_normal_error_deg, "Fusion: normal agreement, degrees")
       ->capture_default_str();
+  cmd->add_option("--edge-erosion", o.fusion.edge_erosion_px,
+                  "Fusion: drop pixels this close to an occluding depth edge, foreground side (0: off)")
+      ->capture_default_str();
+  cmd->add_option("--edge-jump", o.fusion.edge_depth_jump, "Fusion: relative depth step of an occluding edge")
+      ->capture_default_str();
   cmd->add_option("--seed", o.patch_match.seed, "Random seed")->capture_default_str();
   cmd->add_flag("--no-geometric", a->no_geometric, "Skip the geometric-consistency pass (faster, noisier)");
   cmd->add_flag("--no-coarse", a->no_coarse, "No half-resolution first pass");

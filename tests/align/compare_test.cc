@@ -10,6 +10,7 @@
 #include "fmv3d/geometry/mesh_distance.h"
 #include "fmv3d/io/colmap_model.h"
 #include "fmv3d/io/obj_io.h"
+#include "fmv3d/surface/colored_mesh.h"
 #include "fmv3d/synth/scene.h"
 #include "test_util.h"
 
@@ -117,6 +118,36 @@ TEST(CompareToCad, CompletenessOverTheSurfaceTheCamerasSee) {
   const auto j = core::ReadJson(dir / "out/compare.json");
   EXPECT_NEAR(j.at("completeness_percent").get<double>(), 100 * seen.completeness, 1e-9);
   EXPECT_NEAR(j.at("error").at("total").at("rms_percent").get<double>(), 100 * seen.total.rms, 1e-9);
+}
+
+TEST(CompareToCad, AMeshIsCompleteWhereItsFacesAreNotOnlyAtItsVertices) {
+  // The CAD itself as a coarse reconstruction (10 vertices, large faces): exact, and complete as a surface,
+  // though its vertices alone are far from almost every CAD sample.
+  Fixture f;
+  surface::ColoredMesh mesh;
+  for (const auto& v : f.cad.vertices) mesh.vertices.push_back(f.to_recon.Apply(v));
+  for (const auto& face : f.cad.faces) mesh.triangles.emplace_back(face.v[0], face.v[1], face.v[2]);
+  mesh.ComputeVertexNormals();
+  test::TempDir dir("fmv3d-compare-mesh");
+  surface::WriteMeshPly(mesh, dir / "mesh.ply");
+  io::WriteObj(f.cad, dir / "cad.obj");
+  CompareOptions o;
+  o.length = kH;
+  o.transform = f.to_recon.Inverse();
+  o.icp = false;  // too few vertices for ICP; the transform is exact
+  o.reconstruction = dir / "mesh.ply";
+  o.cad = dir / "cad.obj";
+  const CompareResult as_mesh = CompareToCad(o);
+  EXPECT_TRUE(as_mesh.completeness_from_faces);
+  EXPECT_GT(as_mesh.completeness, 0.99);
+  EXPECT_LT(as_mesh.total.rms, 1e-6);
+  // The same vertices as a point cloud: only the samples near the corners are covered.
+  io::OrientedPointCloud points;
+  points.positions = mesh.vertices;
+  const CompareResult as_points = CompareToCad(points, f.cad, o);
+  EXPECT_FALSE(as_points.completeness_from_faces);
+  EXPECT_LT(as_points.completeness, 0.05);
+  EXPECT_EQ(as_points.points_measured, as_mesh.points_measured);
 }
 
 TEST(CompareToCad, Sim3JsonRoundTripAndErrors) {

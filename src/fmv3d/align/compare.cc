@@ -5,6 +5,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <fstream>
 
 #include "fmv3d/align/compare_plots.h"
 #include "fmv3d/core/error.h"
@@ -14,6 +15,7 @@
 #include "fmv3d/io/colmap_model.h"
 #include "fmv3d/io/obj_io.h"
 #include "fmv3d/render/renderer.h"
+#include "fmv3d/surface/colored_mesh.h"
 
 namespace fmv3d::align {
 namespace {
@@ -91,6 +93,40 @@ std::vector<char> SeenSamples(const io::TexturedMesh& cad, const std::vector<Eig
   return seen;
 }
 
+// True when a PLY file declares faces (a mesh, not a point cloud).
+bool PlyHasFaces(const std::filesystem::path& path) {
+  std::ifstream in(path, std::ios::binary);
+  std::string line;
+  while (std::getline(in, line) && line.rfind("end_header", 0) != 0)
+    if (line.rfind("element face", 0) == 0) return std::stol(line.substr(12)) > 0;
+  return false;
+}
+
+// Points on the triangles (already in the CAD frame) with a vertex inside `box`: a barycentric grid with
+// steps of at most `spacing` along the longest edge (vertices excluded: they are measured already).
+std::vector<Eigen::Vector3d> SampleFaces(const std::vector<Eigen::Vector3d>& v,
+                                         const std::vector<Eigen::Vector3i>& triangles,
+                                         const Eigen::AlignedBox3d& box, double spacing) {
+  std::vector<Eigen::Vector3d> out;
+  for (const auto& f : triangles) {
+    const Eigen::Vector3d &a = v[f[0]], &b = v[f[1]], &c = v[f[2]];
+    if (!box.contains(a) && !box.contains(b) && !box.contains(c)) continue;
+    const double longest = std::max({(b - a).norm(), (c - b).norm(), (a - c).norm()});
+    const int n = std::min(64, static_cast<int>(std::ceil(longest / spacing)));
+    if (n < 2) {
+      out.push_back((a + b + c) / 3);
+      continue;
+    }
+    for (int i = 0; i <= n; ++i)
+      for (int j = 0; i + j <= n; ++j) {
+        if ((i == 0 && j == 0) || i == n || j == n) continue;
+        const double u = double(i) / n, w = double(j) / n;
+        out.push_back(a + u * (b - a) + w * (c - a));
+      }
+  }
+  return out;
+}
+
 }  // namespace
 
 IcpOptions CompareOptions::DefaultIcpOptions() {
@@ -135,6 +171,7 @@ nlohmann::json CompareResult::ToJson() const {
   j["completeness_threshold_percent"] = 100 * completeness_threshold;
   j["completeness_samples"] = surface_samples;
   j["completeness_seen_only"] = completeness_seen_only;
+  j["completeness_from_faces"] = completeness_from_faces;
   return j;
 }
 
@@ -146,11 +183,18 @@ CompareResult CompareToCad(const CompareOptions& options) {
   const io::OrientedPointCloud recon = io::ReadPointCloudPly(options.reconstruction);
   const io::TexturedMesh cad = io::ReadObj(options.cad, /*load_textures=*/false);
   if (cad.faces.empty()) throw Error(options.cad.string() + ": no faces");
-  return CompareToCad(recon, cad, options);
+  std::vector<Eigen::Vector3i> triangles;
+  if (PlyHasFaces(options.reconstruction)) {
+    triangles = surface::ReadMeshPly(options.reconstruction).triangles;
+    for (const auto& f : triangles)
+      if (f.minCoeff() < 0 || static_cast<size_t>(f.maxCoeff()) >= recon.size())
+        throw Error(options.reconstruction.string() + ": a face names a vertex that does not exist");
+  }
+  return CompareToCad(recon, cad, options, triangles);
 }
 
 CompareResult CompareToCad(const io::OrientedPointCloud& recon_in, const io::TexturedMesh& cad,
-                           const CompareOptions& o) {
+                           const CompareOptions& o, const std::vector<Eigen::Vector3i>& triangles) {
   o.Check();
   if (recon_in.empty()) throw Error("compare: the reconstruction has no points");
   cad.Validate();
@@ -260,7 +304,18 @@ CompareResult CompareToCad(const io::OrientedPointCloud& recon_in, const io::Tex
     for (size_t i = 0; i < samples.size(); ++i) counted[i] = counted[i] && seen[i];
     res.completeness_seen_only = true;
   }
-  const PointIndex index(pts.positions);
+  std::vector<Eigen::Vector3d> surface_points = pts.positions;
+  if (!triangles.empty()) {
+    std::vector<Eigen::Vector3d> all(recon_in.size());
+    for (size_t i = 0; i < all.size(); ++i) all[i] = T.Apply(recon_in.positions[i]);
+    const Eigen::Vector3d m = Eigen::Vector3d::Constant(o.crop_margin * H);
+    Eigen::AlignedBox3d box(cad_box.min() - m, cad_box.max() + m);
+    box.min().z() = ground_z;
+    const auto on_faces = SampleFaces(all, triangles, box, o.sample_spacing * H);
+    surface_points.insert(surface_points.end(), on_faces.begin(), on_faces.end());
+    res.completeness_from_faces = true;
+  }
+  const PointIndex index(surface_points);
   const double thr2 = std::pow(o.completeness_threshold * H, 2);
   std::vector<char> covered(samples.size(), 0);
   tbb::parallel_for(tbb::blocked_range<size_t>(0, samples.size(), 2048), [&](const tbb::blocked_range<size_t>& r) {

@@ -12,7 +12,8 @@
 //      components and the signed distance (+ outside, − inside), all as fractions of H. Per quantity:
 //      mean, standard deviation, RMS of the signed values, and 50/90/99th percentiles of the absolute values.
 //   4. Completeness: the share of CAD surface samples with a reconstructed point within
-//      completeness_threshold·H; with `cameras` (a COLMAP model in the CAD frame) only samples that at least
+//      completeness_threshold·H (for a mesh: a point of its surface, i.e. its vertices and points sampled
+//      on its faces every sample_spacing·H, so a coarse but faithful mesh is not counted as holes); with `cameras` (a COLMAP model in the CAD frame) only samples that at least
 //      min_views cameras see (depth test against the CAD rendered by render::Renderer) count.
 //   5. Outputs in output_dir: compare.json (everything below), histograms.png (X, Y, Z error histograms in
 //      one plot), top.png and side.png (the CAD with the points coloured by error), compare.html.
@@ -74,17 +75,20 @@ struct CompareResult {
   double completeness_threshold = 0; // fraction of H
   size_t surface_samples = 0;        // counted samples
   bool completeness_seen_only = false;  // samples restricted to those seen by ≥ min_views cameras
+  bool completeness_from_faces = false; // the reconstruction's faces were sampled for completeness
   double length = 0;
   nlohmann::json ToJson() const;
 };
 
-// The whole comparison from files (see the header comment); writes the outputs when output_dir is set.
+// The whole comparison from files (see the header comment); writes the outputs when output_dir is set. A PLY
+// with faces is a mesh: its vertices are measured and its surface counts for completeness.
 // Throws fmv3d::Error for unreadable inputs, an empty reconstruction, no point within the crop box, or a
 // failed alignment.
 CompareResult CompareToCad(const CompareOptions& options);
 
-// The same on data in memory (options' paths other than cameras/output_dir are ignored).
+// The same on data in memory (options' paths other than cameras/output_dir are ignored). `triangles`
+// (optional) are faces over the reconstruction's positions.
 CompareResult CompareToCad(const io::OrientedPointCloud& reconstruction, const io::TexturedMesh& cad,
-                           const CompareOptions& options);
+                           const CompareOptions& options, const std::vector<Eigen::Vector3i>& triangles = {});
 
 }  // namespace fmv3d::align

@@ -204,6 +204,8 @@ nlohmann::json RunDenseStage(const fs::path& workspace, const DenseStageOptions&
        {{"candidates", fstats.candidates},
         {"rejected_too_few_views", fstats.rejected_support},
         {"rejected_visibility", fstats.rejected_visibility},
+        {"edge_pixels_removed", fstats.edge_pixels},
+        {"edge_erosion_px", options.fusion.edge_erosion_px},
         {"mean_consistent_views", mean_views},
         {"consistent_views_histogram", hist}}},
       {"seconds",

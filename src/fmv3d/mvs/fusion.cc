@@ -1,6 +1,7 @@
 #include "fmv3d/mvs/fusion.h"
 
 #include <cmath>
+#include <opencv2/imgproc.hpp>
 
 #include "fmv3d/core/error.h"
 
@@ -15,6 +16,27 @@ void FusionOptions::Check() const {
     throw Error("fusion: max_normal_error_deg must be in (0, 180]");
   if (!(max_reproj_error_px > 0)) throw Error("fusion: max_reproj_error_px must be positive");
   if (!(visibility_margin > 0)) throw Error("fusion: visibility_margin must be positive");
+  if (edge_erosion_px < 0) throw Error("fusion: edge_erosion_px must be >= 0");
+  if (!(edge_depth_jump > 0)) throw Error("fusion: edge_depth_jump must be positive");
+}
+
+cv::Mat OccludingEdgeMask(const cv::Mat& depth, int radius_px, double depth_jump) {
+  CV_Assert(depth.type() == CV_32F);
+  cv::Mat mask = cv::Mat::zeros(depth.size(), CV_8U);
+  if (radius_px <= 0) return mask;
+  // The farthest depth within the radius (a disc): pixels without depth hold 0 and never win the max.
+  cv::Mat farthest;
+  const cv::Mat disc = cv::getStructuringElement(cv::MORPH_ELLIPSE, cv::Size(2 * radius_px + 1, 2 * radius_px + 1));
+  cv::dilate(depth, farthest, disc, cv::Point(-1, -1), 1, cv::BORDER_CONSTANT, cv::Scalar(0));
+  const float k = static_cast<float>(1 + depth_jump);
+  for (int y = 0; y < depth.rows; ++y) {
+    const float* d = depth.ptr<float>(y);
+    const float* f = farthest.ptr<float>(y);
+    uint8_t* m = mask.ptr<uint8_t>(y);
+    for (int x = 0; x < depth.cols; ++x)
+      if (d[x] > 0 && f[x] > k * d[x]) m[x] = 255;
+  }
+  return mask;
 }
 
 FusionView MakeFusionView(const ViewGeometry& geom, const DepthMap& map, const cv::Mat& color,
@@ -52,8 +74,22 @@ io::OrientedPointCloud FuseDepthMaps(const std::map<uint32_t, FusionView>& views
   opt.Check();
   FusionStats st;
   io::OrientedPointCloud cloud;
+  // Depths with the occluding edges' foreground side removed (a copy only when something is removed).
+  std::map<uint32_t, FusionView> eroded;
+  const std::map<uint32_t, FusionView>* maps = &views;
+  if (opt.edge_erosion_px > 0) {
+    for (const auto& [id, v] : views) {
+      FusionView e = v;
+      const cv::Mat mask = OccludingEdgeMask(v.depth, opt.edge_erosion_px, opt.edge_depth_jump);
+      st.edge_pixels += static_cast<size_t>(cv::countNonZero(mask));
+      e.depth = v.depth.clone();
+      e.depth.setTo(0, mask);
+      eroded.emplace(id, std::move(e));
+    }
+    maps = &eroded;
+  }
   std::map<uint32_t, cv::Mat> used;
-  for (const auto& [id, v] : views) used[id] = cv::Mat::zeros(v.depth.size(), CV_8U);
+  for (const auto& [id, v] : *maps) used[id] = cv::Mat::zeros(v.depth.size(), CV_8U);
   const float cos_max = static_cast<float>(std::cos(opt.max_normal_error_deg * M_PI / 180));
   const double max_reproj2 = opt.max_reproj_error_px * opt.max_reproj_error_px;
 
@@ -63,11 +99,11 @@ io::OrientedPointCloud FuseDepthMaps(const std::map<uint32_t, FusionView>& views
     bool fresh;
   };
   std::vector<Hit> hits;
-  for (const auto& [rid, ref] : views) {
+  for (const auto& [rid, ref] : *maps) {
     std::vector<const FusionView*> nbs;
     for (uint32_t j : ref.neighbours) {
-      auto it = views.find(j);
-      if (it != views.end() && j != rid) nbs.push_back(&it->second);
+      auto it = maps->find(j);
+      if (it != maps->end() && j != rid) nbs.push_back(&it->second);
     }
     cv::Mat& ref_used = used[rid];
     for (int y = 0; y < ref.depth.rows; ++y) {

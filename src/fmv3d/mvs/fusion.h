@@ -8,7 +8,14 @@
 //  - conflict in view j (the PMVS visibility filter): view j sees a surface clearly *behind* X through that
 //    pixel, i.e. X floats in space that j sees through.
 // A point is kept when at least min_views views (the reference included) are consistent and conflicts do not
-// outnumber the supporting views. It is the mean of the consistent views' points; the pixels it used are
+// outnumber the supporting views.
+//
+// Before that, every map loses the foreground side of its depth discontinuities (edge_erosion_px > 0): a pixel
+// with a pixel within edge_erosion_px whose depth is more than edge_depth_jump (relative) farther. PatchMatch's
+// window straddles an occluding edge there and gives background pixels the foreground's plane ("fattening"):
+// a roof or a facade continued up to a window radius past its real edge, and multi-view consistent, because
+// neighbouring views fatten the same way. The same edge is kept from the views where it is not an occluding
+// contour (both sides of a convex corner visible), so little true surface is lost. It is the mean of the consistent views' points; the pixels it used are
 // marked so that the same surface is not emitted again from another view. Deterministic (views in id order).
 #pragma once
 
@@ -30,6 +37,8 @@ struct FusionOptions {
   double max_normal_error_deg = 15;
   double visibility_margin = 0.03;    // relative depth beyond which a source "sees through" the point
   bool visibility_filter = true;
+  int edge_erosion_px = 4;            // 0 = off; about PatchMatch's window radius
+  double edge_depth_jump = 0.05;      // relative depth step that makes an occluding edge
   void Check() const;
 };
 
@@ -50,8 +59,13 @@ struct FusionStats {
   size_t candidates = 0;          // pixels with depth examined
   size_t rejected_support = 0;    // too few consistent views
   size_t rejected_visibility = 0; // free-space conflicts
+  size_t edge_pixels = 0;         // pixels removed on the foreground side of depth discontinuities
   std::map<int, size_t> views_histogram;  // number of consistent views → points
 };
+
+// The mask (CV_8U, 255 = drop) of a depth map's pixels on the foreground side of its discontinuities (see
+// above). Pixels without depth (0) are neither foreground nor background.
+cv::Mat OccludingEdgeMask(const cv::Mat& depth, int radius_px, double depth_jump);
 
 io::OrientedPointCloud FuseDepthMaps(const std::map<uint32_t, FusionView>& views, const FusionOptions& options,
                                      FusionStats* stats = nullptr);

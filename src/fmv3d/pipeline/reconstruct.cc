@@ -103,7 +103,7 @@ std::vector<Stage> ReconstructStages(const ReconstructOptions& o) {
   return stages;
 }
 
-nlohmann::json RunReconstruct(const ReconstructOptions& o) {
+nlohmann::json RunReconstruct(const ReconstructOptions& o, std::vector<StageResult>* stage_results) {
   o.Check();
   const Workspace ws(o.workspace);
   core::EnsureDirectory(ws.root());
@@ -123,6 +123,7 @@ nlohmann::json RunReconstruct(const ReconstructOptions& o) {
   nlohmann::json timings = nlohmann::json::object();
   for (const auto& r : results) timings[r.name] = r.skipped ? nlohmann::json("skipped") : nlohmann::json(r.seconds);
   RecordTimings(ws.root(), timings);
+  if (stage_results) *stage_results = results;
   return o.report ? WriteReport(ws.root()) : nlohmann::json();
 }
 

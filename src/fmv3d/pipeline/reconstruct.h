@@ -46,6 +46,7 @@ struct ReconstructOptions {
 std::vector<Stage> ReconstructStages(const ReconstructOptions& options);
 
 // Runs the stages and writes the report; returns report.json's content (null when options.report is off).
-nlohmann::json RunReconstruct(const ReconstructOptions& options);
+// `stage_results` (optional) receives each stage's wall and CPU time.
+nlohmann::json RunReconstruct(const ReconstructOptions& options, std::vector<StageResult>* stage_results = nullptr);
 
 }  // namespace fmv3d::pipeline

@@ -2,6 +2,8 @@
 
 #include <spdlog/spdlog.h>
 
+#include <sys/resource.h>
+
 #include <chrono>
 
 #include "fmv3d/core/error.h"
@@ -19,6 +21,12 @@ int IndexOf(const std::vector<Stage>& stages, const std::string& name, const cha
   throw Error(std::string(option) + ": unknown stage '" + name + "' (stages: " + known + ")");
 }
 }  // namespace
+
+double ProcessCpuSeconds() {
+  rusage u{};
+  getrusage(RUSAGE_SELF, &u);
+  return u.ru_utime.tv_sec + u.ru_stime.tv_sec + 1e-6 * (u.ru_utime.tv_usec + u.ru_stime.tv_usec);
+}
 
 std::vector<StageResult> RunStages(const std::vector<Stage>& stages, const RunnerOptions& options) {
   const int from = IndexOf(stages, options.from, "--from");
@@ -38,6 +46,7 @@ std::vector<StageResult> RunStages(const std::vector<Stage>& stages, const Runne
     }
     spdlog::info("[{}/{}] {} ...", i + 1, stages.size(), stage.name);
     const auto t0 = std::chrono::steady_clock::now();
+    const double cpu0 = ProcessCpuSeconds();
     try {
       r.summary = stage.run();
     } catch (const Error& e) {
@@ -45,7 +54,9 @@ std::vector<StageResult> RunStages(const std::vector<Stage>& stages, const Runne
       throw;
     }
     r.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-    spdlog::info("[{}/{}] {} done in {:.1f} s", i + 1, stages.size(), stage.name, r.seconds);
+    r.cpu_seconds = ProcessCpuSeconds() - cpu0;
+    spdlog::info("[{}/{}] {} done in {:.1f} s ({:.1f} CPU-s)", i + 1, stages.size(), stage.name, r.seconds,
+                 r.cpu_seconds);
     results.push_back(r);
   }
   return results;

@@ -24,6 +24,7 @@ struct StageResult {
   std::string name;
   bool skipped = false;
   double seconds = 0;
+  double cpu_seconds = 0;  // process CPU time (user + system, all threads) spent in the stage
   nlohmann::json summary;  // the stage's summary (null when skipped)
 };
 
@@ -31,6 +32,9 @@ struct RunnerOptions {
   std::string from;   // force re-running from this stage on (empty: resume by timestamps)
   std::string until;  // stop after this stage (empty: all)
 };
+
+// CPU seconds (user + system, all threads) this process has used so far.
+double ProcessCpuSeconds();
 
 // Runs the stages in order. Throws fmv3d::Error for an unknown --from/--until name, and lets a stage's
 // error propagate (after logging which stage failed) so the CLI exits non-zero.
