@@ -4,6 +4,9 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <atomic>
+#include <cstdio>
+#include <limits>
 #include <opencv2/imgproc.hpp>
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
@@ -11,6 +14,13 @@
 #include "fmv3d/core/error.h"
 
 namespace fmv3d::mvs {
+// #define PM_COUNT  // uncomment for hypothesis counters on stderr (development only)
+#ifdef PM_COUNT
+std::atomic<long> g_cost_calls{0}, g_ncc_calls{0}, g_pruned{0}, g_trials{0}, g_dedup{0}, g_accept{0}, g_skip{0};
+#define PMC(x) (x)++
+#else
+#define PMC(x) (void)0
+#endif
 namespace {
 
 constexpr float kMaxCost = 2.0f;
@@ -77,6 +87,8 @@ class Solver {
     normal_.assign(n, Eigen::Vector3f(0, 0, -1));
     cost_.assign(n, kMaxCost);
     photo_.assign(n, kMaxCost);
+    changed_.assign(n, 0);
+    updated_.assign(n, 0);
   }
 
   std::vector<float> depth_, cost_, photo_;
@@ -195,8 +207,14 @@ class Solver {
   }
 
   // Aggregated cost of plane (depth d, normal n) at pixel (x, y); *photo gets the photometric part.
-  float Cost(const RefPatch& rp, int x, int y, float d, const Eigen::Vector3f& n, float* photo) const {
-    *photo = kMaxCost;
+  // Early termination: the result only matters when it is below `bound` (the pixel's best so far). After each
+  // source, the mean of the k smallest of {totals so far} ∪ {lower bounds of the sources not yet scored} is a
+  // lower bound of the final top-k mean (photometric costs are >= 0; the geometric term is known before any
+  // NCC); once it reaches `bound` the plane is rejected without scoring the other sources. The returned value
+  // is then >= bound (not the exact cost), so callers that keep only costs < bound get identical results.
+  float Cost(const RefPatch& rp, int x, int y, float d, const Eigen::Vector3f& n, float* photo,
+             float bound = std::numeric_limits<float>::infinity()) const {
+    *photo = kMaxCost; PMC(g_cost_calls);
     if (!(d >= dmin_ && d <= dmax_)) return kMaxCost + 1;
     const Eigen::Vector3f X = d * Ray(x, y);
     const float c = n.dot(X);
@@ -204,23 +222,31 @@ class Solver {
     const Eigen::RowVector3f nKinv = n.transpose() * L_.Kinv / c;
     float costs[16], totals[16];
     const int ns = static_cast<int>(std::min<size_t>(L_.sources.size(), 16));
+    const int k = std::max(1, std::min(opt_.top_k, ns));
+    // totals[] holds each source's lower bound until it is scored.
+    for (int i = 0; i < ns; ++i) {
+      const Source& s = L_.sources[i];
+      totals[i] = s.map ? static_cast<float>(opt_.geom_weight) * ReprojectionError(x, y, X, s) : 0.f;
+    }
+    auto k_smallest_sum = [&](int* order) {
+      for (int i = 0; i < ns; ++i) order[i] = i;
+      std::partial_sort(order, order + k, order + ns, [&](int a, int b) { return totals[a] < totals[b]; });
+      float sum = 0;
+      for (int i = 0; i < k; ++i) sum += totals[order[i]];
+      return sum;
+    };
+    int order[16];
     for (int i = 0; i < ns; ++i) {
       const Source& s = L_.sources[i];
       const Eigen::Matrix3f H = s.K * (s.R * L_.Kinv + s.t * nKinv);
-      costs[i] = Ncc(rp, x, y, H, s);
-      totals[i] = costs[i];
-      if (s.map) totals[i] += static_cast<float>(opt_.geom_weight) * ReprojectionError(x, y, X, s);
+      costs[i] = Ncc(rp, x, y, H, s); PMC(g_ncc_calls);
+      totals[i] += costs[i];
+      if (i + 1 < ns && k_smallest_sum(order) / static_cast<float>(k) >= bound) { PMC(g_pruned); return bound; }
     }
     // Mean of the best top_k totals (per-pixel view selection).
-    int order[16];
-    for (int i = 0; i < ns; ++i) order[i] = i;
-    std::sort(order, order + ns, [&](int a, int b) { return totals[a] < totals[b]; });
-    const int k = std::max(1, std::min(opt_.top_k, ns));
-    float sum_t = 0, sum_p = 0;
-    for (int i = 0; i < k; ++i) {
-      sum_t += totals[order[i]];
-      sum_p += costs[order[i]];
-    }
+    const float sum_t = k_smallest_sum(order);
+    float sum_p = 0;
+    for (int i = 0; i < k; ++i) sum_p += costs[order[i]];
     *photo = sum_p / static_cast<float>(k);
     return sum_t / static_cast<float>(k);
   }
@@ -274,6 +300,7 @@ class Solver {
   // One round: red pixels, then black pixels. `round` sets the refinement range (halved every round).
   void Iterate(int round) {
     for (int colour = 0; colour < 2; ++colour) {
+      ++pass_;
       tbb::parallel_for(tbb::blocked_range<int>(0, L_.h, 2), [&](const tbb::blocked_range<int>& rows) {
         RefPatch rp;
         for (int y = rows.begin(); y < rows.end(); ++y)
@@ -295,21 +322,30 @@ class Solver {
     int n_tried = 0;
     auto trial = [&](float d, const Eigen::Vector3f& n) {
       for (int k = 0; k < n_tried; ++k)
-        if (std::abs(d - tried_d[k]) <= 1e-5f * d && n.dot(tried_n[k]) >= 0.99999f) return;
+        if (std::abs(d - tried_d[k]) <= 1e-5f * d && n.dot(tried_n[k]) >= 0.99999f) { PMC(g_dedup); return; }
+      PMC(g_trials);
       if (n_tried < 16) tried_d[n_tried] = d, tried_n[n_tried++] = n;
       float photo;
-      const float c = Cost(*rp, x, y, d, n, &photo);
-      if (c < best_cost) best_cost = c, best_photo = photo, best_d = d, best_n = n;
+      const float c = Cost(*rp, x, y, d, n, &photo, best_cost);
+      if (c < best_cost) PMC(g_accept), best_cost = c, best_photo = photo, best_d = d, best_n = n;
     };
     // Propagation: the planes of the opposite colour at distance 1 and 5 (both odd: the other colour).
     tried_d[0] = best_d;
     tried_n[0] = best_n;
     n_tried = 1;
     static const int kOff[8][2] = {{-1, 0}, {1, 0}, {0, -1}, {0, 1}, {-5, 0}, {5, 0}, {0, -5}, {0, 5}};
+    // A neighbour whose plane has not changed since this pixel's previous update was scored then: its cost is
+    // the same now and not below the best (which only decreases), so it is skipped — an exact shortcut that
+    // removes most of the propagation work once regions have converged.
+    const int last_update = updated_[i];
     for (const auto& o : kOff) {
       const int nx = x + o[0], ny = y + o[1];
       if (nx < 0 || ny < 0 || nx >= L_.w || ny >= L_.h) continue;
       const size_t j = static_cast<size_t>(ny) * L_.w + nx;
+      if (changed_[j] < last_update) {
+        PMC(g_skip);
+        continue;
+      }
       const Eigen::Vector3f& n = normal_[j];
       const float den = n.dot(ray);
       if (!(den < 0)) continue;
@@ -332,6 +368,8 @@ class Solver {
     trial(best_d * (1 + dp * rng.Symmetric()), perturb_normal(best_n, np));
     trial(best_d * (1 + dp * rng.Symmetric()), best_n);
     trial(best_d, perturb_normal(best_n, np));
+    updated_[i] = pass_;
+    if (best_d != depth_[i] || best_n != normal_[i]) changed_[i] = pass_;
     depth_[i] = best_d;
     normal_[i] = best_n;
     cost_[i] = best_cost;
@@ -344,6 +382,10 @@ class Solver {
   float dmin_, dmax_;
   uint64_t seed_;
   int side_ = 0, n_samples_ = 0, radius_ = 0;
+  // Change tracking for propagation: colour passes are numbered from 1; changed_[i] is the pass in which
+  // pixel i's plane last changed (0: initial plane), updated_[i] the pass of its last update (0: none yet).
+  int pass_ = 0;
+  std::vector<int> changed_, updated_;
   std::vector<float> spatial_;
   float inv_2sc2_ = 0;
 };
@@ -481,6 +523,10 @@ DepthMap RunPatchMatch(const PatchMatchInput& in, const PatchMatchOptions& opt, 
       out.cost.at<float>(y, x) = solver.photo_[i];
       valid += ok;
     }
+#ifdef PM_COUNT
+  std::fprintf(stderr, "cost %ld ncc %ld pruned %ld trials %ld dedup %ld accept %ld skipped %ld\n", g_cost_calls.load(),
+               g_ncc_calls.load(), g_pruned.load(), g_trials.load(), g_dedup.load(), g_accept.load(), g_skip.load());
+#endif
   if (stats) {
     stats->seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
     stats->valid_pixels = valid;
