@@ -24,7 +24,13 @@ std::atomic<long> g_cost_calls{0}, g_ncc_calls{0}, g_pruned{0}, g_trials{0}, g_d
 namespace {
 
 constexpr float kMaxCost = 2.0f;
-constexpr int kMaxSamples = 64;  // (2·radius/step + 1)² for the allowed options
+constexpr int kMaxSamples = 64;  // (2·radius/step + 1)² for the allowed options, rounded up to kLanes
+constexpr int kLanes = 4;        // the NCC works on groups of 4 samples (SSE2 width; GCC/Clang vector types)
+typedef float V4f __attribute__((vector_size(16)));
+typedef int V4i __attribute__((vector_size(16)));
+inline V4f Load4(const float* p) { V4f v; __builtin_memcpy(&v, p, sizeof v); return v; }
+inline V4f Splat(float f) { return V4f{f, f, f, f}; }
+inline float Sum4(V4f v) { return (v[0] + v[1]) + (v[2] + v[3]); }
 
 // Counter-based random numbers: a pixel's draws depend only on (seed, pixel, round), so results do not depend
 // on thread scheduling.
@@ -48,6 +54,10 @@ struct Source {
   Eigen::Matrix3f K;
   Eigen::Matrix3f R;               // reference camera frame → source camera frame
   Eigen::Vector3f t;
+  // Plane-induced homography ref pixels → source pixels for the plane n·X + c = 0 (X in the reference frame):
+  // H = K_s (R − t nᵀ/c) K⁻¹ = A + b · (nᵀ K⁻¹ / (−c)); A and b are fixed per level.
+  Eigen::Matrix3f A;
+  Eigen::Vector3f b;
   const DepthMap* map = nullptr;   // geometric pass only (at the source's working resolution)
   Eigen::Matrix3f map_K, map_Kinv; // intrinsics of that map
 };
@@ -61,10 +71,11 @@ struct Level {
   std::vector<Source> sources;
 };
 
+// The reference side of the NCC, once per pixel update: bilateral weights w (normalised to sum 1) and
+// wr = w·(v − mean)/σ, so that NCC = Σ wr·s / σ_s for source samples s. Padding lanes have w = wr = 0.
 struct RefPatch {
-  float v[kMaxSamples];
-  float w[kMaxSamples];  // normalised to sum 1
-  float mean = 0, var = 0;
+  alignas(16) float w[kMaxSamples];
+  alignas(16) float wr[kMaxSamples];
 };
 
 class Solver {
@@ -82,6 +93,14 @@ class Solver {
         spatial_[j * side_ + i] = -(dx * dx + dy * dy) / static_cast<float>(2 * opt.sigma_spatial * opt.sigma_spatial);
       }
     inv_2sc2_ = static_cast<float>(1.0 / (2 * opt.sigma_color * opt.sigma_color));
+    // Sample offsets from the patch's top-left sample, padded to whole groups of kLanes with copies of the
+    // first sample (weight 0).
+    n_padded_ = (n_samples_ + kLanes - 1) / kLanes * kLanes;
+    for (int k = 0; k < kMaxSamples; ++k) {
+      const int kk = k < n_samples_ ? k : 0;
+      off_x_[k] = static_cast<float>((kk % side_) * opt.window_step);
+      off_y_[k] = static_cast<float>((kk / side_) * opt.window_step);
+    }
     const size_t n = static_cast<size_t>(L_.w) * L_.h;
     depth_.assign(n, 0);
     normal_.assign(n, Eigen::Vector3f(0, 0, -1));
@@ -118,15 +137,15 @@ class Solver {
     const float* img = L_.ref.ptr<float>(0);
     const size_t stride = L_.ref.step1();
     const float centre = img[y * stride + x];
+    float v[kMaxSamples];
     float sum_w = 0;
     for (int j = 0, k = 0; j < side_; ++j) {
       const int yy = std::clamp(y - radius_ + j * opt_.window_step, 0, L_.h - 1);
       for (int i = 0; i < side_; ++i, ++k) {
         const int xx = std::clamp(x - radius_ + i * opt_.window_step, 0, L_.w - 1);
-        const float v = img[yy * stride + xx];
-        const float d = v - centre;
+        v[k] = img[yy * stride + xx];
+        const float d = v[k] - centre;
         const float w = std::exp(spatial_[k] - d * d * inv_2sc2_);
-        p->v[k] = v;
         p->w[k] = w;
         sum_w += w;
       }
@@ -134,55 +153,65 @@ class Solver {
     float mean = 0, sq = 0;
     for (int k = 0; k < n_samples_; ++k) {
       p->w[k] /= sum_w;
-      mean += p->w[k] * p->v[k];
-      sq += p->w[k] * p->v[k] * p->v[k];
+      mean += p->w[k] * v[k];
+      sq += p->w[k] * v[k] * v[k];
     }
-    p->mean = mean;
-    p->var = std::max(sq - mean * mean, 0.f);
+    constexpr float kEps = 1e-6f;
+    const float inv_sigma = 1.f / std::sqrt(std::max(sq - mean * mean, kEps));
+    for (int k = 0; k < n_samples_; ++k) p->wr[k] = p->w[k] * (v[k] - mean) * inv_sigma;
+    for (int k = n_samples_; k < n_padded_; ++k) p->w[k] = p->wr[k] = 0;
   }
 
-  // 1 − weighted NCC of the reference patch against source s through homography H; kMaxCost when the patch
-  // leaves the source image. The patch's corners are tested first: with all four in front of the source, the
-  // homography maps the square patch onto a convex quadrilateral, so every sample inside lies within the
-  // corners' bounding box and the inner loop needs no per-sample tests (it was most of the stage's time).
+  // 1 − weighted NCC of the reference patch against source s through homography H; kMaxCost when a sample
+  // falls outside the source image (or behind it). All sample positions are computed first, 4 at a time,
+  // directly from H (no incremental drift), and bounds-tested together; then the bilinear samples are gathered
+  // and accumulated 4 lanes at a time.
   float Ncc(const RefPatch& rp, int x, int y, const Eigen::Matrix3f& H, const Source& s) const {
     const float u0 = static_cast<float>(x - radius_) + 0.5f, v0 = static_cast<float>(y - radius_) + 0.5f;
-    const Eigen::Vector3f row0 = H * Eigen::Vector3f(u0, v0, 1.f);
-    const float step = static_cast<float>(opt_.window_step);
-    const Eigen::Vector3f sx = H.col(0) * step, sy = H.col(1) * step;
-    // Margin: the incremental sums below drift by far less than this from the corner values.
-    constexpr float kMargin = 0.01f;
-    const float wmax = static_cast<float>(s.w - 1) - kMargin, hmax = static_cast<float>(s.h - 1) - kMargin;
-    const float span = static_cast<float>(side_ - 1);
-    for (int c = 0; c < 4; ++c) {
-      const Eigen::Vector3f p = row0 + ((c & 1) ? span : 0.f) * sx + ((c & 2) ? span : 0.f) * sy;
-      if (!(p.z() > 0)) return kMaxCost;
-      const float fx = p.x() / p.z() - 0.5f, fy = p.y() / p.z() - 0.5f;
-      if (!(fx >= kMargin && fy >= kMargin && fx < wmax && fy < hmax)) return kMaxCost;
+    const Eigen::Vector3f o = H * Eigen::Vector3f(u0, v0, 1.f);
+    const V4f ox = Splat(o.x() - 0.5f * o.z()), oy = Splat(o.y() - 0.5f * o.z()), oz = Splat(o.z());
+    const V4f hx0 = Splat(H(0, 0) - 0.5f * H(2, 0)), hy0 = Splat(H(1, 0) - 0.5f * H(2, 0)), hz0 = Splat(H(2, 0));
+    const V4f hx1 = Splat(H(0, 1) - 0.5f * H(2, 1)), hy1 = Splat(H(1, 1) - 0.5f * H(2, 1)), hz1 = Splat(H(2, 1));
+    const V4f wmax = Splat(static_cast<float>(s.w - 1)), hmax = Splat(static_cast<float>(s.h - 1));
+    const V4f zero = Splat(0.f);
+    alignas(16) float fx[kMaxSamples], fy[kMaxSamples];
+    V4i ok = {-1, -1, -1, -1};
+    for (int k = 0; k < n_padded_; k += kLanes) {
+      const V4f dx = Load4(&off_x_[k]), dy = Load4(&off_y_[k]);
+      const V4f z = oz + dx * hz0 + dy * hz1;
+      // Pixel centres at +0.5: fx = u/z − 0.5 = (u − 0.5 z)/z, folded into the rows above.
+      const V4f iz = 1.f / z;
+      const V4f px = (ox + dx * hx0 + dy * hx1) * iz, py = (oy + dx * hy0 + dy * hy1) * iz;
+      ok &= (z > zero) & (px >= zero) & (py >= zero) & (px < wmax) & (py < hmax);  // false for NaN too
+      __builtin_memcpy(&fx[k], &px, sizeof px);
+      __builtin_memcpy(&fy[k], &py, sizeof py);
     }
-    float sw_s = 0, sw_ss = 0, sw_rs = 0;
-    Eigen::Vector3f row = row0;
-    for (int j = 0, k = 0; j < side_; ++j, row += sy) {
-      float px = row.x(), py = row.y(), pz = row.z();
-      for (int i = 0; i < side_; ++i, ++k, px += sx.x(), py += sx.y(), pz += sx.z()) {
-        const float iz = 1.f / pz;
-        const float fx = px * iz - 0.5f, fy = py * iz - 0.5f;
-        const int ix = static_cast<int>(fx), iy = static_cast<int>(fy);
-        const float ax = fx - static_cast<float>(ix), ay = fy - static_cast<float>(iy);
-        const float* r0 = s.img + static_cast<size_t>(iy) * s.stride + ix;
-        const float top = r0[0] + ax * (r0[1] - r0[0]);
-        const float bot = r0[s.stride] + ax * (r0[s.stride + 1] - r0[s.stride]);
-        const float v = top + ay * (bot - top);
-        const float wv = rp.w[k] * v;
-        sw_s += wv;
-        sw_ss += wv * v;
-        sw_rs += wv * rp.v[k];
+    if (!(ok[0] & ok[1] & ok[2] & ok[3])) return kMaxCost;
+    V4f acc_s = zero, acc_ss = zero, acc_rs = zero;
+    const size_t st = s.stride;
+    for (int k = 0; k < n_padded_; k += kLanes) {
+      const V4f px = Load4(&fx[k]), py = Load4(&fy[k]);
+      const V4i ix = __builtin_convertvector(px, V4i), iy = __builtin_convertvector(py, V4i);  // >= 0: floor
+      const V4f ax = px - __builtin_convertvector(ix, V4f), ay = py - __builtin_convertvector(iy, V4f);
+      V4f t0, t1, b0, b1;
+      for (int l = 0; l < kLanes; ++l) {
+        const float* r = s.img + static_cast<size_t>(iy[l]) * st + static_cast<size_t>(ix[l]);
+        t0[l] = r[0];
+        t1[l] = r[1];
+        b0[l] = r[st];
+        b1[l] = r[st + 1];
       }
+      const V4f top = t0 + ax * (t1 - t0), bot = b0 + ax * (b1 - b0);
+      const V4f v = top + ay * (bot - top);
+      const V4f wv = Load4(&rp.w[k]) * v;
+      acc_s += wv;
+      acc_ss += wv * v;
+      acc_rs += Load4(&rp.wr[k]) * v;
     }
-    const float var_s = std::max(sw_ss - sw_s * sw_s, 0.f);
-    const float cov = sw_rs - rp.mean * sw_s;
+    const float sw_s = Sum4(acc_s);
+    const float var_s = std::max(Sum4(acc_ss) - sw_s * sw_s, 0.f);
     constexpr float kEps = 1e-6f;
-    const float ncc = cov / std::sqrt(std::max(rp.var, kEps) * std::max(var_s, kEps));
+    const float ncc = Sum4(acc_rs) / std::sqrt(std::max(var_s, kEps));
     return std::clamp(1.f - ncc, 0.f, kMaxCost);
   }
 
@@ -238,7 +267,7 @@ class Solver {
     int order[16];
     for (int i = 0; i < ns; ++i) {
       const Source& s = L_.sources[i];
-      const Eigen::Matrix3f H = s.K * (s.R * L_.Kinv + s.t * nKinv);
+      const Eigen::Matrix3f H = s.A + s.b * nKinv;
       costs[i] = Ncc(rp, x, y, H, s); PMC(g_ncc_calls);
       totals[i] += costs[i];
       if (i + 1 < ns && k_smallest_sum(order) / static_cast<float>(k) >= bound) { PMC(g_pruned); return bound; }
@@ -381,7 +410,8 @@ class Solver {
   const PatchMatchOptions& opt_;
   float dmin_, dmax_;
   uint64_t seed_;
-  int side_ = 0, n_samples_ = 0, radius_ = 0;
+  int side_ = 0, n_samples_ = 0, n_padded_ = 0, radius_ = 0;
+  alignas(16) float off_x_[kMaxSamples], off_y_[kMaxSamples];
   // Change tracking for propagation: colour passes are numbered from 1; changed_[i] is the pass in which
   // pixel i's plane last changed (0: initial plane), updated_[i] the pass of its last update (0: none yet).
   int pass_ = 0;
@@ -428,6 +458,8 @@ Level MakeLevel(const PatchMatchInput& in, double factor) {
     const Eigen::Matrix3d R = v->geom.R * rg.R.transpose();
     s.R = R.cast<float>();
     s.t = (v->geom.t - R * rg.t).cast<float>();
+    s.A = s.K * s.R * L.Kinv;
+    s.b = s.K * s.t;
     if (i < in.source_maps.size() && in.source_maps[i] && factor == 1.0) {
       s.map = in.source_maps[i];
       s.map_K = ScaledK(v->geom.K, static_cast<double>(s.map->width()) / v->geom.width,
