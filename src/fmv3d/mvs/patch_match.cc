@@ -257,9 +257,13 @@ class Solver {
       const Source& s = L_.sources[i];
       totals[i] = s.map ? static_cast<float>(opt_.geom_weight) * ReprojectionError(x, y, X, s) : 0.f;
     }
+    // Sum of the k smallest totals, in ascending order (order[] gets their indices); insertion sort, ns <= 16.
     auto k_smallest_sum = [&](int* order) {
-      for (int i = 0; i < ns; ++i) order[i] = i;
-      std::partial_sort(order, order + k, order + ns, [&](int a, int b) { return totals[a] < totals[b]; });
+      for (int i = 0; i < ns; ++i) {
+        int j = i;
+        for (; j > 0 && totals[order[j - 1]] > totals[i]; --j) order[j] = order[j - 1];
+        order[j] = i;
+      }
       float sum = 0;
       for (int i = 0; i < k; ++i) sum += totals[order[i]];
       return sum;
