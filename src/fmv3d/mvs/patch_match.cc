@@ -485,7 +485,8 @@ void PatchMatchOptions::Check() const {
     throw Error("patch match: window too large (at most " + std::to_string(kMaxSamples) +
                 " samples; raise window_step)");
   if (!(sigma_color > 0 && sigma_spatial > 0)) throw Error("patch match: sigmas must be positive");
-  if (iterations < 1 || geom_iterations < 0) throw Error("patch match: iterations must be >= 1");
+  if (iterations < 1 || fine_iterations < 1 || geom_iterations < 0)
+    throw Error("patch match: iterations and fine_iterations must be >= 1, geom_iterations >= 0");
   if (top_k < 1) throw Error("patch match: top_k must be >= 1");
   if (!(geom_weight >= 0 && geom_max_error_px > 0)) throw Error("patch match: bad geometric weight / max error");
   if (!(max_cost > 0 && max_cost <= 2)) throw Error("patch match: max_cost must be in (0, 2]");
@@ -537,8 +538,7 @@ DepthMap RunPatchMatch(const PatchMatchInput& in, const PatchMatchOptions& opt, 
         solver.normal_[i] = n;
       }
     solver.Initialise(nullptr, true);
-    const int fine_rounds = std::max(2, opt.iterations - 2);
-    for (int r = 0; r < fine_rounds; ++r) solver.Iterate(r + 2);
+    for (int r = 0; r < opt.fine_iterations; ++r) solver.Iterate(r + 2);
   } else {
     solver.Initialise(&seeds_cam, false);
     for (int r = 0; r < opt.iterations; ++r) solver.Iterate(r);
