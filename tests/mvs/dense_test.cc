@@ -6,7 +6,9 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <opencv2/core.hpp>
 #include <opencv2/imgcodecs.hpp>
+#include <tbb/global_control.h>
 
 #include "fmv3d/core/error.h"
 #include "fmv3d/core/files.h"
@@ -133,11 +135,12 @@ DepthCheck CheckFirstViewDepth(const Relight& relight) {
 TEST(PatchMatch, DepthMatchesRenderedTruth) {
   const DepthCheck c = CheckFirstViewDepth([](int, View*) {});
   ASSERT_GT(c.seen, 1000);
-  EXPECT_GT(static_cast<double>(c.valid) / c.seen, 0.7) << c.valid << " of " << c.seen;
+  // Measured (session 4): valid 90.4% of the seen pixels, 57.4% of them within 1%, median 0.34%.
+  EXPECT_GT(static_cast<double>(c.valid) / c.seen, 0.85) << c.valid << " of " << c.seen;
   // The photometric map alone keeps some wrong planes on weak texture (the geometric pass and fusion remove
   // them); most pixels must be right and the median well below 1%.
-  EXPECT_LT(c.median, 0.006);
-  EXPECT_GT(static_cast<double>(c.good) / c.valid, 0.5)
+  EXPECT_LT(c.median, 0.0045);
+  EXPECT_GT(static_cast<double>(c.good) / c.valid, 0.53)
       << c.good << " of " << c.valid << " within 1% of the true depth; relative error median " << c.median
       << ", p90 " << c.p90;
 }
@@ -164,6 +167,50 @@ TEST(PatchMatch, SourcesWithOtherGainAndBiasMatchAsWell) {
   EXPECT_GT(good_relit, good_same - 0.05);
   EXPECT_LT(relit.median, 1.25 * same.median + 1e-4) << "median relative depth error " << same.median << " → "
                                                       << relit.median;
+}
+
+// Same seed, same maps — whatever the thread count (red–black updates, per-pixel random streams, and the
+// change tracking / early termination of hypotheses must not depend on scheduling).
+TEST(PatchMatch, DeterministicForAFixedSeedWhateverTheThreads) {
+  const Flight& flight = SmallFlight();
+  const auto& rec = flight.result.truth;
+  std::map<uint32_t, ViewGeometry> geoms;
+  for (const auto& [id, im] : rec.images) geoms[id] = MakeViewGeometry(rec, id, 0);
+  const auto sel = SelectViews(rec, geoms, {});
+  const uint32_t ref_id = rec.images.begin()->first;
+  const auto& rs = sel.at(ref_id);
+  const View ref = LoadView(rec, geoms.at(ref_id), flight.dir / "frames");
+  std::vector<View> srcs;
+  for (size_t k = 0; k < 4 && k < rs.neighbours.size(); ++k)
+    srcs.push_back(LoadView(rec, geoms.at(rs.neighbours[k].image_id), flight.dir / "frames"));
+  PatchMatchInput in;
+  in.ref = &ref;
+  for (const auto& s : srcs) in.sources.push_back(&s);
+  in.depth_min = rs.depth_min;
+  in.depth_max = rs.depth_max;
+  PatchMatchOptions opt;
+  opt.seed = 7;
+  auto run = [&](int threads) {
+    tbb::global_control limit(tbb::global_control::max_allowed_parallelism, threads);
+    return RunPatchMatch(in, opt);
+  };
+  const DepthMap a = run(1), b = run(2);
+  // Geometric pass too (the photometric map of the reference stands in for its sources').
+  PatchMatchInput gin = in;
+  gin.init = &a;
+  for (size_t k = 0; k < srcs.size(); ++k) gin.source_maps.push_back(&a);
+  auto run_geom = [&](int threads) {
+    tbb::global_control limit(tbb::global_control::max_allowed_parallelism, threads);
+    return RunPatchMatch(gin, opt);
+  };
+  const DepthMap ga = run_geom(1), gb = run_geom(3);
+  for (const auto& [x, y] : {std::pair{&a, &b}, std::pair{&ga, &gb}}) {
+    ASSERT_EQ(x->width(), y->width());
+    EXPECT_EQ(cv::norm(x->depth, y->depth, cv::NORM_INF), 0.0);
+    EXPECT_EQ(cv::norm(x->normal, y->normal, cv::NORM_INF), 0.0);
+    EXPECT_EQ(cv::norm(x->cost, y->cost, cv::NORM_INF), 0.0);
+  }
+  EXPECT_GT(a.CountValid(), a.width() * a.height() / 2);
 }
 
 TEST(DenseStage, FusedPointsLieOnTheTrueSurface) {
@@ -208,6 +255,8 @@ TEST(DenseStage, FusedPointsLieOnTheTrueSurface) {
                                                   truth_json["bounds"]["max"][2]));
   const auto ev = EvaluateDense(cloud, flight.result.truth, flight.result.truth, scene,
                                 flight.result.characteristic_length, eo);
+  std::printf("fused: %zu points, median %.5f, p90 %.5f of the height, completeness %.4f\n", cloud.size(),
+              ev.median_fraction(), ev.p90_fraction(), ev.completeness);
   // At 320x240 a pixel covers ~0.2 m of the 30 m building: points within a fraction of a pixel.
   EXPECT_LT(ev.median_fraction(), 0.004) << ev.ToJson().dump();
   EXPECT_LT(ev.p90_fraction(), 0.015) << ev.ToJson().dump();

@@ -4,6 +4,12 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <atomic>
+#include <cstdio>
+#ifdef __SSE2__
+#include <emmintrin.h>
+#endif
+#include <limits>
 #include <opencv2/imgproc.hpp>
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
@@ -11,10 +17,23 @@
 #include "fmv3d/core/error.h"
 
 namespace fmv3d::mvs {
+// #define PM_COUNT  // uncomment for hypothesis counters on stderr (development only)
+#ifdef PM_COUNT
+std::atomic<long> g_cost_calls{0}, g_ncc_calls{0}, g_pruned{0}, g_trials{0}, g_dedup{0}, g_accept{0}, g_skip{0};
+#define PMC(x) (x)++
+#else
+#define PMC(x) (void)0
+#endif
 namespace {
 
 constexpr float kMaxCost = 2.0f;
-constexpr int kMaxSamples = 64;  // (2·radius/step + 1)² for the allowed options
+constexpr int kMaxSamples = 64;  // (2·radius/step + 1)² for the allowed options, rounded up to kLanes
+constexpr int kLanes = 4;        // the NCC works on groups of 4 samples (SSE2 width; GCC/Clang vector types)
+typedef float V4f __attribute__((vector_size(16)));
+typedef int V4i __attribute__((vector_size(16)));
+inline V4f Load4(const float* p) { V4f v; __builtin_memcpy(&v, p, sizeof v); return v; }
+inline V4f Splat(float f) { return V4f{f, f, f, f}; }
+inline float Sum4(V4f v) { return (v[0] + v[1]) + (v[2] + v[3]); }
 
 // Counter-based random numbers: a pixel's draws depend only on (seed, pixel, round), so results do not depend
 // on thread scheduling.
@@ -38,6 +57,10 @@ struct Source {
   Eigen::Matrix3f K;
   Eigen::Matrix3f R;               // reference camera frame → source camera frame
   Eigen::Vector3f t;
+  // Plane-induced homography ref pixels → source pixels for the plane n·X + c = 0 (X in the reference frame):
+  // H = K_s (R − t nᵀ/c) K⁻¹ = A + b · (nᵀ K⁻¹ / (−c)); A and b are fixed per level.
+  Eigen::Matrix3f A;
+  Eigen::Vector3f b;
   const DepthMap* map = nullptr;   // geometric pass only (at the source's working resolution)
   Eigen::Matrix3f map_K, map_Kinv; // intrinsics of that map
 };
@@ -51,10 +74,11 @@ struct Level {
   std::vector<Source> sources;
 };
 
+// The reference side of the NCC, once per pixel update: bilateral weights w (normalised to sum 1) and
+// wr = w·(v − mean)/σ, so that NCC = Σ wr·s / σ_s for source samples s. Padding lanes have w = wr = 0.
 struct RefPatch {
-  float v[kMaxSamples];
-  float w[kMaxSamples];  // normalised to sum 1
-  float mean = 0, var = 0;
+  alignas(16) float w[kMaxSamples];
+  alignas(16) float wr[kMaxSamples];
 };
 
 class Solver {
@@ -72,11 +96,21 @@ class Solver {
         spatial_[j * side_ + i] = -(dx * dx + dy * dy) / static_cast<float>(2 * opt.sigma_spatial * opt.sigma_spatial);
       }
     inv_2sc2_ = static_cast<float>(1.0 / (2 * opt.sigma_color * opt.sigma_color));
+    // Sample offsets from the patch's top-left sample, padded to whole groups of kLanes with copies of the
+    // first sample (weight 0).
+    n_padded_ = (n_samples_ + kLanes - 1) / kLanes * kLanes;
+    for (int k = 0; k < kMaxSamples; ++k) {
+      const int kk = k < n_samples_ ? k : 0;
+      off_x_[k] = static_cast<float>((kk % side_) * opt.window_step);
+      off_y_[k] = static_cast<float>((kk / side_) * opt.window_step);
+    }
     const size_t n = static_cast<size_t>(L_.w) * L_.h;
     depth_.assign(n, 0);
     normal_.assign(n, Eigen::Vector3f(0, 0, -1));
     cost_.assign(n, kMaxCost);
     photo_.assign(n, kMaxCost);
+    changed_.assign(n, 0);
+    updated_.assign(n, 0);
   }
 
   std::vector<float> depth_, cost_, photo_;
@@ -106,15 +140,15 @@ class Solver {
     const float* img = L_.ref.ptr<float>(0);
     const size_t stride = L_.ref.step1();
     const float centre = img[y * stride + x];
+    float v[kMaxSamples];
     float sum_w = 0;
     for (int j = 0, k = 0; j < side_; ++j) {
       const int yy = std::clamp(y - radius_ + j * opt_.window_step, 0, L_.h - 1);
       for (int i = 0; i < side_; ++i, ++k) {
         const int xx = std::clamp(x - radius_ + i * opt_.window_step, 0, L_.w - 1);
-        const float v = img[yy * stride + xx];
-        const float d = v - centre;
+        v[k] = img[yy * stride + xx];
+        const float d = v[k] - centre;
         const float w = std::exp(spatial_[k] - d * d * inv_2sc2_);
-        p->v[k] = v;
         p->w[k] = w;
         sum_w += w;
       }
@@ -122,55 +156,87 @@ class Solver {
     float mean = 0, sq = 0;
     for (int k = 0; k < n_samples_; ++k) {
       p->w[k] /= sum_w;
-      mean += p->w[k] * p->v[k];
-      sq += p->w[k] * p->v[k] * p->v[k];
+      mean += p->w[k] * v[k];
+      sq += p->w[k] * v[k] * v[k];
     }
-    p->mean = mean;
-    p->var = std::max(sq - mean * mean, 0.f);
+    constexpr float kEps = 1e-6f;
+    const float inv_sigma = 1.f / std::sqrt(std::max(sq - mean * mean, kEps));
+    for (int k = 0; k < n_samples_; ++k) p->wr[k] = p->w[k] * (v[k] - mean) * inv_sigma;
+    for (int k = n_samples_; k < n_padded_; ++k) p->w[k] = p->wr[k] = 0;
   }
 
-  // 1 − weighted NCC of the reference patch against source s through homography H; kMaxCost when the patch
-  // leaves the source image. The patch's corners are tested first: with all four in front of the source, the
-  // homography maps the square patch onto a convex quadrilateral, so every sample inside lies within the
-  // corners' bounding box and the inner loop needs no per-sample tests (it was most of the stage's time).
+  // 1 − weighted NCC of the reference patch against source s through homography H; kMaxCost when a sample
+  // falls outside the source image (or behind it). All sample positions are computed first, 4 at a time,
+  // directly from H (no incremental drift), and bounds-tested together; then the bilinear samples are gathered
+  // and accumulated 4 lanes at a time.
   float Ncc(const RefPatch& rp, int x, int y, const Eigen::Matrix3f& H, const Source& s) const {
     const float u0 = static_cast<float>(x - radius_) + 0.5f, v0 = static_cast<float>(y - radius_) + 0.5f;
-    const Eigen::Vector3f row0 = H * Eigen::Vector3f(u0, v0, 1.f);
-    const float step = static_cast<float>(opt_.window_step);
-    const Eigen::Vector3f sx = H.col(0) * step, sy = H.col(1) * step;
-    // Margin: the incremental sums below drift by far less than this from the corner values.
-    constexpr float kMargin = 0.01f;
-    const float wmax = static_cast<float>(s.w - 1) - kMargin, hmax = static_cast<float>(s.h - 1) - kMargin;
-    const float span = static_cast<float>(side_ - 1);
-    for (int c = 0; c < 4; ++c) {
-      const Eigen::Vector3f p = row0 + ((c & 1) ? span : 0.f) * sx + ((c & 2) ? span : 0.f) * sy;
-      if (!(p.z() > 0)) return kMaxCost;
-      const float fx = p.x() / p.z() - 0.5f, fy = p.y() / p.z() - 0.5f;
-      if (!(fx >= kMargin && fy >= kMargin && fx < wmax && fy < hmax)) return kMaxCost;
+    const Eigen::Vector3f o = H * Eigen::Vector3f(u0, v0, 1.f);
+    const V4f ox = Splat(o.x() - 0.5f * o.z()), oy = Splat(o.y() - 0.5f * o.z()), oz = Splat(o.z());
+    const V4f hx0 = Splat(H(0, 0) - 0.5f * H(2, 0)), hy0 = Splat(H(1, 0) - 0.5f * H(2, 0)), hz0 = Splat(H(2, 0));
+    const V4f hx1 = Splat(H(0, 1) - 0.5f * H(2, 1)), hy1 = Splat(H(1, 1) - 0.5f * H(2, 1)), hz1 = Splat(H(2, 1));
+    const V4f wmax = Splat(static_cast<float>(s.w - 1)), hmax = Splat(static_cast<float>(s.h - 1));
+    const V4f zero = Splat(0.f);
+    alignas(16) float fx[kMaxSamples], fy[kMaxSamples];
+    V4i ok = {-1, -1, -1, -1};
+    for (int k = 0; k < n_padded_; k += kLanes) {
+      const V4f dx = Load4(&off_x_[k]), dy = Load4(&off_y_[k]);
+      const V4f z = oz + dx * hz0 + dy * hz1;
+      // Pixel centres at +0.5: fx = u/z − 0.5 = (u − 0.5 z)/z, folded into the rows above.
+      const V4f iz = 1.f / z;
+      const V4f px = (ox + dx * hx0 + dy * hx1) * iz, py = (oy + dx * hy0 + dy * hy1) * iz;
+      ok &= (z > zero) & (px >= zero) & (py >= zero) & (px < wmax) & (py < hmax);  // false for NaN too
+      __builtin_memcpy(&fx[k], &px, sizeof px);
+      __builtin_memcpy(&fy[k], &py, sizeof py);
     }
-    float sw_s = 0, sw_ss = 0, sw_rs = 0;
-    Eigen::Vector3f row = row0;
-    for (int j = 0, k = 0; j < side_; ++j, row += sy) {
-      float px = row.x(), py = row.y(), pz = row.z();
-      for (int i = 0; i < side_; ++i, ++k, px += sx.x(), py += sx.y(), pz += sx.z()) {
-        const float iz = 1.f / pz;
-        const float fx = px * iz - 0.5f, fy = py * iz - 0.5f;
-        const int ix = static_cast<int>(fx), iy = static_cast<int>(fy);
-        const float ax = fx - static_cast<float>(ix), ay = fy - static_cast<float>(iy);
-        const float* r0 = s.img + static_cast<size_t>(iy) * s.stride + ix;
-        const float top = r0[0] + ax * (r0[1] - r0[0]);
-        const float bot = r0[s.stride] + ax * (r0[s.stride + 1] - r0[s.stride]);
-        const float v = top + ay * (bot - top);
-        const float wv = rp.w[k] * v;
-        sw_s += wv;
-        sw_ss += wv * v;
-        sw_rs += wv * rp.v[k];
+    if (!(ok[0] & ok[1] & ok[2] & ok[3])) return kMaxCost;
+    V4f acc_s = zero, acc_ss = zero, acc_rs = zero;
+    const size_t st = s.stride;
+    for (int k = 0; k < n_padded_; k += kLanes) {
+      const V4f px = Load4(&fx[k]), py = Load4(&fy[k]);
+      const V4i ix = __builtin_convertvector(px, V4i), iy = __builtin_convertvector(py, V4i);  // >= 0: floor
+      const V4f ax = px - __builtin_convertvector(ix, V4f), ay = py - __builtin_convertvector(iy, V4f);
+      V4f t0, t1, b0, b1;
+#ifdef __SSE2__
+      // Each lane's two horizontal neighbours are adjacent floats: one 64-bit load per row and lane, then a
+      // transpose (8 loads + 4 shuffles instead of 16 scalar loads and inserts).
+      const float* r0 = s.img + static_cast<size_t>(iy[0]) * st + static_cast<size_t>(ix[0]);
+      const float* r1 = s.img + static_cast<size_t>(iy[1]) * st + static_cast<size_t>(ix[1]);
+      const float* r2 = s.img + static_cast<size_t>(iy[2]) * st + static_cast<size_t>(ix[2]);
+      const float* r3 = s.img + static_cast<size_t>(iy[3]) * st + static_cast<size_t>(ix[3]);
+      const __m128 z = _mm_setzero_ps();
+      const __m128 top01 = _mm_loadh_pi(_mm_loadl_pi(z, reinterpret_cast<const __m64*>(r0)),
+                                        reinterpret_cast<const __m64*>(r1));
+      const __m128 top23 = _mm_loadh_pi(_mm_loadl_pi(z, reinterpret_cast<const __m64*>(r2)),
+                                        reinterpret_cast<const __m64*>(r3));
+      const __m128 bot01 = _mm_loadh_pi(_mm_loadl_pi(z, reinterpret_cast<const __m64*>(r0 + st)),
+                                        reinterpret_cast<const __m64*>(r1 + st));
+      const __m128 bot23 = _mm_loadh_pi(_mm_loadl_pi(z, reinterpret_cast<const __m64*>(r2 + st)),
+                                        reinterpret_cast<const __m64*>(r3 + st));
+      t0 = reinterpret_cast<V4f>(_mm_shuffle_ps(top01, top23, _MM_SHUFFLE(2, 0, 2, 0)));
+      t1 = reinterpret_cast<V4f>(_mm_shuffle_ps(top01, top23, _MM_SHUFFLE(3, 1, 3, 1)));
+      b0 = reinterpret_cast<V4f>(_mm_shuffle_ps(bot01, bot23, _MM_SHUFFLE(2, 0, 2, 0)));
+      b1 = reinterpret_cast<V4f>(_mm_shuffle_ps(bot01, bot23, _MM_SHUFFLE(3, 1, 3, 1)));
+#else
+      for (int l = 0; l < kLanes; ++l) {
+        const float* r = s.img + static_cast<size_t>(iy[l]) * st + static_cast<size_t>(ix[l]);
+        t0[l] = r[0];
+        t1[l] = r[1];
+        b0[l] = r[st];
+        b1[l] = r[st + 1];
       }
+#endif
+      const V4f top = t0 + ax * (t1 - t0), bot = b0 + ax * (b1 - b0);
+      const V4f v = top + ay * (bot - top);
+      const V4f wv = Load4(&rp.w[k]) * v;
+      acc_s += wv;
+      acc_ss += wv * v;
+      acc_rs += Load4(&rp.wr[k]) * v;
     }
-    const float var_s = std::max(sw_ss - sw_s * sw_s, 0.f);
-    const float cov = sw_rs - rp.mean * sw_s;
+    const float sw_s = Sum4(acc_s);
+    const float var_s = std::max(Sum4(acc_ss) - sw_s * sw_s, 0.f);
     constexpr float kEps = 1e-6f;
-    const float ncc = cov / std::sqrt(std::max(rp.var, kEps) * std::max(var_s, kEps));
+    const float ncc = Sum4(acc_rs) / std::sqrt(std::max(var_s, kEps));
     return std::clamp(1.f - ncc, 0.f, kMaxCost);
   }
 
@@ -195,8 +261,14 @@ class Solver {
   }
 
   // Aggregated cost of plane (depth d, normal n) at pixel (x, y); *photo gets the photometric part.
-  float Cost(const RefPatch& rp, int x, int y, float d, const Eigen::Vector3f& n, float* photo) const {
-    *photo = kMaxCost;
+  // Early termination: the result only matters when it is below `bound` (the pixel's best so far). After each
+  // source, the mean of the k smallest of {totals so far} ∪ {lower bounds of the sources not yet scored} is a
+  // lower bound of the final top-k mean (photometric costs are >= 0; the geometric term is known before any
+  // NCC); once it reaches `bound` the plane is rejected without scoring the other sources. The returned value
+  // is then >= bound (not the exact cost), so callers that keep only costs < bound get identical results.
+  float Cost(const RefPatch& rp, int x, int y, float d, const Eigen::Vector3f& n, float* photo,
+             float bound = std::numeric_limits<float>::infinity()) const {
+    *photo = kMaxCost; PMC(g_cost_calls);
     if (!(d >= dmin_ && d <= dmax_)) return kMaxCost + 1;
     const Eigen::Vector3f X = d * Ray(x, y);
     const float c = n.dot(X);
@@ -204,23 +276,35 @@ class Solver {
     const Eigen::RowVector3f nKinv = n.transpose() * L_.Kinv / c;
     float costs[16], totals[16];
     const int ns = static_cast<int>(std::min<size_t>(L_.sources.size(), 16));
+    const int k = std::max(1, std::min(opt_.top_k, ns));
+    // totals[] holds each source's lower bound until it is scored.
     for (int i = 0; i < ns; ++i) {
       const Source& s = L_.sources[i];
-      const Eigen::Matrix3f H = s.K * (s.R * L_.Kinv + s.t * nKinv);
-      costs[i] = Ncc(rp, x, y, H, s);
-      totals[i] = costs[i];
-      if (s.map) totals[i] += static_cast<float>(opt_.geom_weight) * ReprojectionError(x, y, X, s);
+      totals[i] = s.map ? static_cast<float>(opt_.geom_weight) * ReprojectionError(x, y, X, s) : 0.f;
+    }
+    // Sum of the k smallest totals, in ascending order (order[] gets their indices); insertion sort, ns <= 16.
+    auto k_smallest_sum = [&](int* order) {
+      for (int i = 0; i < ns; ++i) {
+        int j = i;
+        for (; j > 0 && totals[order[j - 1]] > totals[i]; --j) order[j] = order[j - 1];
+        order[j] = i;
+      }
+      float sum = 0;
+      for (int i = 0; i < k; ++i) sum += totals[order[i]];
+      return sum;
+    };
+    int order[16];
+    for (int i = 0; i < ns; ++i) {
+      const Source& s = L_.sources[i];
+      const Eigen::Matrix3f H = s.A + s.b * nKinv;
+      costs[i] = Ncc(rp, x, y, H, s); PMC(g_ncc_calls);
+      totals[i] += costs[i];
+      if (i + 1 < ns && k_smallest_sum(order) / static_cast<float>(k) >= bound) { PMC(g_pruned); return bound; }
     }
     // Mean of the best top_k totals (per-pixel view selection).
-    int order[16];
-    for (int i = 0; i < ns; ++i) order[i] = i;
-    std::sort(order, order + ns, [&](int a, int b) { return totals[a] < totals[b]; });
-    const int k = std::max(1, std::min(opt_.top_k, ns));
-    float sum_t = 0, sum_p = 0;
-    for (int i = 0; i < k; ++i) {
-      sum_t += totals[order[i]];
-      sum_p += costs[order[i]];
-    }
+    const float sum_t = k_smallest_sum(order);
+    float sum_p = 0;
+    for (int i = 0; i < k; ++i) sum_p += costs[order[i]];
     *photo = sum_p / static_cast<float>(k);
     return sum_t / static_cast<float>(k);
   }
@@ -274,6 +358,7 @@ class Solver {
   // One round: red pixels, then black pixels. `round` sets the refinement range (halved every round).
   void Iterate(int round) {
     for (int colour = 0; colour < 2; ++colour) {
+      ++pass_;
       tbb::parallel_for(tbb::blocked_range<int>(0, L_.h, 2), [&](const tbb::blocked_range<int>& rows) {
         RefPatch rp;
         for (int y = rows.begin(); y < rows.end(); ++y)
@@ -295,21 +380,30 @@ class Solver {
     int n_tried = 0;
     auto trial = [&](float d, const Eigen::Vector3f& n) {
       for (int k = 0; k < n_tried; ++k)
-        if (std::abs(d - tried_d[k]) <= 1e-5f * d && n.dot(tried_n[k]) >= 0.99999f) return;
+        if (std::abs(d - tried_d[k]) <= 1e-5f * d && n.dot(tried_n[k]) >= 0.99999f) { PMC(g_dedup); return; }
+      PMC(g_trials);
       if (n_tried < 16) tried_d[n_tried] = d, tried_n[n_tried++] = n;
       float photo;
-      const float c = Cost(*rp, x, y, d, n, &photo);
-      if (c < best_cost) best_cost = c, best_photo = photo, best_d = d, best_n = n;
+      const float c = Cost(*rp, x, y, d, n, &photo, best_cost);
+      if (c < best_cost) PMC(g_accept), best_cost = c, best_photo = photo, best_d = d, best_n = n;
     };
     // Propagation: the planes of the opposite colour at distance 1 and 5 (both odd: the other colour).
     tried_d[0] = best_d;
     tried_n[0] = best_n;
     n_tried = 1;
     static const int kOff[8][2] = {{-1, 0}, {1, 0}, {0, -1}, {0, 1}, {-5, 0}, {5, 0}, {0, -5}, {0, 5}};
+    // A neighbour whose plane has not changed since this pixel's previous update was scored then: its cost is
+    // the same now and not below the best (which only decreases), so it is skipped — an exact shortcut that
+    // removes most of the propagation work once regions have converged.
+    const int last_update = updated_[i];
     for (const auto& o : kOff) {
       const int nx = x + o[0], ny = y + o[1];
       if (nx < 0 || ny < 0 || nx >= L_.w || ny >= L_.h) continue;
       const size_t j = static_cast<size_t>(ny) * L_.w + nx;
+      if (changed_[j] < last_update) {
+        PMC(g_skip);
+        continue;
+      }
       const Eigen::Vector3f& n = normal_[j];
       const float den = n.dot(ray);
       if (!(den < 0)) continue;
@@ -332,6 +426,8 @@ class Solver {
     trial(best_d * (1 + dp * rng.Symmetric()), perturb_normal(best_n, np));
     trial(best_d * (1 + dp * rng.Symmetric()), best_n);
     trial(best_d, perturb_normal(best_n, np));
+    updated_[i] = pass_;
+    if (best_d != depth_[i] || best_n != normal_[i]) changed_[i] = pass_;
     depth_[i] = best_d;
     normal_[i] = best_n;
     cost_[i] = best_cost;
@@ -343,7 +439,12 @@ class Solver {
   const PatchMatchOptions& opt_;
   float dmin_, dmax_;
   uint64_t seed_;
-  int side_ = 0, n_samples_ = 0, radius_ = 0;
+  int side_ = 0, n_samples_ = 0, n_padded_ = 0, radius_ = 0;
+  alignas(16) float off_x_[kMaxSamples], off_y_[kMaxSamples];
+  // Change tracking for propagation: colour passes are numbered from 1; changed_[i] is the pass in which
+  // pixel i's plane last changed (0: initial plane), updated_[i] the pass of its last update (0: none yet).
+  int pass_ = 0;
+  std::vector<int> changed_, updated_;
   std::vector<float> spatial_;
   float inv_2sc2_ = 0;
 };
@@ -386,6 +487,8 @@ Level MakeLevel(const PatchMatchInput& in, double factor) {
     const Eigen::Matrix3d R = v->geom.R * rg.R.transpose();
     s.R = R.cast<float>();
     s.t = (v->geom.t - R * rg.t).cast<float>();
+    s.A = s.K * s.R * L.Kinv;
+    s.b = s.K * s.t;
     if (i < in.source_maps.size() && in.source_maps[i] && factor == 1.0) {
       s.map = in.source_maps[i];
       s.map_K = ScaledK(v->geom.K, static_cast<double>(s.map->width()) / v->geom.width,
@@ -407,7 +510,8 @@ void PatchMatchOptions::Check() const {
     throw Error("patch match: window too large (at most " + std::to_string(kMaxSamples) +
                 " samples; raise window_step)");
   if (!(sigma_color > 0 && sigma_spatial > 0)) throw Error("patch match: sigmas must be positive");
-  if (iterations < 1 || geom_iterations < 0) throw Error("patch match: iterations must be >= 1");
+  if (iterations < 1 || fine_iterations < 1 || geom_iterations < 0)
+    throw Error("patch match: iterations and fine_iterations must be >= 1, geom_iterations >= 0");
   if (top_k < 1) throw Error("patch match: top_k must be >= 1");
   if (!(geom_weight >= 0 && geom_max_error_px > 0)) throw Error("patch match: bad geometric weight / max error");
   if (!(max_cost > 0 && max_cost <= 2)) throw Error("patch match: max_cost must be in (0, 2]");
@@ -459,8 +563,7 @@ DepthMap RunPatchMatch(const PatchMatchInput& in, const PatchMatchOptions& opt, 
         solver.normal_[i] = n;
       }
     solver.Initialise(nullptr, true);
-    const int fine_rounds = std::max(2, opt.iterations - 2);
-    for (int r = 0; r < fine_rounds; ++r) solver.Iterate(r + 2);
+    for (int r = 0; r < opt.fine_iterations; ++r) solver.Iterate(r + 2);
   } else {
     solver.Initialise(&seeds_cam, false);
     for (int r = 0; r < opt.iterations; ++r) solver.Iterate(r);
@@ -481,6 +584,10 @@ DepthMap RunPatchMatch(const PatchMatchInput& in, const PatchMatchOptions& opt, 
       out.cost.at<float>(y, x) = solver.photo_[i];
       valid += ok;
     }
+#ifdef PM_COUNT
+  std::fprintf(stderr, "cost %ld ncc %ld pruned %ld trials %ld dedup %ld accept %ld skipped %ld\n", g_cost_calls.load(),
+               g_ncc_calls.load(), g_pruned.load(), g_trials.load(), g_dedup.load(), g_accept.load(), g_skip.load());
+#endif
   if (stats) {
     stats->seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
     stats->valid_pixels = valid;

@@ -28,8 +28,11 @@ struct PatchMatchOptions {
   int window_step = 2;
   double sigma_color = 0.2;     // bilateral weight on grey-value difference to the centre (0..1 grey)
   double sigma_spatial = 5;     // bilateral weight on distance to the centre, pixels
-  int iterations = 5;           // photometric rounds (red + black each)
-  int geom_iterations = 2;      // rounds of the geometric pass
+  int iterations = 5;           // photometric rounds (red + black each); with coarse_to_fine, at half resolution
+  // coarse_to_fine: rounds at full resolution after upsampling the coarse planes. Further rounds lower the cost
+  // but do not bring depths closer to the truth (bench/RESULTS.md, session 4); session 3 ran 3.
+  int fine_iterations = 2;
+  int geom_iterations = 1;      // rounds of the geometric pass (session 3: 2; see bench/RESULTS.md, session 4)
   int top_k = 3;                // best source costs averaged per pixel
   double geom_weight = 0.3;     // cost per pixel of reprojection error in the geometric pass
   double geom_max_error_px = 3;
