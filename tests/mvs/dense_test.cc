@@ -2,6 +2,8 @@
 // true model is the sparse model, so depth maps and fused points are checked against the true depth and mesh.
 #include <gtest/gtest.h>
 
+#include <functional>
+
 #include <algorithm>
 #include <cstdio>
 #include <filesystem>
@@ -73,8 +75,25 @@ struct DepthCheck {
   double median = 1, p90 = 1;         // relative error of the valid pixels
 };
 
-template <typename Relight>
-DepthCheck CheckFirstViewDepth(const Relight& relight) {
+// The small flight's first view and its (up to) 4 best sources by view selection, loaded; `relight` (if given)
+// changes each source image after loading. Input() points into this object: keep it in place while it is used.
+struct FirstViewSetup {
+  View ref;
+  std::vector<View> srcs;
+  double depth_min = 0, depth_max = 0;
+  size_t num_neighbours = 0;
+  std::string problem;
+  PatchMatchInput Input() const {
+    PatchMatchInput in;
+    in.ref = &ref;
+    for (const auto& s : srcs) in.sources.push_back(&s);
+    in.depth_min = depth_min;
+    in.depth_max = depth_max;
+    return in;
+  }
+};
+
+FirstViewSetup LoadFirstView(const std::function<void(int, View*)>& relight = {}) {
   const Flight& flight = SmallFlight();
   const auto& rec = flight.result.truth;
   std::map<uint32_t, ViewGeometry> geoms;
@@ -82,19 +101,30 @@ DepthCheck CheckFirstViewDepth(const Relight& relight) {
   const auto sel = SelectViews(rec, geoms, {});
   const uint32_t ref_id = rec.images.begin()->first;
   const auto& rs = sel.at(ref_id);
-  EXPECT_TRUE(rs.problem.empty()) << rs.problem;
-  EXPECT_GE(rs.neighbours.size(), 3u);
-  const View ref = LoadView(rec, geoms.at(ref_id), flight.dir / "frames");
-  std::vector<View> srcs;
+  FirstViewSetup out;
+  out.problem = rs.problem;
+  out.num_neighbours = rs.neighbours.size();
+  out.depth_min = rs.depth_min;
+  out.depth_max = rs.depth_max;
+  out.ref = LoadView(rec, geoms.at(ref_id), flight.dir / "frames");
   for (size_t k = 0; k < 4 && k < rs.neighbours.size(); ++k) {
-    srcs.push_back(LoadView(rec, geoms.at(rs.neighbours[k].image_id), flight.dir / "frames"));
-    relight(static_cast<int>(k), &srcs.back());
+    out.srcs.push_back(LoadView(rec, geoms.at(rs.neighbours[k].image_id), flight.dir / "frames"));
+    if (relight) relight(static_cast<int>(k), &out.srcs.back());
   }
-  PatchMatchInput in;
-  in.ref = &ref;
-  for (const auto& s : srcs) in.sources.push_back(&s);
-  in.depth_min = rs.depth_min;
-  in.depth_max = rs.depth_max;
+  return out;
+}
+
+template <typename Relight>
+DepthCheck CheckFirstViewDepth(const Relight& relight) {
+  const Flight& flight = SmallFlight();
+  const auto& rec = flight.result.truth;
+  const uint32_t ref_id = rec.images.begin()->first;
+  const FirstViewSetup setup = LoadFirstView(relight);
+  EXPECT_TRUE(setup.problem.empty()) << setup.problem;
+  EXPECT_GE(setup.num_neighbours, 3u);
+  const View& ref = setup.ref;
+  const auto& srcs = setup.srcs;
+  const PatchMatchInput in = setup.Input();
   PatchMatchOptions opt;
   const DepthMap map = RunPatchMatch(in, opt);
   EXPECT_EQ(map.width(), 320);
@@ -172,22 +202,9 @@ TEST(PatchMatch, SourcesWithOtherGainAndBiasMatchAsWell) {
 // Same seed, same maps — whatever the thread count (red–black updates, per-pixel random streams, and the
 // change tracking / early termination of hypotheses must not depend on scheduling).
 TEST(PatchMatch, DeterministicForAFixedSeedWhateverTheThreads) {
-  const Flight& flight = SmallFlight();
-  const auto& rec = flight.result.truth;
-  std::map<uint32_t, ViewGeometry> geoms;
-  for (const auto& [id, im] : rec.images) geoms[id] = MakeViewGeometry(rec, id, 0);
-  const auto sel = SelectViews(rec, geoms, {});
-  const uint32_t ref_id = rec.images.begin()->first;
-  const auto& rs = sel.at(ref_id);
-  const View ref = LoadView(rec, geoms.at(ref_id), flight.dir / "frames");
-  std::vector<View> srcs;
-  for (size_t k = 0; k < 4 && k < rs.neighbours.size(); ++k)
-    srcs.push_back(LoadView(rec, geoms.at(rs.neighbours[k].image_id), flight.dir / "frames"));
-  PatchMatchInput in;
-  in.ref = &ref;
-  for (const auto& s : srcs) in.sources.push_back(&s);
-  in.depth_min = rs.depth_min;
-  in.depth_max = rs.depth_max;
+  const FirstViewSetup setup = LoadFirstView();
+  const auto& srcs = setup.srcs;
+  const PatchMatchInput in = setup.Input();
   PatchMatchOptions opt;
   opt.seed = 7;
   auto run = [&](int threads) {

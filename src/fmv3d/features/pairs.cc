@@ -101,14 +101,32 @@ std::vector<std::vector<float>> GlobalDescriptors(const std::vector<const Descri
     cv::batchDistance(f, centres, dist, CV_32F, nidx, cv::NORM_L2SQR, 1);
     for (int r = 0; r < nidx.rows; ++r) hist[i][nidx.at<int>(r, 0)] += 1.f;
   });
-  // With thousands of features per frame and a small vocabulary every word occurs in every frame, so plain idf
-  // (log n/df) is 0 everywhere and every descriptor would be zero (no loop closure found at all). Hence the
-  // smoothed idf, log((1 + n)/(1 + df)) + 1, which is never 0, and the centring: each image's weighted word
-  // frequencies minus the collection's mean, so the component every frame shares (the scene's overall texture
-  // statistics) drops out and the cosine compares what is particular to each view.
+  // Plain tf-idf (log n/df) while some word is missing from some frame. With thousands of features per frame
+  // and a small vocabulary every word occurs in every frame: idf is then 0 everywhere and every descriptor
+  // would be zero (no loop closure found at all). In that case the smoothed idf, log((1 + n)/(1 + df)) + 1,
+  // never 0, and centring: each image's weighted word frequencies minus the collection's mean, so the
+  // component every frame shares (the scene's overall texture statistics) drops out and the cosine compares
+  // what is particular to each view.
   std::vector<double> df(k, 0);
   for (const auto& h : hist)
     for (int w = 0; w < k; ++w) df[w] += h[w] > 0;
+  const bool degenerate = std::all_of(df.begin(), df.end(), [&](double d) { return d >= double(n); });
+  if (!degenerate) {
+    for (size_t i = 0; i < n; ++i) {
+      const double count = std::accumulate(hist[i].begin(), hist[i].end(), 0.0);
+      double norm = 0;
+      out[i].assign(k, 0.f);
+      for (int w = 0; w < k; ++w) {
+        if (hist[i][w] == 0) continue;
+        const double v = (hist[i][w] / count) * std::log(double(n) / df[w]);
+        out[i][w] = static_cast<float>(v);
+        norm += v * v;
+      }
+      if (norm > 0)
+        for (auto& v : out[i]) v = static_cast<float>(v / std::sqrt(norm));
+    }
+    return out;
+  }
   std::vector<std::vector<double>> tfidf(n, std::vector<double>(k, 0.0));
   std::vector<double> mean(k, 0.0);
   size_t used = 0;

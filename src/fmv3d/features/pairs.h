@@ -39,8 +39,8 @@ std::vector<ImagePair> ExhaustivePairs(size_t num_images);
 std::vector<ImagePair> SequentialPairs(size_t num_images, int overlap, bool quadratic);
 
 // Global descriptors: one unit-norm bag-of-words vector per image (rows), from a k-means vocabulary trained on a
-// deterministic sample of the descriptors: smoothed tf-idf minus the collection's mean (so words that occur in
-// every frame still tell frames apart). Deterministic for a fixed seed.
+// deterministic sample of the descriptors: tf-idf, or, when every word occurs in every frame (idf 0 everywhere),
+// smoothed tf-idf minus the collection's mean, which still tells frames apart. Deterministic for a fixed seed.
 std::vector<std::vector<float>> GlobalDescriptors(const std::vector<const Descriptors*>& images,
                                                   const PairOptions& options);
 
