@@ -11,12 +11,17 @@ MipTexture::MipTexture(const cv::Mat& bgr) {
   if (bgr.empty()) return;
   if (bgr.type() != CV_8UC3) throw Error("texture: expected an 8-bit 3-channel image");
   cv::Mat level = bgr;
+  double span_w = bgr.cols, span_h = bgr.rows;  // texels of this level across u, v ∈ [0, 1]
   while (true) {
     Level l;
     l.w = level.cols;
     l.h = level.rows;
-    l.fw = static_cast<float>(l.w);
-    l.fh = static_cast<float>(l.h);
+    // Not the texel count: after an odd size the last texel is a repeat that lies past u = 1, and texel x of
+    // every level must stay centred on the texels it averages — (x + 0.5) / span in u. Using the rounded count
+    // stretched coarse levels (3380 → … → 845 → 423 texels: 0.12%, then 0.24% more), so the ground slid
+    // against the geometry with distance and resolution: 640x360 orbits came out 0.16% elliptical.
+    l.fw = static_cast<float>(span_w);
+    l.fh = static_cast<float>(span_h);
     l.tiles_x = (l.w + 31) / 32;
     l.bgr.assign(size_t(l.tiles_x) * ((l.h + 31) / 32) * 4096, 0);
     for (int y = 0; y < l.h; ++y) {
@@ -45,6 +50,7 @@ MipTexture::MipTexture(const cv::Mat& bgr) {
       }
     }
     level = next;
+    span_w /= 2, span_h /= 2;
   }
 }
 

@@ -28,7 +28,7 @@ class MipTexture {
  private:
   struct Level {
     int w = 0, h = 0;
-    float fw = 0, fh = 0;
+    float fw = 0, fh = 0;  // texels across the unit u, v range (the level-0 size / 2^level)
     int tiles_x = 0;
     // 4 bytes per texel (B, G, R, unused), stored in 32x32-texel tiles (4 KiB, one page): a bilinear
     // footprint walking across a large texture in any direction then stays within few pages and cache
@@ -44,7 +44,9 @@ class MipTexture {
 
 // Inline: these run once or twice per shaded pixel.
 inline Eigen::Vector3f MipTexture::Bilinear(const Level& l, float u, float v) const {
-  // Texel centres at (i + 0.5) / w; v flipped (OBJ convention); coordinates wrap.
+  // Texel centres at (i + 0.5) / span; v flipped (OBJ convention); coordinates wrap (period: the texture).
+  u -= std::floor(u);
+  v -= std::floor(v);
   const float x = u * l.fw - 0.5f, y = (1.0f - v) * l.fh - 0.5f;
   const float fx = std::floor(x), fy = std::floor(y);
   const float ax = x - fx, ay = y - fy;
