@@ -169,8 +169,11 @@ nlohmann::json RunDenseStage(const fs::path& workspace, const DenseStageOptions&
       valid_pixels += static_cast<size_t>(map.CountValid());
       total_pixels += map.depth.total();
       const auto view = cache.Get(id);
-      fviews.emplace(id, MakeFusionView(geoms.at(id), map, view->color,
-                                        std::vector<uint32_t>(links[id].begin(), links[id].end())));
+      FusionView fv = MakeFusionView(geoms.at(id), map, view->color,
+                                     std::vector<uint32_t>(links[id].begin(), links[id].end()));
+      if (options.fusion.max_relative_uncertainty > 0)
+        fv.texture = TexturePrecisionMap(view->color, options.patch_match.window_radius);
+      fviews.emplace(id, std::move(fv));
       progress.Add();
     }
   }
@@ -206,6 +209,10 @@ nlohmann::json RunDenseStage(const fs::path& workspace, const DenseStageOptions&
         {"rejected_visibility", fstats.rejected_visibility},
         {"edge_pixels_removed", fstats.edge_pixels},
         {"edge_erosion_px", options.fusion.edge_erosion_px},
+        {"rejected_uncertainty", fstats.rejected_uncertainty},
+        {"max_relative_uncertainty", options.fusion.max_relative_uncertainty},
+        {"median_normal_sigma", fstats.median_uncertainty},
+        {"max_normal_sigma", fstats.max_uncertainty},
         {"mean_consistent_views", mean_views},
         {"consistent_views_histogram", hist}}},
       {"seconds",

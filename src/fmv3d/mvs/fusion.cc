@@ -1,6 +1,9 @@
 #include "fmv3d/mvs/fusion.h"
 
+#include <Eigen/Dense>
+#include <algorithm>
 #include <cmath>
+#include <limits>
 #include <opencv2/imgproc.hpp>
 
 #include "fmv3d/core/error.h"
@@ -18,6 +21,54 @@ void FusionOptions::Check() const {
   if (!(visibility_margin > 0)) throw Error("fusion: visibility_margin must be positive");
   if (edge_erosion_px < 0) throw Error("fusion: edge_erosion_px must be >= 0");
   if (!(edge_depth_jump > 0)) throw Error("fusion: edge_depth_jump must be positive");
+  if (!(max_relative_uncertainty == 0 || max_relative_uncertainty >= 1))
+    throw Error("fusion: max_relative_uncertainty must be 0 (off) or at least 1");
+}
+
+double NormalUncertainty(const Eigen::Vector3d& X, const Eigen::Vector3d& n,
+                         const std::vector<const ViewGeometry*>& views, const std::vector<double>& pixel_sigma) {
+  constexpr double kMinCos = 0.05;  // rays within ~3° of the surface: footprint capped at 20 pixels' width
+  Eigen::Matrix3d info = Eigen::Matrix3d::Zero();
+  for (size_t i = 0; i < views.size(); ++i) {
+    const ViewGeometry* g = views[i];
+    const double z = (g->R * X + g->t).z();
+    const double px = pixel_sigma.empty() ? 1.0 : pixel_sigma[i];
+    if (!(z > 0) || !(px > 0) || !std::isfinite(px)) continue;
+    const Eigen::Vector3d d = (X - g->Centre()).normalized();
+    const double cos_t = std::max(kMinCos, std::abs(n.dot(d)));
+    const double f = 0.5 * (g->K(0, 0) + g->K(1, 1));
+    const double s = px * z / (f * cos_t);
+    info += (Eigen::Matrix3d::Identity() - d * d.transpose()) / (s * s);
+  }
+  // Fewer than two distinct directions leave a null direction (along the common ray): unconstrained.
+  const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es(info);
+  const Eigen::Vector3d ev = es.eigenvalues();  // ascending
+  if (!(ev(2) > 0) || !(ev(0) > 1e-12 * ev(2))) return std::numeric_limits<double>::infinity();
+  const Eigen::Vector3d c = es.eigenvectors().transpose() * n;
+  return std::sqrt(c(0) * c(0) / ev(0) + c(1) * c(1) / ev(1) + c(2) * c(2) / ev(2));
+}
+
+cv::Mat TexturePrecisionMap(const cv::Mat& color, int radius_px) {
+  CV_Assert(color.type() == CV_8UC3 && radius_px >= 1);
+  cv::Mat grey, gx, gy;
+  cv::cvtColor(color, grey, cv::COLOR_BGR2GRAY);
+  grey.convertTo(grey, CV_32F, 1.0 / 255);
+  cv::Sobel(grey, gx, CV_32F, 1, 0, 3, 1.0 / 8);  // grey levels per pixel
+  cv::Sobel(grey, gy, CV_32F, 0, 1, 3, 1.0 / 8);
+  cv::Mat energy = gx.mul(gx) + gy.mul(gy);
+  cv::boxFilter(energy, energy, -1, cv::Size(2 * radius_px + 1, 2 * radius_px + 1), cv::Point(-1, -1), true,
+                cv::BORDER_REFLECT);
+  // σ_px ∝ 1 / sqrt(mean squared gradient / 2): the per-direction gradient energy of the window. A flat
+  // window gets a large but finite value (6e4, within CV_16F's range), so it still ranks as the least precise.
+  cv::Mat sigma(energy.size(), CV_32F);
+  for (int y = 0; y < energy.rows; ++y) {
+    const float* e = energy.ptr<float>(y);
+    float* o = sigma.ptr<float>(y);
+    for (int x = 0; x < energy.cols; ++x) o[x] = std::min(6e4f, 1.f / std::sqrt(std::max(0.5f * e[x], 1e-12f)));
+  }
+  cv::Mat half;
+  sigma.convertTo(half, CV_16F);
+  return half;
 }
 
 cv::Mat OccludingEdgeMask(const cv::Mat& depth, int radius_px, double depth_jump) {
@@ -99,6 +150,11 @@ io::OrientedPointCloud FuseDepthMaps(const std::map<uint32_t, FusionView>& views
     bool fresh;
   };
   std::vector<Hit> hits;
+  std::vector<int> support_of;   // per fused point
+  std::vector<double> sigma_of;  // per fused point: σ_n (only with the uncertainty filter)
+  const bool uncertainty = opt.max_relative_uncertainty > 0;
+  std::vector<const ViewGeometry*> hit_views;
+  std::vector<double> hit_px;
   for (const auto& [rid, ref] : *maps) {
     std::vector<const FusionView*> nbs;
     for (uint32_t j : ref.neighbours) {
@@ -170,10 +226,45 @@ io::OrientedPointCloud FuseDepthMaps(const std::map<uint32_t, FusionView>& views
                                         static_cast<uint8_t>(std::lround(col.y())),
                                         static_cast<uint8_t>(std::lround(col.z()))));
         cloud.visibility.push_back(std::move(vis));
-        ++st.views_histogram[support];
+        support_of.push_back(support);
+        if (uncertainty) {
+          hit_views.clear();
+          hit_px.clear();
+          for (const Hit& h : hits) {
+            hit_views.push_back(&h.view->geom);
+            hit_px.push_back(h.view->texture.empty() ? 1.0
+                                                     : static_cast<double>(h.view->texture.at<cv::float16_t>(h.y, h.x)));
+          }
+          sigma_of.push_back(NormalUncertainty(pos, cloud.normals.back().cast<double>(), hit_views, hit_px));
+        }
       }
     }
   }
+  if (uncertainty && !cloud.empty()) {
+    std::vector<double> sorted = sigma_of;
+    const size_t mid = sorted.size() / 2;
+    std::nth_element(sorted.begin(), sorted.begin() + static_cast<std::ptrdiff_t>(mid), sorted.end());
+    st.median_uncertainty = sorted[mid];
+    st.max_uncertainty = opt.max_relative_uncertainty * st.median_uncertainty;
+    io::OrientedPointCloud kept;
+    kept.Reserve(cloud.size());
+    std::vector<int> kept_support;
+    kept_support.reserve(cloud.size());
+    for (size_t i = 0; i < cloud.size(); ++i) {
+      if (!(sigma_of[i] <= st.max_uncertainty)) {
+        ++st.rejected_uncertainty;
+        continue;
+      }
+      kept.positions.push_back(cloud.positions[i]);
+      kept.normals.push_back(cloud.normals[i]);
+      kept.colors.push_back(cloud.colors[i]);
+      kept.visibility.push_back(std::move(cloud.visibility[i]));
+      kept_support.push_back(support_of[i]);
+    }
+    cloud = std::move(kept);
+    support_of = std::move(kept_support);
+  }
+  for (int s : support_of) ++st.views_histogram[s];
   if (stats) *stats = st;
   return cloud;
 }
