@@ -151,7 +151,7 @@ io::OrientedPointCloud FuseDepthMaps(const std::map<uint32_t, FusionView>& views
   };
   std::vector<Hit> hits;
   std::vector<int> support_of;   // per fused point
-  std::vector<double> sigma_of;  // per fused point: σ_n (only with the uncertainty filter)
+  std::vector<float> sigma_of;  // per fused point: σ_n (only with the uncertainty filter)
   const bool uncertainty = opt.max_relative_uncertainty > 0;
   std::vector<const ViewGeometry*> hit_views;
   std::vector<double> hit_px;
@@ -235,34 +235,39 @@ io::OrientedPointCloud FuseDepthMaps(const std::map<uint32_t, FusionView>& views
             hit_px.push_back(h.view->texture.empty() ? 1.0
                                                      : static_cast<double>(h.view->texture.at<cv::float16_t>(h.y, h.x)));
           }
-          sigma_of.push_back(NormalUncertainty(pos, cloud.normals.back().cast<double>(), hit_views, hit_px));
+          sigma_of.push_back(static_cast<float>(
+              NormalUncertainty(pos, cloud.normals.back().cast<double>(), hit_views, hit_px)));
         }
       }
     }
   }
   if (uncertainty && !cloud.empty()) {
-    std::vector<double> sorted = sigma_of;
+    std::vector<float> sorted = sigma_of;
     const size_t mid = sorted.size() / 2;
     std::nth_element(sorted.begin(), sorted.begin() + static_cast<std::ptrdiff_t>(mid), sorted.end());
     st.median_uncertainty = sorted[mid];
     st.max_uncertainty = opt.max_relative_uncertainty * st.median_uncertainty;
-    io::OrientedPointCloud kept;
-    kept.Reserve(cloud.size());
-    std::vector<int> kept_support;
-    kept_support.reserve(cloud.size());
+    // In place (no second copy of the cloud).
+    size_t j = 0;
     for (size_t i = 0; i < cloud.size(); ++i) {
       if (!(sigma_of[i] <= st.max_uncertainty)) {
         ++st.rejected_uncertainty;
         continue;
       }
-      kept.positions.push_back(cloud.positions[i]);
-      kept.normals.push_back(cloud.normals[i]);
-      kept.colors.push_back(cloud.colors[i]);
-      kept.visibility.push_back(std::move(cloud.visibility[i]));
-      kept_support.push_back(support_of[i]);
+      if (j != i) {
+        cloud.positions[j] = cloud.positions[i];
+        cloud.normals[j] = cloud.normals[i];
+        cloud.colors[j] = cloud.colors[i];
+        cloud.visibility[j] = std::move(cloud.visibility[i]);
+        support_of[j] = support_of[i];
+      }
+      ++j;
     }
-    cloud = std::move(kept);
-    support_of = std::move(kept_support);
+    cloud.positions.resize(j);
+    cloud.normals.resize(j);
+    cloud.colors.resize(j);
+    cloud.visibility.resize(j);
+    support_of.resize(j);
   }
   for (int s : support_of) ++st.views_histogram[s];
   if (stats) *stats = st;
