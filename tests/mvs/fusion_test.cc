@@ -296,8 +296,9 @@ TEST(Fusion, UncertaintyFilterDropsWeaklyTexturedSurface) {
   EXPECT_LT(p90_1, p90_0 / 3);
 }
 
-// The pixel precision of a window is set by its gradients: a sharp checkerboard locates ~8x better than the
-// same board blurred and faded to a quarter of the contrast; a flat image is the worst (capped, finite).
+// The pixel precision of a window is set by its gradients: a sharp checkerboard locates far better than the
+// same board blurred and faded to a quarter of the contrast; a flat image is the worst (capped, finite), and a
+// steep linear ramp is as bad: NCC, invariant to gain and bias, cannot tell a shifted ramp from the ramp.
 TEST(TexturePrecisionMap, SharpTextureLocatesBetterThanFaintTexture) {
   cv::Mat board(64, 64, CV_8UC3);
   for (int y = 0; y < 64; ++y)
@@ -314,6 +315,12 @@ TEST(TexturePrecisionMap, SharpTextureLocatesBetterThanFaintTexture) {
   EXPECT_GT(none, 100 * weak);
   EXPECT_TRUE(std::isfinite(none));
   EXPECT_EQ(TexturePrecisionMap(board, 5).type(), CV_16F);
+  cv::Mat ramp(64, 64, CV_8UC3);
+  for (int y = 0; y < 64; ++y)
+    for (int x = 0; x < 64; ++x) ramp.at<cv::Vec3b>(y, x) = cv::Vec3b::all(static_cast<uchar>(30 + 3 * x));
+  const double steep = centre(TexturePrecisionMap(ramp, 5));
+  std::printf("ramp of 3 grey levels per pixel: %.1f\n", steep);
+  EXPECT_GT(steep, 100 * weak);
 }
 
 TEST(Fusion, UncertaintyOptionIsChecked) {

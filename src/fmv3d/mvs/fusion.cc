@@ -55,17 +55,31 @@ cv::Mat TexturePrecisionMap(const cv::Mat& color, int radius_px) {
   grey.convertTo(grey, CV_32F, 1.0 / 255);
   cv::Sobel(grey, gx, CV_32F, 1, 0, 3, 1.0 / 8);  // grey levels per pixel
   cv::Sobel(grey, gy, CV_32F, 0, 1, 3, 1.0 / 8);
-  cv::Mat energy = gx.mul(gx) + gy.mul(gy);
-  cv::boxFilter(energy, energy, -1, cv::Size(2 * radius_px + 1, 2 * radius_px + 1), cv::Point(-1, -1), true,
-                cv::BORDER_REFLECT);
-  // σ_px ∝ 1 / sqrt(mean squared gradient / 2): the per-direction gradient energy of the window. A flat
-  // window gets a large but finite value (6e4, within CV_16F's range), so it still ranks as the least precise.
-  cv::Mat sigma(energy.size(), CV_32F);
-  for (int y = 0; y < energy.rows; ++y) {
-    const float* e = energy.ptr<float>(y);
-    float* o = sigma.ptr<float>(y);
-    for (int x = 0; x < energy.cols; ++x) o[x] = std::min(6e4f, 1.f / std::sqrt(std::max(0.5f * e[x], 1e-12f)));
-  }
+  const cv::Size window(2 * radius_px + 1, 2 * radius_px + 1);
+  auto mean = [&](const cv::Mat& m) {
+    cv::Mat out;
+    cv::boxFilter(m, out, CV_32F, window, cv::Point(-1, -1), true, cv::BORDER_REFLECT);
+    return out;
+  };
+  const cv::Mat mi = mean(grey), mii = mean(grey.mul(grey));
+  const cv::Mat mx = mean(gx), mxx = mean(gx.mul(gx)), mxi = mean(gx.mul(grey));
+  const cv::Mat my = mean(gy), myy = mean(gy.mul(gy)), myi = mean(gy.mul(grey));
+  cv::Mat sigma(grey.size(), CV_32F);
+  for (int y = 0; y < grey.rows; ++y)
+    for (int x = 0; x < grey.cols; ++x) {
+      const float vi = std::max(mii.at<float>(y, x) - mi.at<float>(y, x) * mi.at<float>(y, x), 0.f);
+      // The part of each gradient component the gain/bias-invariant match can use: its variance over the
+      // window less what a linear function of the intensity explains. (A shifted linear ramp is the same ramp
+      // with another bias: NCC cannot see the shift, however steep the ramp.)
+      auto usable = [&](const cv::Mat& m, const cv::Mat& mm, const cv::Mat& mg) {
+        const float g = m.at<float>(y, x);
+        const float var = std::max(mm.at<float>(y, x) - g * g, 0.f);
+        const float cov = mg.at<float>(y, x) - g * mi.at<float>(y, x);
+        return vi > 1e-12f ? std::max(var - cov * cov / vi, 0.f) : 0.f;
+      };
+      const float e = 0.5f * (usable(mx, mxx, mxi) + usable(my, myy, myi));
+      sigma.at<float>(y, x) = std::min(6e4f, 1.f / std::sqrt(std::max(e, 1e-12f)));
+    }
   cv::Mat half;
   sigma.convertTo(half, CV_16F);
   return half;

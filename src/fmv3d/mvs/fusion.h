@@ -26,9 +26,11 @@
 //   - z_i / (f_i · |cos θ_i|): one pixel's footprint on the surface (depth z_i, focal f_i, θ_i the angle
 //     between the ray and the normal): distance and grazing views make it large;
 //   - p_i: how precisely a matching window can be located there, in pixels: the image-noise limit of
-//     window matching (Cramér–Rao), ∝ 1 / sqrt(mean squared grey gradient over the window) — weak or
-//     blurred texture makes it large (TexturePrecisionMap; the unknown noise level cancels below).
-//     Without a texture map p_i = 1.
+//     window matching (Cramér–Rao), ∝ 1 / sqrt(E) with E the gradient energy over the window that a gain-
+//     and bias-invariant match (NCC) can use: the gradients' variance less the part a linear function of the
+//     intensity explains (a smooth ramp shifted is the same ramp with another bias, so it fixes nothing).
+//     Weak, blurred or ramp-like texture makes p_i large (TexturePrecisionMap; the unknown noise level
+//     cancels below). Without a texture map p_i = 1.
 // Then Λ = Σ_i (I − d_i d_iᵀ) / σ_i² and σ_n = sqrt(nᵀ Λ⁻¹ n), which also grows when the view directions
 // are close together (small triangulation angle). Points whose σ_n exceeds max_relative_uncertainty times the
 // median σ_n of the cloud are dropped: surface resolved an order of magnitude worse than the scene's typical
@@ -97,8 +99,8 @@ double NormalUncertainty(const Eigen::Vector3d& X, const Eigen::Vector3d& n,
                          const std::vector<const ViewGeometry*>& views, const std::vector<double>& pixel_sigma = {});
 
 // p (see above) per pixel of a colour image (CV_8UC3), for matching windows of the given radius, up to a
-// common factor: 1 / sqrt(mean over the window of (g_x² + g_y²) / 2), g in grey levels (0..1) per pixel.
-// CV_16F.
+// common factor: 1 / sqrt(E), E = mean over x and y of [var(g) − cov(g, I)² / var(I)] over the window (g the
+// grey gradient component, I the grey level, 0..1); capped at 6e4 (flat windows). CV_16F.
 cv::Mat TexturePrecisionMap(const cv::Mat& color, int radius_px);
 
 io::OrientedPointCloud FuseDepthMaps(const std::map<uint32_t, FusionView>& views, const FusionOptions& options,
