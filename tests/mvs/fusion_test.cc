@@ -5,6 +5,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <filesystem>
 #include <limits>
 #include <map>
 #include <random>
@@ -12,7 +13,9 @@
 #include <opencv2/imgproc.hpp>
 
 #include "fmv3d/core/error.h"
+#include "fmv3d/io/point_cloud.h"
 #include "fmv3d/mvs/fusion.h"
+#include "test_util.h"
 
 namespace fmv3d::mvs {
 namespace {
@@ -321,6 +324,38 @@ TEST(TexturePrecisionMap, SharpTextureLocatesBetterThanFaintTexture) {
   const double steep = centre(TexturePrecisionMap(ramp, 5));
   std::printf("ramp of 3 grey levels per pixel: %.1f\n", steep);
   EXPECT_GT(steep, 100 * weak);
+}
+
+// The streaming variant writes exactly the points the in-memory fusion returns (with the filter at work).
+TEST(Fusion, StreamingToPlyMatchesTheInMemoryCloud) {
+  const double offsets[5][2] = {{0, 0}, {1.5, 1.5}, {-1.5, 1.5}, {1.5, -1.5}, {-1.5, -1.5}};
+  std::map<uint32_t, FusionView> views;
+  for (uint32_t id = 1; id <= 5; ++id) {
+    std::vector<uint32_t> nbs;
+    for (uint32_t j = 1; j <= 5; ++j)
+      if (j != id) nbs.push_back(j);
+    views.emplace(id, CliffView(NadirView(id, offsets[id - 1][0], offsets[id - 1][1]), nbs, id));
+  }
+  FusionStats mem_st, ply_st;
+  const io::OrientedPointCloud mem = FuseDepthMaps(views, FusionOptions{}, &mem_st);
+  test::TempDir dir("fusion_ply");
+  const auto path = dir.path() / "fused.ply";
+  const size_t n = FuseDepthMapsToPly(views, FusionOptions{}, path, &ply_st);
+  EXPECT_FALSE(std::filesystem::exists(path.string() + ".unfiltered"));
+  const io::OrientedPointCloud ply = io::ReadPointCloudPly(path);
+  ASSERT_EQ(n, mem.size());
+  ASSERT_EQ(ply.size(), mem.size());
+  ASSERT_GT(mem_st.rejected_uncertainty, 0u);
+  EXPECT_EQ(ply_st.rejected_uncertainty, mem_st.rejected_uncertainty);
+  EXPECT_EQ(ply_st.edge_pixels, mem_st.edge_pixels);
+  EXPECT_EQ(ply_st.views_histogram, mem_st.views_histogram);
+  EXPECT_EQ(ply_st.median_uncertainty, mem_st.median_uncertainty);
+  for (size_t i = 0; i < mem.size(); ++i) {
+    ASSERT_EQ(ply.positions[i], mem.positions[i].cast<float>().cast<double>()) << i;
+    ASSERT_EQ(ply.normals[i], mem.normals[i]) << i;
+    ASSERT_EQ(ply.colors[i], mem.colors[i]) << i;
+    ASSERT_EQ(ply.visibility[i], mem.visibility[i]) << i;
+  }
 }
 
 TEST(Fusion, UncertaintyOptionIsChecked) {

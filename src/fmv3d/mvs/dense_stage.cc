@@ -178,11 +178,11 @@ nlohmann::json RunDenseStage(const fs::path& workspace, const DenseStageOptions&
     }
   }
   FusionStats fstats;
-  const io::OrientedPointCloud cloud = FuseDepthMaps(fviews, options.fusion, &fstats);
+  // Straight to the PLY: the cloud is never held in memory (the largest part of the stage's memory otherwise).
+  const size_t n_points = FuseDepthMapsToPly(std::move(fviews), options.fusion, dense_dir / "fused.ply", &fstats);
   fviews.clear();
-  if (cloud.empty())
+  if (n_points == 0)
     spdlog::warn("dense: fusion produced no points (no pixel was consistent in {} views)", options.fusion.min_views);
-  io::WritePointCloudPly(cloud, dense_dir / "fused.ply");
   const double fuse_seconds = seconds_since(t_fuse);
 
   nlohmann::json hist = nlohmann::json::object();
@@ -191,7 +191,7 @@ nlohmann::json RunDenseStage(const fs::path& workspace, const DenseStageOptions&
     hist[std::to_string(k)] = n;
     mean_views += static_cast<double>(k) * n;
   }
-  if (!cloud.empty()) mean_views /= static_cast<double>(cloud.size());
+  if (n_points > 0) mean_views /= static_cast<double>(n_points);
   const auto& g0 = geoms.at(usable.front());
   nlohmann::json report = {
       {"registered_images", rec.images.size()},
@@ -201,7 +201,7 @@ nlohmann::json RunDenseStage(const fs::path& workspace, const DenseStageOptions&
       {"max_size", options.max_size},
       {"max_sources", options.max_sources},
       {"geometric_pass", options.geometric},
-      {"points", cloud.size()},
+      {"points", n_points},
       {"valid_depth_fraction", total_pixels ? static_cast<double>(valid_pixels) / total_pixels : 0.0},
       {"fusion",
        {{"candidates", fstats.candidates},
@@ -226,7 +226,7 @@ nlohmann::json RunDenseStage(const fs::path& workspace, const DenseStageOptions&
         {"total", seconds_since(t_start)}}},
       {"output", (dense_dir / "fused.ply").string()}};
   core::WriteJson(report_dir / "dense.json", report);
-  spdlog::info("dense: {} points from {} views ({} skipped) in {:.1f} s", cloud.size(), usable.size(),
+  spdlog::info("dense: {} points from {} views ({} skipped) in {:.1f} s", n_points, usable.size(),
                skipped.size(), seconds_since(t_start));
   return report;
 }

@@ -41,6 +41,7 @@
 #pragma once
 
 #include <cstdint>
+#include <filesystem>
 #include <map>
 #include <opencv2/core.hpp>
 #include <vector>
@@ -105,5 +106,11 @@ cv::Mat TexturePrecisionMap(const cv::Mat& color, int radius_px);
 
 io::OrientedPointCloud FuseDepthMaps(const std::map<uint32_t, FusionView>& views, const FusionOptions& options,
                                      FusionStats* stats = nullptr);
+
+// The same points written straight to a PLY file (io::WritePointCloudPly's layout) without holding the cloud:
+// the points go to a scratch file next to `ply` first, then the kept ones are copied behind the header. The
+// maps are eroded in place (pass them with std::move). Returns the number of points written.
+size_t FuseDepthMapsToPly(std::map<uint32_t, FusionView> views, const FusionOptions& options,
+                          const std::filesystem::path& ply, FusionStats* stats = nullptr);
 
 }  // namespace fmv3d::mvs
