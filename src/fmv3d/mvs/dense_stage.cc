@@ -9,7 +9,6 @@
 #include "fmv3d/core/files.h"
 #include "fmv3d/core/logging.h"
 #include "fmv3d/io/colmap_model.h"
-#include "fmv3d/io/point_cloud.h"
 
 namespace fmv3d::mvs {
 
