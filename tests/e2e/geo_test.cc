@@ -32,6 +32,10 @@ TEST(E2eGeo, KlvFlightGeoreferencedDsm) {
       " --attitude-noise 1 --seed 3 -o " + synth);
   Cli("-q frames " + synth + "/flight.ts -o " + ws);
   ASSERT_TRUE(std::filesystem::exists(dir / "ws/frames/telemetry.json"));
+  // The KLV sensor HFOV gives the focal prior (truth: 554.26 px; ST 0601 stores the HFOV to 0.003°).
+  const auto frames = core::ReadJson(dir / "ws/frames/frames.json");
+  EXPECT_EQ(frames.at("cameras").at(0).at("prior_source").get<std::string>(), "telemetry-hfov");
+  EXPECT_NEAR(frames.at("cameras").at(0).at("prior").at("f").get<double>(), 554.26, 0.5);
   Cli("-q features " + ws);
   Cli("-q match " + ws);
   Cli("-q sparse " + ws);

@@ -105,7 +105,7 @@ struct GeorefCase {
 
 // attitude_noise < 0: no attitude in the telemetry; heading_offset: a systematic heading error (degrees).
 void MakeGeorefCase(GeorefCase* g, int n, double noise, bool straight, int outlier, double attitude_noise = -1,
-                    double heading_offset = 0, double radius = 200) {
+                    double heading_offset = 0, double radius = 200, double bend = 0) {
   std::mt19937_64 rng(5);
   std::normal_distribution<double> N(0, 1);
   std::mt19937_64 rng_att(9);  // separate, so positions are the same with and without attitude
@@ -135,6 +135,7 @@ void MakeGeorefCase(GeorefCase* g, int n, double noise, bool straight, int outli
     f.frame_index = k;
     Eigen::Vector3d noisy = c + noise * Eigen::Vector3d(N(rng), N(rng), N(rng));
     if (k == outlier) noisy += Eigen::Vector3d(150, -80, 40);
+    if (10 * k >= 7 * n) noisy += Eigen::Vector3d(bend, 0, 0);  // the model's last 30% is not where the flight was
     const GeoPoint p = frame.ToGeodetic(noisy);
     f.telemetry = {{"time", k * 0.1}, {"source", "ST0601"}, {"sensor_latitude", p.lat}, {"sensor_longitude", p.lon},
                    {"sensor_altitude_hae", p.alt}, {"sensor_altitude_msl", p.alt}};
@@ -198,6 +199,21 @@ TEST(Georef, NoisyTelemetryWithAnOutlier) {
   EXPECT_GE(j["inliers"].get<int>(), n - 3);
   EXPECT_NEAR(j["residuals"]["sigma_per_axis_m"].get<double>(), 3.0, 0.6);
   EXPECT_LT(CentreRms(g), 1.5);
+  EXPECT_TRUE(j["consistent_with_telemetry"].get<bool>());
+  EXPECT_TRUE(ReadGeoref(g.dir.path()).consistent_with_telemetry);
+}
+
+// A reconstruction whose trajectory does not have the flight's shape (here: its last 30% is 60 m off, as a
+// telephoto model with a wrong relative pose is) cannot be georeferenced by a similarity: georef says so.
+TEST(Georef, ModelThatDisagreesWithTheFlightIsFlagged) {
+  GeorefCase g;
+  MakeGeorefCase(&g, 40, 3.0, false, -1, -1, 0, 200, 60);
+  GeorefOptions o;
+  o.origin = kOrigin;
+  const auto j = RunGeorefStage(g.dir.path(), o);
+  EXPECT_FALSE(j["consistent_with_telemetry"].get<bool>()) << j["fit_fraction"];
+  EXPECT_LT(j["fit_fraction"].get<double>(), 0.8);
+  EXPECT_FALSE(ReadGeoref(g.dir.path()).consistent_with_telemetry);
 }
 
 // The fusion weighs each source by its information: precise positions on a wide orbit are not pulled off by

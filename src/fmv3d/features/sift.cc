@@ -119,9 +119,14 @@ FeatureSet ExtractSift(const cv::Mat& image, const SiftOptions& options) {
   for (size_t i = 0; i < kps.size(); ++i) {
     const auto& k = kps[i];
     auto& o = out.keypoints[i];
-    // OpenCV pixel centres are integers; ours are at +0.5. Map through the extraction scale.
-    o.x = static_cast<float>((k.pt.x + 0.5) / sx);
-    o.y = static_cast<float>((k.pt.y + 0.5) / sy);
+    // OpenCV pixel centres are integers; ours are at +0.5. OpenCV's SIFT also reports every keypoint 0.25 px
+    // right and down of where it is: it doubles the image with a centre-aligned resize (doubled pixel X sits at
+    // X/2 − 0.25) but halves coordinates as X/2, and its coarser octaves subsample that grid. A shift common to
+    // all images costs nothing in reprojection error but rotates every camera alike (test
+    // KeypointsHaveNoCommonOffset). Then map through the extraction scale.
+    constexpr double kOpenCvSiftOffset = 0.25;
+    o.x = static_cast<float>((k.pt.x + 0.5 - kOpenCvSiftOffset) / sx);
+    o.y = static_cast<float>((k.pt.y + 0.5 - kOpenCvSiftOffset) / sy);
     o.scale = static_cast<float>(0.5 * k.size / std::sqrt(sx * sy));
     o.orientation = static_cast<float>(k.angle * M_PI / 180.0);
     const int c = std::clamp(static_cast<int>(o.x), 0, image.cols - 1);

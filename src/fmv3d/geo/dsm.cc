@@ -213,6 +213,10 @@ nlohmann::json RunDsmStage(const fs::path& ws, const DsmOptions& o) {
   j["crs"] = g.utm.Name();
   j["vertical_datum"] = g.vertical_datum;
   j["valid_cells"] = valid;
+  j["georef_consistent_with_telemetry"] = g.consistent_with_telemetry;
+  if (!g.consistent_with_telemetry)
+    spdlog::warn("dsm: the georeference disagrees with the telemetry (see geo/georef.json): heights and "
+                 "positions of this DSM are not reliable");
   j["height_range_m"] = {hmin, hmax};
   const LocalFrame frame(g.origin, g.utm);
   const GeoPoint centre = frame.UtmToGeodetic({grid.min_e + 0.5 * grid.width * gsd, grid.max_n - 0.5 * grid.height * gsd, 0});

@@ -2,7 +2,11 @@
 
 #include <fmt/format.h>
 
+#include <algorithm>
 #include <cmath>
+#include <limits>
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
 #include <optional>
 
 #include "fmv3d/core/error.h"
@@ -38,9 +42,11 @@ struct Stats {
 // error, sampled uniformly over the true mesh inside truth.json's "bounds" (the modelled area, not synth's
 // backdrop ring), whether or not the reconstruction has a point there. This isolates the georeference
 // (translation, rotation, scale) from the dense/sparse surface noise, which "points" and "dsm" measure.
+// S: the least-squares similarity of the georeferenced cameras onto the true ones (workspace ENU); *fit_rms its
+// residual RMS.
 template <typename ToWs>
-nlohmann::json SurfaceError(const core::Reconstruction& est, const core::Reconstruction& tru,
-                            const io::TexturedMesh& mesh, const nlohmann::json& truth, const ToWs& to_ws) {
+core::Sim3 GeorefErrorSimilarity(const core::Reconstruction& est, const core::Reconstruction& tru, const ToWs& to_ws,
+                                 double* fit_rms) {
   std::vector<Eigen::Vector3d> src, dst;
   for (const auto& [id, img] : est.images)
     if (const core::Image* t = tru.FindImageByName(img.name)) src.push_back(img.pose.Centre()), dst.push_back(to_ws(t->pose.Centre()));
@@ -49,6 +55,14 @@ nlohmann::json SurfaceError(const core::Reconstruction& est, const core::Reconst
     throw Error("evaluate-geo: fewer than 3 non-collinear cameras match the truth; no surface error");
   Stats fit;
   for (size_t i = 0; i < src.size(); ++i) fit.Add((s.Apply(src[i]) - dst[i]).norm());
+  *fit_rms = fit.Rms();
+  return s;
+}
+
+template <typename ToWs>
+nlohmann::json SurfaceError(const core::Reconstruction& est, const core::Reconstruction& tru, const core::Sim3& s,
+                            double fit_rms, const io::TexturedMesh& mesh, const nlohmann::json& truth,
+                            const ToWs& to_ws) {
   // Region: truth.json bounds (world frame of the truth), else the whole mesh.
   Eigen::AlignedBox3d region;
   if (truth.contains("bounds")) {
@@ -95,7 +109,11 @@ nlohmann::json SurfaceError(const core::Reconstruction& est, const core::Reconst
           {"vertical_rms_m", ev.Rms()},
           {"vertical_mean_m", ev.Mean()},
           {"max_m", worst},
-          {"cameras_fit_rms_m", fit.Rms()},
+          {"cameras_fit_rms_m", fit_rms},
+          // The georeference's own error, as S: its rotation, the part of it that tilts the vertical, scale.
+          {"rotation_error_deg", Eigen::AngleAxisd(s.q).angle() * 180 / M_PI},
+          {"tilt_error_deg", std::acos(std::clamp((s.q * Eigen::Vector3d::UnitZ()).z(), -1.0, 1.0)) * 180 / M_PI},
+          {"scale_error", s.s - 1},
           {"maps", "error of true point X = S^-1(X) - X, S = similarity of geo/sparse_enu camera centres onto the true ones"}};
 }
 
@@ -191,19 +209,24 @@ nlohmann::json EvaluateGeoAgainstSynth(const fs::path& ws, const fs::path& synth
     }
   }
   io::TexturedMesh mesh = io::ReadObj(synth / "scene.obj", false);
-  j["surface"] = SurfaceError(est, tru, mesh, truth, to_ws);
+  double fit_rms = 0;
+  const core::Sim3 s_err = GeorefErrorSimilarity(est, tru, to_ws, &fit_rms);
+  const core::Sim3 s_inv = s_err.Inverse();
+  j["surface"] = SurfaceError(est, tru, s_err, fit_rms, mesh, truth, to_ws);
   for (auto& v : mesh.vertices) v = to_ws(v);
   // Points against the true mesh.
   const geometry::MeshDistance dist(mesh);
-  Stats pd;
+  Stats pd, ps;
   std::vector<double> all;
   for (const auto& [id, p] : est.points) {
-    const double d = dist.Closest(p.xyz).distance;
-    pd.Add(d);
-    all.push_back(d);
+    const auto c = dist.Closest(p.xyz);
+    pd.Add(c.distance);
+    if (c.distance < 0.05 * building) ps.Add(c.signed_distance);  // the bias of the points near the surface
+    all.push_back(c.distance);
   }
   std::sort(all.begin(), all.end());
-  j["points"] = {{"count", pd.n}, {"rms_m", pd.Rms()}, {"median_m", all.empty() ? 0.0 : all[all.size() / 2]}};
+  j["points"] = {{"count", pd.n}, {"rms_m", pd.Rms()}, {"median_m", all.empty() ? 0.0 : all[all.size() / 2]},
+                 {"signed_mean_m", ps.Mean()}, {"signed_mean_of", "points within 5% of H of the true mesh; + outside"}};
   // DSM.
   const fs::path dsm_path = ws / "geo" / "dsm.tif";
   if (fs::exists(dsm_path)) {
@@ -214,28 +237,72 @@ nlohmann::json EvaluateGeoAgainstSynth(const fs::path& ws, const fs::path& synth
     fg.EnuToUtm(&ts.vertices);
     for (const auto& f : mesh.faces) ts.triangles.emplace_back(f.v[0], f.v[1], f.v[2]);
     const cv::Mat th = RasteriseDsm(ts, grid);
+    // Cells are compared where the true surface is flat (within 1% of H) over a disc of radius `margin`
+    // (3% of H, at least one cell) around them. A height step (a wall) has no single true height in its cell,
+    // and the cells beside it take the wall's full height from any horizontal offset of the reconstruction
+    // (the georeference alone is ~0.5 m off horizontally) or from the mesh rounding the wall's foot: there a
+    // height difference measures the offset, not the DSM's heights (the usual breakline exclusion).
     const double flat = std::max(0.01 * building, 0.05);
-    Stats dz;
+    const double margin = std::max(grid.gsd, 0.03 * building);
+    const int k = static_cast<int>(std::ceil(margin / grid.gsd));
+    // Lowest and highest truth over the disc; a cell without truth (NaN) in the disc makes them ∓inf.
+    constexpr float kInf = std::numeric_limits<float>::infinity();
+    cv::Mat t_min = th.clone(), t_max = th.clone();
+    t_min.setTo(-kInf, th != th);
+    t_max.setTo(kInf, th != th);
+    const cv::Mat disc = cv::getStructuringElement(cv::MORPH_ELLIPSE, cv::Size(2 * k + 1, 2 * k + 1));
+    cv::erode(t_min, t_min, disc, cv::Point(-1, -1), 1, cv::BORDER_CONSTANT, -kInf);
+    cv::dilate(t_max, t_max, disc, cv::Point(-1, -1), 1, cv::BORDER_CONSTANT, kInf);
+    Stats dz, dz_model;
     size_t seen = 0;
-    for (int r = 1; r + 1 < h.rows; ++r)
-      for (int c = 1; c + 1 < h.cols; ++c) {
+    std::vector<double> abs_dz;
+    // Signed error per compared cell, for dsm_error.png: blue below the truth, red above, full colour at 1% of
+    // the building height; grey where seen but not compared (near a height step), black where unseen.
+    cv::Mat err_png(h.rows, h.cols, CV_8UC3, cv::Scalar(0, 0, 0));
+    for (int r = 0; r < h.rows; ++r)
+      for (int c = 0; c < h.cols; ++c) {
         const float v = h.at<float>(r, c);
         if (!std::isfinite(v)) continue;
         ++seen;
-        float lo = INFINITY, hi = -INFINITY;
-        for (int dr = -1; dr <= 1; ++dr)
-          for (int dc = -1; dc <= 1; ++dc) {
-            const float t = th.at<float>(r + dr, c + dc);
-            lo = std::min(lo, t), hi = std::max(hi, t);
-          }
+        err_png.at<cv::Vec3b>(r, c) = cv::Vec3b(96, 96, 96);
+        const float lo = t_min.at<float>(r, c), hi = t_max.at<float>(r, c);
         if (!std::isfinite(lo) || !std::isfinite(hi) || hi - lo > flat) continue;
-        dz.Add(v - th.at<float>(r, c));
+        const double e = v - th.at<float>(r, c);
+        dz.Add(e);
+        abs_dz.push_back(std::abs(e));
+        // The part of e that is the reconstruction's own (not the georeference's): minus the height error S⁻¹
+        // makes at this true surface point.
+        const Eigen::Vector2d en = grid.CellCentre(r, c);
+        const Eigen::Vector3d xw = fg.ToEnu(fg.UtmToGeodetic({en.x(), en.y(), th.at<float>(r, c)}));
+        dz_model.Add(e - (s_inv.Apply(xw) - xw).z());
+        const double t = std::clamp(e / (0.01 * building), -1.0, 1.0);
+        const auto lift = [](double a) { return static_cast<uchar>(255 * (1 - std::abs(a))); };
+        err_png.at<cv::Vec3b>(r, c) = t < 0 ? cv::Vec3b(255, lift(t), lift(t)) : cv::Vec3b(lift(t), lift(t), 255);
       }
+    const auto pct = [&](double q) {
+      if (abs_dz.empty()) return 0.0;
+      const size_t k = std::min(abs_dz.size() - 1, static_cast<size_t>(q * abs_dz.size()));
+      std::nth_element(abs_dz.begin(), abs_dz.begin() + k, abs_dz.end());
+      return abs_dz[k];
+    };
+    const double p50 = pct(0.5), p90 = pct(0.9);
+    core::EnsureDirectory(ws / "report");
+    core::WriteAtomically(ws / "report" / "dsm_error.png", [&](const fs::path& tmp) {
+      if (!cv::imwrite(tmp.string() + ".png", err_png)) throw Error((ws / "report" / "dsm_error.png").string() + ": cannot write");
+      fs::rename(tmp.string() + ".png", tmp);
+    });
     j["dsm"] = {{"cells_seen", seen},
                 {"cells_compared", dz.n},
                 {"flat_tolerance_m", flat},
+                {"step_margin_m", margin},
+                {"compared", "cells whose true surface is flat within flat_tolerance_m over a disc of step_margin_m"},
                 {"height_rms_m", dz.Rms()},
                 {"height_bias_m", dz.Mean()},
+                {"abs_error_p50_m", p50},
+                {"height_rms_of_model_m", dz_model.Rms()},
+                {"height_rms_of_model_percent_of_building", 100 * dz_model.Rms() / building},
+                {"abs_error_p90_m", p90},
+                {"error_map", "report/dsm_error.png (blue below, red above the truth, saturated at 1% of H)"},
                 {"height_rms_without_bias_m", dz.CentredRms()},
                 {"height_rms_percent_of_building", 100 * dz.Rms() / building},
                 {"height_rms_without_bias_percent_of_building", 100 * dz.CentredRms() / building}};

@@ -290,6 +290,7 @@ Georef ReadGeoref(const fs::path& ws) {
     g.utm.zone = j.at("utm").at("zone").get<int>();
     g.utm.north = j.at("utm").at("north").get<bool>();
     if (g.utm.zone < 1 || g.utm.zone > 60 || !(g.sparse_to_enu.s > 0)) throw Error("bad values");
+    g.consistent_with_telemetry = j.value("consistent_with_telemetry", true);
     return g;
   } catch (const std::exception& e) {
     throw Error(p.string() + ": malformed georef (" + e.what() + ") — run `fmv3d georef` again");
@@ -535,6 +536,16 @@ nlohmann::json RunGeorefStage(const fs::path& ws, const GeorefOptions& o) {
   j["fit"] = track_json;
   j["fit"]["from"] = use_track ? "every telemetry packet vs the model trajectory at its time" : "keyframes";
   j["expected_translation_error_m"] = sigma * std::sqrt(3.0 / n_eff);
+  // A model whose trajectory has the telemetry's shape fits nearly every packet (synthetic flights: 98%); when
+  // a large part does not fit, the reconstruction's shape is wrong (too little parallax, a telephoto pair's
+  // ambiguous pose) and every product placed by this similarity inherits it. Say so, loudly, in the file too.
+  const double fit_fraction = pairs.empty() ? 0.0 : static_cast<double>(fit_in) / pairs.size();
+  j["consistent_with_telemetry"] = fit_fraction >= 0.8;
+  j["fit_fraction"] = fit_fraction;
+  if (fit_fraction < 0.8)
+    spdlog::warn("georef: only {:.0f}% of the telemetry fits the model's trajectory: the reconstruction's shape "
+                 "disagrees with the flight (too little parallax?); georeferenced products are not reliable",
+                 100 * fit_fraction);
   const UtmZone zone = frame.utm_zone();
   j["utm"] = {{"zone", zone.zone}, {"north", zone.north}, {"epsg", zone.Epsg()}, {"name", zone.Name()}};
   j["proj"] = {{"enu_from_wgs84", frame.EnuPipeline()}, {"utm_from_wgs84", frame.UtmPipeline()},

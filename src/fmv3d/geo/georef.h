@@ -50,6 +50,7 @@ struct Georef {
   std::string vertical_datum;  // "WGS84 ellipsoid" or "MSL"
   core::Sim3 sparse_to_enu;
   UtmZone utm;
+  bool consistent_with_telemetry = true;  // false: the model's trajectory disagrees with the telemetry
 };
 // Reads WS/geo/georef.json; throws fmv3d::Error ("WS: no geo/georef.json — run `fmv3d georef` first").
 Georef ReadGeoref(const std::filesystem::path& workspace);

@@ -110,6 +110,28 @@ std::vector<fs::path> ExpandInputs(const std::vector<fs::path>& inputs) {
 }
 
 namespace {
+// With no better prior than the guess, the telemetry's horizontal field of view (KLV sensor HFOV) of the camera's
+// frames gives the focal: f = (w / 2) / tan(HFOV / 2) — the median over frames. The mapper then skips its focal
+// scan and refines this value. Zoom during the video changes the HFOV; one camera per video keeps one focal,
+// so that is only warned about.
+void FocalFromTelemetryHfov(const FramesIndex& index, uint32_t camera_id, core::Camera* cam, std::string* source) {
+  std::vector<double> hfov;
+  for (const auto& f : index.frames)
+    if (f.camera_id == camera_id && f.telemetry.is_object() && f.telemetry.contains("horizontal_fov") &&
+        f.telemetry["horizontal_fov"].is_number()) {
+      const double h = f.telemetry["horizontal_fov"].get<double>();
+      if (h > 0.01 && h < 170) hfov.push_back(h);
+    }
+  if (hfov.empty()) return;
+  std::sort(hfov.begin(), hfov.end());
+  const double median = hfov[hfov.size() / 2];
+  if (hfov.back() > 1.05 * hfov.front())
+    spdlog::warn("camera {}: the telemetry HFOV changes from {:.3f}° to {:.3f}° (zoom); the focal prior uses the "
+                 "median, {:.3f}°", camera_id, hfov.front(), hfov.back(), median);
+  cam->f = 0.5 * cam->width / std::tan(0.5 * median * M_PI / 180) / cam->aspect;  // the horizontal focal is f · aspect
+  *source = "telemetry-hfov";
+}
+
 // A video's own telemetry: KLV data streams (MISB ST 0601 / EG0104) or a DJI .SRT beside it. Telemetry is an
 // optional extra: a damaged stream costs a warning, never the frames.
 std::vector<TelemetrySample> LoadTelemetry(const std::filesystem::path& video) {
@@ -352,6 +374,7 @@ FramesIndex IngestFrames(const std::vector<fs::path>& inputs, const IngestOption
     // Non-square pixels (e.g. DV/SD video, SAR 10:11): a pixel is pixel_aspect times wider than tall, so the
     // horizontal focal in pixels is f / pixel_aspect. A calibration already measured it.
     if (groups[i].pixel_aspect != 1.0 && source.rfind("calibration:", 0) != 0) cam.aspect /= groups[i].pixel_aspect;
+    if (source == "guess") FocalFromTelemetryHfov(index, static_cast<uint32_t>(i + 1), &cam, &source);
     cam.Validate();
     index.cameras[i].camera = cam;
     index.cameras[i].prior_source = source;

@@ -23,6 +23,10 @@ nlohmann::json SparseEvaluation::ToJson() const {
           {"max_centre_error_percent_of_extent", 100 * max_centre_error_fraction},
           {"median_relative_rotation_error_deg", median_rotation_error_deg},
           {"focal_relative_error_percent", 100 * focal_relative_error},
+          {"systematic_rotation_error_deg", {systematic_rotation_deg.x(), systematic_rotation_deg.y(), systematic_rotation_deg.z()}},
+          {"systematic_rotation_error_definition",
+           "mean over cameras of each camera's absolute rotation error (after the similarity), in its own axes: "
+           "x = pitch (image rows), y = yaw (columns), z = roll"},
           {"alignment", {{"scale", alignment.s},
                          {"q_wxyz", {alignment.q.w(), alignment.q.x(), alignment.q.y(), alignment.q.z()}},
                          {"t", {alignment.t.x(), alignment.t.y(), alignment.t.z()}}}}};
@@ -76,6 +80,16 @@ SparseEvaluation EvaluateSparse(const core::Reconstruction& estimate, const core
   ev.centre_rmse_fraction = ev.extent > 0 ? ev.centre_rmse / ev.extent : 0;
   ev.max_centre_error_fraction = ev.extent > 0 ? ev.max_centre_error_fraction / ev.extent : 0;
   ev.median_rotation_error_deg = MedianRelativeRotationErrorDeg(pe, pt);
+  // A rotation error every camera shares in its own axes (e.g. all pitched alike) does not show in the relative
+  // errors above, yet it moves the surface the views triangulate (on an orbit: up or down).
+  Eigen::Vector3d sys = Eigen::Vector3d::Zero();
+  for (size_t i = 0; i < pe.size(); ++i) {
+    // world-to-camera of ours in the truth's frame: R_est · q_align⁻¹
+    const Eigen::Quaterniond aligned = pe[i].q * ev.alignment.q.conjugate();
+    const Eigen::AngleAxisd d(pt[i].q * aligned.conjugate());  // camera-frame error rotation
+    sys += d.angle() * d.axis();
+  }
+  ev.systematic_rotation_deg = sys / static_cast<double>(pe.size()) * 180.0 / M_PI;
   for (const auto& [ours, theirs] : camera_match) {
     const double fe = estimate.cameras.at(ours).f, ft = truth.cameras.at(theirs).f;
     if (ft > 0) ev.focal_relative_error = std::max(ev.focal_relative_error, std::abs(fe - ft) / ft);

@@ -26,6 +26,7 @@ struct SparseEvaluation {
   double median_rotation_error_deg = 0;
   double max_centre_error_fraction = 0;
   double focal_relative_error = 0;  // worst over matched cameras
+  Eigen::Vector3d systematic_rotation_deg = Eigen::Vector3d::Zero();  // see ToJson
   core::Sim3 alignment;             // ours → truth
   nlohmann::json ToJson() const;
 };

@@ -75,6 +75,7 @@ class ModelBuilder {
   const std::map<uint32_t, std::string>& fail_reasons() const { return fail_reason_; }
   std::pair<uint32_t, uint32_t> init_pair() const { return {gauge1_, gauge2_}; }
   int num_global_ba() const { return num_global_ba_; }
+  int num_relocalised() const { return num_relocalised_; }
 
  private:
   Eigen::Vector2d Normalized(const core::Camera& cam, const Eigen::Vector2d& uv) const {
@@ -102,6 +103,10 @@ class ModelBuilder {
   int FilterPoints(const std::set<uint64_t>* subset);
   int VisiblePoints(uint32_t image_id, double* score) const;
   bool TryRegister(uint32_t image_id);
+  // 2D–3D correspondences of an image with the current model: keypoints, points, (keypoint, point id) pairs.
+  void Correspondences2d3d(uint32_t image_id, std::vector<Eigen::Vector2d>* p2, std::vector<Eigen::Vector3d>* p3,
+                           std::vector<std::pair<uint32_t, uint64_t>>* kps) const;
+  int RelocaliseImages();
   void LocalBundleAdjust(uint32_t image_id);
   BundleAdjustmentSummary GlobalBundleAdjust(bool final_pass, bool principal_point = false);
   void TryPrincipalPoint();
@@ -119,6 +124,7 @@ class ModelBuilder {
   double tri_min_angle_deg_ = 0, filter_min_angle_deg_ = 0;  // set in the constructor body
   const MapperOptions& opt_;
   std::set<uint32_t> pool_;
+  int num_relocalised_ = 0;
   Timings* t_;
   core::Reconstruction rec_;
   uint32_t gauge1_ = 0, gauge2_ = 0;
@@ -606,22 +612,29 @@ BundleAdjustmentOptions ModelBuilder::BaOptions() const {
   return o;
 }
 
+void ModelBuilder::Correspondences2d3d(uint32_t image_id, std::vector<Eigen::Vector2d>* p2,
+                                       std::vector<Eigen::Vector3d>* p3,
+                                       std::vector<std::pair<uint32_t, uint64_t>>* kps) const {
+  const MapperImage& mi = *images_.at(image_id);
+  for (uint32_t kp = 0; kp < mi.keypoints.size(); ++kp) {
+    std::set<int64_t> pids;
+    for (const auto& c : graph_.Correspondences(image_id, kp)) {
+      const int64_t pid = PointOf(c);
+      if (pid == core::kNoPoint3D || !pids.insert(pid).second) continue;
+      p2->push_back(mi.keypoints[kp]);
+      p3->push_back(rec_.points.at(static_cast<uint64_t>(pid)).xyz);
+      kps->emplace_back(kp, static_cast<uint64_t>(pid));
+    }
+  }
+}
+
 bool ModelBuilder::TryRegister(uint32_t image_id) {
   const auto start = Clock::now();
   const MapperImage& mi = *images_.at(image_id);
   std::vector<Eigen::Vector2d> p2;
   std::vector<Eigen::Vector3d> p3;
   std::vector<std::pair<uint32_t, uint64_t>> kps;  // (keypoint, point) per correspondence
-  for (uint32_t kp = 0; kp < mi.keypoints.size(); ++kp) {
-    std::set<int64_t> pids;
-    for (const auto& c : graph_.Correspondences(image_id, kp)) {
-      const int64_t pid = PointOf(c);
-      if (pid == core::kNoPoint3D || !pids.insert(pid).second) continue;
-      p2.push_back(mi.keypoints[kp]);
-      p3.push_back(rec_.points.at(static_cast<uint64_t>(pid)).xyz);
-      kps.emplace_back(kp, static_cast<uint64_t>(pid));
-    }
-  }
+  Correspondences2d3d(image_id, &p2, &p3, &kps);
   core::Camera cam = rec_.cameras.count(mi.camera_id) ? rec_.cameras.at(mi.camera_id)
                                                        : input_.cameras.at(mi.camera_id).camera;
   geometry::AbsolutePoseOptions po;
@@ -642,6 +655,71 @@ bool ModelBuilder::TryRegister(uint32_t image_id) {
       AddObservation(kps[i].second, image_id, kps[i].first);
   fail_reason_.erase(image_id);
   return true;
+}
+
+// An image registered early, while its true neighbours were not yet in the model, can sit at a wrong pose that
+// wrong correspondences support: a symmetric building seen from the opposite side of an orbit, repeated
+// texture. Its true neighbours, registered later, offer 2D–3D correspondences that the wrong pose cannot use.
+// A fresh absolute pose over all its correspondences finds them: when it is a different pose and explains
+// clearly more correspondences than the current one (same pixel threshold for both: 1.5x + 20), the image is
+// re-registered there (its observations dropped, the new inliers added, then triangulated).
+int ModelBuilder::RelocaliseImages() {
+  const auto start = Clock::now();
+  Eigen::AlignedBox3d box;
+  for (const auto& [id, im] : rec_.images) box.extend(im.pose.Centre());
+  const double extent = box.diagonal().norm();
+  int moved = 0;
+  std::vector<uint32_t> ids;
+  for (const auto& [id, im] : rec_.images)
+    if (id != gauge1_ && id != gauge2_) ids.push_back(id);
+  for (uint32_t id : ids) {
+    auto& im = rec_.images.at(id);
+    std::vector<Eigen::Vector2d> p2;
+    std::vector<Eigen::Vector3d> p3;
+    std::vector<std::pair<uint32_t, uint64_t>> kps;
+    Correspondences2d3d(id, &p2, &p3, &kps);
+    const core::Camera& cam = rec_.cameras.at(im.camera_id);
+    int support = 0;  // correspondences the current pose explains
+    for (size_t i = 0; i < p2.size(); ++i) {
+      const Eigen::Vector3d xc = im.pose.Transform(p3[i]);
+      support += xc.z() > 0 && (cam.Project(xc) - p2[i]).norm() <= opt_.abs_pose_max_error_px;
+    }
+    const int wanted = support + support / 2 + 20;
+    if (static_cast<int>(p2.size()) < wanted) continue;
+    geometry::AbsolutePoseOptions po;
+    po.max_error_px = opt_.abs_pose_max_error_px;
+    po.min_inliers = std::max(opt_.abs_pose_min_inliers, wanted);
+    po.min_inlier_ratio = opt_.abs_pose_min_inlier_ratio;
+    const auto r = geometry::EstimateAbsolutePose(p2, p3, cam, po);
+    if (!r.success || r.num_inliers < wanted) continue;
+    const double dc = (r.pose.Centre() - im.pose.Centre()).norm();
+    const double da = core::RotationAngle(r.pose.q, im.pose.q);
+    if (dc < 0.01 * extent && da < 1.0 * kDeg) continue;  // the same pose, better supported: nothing wrong
+    int obs = 0;
+    for (int64_t pid : im.point3d_ids) obs += pid != core::kNoPoint3D;
+    spdlog::info("sparse: {} re-registered: its pose explained {} of {} 2D-3D correspondences ({} observations), "
+                 "one {:.3g} away ({:.2f}°) explains {}",
+                 im.name, support, p2.size(), obs, dc, da / kDeg, r.num_inliers);
+    for (uint32_t kp = 0; kp < im.point3d_ids.size(); ++kp) {
+      const int64_t pid = im.point3d_ids[kp];
+      if (pid == core::kNoPoint3D) continue;
+      auto& track = rec_.points.at(static_cast<uint64_t>(pid)).track;
+      track.erase(std::remove_if(track.begin(), track.end(),
+                                 [&](const core::TrackElement& el) { return el.image_id == id; }),
+                  track.end());
+      im.point3d_ids[kp] = core::kNoPoint3D;
+      if (track.size() < 2) DeletePoint(static_cast<uint64_t>(pid));
+    }
+    im.pose = r.pose;
+    for (size_t i = 0; i < kps.size(); ++i)
+      if (r.inlier_mask[i] && rec_.points.count(kps[i].second) && im.point3d_ids[kps[i].first] == core::kNoPoint3D &&
+          !PointHasImage(kps[i].second, id))
+        AddObservation(kps[i].second, id, kps[i].first);
+    TriangulateImage(id);
+    ++moved;
+  }
+  t_->registration += Seconds(start);
+  return moved;
 }
 
 void ModelBuilder::LocalBundleAdjust(uint32_t image_id) {
@@ -878,6 +956,7 @@ void ModelBuilder::Grow() {
   }
   // Final polish: retriangulate with the refined cameras, then a tight global BA.
   GlobalBundleAdjust(false);
+  if (opt_.relocalise && (num_relocalised_ = RelocaliseImages()) > 0) GlobalBundleAdjust(false);
   Retriangulate();
   GlobalBundleAdjust(true);
   if (focal_from_plateau_ && static_cast<int>(rec_.images.size()) >= opt_.refine_principal_point_min_images)
@@ -923,11 +1002,13 @@ MapperResult RunIncrementalMapper(const MapperInput& input, const MapperOptions&
 
   Timings timings;
   std::vector<std::map<uint32_t, std::string>> model_fail;
+  int relocalised = 0;
   while (static_cast<int>(pool.size()) >= options.min_model_size &&
          static_cast<int>(result.models.size()) < options.max_models) {
     ModelBuilder builder(input, images, graph, options, pool, &timings);
     if (!builder.Initialize()) break;
     builder.Grow();
+    relocalised += builder.num_relocalised();
     auto& rec = builder.rec();
     for (const auto& [id, im] : rec.images) pool.erase(id);
     for (const auto& [id, why] : builder.fail_reasons())
@@ -957,6 +1038,7 @@ MapperResult RunIncrementalMapper(const MapperInput& input, const MapperOptions&
   result.stats = {{"correspondences", graph.NumCorrespondences()},
                   {"invalid_matches_skipped", graph.NumSkipped()},
                   {"models", result.models.size()},
+                  {"relocalised_images", relocalised},
                   {"seconds", {{"initial_pair", timings.init},
                                {"absolute_pose", timings.registration},
                                {"triangulation", timings.triangulation},

@@ -58,6 +58,9 @@ struct MapperOptions {
   double abs_pose_min_inlier_ratio = 0.2;
   int min_visible_points = 15;  // an image needs this many triangulated tracks to be tried
   int max_registration_trials = 4;
+  // Before the final adjustment, re-register images whose pose a fresh absolute pose over all their 2D–3D
+  // correspondences contradicts with twice the support (an early registration on ambiguous matches).
+  bool relocalise = true;
   // Triangulation / filtering.
   double tri_min_angle_deg = 1.5;
   double tri_max_error_px = 4;
