@@ -43,6 +43,11 @@ void Add(CLI::App& app) {
       ->capture_default_str();
   cmd->add_option("--edge-jump", o.fusion.edge_depth_jump, "Fusion: relative depth step of an occluding edge")
       ->capture_default_str();
+  cmd->add_option("--max-uncertainty", o.fusion.max_relative_uncertainty,
+                  "Fusion: drop points whose expected error along the normal (from their consistent views' "
+                  "distance, grazing angle, spread of directions and image texture) exceeds this multiple of the "
+                  "cloud's median (0: off)")
+      ->capture_default_str();
   cmd->add_option("--seed", o.patch_match.seed, "Random seed")->capture_default_str();
   cmd->add_flag("--no-geometric", a->no_geometric, "Skip the geometric-consistency pass (faster, noisier)");
   cmd->add_flag("--no-coarse", a->no_coarse, "No half-resolution first pass");

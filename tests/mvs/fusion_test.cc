@@ -3,11 +3,19 @@
 // multi-view consistent and only removing the foreground side of depth discontinuities takes it away.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
+#include <filesystem>
+#include <limits>
 #include <map>
+#include <random>
+
+#include <opencv2/imgproc.hpp>
 
 #include "fmv3d/core/error.h"
+#include "fmv3d/io/point_cloud.h"
 #include "fmv3d/mvs/fusion.h"
+#include "test_util.h"
 
 namespace fmv3d::mvs {
 namespace {
@@ -121,6 +129,243 @@ TEST(Fusion, EdgeOptionsAreChecked) {
   o.edge_erosion_px = 2;
   o.edge_depth_jump = 0;
   EXPECT_THROW(o.Check(), Error);
+}
+
+
+// The uncertainty filter. Two nadir cameras 2b apart at height h over a point with an upward normal: each
+// constrains the point perpendicular to its ray with one surface footprint r/f (r: range; the ray meets the
+// surface at cos θ = h/r), so along the normal σ_n = r² / (√2 · b · f), the stereo depth uncertainty.
+TEST(NormalUncertainty, MatchesTheTwoViewStereoFormula) {
+  const double b = 1.5, f = 200;
+  ViewGeometry left = NadirView(1, -b, 0), right = NadirView(2, b, 0);
+  const Eigen::Vector3d X(0, 0, 0), n = Eigen::Vector3d::UnitZ();
+  const double r = std::hypot(b, kCameraZ);
+  EXPECT_NEAR(NormalUncertainty(X, n, {&left, &right}), r * r / (std::sqrt(2.0) * b * f), 1e-9);
+  // Twice the baseline: half the uncertainty (almost: the range grows a little).
+  ViewGeometry far_left = NadirView(3, -2 * b, 0), far_right = NadirView(4, 2 * b, 0);
+  const double r2 = std::hypot(2 * b, kCameraZ);
+  EXPECT_NEAR(NormalUncertainty(X, n, {&far_left, &far_right}), r2 * r2 / (std::sqrt(2.0) * 2 * b * f), 1e-9);
+  // Matching twice as imprecise in both views (weaker texture): twice the uncertainty.
+  EXPECT_NEAR(NormalUncertainty(X, n, {&left, &right}, {2.0, 2.0}), 2 * r * r / (std::sqrt(2.0) * b * f), 1e-9);
+  // One view (or two on the same ray) leaves the point free along its ray.
+  EXPECT_TRUE(std::isinf(NormalUncertainty(X, n, {&left})));
+  EXPECT_TRUE(std::isinf(NormalUncertainty(X, n, {&left, &left})));
+}
+
+// Ground at z = 0 for x < kCliffX, a floor 90 m lower beyond: seen from 30 m, the floor is 4x farther, so its
+// points are resolved 16x more coarsely along the normal (footprint x4, triangulation angle /4). Each view's
+// depth has stereo-like noise growing with z² (the same disparity error everywhere), so the floor's points are
+// 16x less accurate. The filter must drop the floor and keep the ground.
+constexpr double kCliffX = 6.0, kFloorZ = -90.0, kDisparityNoise = 1.2e-5;  // depth noise σ = k z²
+
+FusionView CliffView(const ViewGeometry& g, const std::vector<uint32_t>& neighbours, uint32_t seed) {
+  std::mt19937 rng(seed);
+  std::normal_distribution<double> gauss(0, 1);
+  DepthMap map;
+  map.depth.create(g.height, g.width, CV_32F);
+  map.normal.create(g.height, g.width, CV_32FC3);
+  map.cost = cv::Mat::zeros(g.height, g.width, CV_32F);
+  const Eigen::Vector3d c = g.Centre();
+  const Eigen::Vector3d n = g.R * Eigen::Vector3d::UnitZ();
+  for (int y = 0; y < g.height; ++y)
+    for (int x = 0; x < g.width; ++x) {
+      const Eigen::Vector3d ray = g.R.transpose() * g.K.inverse() * Eigen::Vector3d(x + 0.5, y + 0.5, 1);
+      Eigen::Vector3d X = c + ray * (-c.z() / ray.z());
+      if (X.x() >= kCliffX) X = c + ray * ((kFloorZ - c.z()) / ray.z());
+      const double z = (g.R * X + g.t).z();
+      map.depth.at<float>(y, x) = static_cast<float>(z + kDisparityNoise * z * z * gauss(rng));
+      map.normal.at<cv::Vec3f>(y, x) = cv::Vec3f(n.x(), n.y(), n.z());
+    }
+  return MakeFusionView(g, map, cv::Mat::zeros(g.height, g.width, CV_8UC3), neighbours);
+}
+
+struct CliffCounts {
+  size_t ground = 0, floor = 0;
+  double p90_error = 0;  // distance to the true plane, all points
+};
+
+CliffCounts ClassifyCliff(const io::OrientedPointCloud& cloud) {
+  CliffCounts c;
+  std::vector<double> err;
+  for (const auto& p : cloud.positions) {
+    const bool floor = p.z() < kFloorZ / 2;
+    (floor ? c.floor : c.ground)++;
+    err.push_back(std::abs(p.z() - (floor ? kFloorZ : 0.0)));
+  }
+  if (!err.empty()) {
+    const size_t k = err.size() * 9 / 10;
+    std::nth_element(err.begin(), err.begin() + static_cast<std::ptrdiff_t>(k), err.end());
+    c.p90_error = err[k];
+  }
+  return c;
+}
+
+TEST(Fusion, UncertaintyFilterDropsTheCoarselyResolvedFloorAndKeepsTheGround) {
+  const double offsets[5][2] = {{0, 0}, {1.5, 1.5}, {-1.5, 1.5}, {1.5, -1.5}, {-1.5, -1.5}};
+  std::map<uint32_t, FusionView> views;
+  for (uint32_t id = 1; id <= 5; ++id) {
+    std::vector<uint32_t> nbs;
+    for (uint32_t j = 1; j <= 5; ++j)
+      if (j != id) nbs.push_back(j);
+    views.emplace(id, CliffView(NadirView(id, offsets[id - 1][0], offsets[id - 1][1]), nbs, id));
+  }
+  FusionOptions off;
+  off.max_relative_uncertainty = 0;
+  FusionStats st_off;
+  const CliffCounts before = ClassifyCliff(FuseDepthMaps(views, off, &st_off));
+  EXPECT_EQ(st_off.rejected_uncertainty, 0u);
+  FusionOptions on;  // the default
+  ASSERT_GT(on.max_relative_uncertainty, 0);
+  FusionStats st;
+  const CliffCounts after = ClassifyCliff(FuseDepthMaps(views, on, &st));
+  std::printf("ground %zu -> %zu, floor %zu -> %zu, p90 %.4f -> %.4f m, median sigma %.3f m\n", before.ground,
+              after.ground, before.floor, after.floor, before.p90_error, after.p90_error, st.median_uncertainty);
+  // Without the filter, the floor is a large share of the cloud (a quarter of each view) and dominates its tail.
+  ASSERT_GT(before.floor, before.ground / 5);
+  EXPECT_GT(before.p90_error, 0.05);
+  // With it, the floor is gone, the ground stays, and the tail is the ground's.
+  EXPECT_LT(after.floor, before.floor / 50);
+  EXPECT_GT(after.ground, before.ground * 99 / 100);
+  EXPECT_LT(after.p90_error, 0.02);
+  EXPECT_EQ(st.rejected_uncertainty, before.floor + before.ground - after.floor - after.ground);
+  size_t hist = 0;
+  for (const auto& [k, n] : st.views_histogram) hist += n;
+  EXPECT_EQ(hist, after.floor + after.ground);
+}
+
+// Weak texture: the same flat ground everywhere, but for x > kWeakX the ground's texture is faint (the matching
+// window locates 20x less precisely, so each view's depth there is 20x noisier). Only the texture maps tell
+// the two halves apart; the filter must drop the faint half.
+constexpr double kWeakX = 3.0, kWeakFactor = 20.0;
+
+FusionView TexturedGroundView(const ViewGeometry& g, const std::vector<uint32_t>& neighbours, uint32_t seed,
+                              bool with_texture_map) {
+  std::mt19937 rng(seed);
+  std::normal_distribution<double> gauss(0, 1);
+  DepthMap map;
+  map.depth.create(g.height, g.width, CV_32F);
+  map.normal.create(g.height, g.width, CV_32FC3);
+  map.cost = cv::Mat::zeros(g.height, g.width, CV_32F);
+  cv::Mat texture(g.height, g.width, CV_32F);
+  const Eigen::Vector3d c = g.Centre();
+  const Eigen::Vector3d n = g.R * Eigen::Vector3d::UnitZ();
+  for (int y = 0; y < g.height; ++y)
+    for (int x = 0; x < g.width; ++x) {
+      const Eigen::Vector3d ray = g.R.transpose() * g.K.inverse() * Eigen::Vector3d(x + 0.5, y + 0.5, 1);
+      const Eigen::Vector3d X = c + ray * (-c.z() / ray.z());
+      const double p = X.x() > kWeakX ? kWeakFactor : 1.0;
+      const double z = (g.R * X + g.t).z();
+      map.depth.at<float>(y, x) = static_cast<float>(z + p * kDisparityNoise * z * z * gauss(rng));
+      map.normal.at<cv::Vec3f>(y, x) = cv::Vec3f(n.x(), n.y(), n.z());
+      texture.at<float>(y, x) = static_cast<float>(p);
+    }
+  FusionView v = MakeFusionView(g, map, cv::Mat::zeros(g.height, g.width, CV_8UC3), neighbours);
+  if (with_texture_map) texture.convertTo(v.texture, CV_16F);
+  return v;
+}
+
+TEST(Fusion, UncertaintyFilterDropsWeaklyTexturedSurface) {
+  const double offsets[5][2] = {{0, 0}, {1.5, 1.5}, {-1.5, 1.5}, {1.5, -1.5}, {-1.5, -1.5}};
+  auto fuse = [&](bool with_texture_map, size_t* strong, size_t* weak, double* p90) {
+    std::map<uint32_t, FusionView> views;
+    for (uint32_t id = 1; id <= 5; ++id) {
+      std::vector<uint32_t> nbs;
+      for (uint32_t j = 1; j <= 5; ++j)
+        if (j != id) nbs.push_back(j);
+      views.emplace(id, TexturedGroundView(NadirView(id, offsets[id - 1][0], offsets[id - 1][1]), nbs, id,
+                                           with_texture_map));
+    }
+    const io::OrientedPointCloud cloud = FuseDepthMaps(views, FusionOptions{});
+    *strong = *weak = 0;
+    std::vector<double> err;
+    for (const auto& p : cloud.positions) {
+      if (p.x() > kWeakX + 0.5) ++*weak;
+      else if (p.x() < kWeakX - 0.5) ++*strong;  // (a metre-wide band at the boundary is not counted)
+      err.push_back(std::abs(p.z()));
+    }
+    const size_t k = err.size() * 9 / 10;
+    std::nth_element(err.begin(), err.begin() + static_cast<std::ptrdiff_t>(k), err.end());
+    *p90 = err[k];
+  };
+  size_t strong0, weak0, strong1, weak1;
+  double p90_0, p90_1;
+  fuse(false, &strong0, &weak0, &p90_0);  // geometry alone cannot tell the halves apart
+  fuse(true, &strong1, &weak1, &p90_1);
+  std::printf("no texture map: %zu + %zu faint, p90 %.4f m; with: %zu + %zu faint, p90 %.4f m\n", strong0, weak0,
+              p90_0, strong1, weak1, p90_1);
+  ASSERT_GT(weak0, strong0 / 4);
+  EXPECT_LT(weak1, weak0 / 20);
+  EXPECT_GT(strong1, strong0 * 98 / 100);
+  EXPECT_LT(p90_1, p90_0 / 3);
+}
+
+// The pixel precision of a window is set by its gradients: a sharp checkerboard locates far better than the
+// same board blurred and faded to a quarter of the contrast; a flat image is the worst (capped, finite), and a
+// steep linear ramp is as bad: NCC, invariant to gain and bias, cannot tell a shifted ramp from the ramp.
+TEST(TexturePrecisionMap, SharpTextureLocatesBetterThanFaintTexture) {
+  cv::Mat board(64, 64, CV_8UC3);
+  for (int y = 0; y < 64; ++y)
+    for (int x = 0; x < 64; ++x) board.at<cv::Vec3b>(y, x) = ((x / 4 + y / 4) % 2) ? cv::Vec3b(200, 200, 200) : cv::Vec3b(40, 40, 40);
+  cv::Mat faint;
+  cv::GaussianBlur(board, faint, cv::Size(0, 0), 2.0);
+  faint.convertTo(faint, -1, 0.25, 90);
+  const cv::Mat flat(64, 64, CV_8UC3, cv::Scalar(100, 100, 100));
+  auto centre = [](const cv::Mat& m) { return static_cast<double>(m.at<cv::float16_t>(32, 32)); };
+  const double sharp = centre(TexturePrecisionMap(board, 5)), weak = centre(TexturePrecisionMap(faint, 5)),
+               none = centre(TexturePrecisionMap(flat, 5));
+  std::printf("pixel precision: sharp %.3f, faint %.3f, flat %.1f\n", sharp, weak, none);
+  EXPECT_GT(weak, 6 * sharp);
+  EXPECT_GT(none, 100 * weak);
+  EXPECT_TRUE(std::isfinite(none));
+  EXPECT_EQ(TexturePrecisionMap(board, 5).type(), CV_16F);
+  cv::Mat ramp(64, 64, CV_8UC3);
+  for (int y = 0; y < 64; ++y)
+    for (int x = 0; x < 64; ++x) ramp.at<cv::Vec3b>(y, x) = cv::Vec3b::all(static_cast<uchar>(30 + 3 * x));
+  const double steep = centre(TexturePrecisionMap(ramp, 5));
+  std::printf("ramp of 3 grey levels per pixel: %.1f\n", steep);
+  EXPECT_GT(steep, 100 * weak);
+}
+
+// The streaming variant writes exactly the points the in-memory fusion returns (with the filter at work).
+TEST(Fusion, StreamingToPlyMatchesTheInMemoryCloud) {
+  const double offsets[5][2] = {{0, 0}, {1.5, 1.5}, {-1.5, 1.5}, {1.5, -1.5}, {-1.5, -1.5}};
+  std::map<uint32_t, FusionView> views;
+  for (uint32_t id = 1; id <= 5; ++id) {
+    std::vector<uint32_t> nbs;
+    for (uint32_t j = 1; j <= 5; ++j)
+      if (j != id) nbs.push_back(j);
+    views.emplace(id, CliffView(NadirView(id, offsets[id - 1][0], offsets[id - 1][1]), nbs, id));
+  }
+  FusionStats mem_st, ply_st;
+  const io::OrientedPointCloud mem = FuseDepthMaps(views, FusionOptions{}, &mem_st);
+  test::TempDir dir("fusion_ply");
+  const auto path = dir.path() / "fused.ply";
+  const size_t n = FuseDepthMapsToPly(views, FusionOptions{}, path, &ply_st);
+  EXPECT_FALSE(std::filesystem::exists(path.string() + ".unfiltered"));
+  const io::OrientedPointCloud ply = io::ReadPointCloudPly(path);
+  ASSERT_EQ(n, mem.size());
+  ASSERT_EQ(ply.size(), mem.size());
+  ASSERT_GT(mem_st.rejected_uncertainty, 0u);
+  EXPECT_EQ(ply_st.rejected_uncertainty, mem_st.rejected_uncertainty);
+  EXPECT_EQ(ply_st.edge_pixels, mem_st.edge_pixels);
+  EXPECT_EQ(ply_st.views_histogram, mem_st.views_histogram);
+  EXPECT_EQ(ply_st.median_uncertainty, mem_st.median_uncertainty);
+  for (size_t i = 0; i < mem.size(); ++i) {
+    ASSERT_EQ(ply.positions[i], mem.positions[i].cast<float>().cast<double>()) << i;
+    ASSERT_EQ(ply.normals[i], mem.normals[i]) << i;
+    ASSERT_EQ(ply.colors[i], mem.colors[i]) << i;
+    ASSERT_EQ(ply.visibility[i], mem.visibility[i]) << i;
+  }
+}
+
+TEST(Fusion, UncertaintyOptionIsChecked) {
+  FusionOptions o;
+  o.max_relative_uncertainty = 0.5;  // would drop half the cloud by definition
+  EXPECT_THROW(o.Check(), Error);
+  o.max_relative_uncertainty = -1;
+  EXPECT_THROW(o.Check(), Error);
+  o.max_relative_uncertainty = 0;
+  EXPECT_NO_THROW(o.Check());
 }
 
 }  // namespace

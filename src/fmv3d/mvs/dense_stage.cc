@@ -9,7 +9,6 @@
 #include "fmv3d/core/files.h"
 #include "fmv3d/core/logging.h"
 #include "fmv3d/io/colmap_model.h"
-#include "fmv3d/io/point_cloud.h"
 
 namespace fmv3d::mvs {
 
@@ -169,17 +168,20 @@ nlohmann::json RunDenseStage(const fs::path& workspace, const DenseStageOptions&
       valid_pixels += static_cast<size_t>(map.CountValid());
       total_pixels += map.depth.total();
       const auto view = cache.Get(id);
-      fviews.emplace(id, MakeFusionView(geoms.at(id), map, view->color,
-                                        std::vector<uint32_t>(links[id].begin(), links[id].end())));
+      FusionView fv = MakeFusionView(geoms.at(id), map, view->color,
+                                     std::vector<uint32_t>(links[id].begin(), links[id].end()));
+      if (options.fusion.max_relative_uncertainty > 0)
+        fv.texture = TexturePrecisionMap(view->color, options.patch_match.window_radius);
+      fviews.emplace(id, std::move(fv));
       progress.Add();
     }
   }
   FusionStats fstats;
-  const io::OrientedPointCloud cloud = FuseDepthMaps(fviews, options.fusion, &fstats);
+  // Straight to the PLY: the cloud is never held in memory (the largest part of the stage's memory otherwise).
+  const size_t n_points = FuseDepthMapsToPly(std::move(fviews), options.fusion, dense_dir / "fused.ply", &fstats);
   fviews.clear();
-  if (cloud.empty())
+  if (n_points == 0)
     spdlog::warn("dense: fusion produced no points (no pixel was consistent in {} views)", options.fusion.min_views);
-  io::WritePointCloudPly(cloud, dense_dir / "fused.ply");
   const double fuse_seconds = seconds_since(t_fuse);
 
   nlohmann::json hist = nlohmann::json::object();
@@ -188,7 +190,7 @@ nlohmann::json RunDenseStage(const fs::path& workspace, const DenseStageOptions&
     hist[std::to_string(k)] = n;
     mean_views += static_cast<double>(k) * n;
   }
-  if (!cloud.empty()) mean_views /= static_cast<double>(cloud.size());
+  if (n_points > 0) mean_views /= static_cast<double>(n_points);
   const auto& g0 = geoms.at(usable.front());
   nlohmann::json report = {
       {"registered_images", rec.images.size()},
@@ -198,7 +200,7 @@ nlohmann::json RunDenseStage(const fs::path& workspace, const DenseStageOptions&
       {"max_size", options.max_size},
       {"max_sources", options.max_sources},
       {"geometric_pass", options.geometric},
-      {"points", cloud.size()},
+      {"points", n_points},
       {"valid_depth_fraction", total_pixels ? static_cast<double>(valid_pixels) / total_pixels : 0.0},
       {"fusion",
        {{"candidates", fstats.candidates},
@@ -206,6 +208,10 @@ nlohmann::json RunDenseStage(const fs::path& workspace, const DenseStageOptions&
         {"rejected_visibility", fstats.rejected_visibility},
         {"edge_pixels_removed", fstats.edge_pixels},
         {"edge_erosion_px", options.fusion.edge_erosion_px},
+        {"rejected_uncertainty", fstats.rejected_uncertainty},
+        {"max_relative_uncertainty", options.fusion.max_relative_uncertainty},
+        {"median_normal_sigma", fstats.median_uncertainty},
+        {"max_normal_sigma", fstats.max_uncertainty},
         {"mean_consistent_views", mean_views},
         {"consistent_views_histogram", hist}}},
       {"seconds",
@@ -219,7 +225,7 @@ nlohmann::json RunDenseStage(const fs::path& workspace, const DenseStageOptions&
         {"total", seconds_since(t_start)}}},
       {"output", (dense_dir / "fused.ply").string()}};
   core::WriteJson(report_dir / "dense.json", report);
-  spdlog::info("dense: {} points from {} views ({} skipped) in {:.1f} s", cloud.size(), usable.size(),
+  spdlog::info("dense: {} points from {} views ({} skipped) in {:.1f} s", n_points, usable.size(),
                skipped.size(), seconds_since(t_start));
   return report;
 }

@@ -1,9 +1,15 @@
 #include "fmv3d/mvs/fusion.h"
 
+#include <Eigen/Dense>
+#include <algorithm>
 #include <cmath>
+#include <fstream>
+#include <functional>
+#include <limits>
 #include <opencv2/imgproc.hpp>
 
 #include "fmv3d/core/error.h"
+#include "fmv3d/core/files.h"
 
 namespace fmv3d::mvs {
 
@@ -18,6 +24,68 @@ void FusionOptions::Check() const {
   if (!(visibility_margin > 0)) throw Error("fusion: visibility_margin must be positive");
   if (edge_erosion_px < 0) throw Error("fusion: edge_erosion_px must be >= 0");
   if (!(edge_depth_jump > 0)) throw Error("fusion: edge_depth_jump must be positive");
+  if (!(max_relative_uncertainty == 0 || max_relative_uncertainty >= 1))
+    throw Error("fusion: max_relative_uncertainty must be 0 (off) or at least 1");
+}
+
+double NormalUncertainty(const Eigen::Vector3d& X, const Eigen::Vector3d& n,
+                         const std::vector<const ViewGeometry*>& views, const std::vector<double>& pixel_sigma) {
+  constexpr double kMinCos = 0.05;  // rays within ~3° of the surface: footprint capped at 20 pixels' width
+  Eigen::Matrix3d info = Eigen::Matrix3d::Zero();
+  for (size_t i = 0; i < views.size(); ++i) {
+    const ViewGeometry* g = views[i];
+    const double z = (g->R * X + g->t).z();
+    const double px = pixel_sigma.empty() ? 1.0 : pixel_sigma[i];
+    if (!(z > 0) || !(px > 0) || !std::isfinite(px)) continue;
+    const Eigen::Vector3d d = (X - g->Centre()).normalized();
+    const double cos_t = std::max(kMinCos, std::abs(n.dot(d)));
+    const double f = 0.5 * (g->K(0, 0) + g->K(1, 1));
+    const double s = px * z / (f * cos_t);
+    info += (Eigen::Matrix3d::Identity() - d * d.transpose()) / (s * s);
+  }
+  // Fewer than two distinct directions leave a null direction (along the common ray): unconstrained.
+  const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es(info);
+  const Eigen::Vector3d ev = es.eigenvalues();  // ascending
+  if (!(ev(2) > 0) || !(ev(0) > 1e-12 * ev(2))) return std::numeric_limits<double>::infinity();
+  const Eigen::Vector3d c = es.eigenvectors().transpose() * n;
+  return std::sqrt(c(0) * c(0) / ev(0) + c(1) * c(1) / ev(1) + c(2) * c(2) / ev(2));
+}
+
+cv::Mat TexturePrecisionMap(const cv::Mat& color, int radius_px) {
+  CV_Assert(color.type() == CV_8UC3 && radius_px >= 1);
+  cv::Mat grey, gx, gy;
+  cv::cvtColor(color, grey, cv::COLOR_BGR2GRAY);
+  grey.convertTo(grey, CV_32F, 1.0 / 255);
+  cv::Sobel(grey, gx, CV_32F, 1, 0, 3, 1.0 / 8);  // grey levels per pixel
+  cv::Sobel(grey, gy, CV_32F, 0, 1, 3, 1.0 / 8);
+  const cv::Size window(2 * radius_px + 1, 2 * radius_px + 1);
+  auto mean = [&](const cv::Mat& m) {
+    cv::Mat out;
+    cv::boxFilter(m, out, CV_32F, window, cv::Point(-1, -1), true, cv::BORDER_REFLECT);
+    return out;
+  };
+  const cv::Mat mi = mean(grey), mii = mean(grey.mul(grey));
+  const cv::Mat mx = mean(gx), mxx = mean(gx.mul(gx)), mxi = mean(gx.mul(grey));
+  const cv::Mat my = mean(gy), myy = mean(gy.mul(gy)), myi = mean(gy.mul(grey));
+  cv::Mat sigma(grey.size(), CV_32F);
+  for (int y = 0; y < grey.rows; ++y)
+    for (int x = 0; x < grey.cols; ++x) {
+      const float vi = std::max(mii.at<float>(y, x) - mi.at<float>(y, x) * mi.at<float>(y, x), 0.f);
+      // The part of each gradient component the gain/bias-invariant match can use: its variance over the
+      // window less what a linear function of the intensity explains. (A shifted linear ramp is the same ramp
+      // with another bias: NCC cannot see the shift, however steep the ramp.)
+      auto usable = [&](const cv::Mat& m, const cv::Mat& mm, const cv::Mat& mg) {
+        const float g = m.at<float>(y, x);
+        const float var = std::max(mm.at<float>(y, x) - g * g, 0.f);
+        const float cov = mg.at<float>(y, x) - g * mi.at<float>(y, x);
+        return vi > 1e-12f ? std::max(var - cov * cov / vi, 0.f) : 0.f;
+      };
+      const float e = 0.5f * (usable(mx, mxx, mxi) + usable(my, myy, myi));
+      sigma.at<float>(y, x) = std::min(6e4f, 1.f / std::sqrt(std::max(e, 1e-12f)));
+    }
+  cv::Mat half;
+  sigma.convertTo(half, CV_16F);
+  return half;
 }
 
 cv::Mat OccludingEdgeMask(const cv::Mat& depth, int radius_px, double depth_jump) {
@@ -69,48 +137,56 @@ Eigen::Vector3f NormalAt(const FusionView& v, int x, int y) {
 }
 }  // namespace
 
-io::OrientedPointCloud FuseDepthMaps(const std::map<uint32_t, FusionView>& views, const FusionOptions& opt,
-                                     FusionStats* stats) {
-  opt.Check();
-  FusionStats st;
-  io::OrientedPointCloud cloud;
-  // Depths with the occluding edges' foreground side removed (a copy only when something is removed).
-  std::map<uint32_t, FusionView> eroded;
-  const std::map<uint32_t, FusionView>* maps = &views;
-  if (opt.edge_erosion_px > 0) {
-    for (const auto& [id, v] : views) {
-      FusionView e = v;
-      const cv::Mat mask = OccludingEdgeMask(v.depth, opt.edge_erosion_px, opt.edge_depth_jump);
-      st.edge_pixels += static_cast<size_t>(cv::countNonZero(mask));
-      e.depth = v.depth.clone();
-      e.depth.setTo(0, mask);
-      eroded.emplace(id, std::move(e));
-    }
-    maps = &eroded;
+namespace {
+
+// Removes the foreground side of every map's occluding edges (in place).
+void ErodeOccludingEdges(std::map<uint32_t, FusionView>* views, const FusionOptions& opt, FusionStats* st) {
+  if (opt.edge_erosion_px <= 0) return;
+  for (auto& [id, v] : *views) {
+    const cv::Mat mask = OccludingEdgeMask(v.depth, opt.edge_erosion_px, opt.edge_depth_jump);
+    st->edge_pixels += static_cast<size_t>(cv::countNonZero(mask));
+    v.depth.setTo(0, mask);
   }
+}
+
+// One fused point as it is emitted.
+struct FusedPoint {
+  Eigen::Vector3d position;
+  Eigen::Vector3f normal;
+  io::Rgb8 color;
+  std::vector<uint32_t> visibility;
+  int support = 0;
+  float sigma = 0;  // σ_n (0 when the uncertainty filter is off)
+};
+
+// The fusion proper over (eroded) maps; every accepted point goes to emit(FusedPoint&&).
+void FuseMaps(const std::map<uint32_t, FusionView>& maps, const FusionOptions& opt, FusionStats* st,
+              const std::function<void(FusedPoint&&)>& emit) {
   std::map<uint32_t, cv::Mat> used;
-  for (const auto& [id, v] : *maps) used[id] = cv::Mat::zeros(v.depth.size(), CV_8U);
+  for (const auto& [id, v] : maps) used[id] = cv::Mat::zeros(v.depth.size(), CV_8U);
   const float cos_max = static_cast<float>(std::cos(opt.max_normal_error_deg * M_PI / 180));
   const double max_reproj2 = opt.max_reproj_error_px * opt.max_reproj_error_px;
-
   struct Hit {
     const FusionView* view;
     int x, y;
     bool fresh;
   };
   std::vector<Hit> hits;
-  for (const auto& [rid, ref] : *maps) {
+  const bool uncertainty = opt.max_relative_uncertainty > 0;
+  std::vector<const ViewGeometry*> hit_views;
+  std::vector<double> hit_px;
+  for (const auto& [rid, ref] : maps) {
     std::vector<const FusionView*> nbs;
     for (uint32_t j : ref.neighbours) {
-      auto it = maps->find(j);
-      if (it != maps->end() && j != rid) nbs.push_back(&it->second);
+      auto it = maps.find(j);
+      if (it != maps.end() && j != rid) nbs.push_back(&it->second);
     }
     cv::Mat& ref_used = used[rid];
     for (int y = 0; y < ref.depth.rows; ++y) {
       for (int x = 0; x < ref.depth.cols; ++x) {
         const float d = ref.depth.at<float>(y, x);
         if (!(d > 0) || ref_used.at<uint8_t>(y, x)) continue;
-        ++st.candidates;
+        ++st->candidates;
         const Eigen::Vector3d X = ref.geom.Unproject({x + 0.5, y + 0.5}, d);
         const Eigen::Vector3f n_ref = NormalAt(ref, x, y);
         hits.clear();
@@ -139,20 +215,20 @@ io::OrientedPointCloud FuseDepthMaps(const std::map<uint32_t, FusionView>& views
         }
         const int support = static_cast<int>(hits.size());
         if (support < opt.min_views) {
-          ++st.rejected_support;
+          ++st->rejected_support;
           continue;
         }
         if (opt.visibility_filter && conflicts > support - 1) {
-          ++st.rejected_visibility;
+          ++st->rejected_visibility;
           continue;
         }
+        FusedPoint p;
         Eigen::Vector3d pos = Eigen::Vector3d::Zero();
         Eigen::Vector3f nrm = Eigen::Vector3f::Zero(), col = Eigen::Vector3f::Zero();
         int fresh = 0;
-        std::vector<uint32_t> vis;
-        vis.reserve(hits.size());
+        p.visibility.reserve(hits.size());
         for (const Hit& h : hits) {
-          vis.push_back(h.view->geom.image_id);
+          p.visibility.push_back(h.view->geom.image_id);
           if (!h.fresh) continue;
           pos += h.view->geom.Unproject({h.x + 0.5, h.y + 0.5}, h.view->depth.at<float>(h.y, h.x));
           nrm += NormalAt(*h.view, h.x, h.y);
@@ -164,18 +240,159 @@ io::OrientedPointCloud FuseDepthMaps(const std::map<uint32_t, FusionView>& views
         pos /= fresh;
         col /= static_cast<float>(fresh);
         if (nrm.norm() < 1e-6f) nrm = n_ref;
-        cloud.positions.push_back(pos);
-        cloud.normals.push_back(nrm.normalized());
-        cloud.colors.push_back(io::Rgb8(static_cast<uint8_t>(std::lround(col.x())),
-                                        static_cast<uint8_t>(std::lround(col.y())),
-                                        static_cast<uint8_t>(std::lround(col.z()))));
-        cloud.visibility.push_back(std::move(vis));
-        ++st.views_histogram[support];
+        p.position = pos;
+        p.normal = nrm.normalized();
+        p.color = io::Rgb8(static_cast<uint8_t>(std::lround(col.x())), static_cast<uint8_t>(std::lround(col.y())),
+                           static_cast<uint8_t>(std::lround(col.z())));
+        p.support = support;
+        if (uncertainty) {
+          hit_views.clear();
+          hit_px.clear();
+          for (const Hit& h : hits) {
+            hit_views.push_back(&h.view->geom);
+            hit_px.push_back(h.view->texture.empty() ? 1.0
+                                                     : static_cast<double>(h.view->texture.at<cv::float16_t>(h.y, h.x)));
+          }
+          p.sigma = static_cast<float>(NormalUncertainty(pos, p.normal.cast<double>(), hit_views, hit_px));
+        }
+        emit(std::move(p));
       }
     }
   }
+}
+
+// Sets the filter's median and threshold in *st from the points' σ_n.
+void SetUncertaintyThreshold(std::vector<float> sigmas, const FusionOptions& opt, FusionStats* st) {
+  if (!(opt.max_relative_uncertainty > 0) || sigmas.empty()) return;
+  const size_t mid = sigmas.size() / 2;
+  std::nth_element(sigmas.begin(), sigmas.begin() + static_cast<std::ptrdiff_t>(mid), sigmas.end());
+  st->median_uncertainty = sigmas[mid];
+  st->max_uncertainty = opt.max_relative_uncertainty * st->median_uncertainty;
+}
+
+bool Keep(float sigma, const FusionOptions& opt, const FusionStats& st) {
+  return !(opt.max_relative_uncertainty > 0) || sigma <= st.max_uncertainty;
+}
+
+}  // namespace
+
+io::OrientedPointCloud FuseDepthMaps(const std::map<uint32_t, FusionView>& views, const FusionOptions& opt,
+                                     FusionStats* stats) {
+  opt.Check();
+  FusionStats st;
+  // Depths with the occluding edges' foreground side removed (a copy of the depths only when eroding).
+  std::map<uint32_t, FusionView> eroded;
+  const std::map<uint32_t, FusionView>* maps = &views;
+  if (opt.edge_erosion_px > 0) {
+    for (const auto& [id, v] : views) {
+      FusionView e = v;
+      e.depth = v.depth.clone();
+      eroded.emplace(id, std::move(e));
+    }
+    ErodeOccludingEdges(&eroded, opt, &st);
+    maps = &eroded;
+  }
+  io::OrientedPointCloud cloud;
+  std::vector<int> support_of;
+  std::vector<float> sigma_of;
+  FuseMaps(*maps, opt, &st, [&](FusedPoint&& p) {
+    cloud.positions.push_back(p.position);
+    cloud.normals.push_back(p.normal);
+    cloud.colors.push_back(p.color);
+    cloud.visibility.push_back(std::move(p.visibility));
+    support_of.push_back(p.support);
+    sigma_of.push_back(p.sigma);
+  });
+  SetUncertaintyThreshold(sigma_of, opt, &st);
+  // In place (no second copy of the cloud).
+  size_t j = 0;
+  for (size_t i = 0; i < cloud.size(); ++i) {
+    if (!Keep(sigma_of[i], opt, st)) {
+      ++st.rejected_uncertainty;
+      continue;
+    }
+    if (j != i) {
+      cloud.positions[j] = cloud.positions[i];
+      cloud.normals[j] = cloud.normals[i];
+      cloud.colors[j] = cloud.colors[i];
+      cloud.visibility[j] = std::move(cloud.visibility[i]);
+      support_of[j] = support_of[i];
+    }
+    ++j;
+  }
+  cloud.positions.resize(j);
+  cloud.normals.resize(j);
+  cloud.colors.resize(j);
+  cloud.visibility.resize(j);
+  support_of.resize(j);
+  for (int s : support_of) ++st.views_histogram[s];
   if (stats) *stats = st;
   return cloud;
+}
+
+size_t FuseDepthMapsToPly(std::map<uint32_t, FusionView> views, const FusionOptions& opt,
+                          const std::filesystem::path& ply, FusionStats* stats) {
+  opt.Check();
+  FusionStats st;
+  ErodeOccludingEdges(&views, opt, &st);
+  // Pass 1: every point's PLY record (float x y z, nx ny nz, uchar r g b, uchar n, n × int32 image id) to a
+  // scratch file; only σ_n and the view count stay in memory.
+  const std::filesystem::path scratch = ply.string() + ".unfiltered";
+  std::vector<float> sigma_of;
+  std::vector<uint8_t> support_of;
+  {
+    std::ofstream out(scratch, std::ios::binary);
+    if (!out) throw Error(scratch.string() + ": cannot write");
+    std::string rec;
+    FuseMaps(views, opt, &st, [&](FusedPoint&& p) {
+      rec.clear();
+      auto put = [&](const void* d, size_t n) { rec.append(static_cast<const char*>(d), n); };
+      const float xyz[3] = {static_cast<float>(p.position.x()), static_cast<float>(p.position.y()),
+                            static_cast<float>(p.position.z())};
+      put(xyz, sizeof xyz);
+      put(p.normal.data(), 3 * sizeof(float));
+      put(p.color.data(), 3);
+      const uint8_t n = static_cast<uint8_t>(std::min<size_t>(p.visibility.size(), 255));
+      put(&n, 1);
+      for (int k = 0; k < n; ++k) {
+        const int32_t id = static_cast<int32_t>(p.visibility[k]);
+        put(&id, 4);
+      }
+      out.write(rec.data(), static_cast<std::streamsize>(rec.size()));
+      sigma_of.push_back(p.sigma);
+      support_of.push_back(static_cast<uint8_t>(std::min(p.support, 255)));
+    });
+    if (!out) throw Error(scratch.string() + ": write failed");
+  }
+  views.clear();
+  SetUncertaintyThreshold(sigma_of, opt, &st);
+  size_t kept = 0;
+  for (size_t i = 0; i < sigma_of.size(); ++i)
+    if (Keep(sigma_of[i], opt, st)) ++kept, ++st.views_histogram[support_of[i]];
+  st.rejected_uncertainty = sigma_of.size() - kept;
+  // Pass 2: the kept records, behind the header of io::WritePointCloudPly's layout.
+  core::WriteAtomically(ply, [&](const std::filesystem::path& tmp) {
+    std::ifstream in(scratch, std::ios::binary);
+    std::ofstream out(tmp, std::ios::binary);
+    if (!in || !out) throw Error(tmp.string() + ": cannot write");
+    out << "ply\nformat binary_little_endian 1.0\ncomment fmv3d oriented points\nelement vertex " << kept
+        << "\nproperty float x\nproperty float y\nproperty float z\n"
+        << "property float nx\nproperty float ny\nproperty float nz\n"
+        << "property uchar red\nproperty uchar green\nproperty uchar blue\n"
+        << "property list uchar int visibility\nend_header\n";
+    constexpr size_t kFixed = 6 * sizeof(float) + 3 + 1;
+    char rec[kFixed + 255 * 4];
+    for (size_t i = 0; i < sigma_of.size(); ++i) {
+      if (!in.read(rec, kFixed)) throw Error(scratch.string() + ": truncated");
+      const size_t n = static_cast<uint8_t>(rec[kFixed - 1]);
+      if (n > 0 && !in.read(rec + kFixed, static_cast<std::streamsize>(4 * n))) throw Error(scratch.string() + ": truncated");
+      if (Keep(sigma_of[i], opt, st)) out.write(rec, static_cast<std::streamsize>(kFixed + 4 * n));
+    }
+    if (!out) throw Error(tmp.string() + ": write failed");
+  });
+  std::filesystem::remove(scratch);
+  if (stats) *stats = st;
+  return kept;
 }
 
 }  // namespace fmv3d::mvs

@@ -15,11 +15,33 @@
 // window straddles an occluding edge there and gives background pixels the foreground's plane ("fattening"):
 // a roof or a facade continued up to a window radius past its real edge, and multi-view consistent, because
 // neighbouring views fatten the same way. The same edge is kept from the views where it is not an occluding
-// contour (both sides of a convex corner visible), so little true surface is lost. It is the mean of the consistent views' points; the pixels it used are
-// marked so that the same surface is not emitted again from another view. Deterministic (views in id order).
+// contour (both sides of a convex corner visible), so little true surface is lost.
+//
+// A fused point is the mean of the consistent views' points; the pixels it used are marked so that the same
+// surface is not emitted again from another view. Deterministic (views in id order).
+//
+// Uncertainty filter (max_relative_uncertainty > 0): every fused point gets the first-order standard
+// deviation of its position along its normal, as if triangulated from its consistent views. View i (unit ray
+// d_i) fixes the point perpendicular to its ray to within σ_i = p_i · z_i / (f_i · |cos θ_i|):
+//   - z_i / (f_i · |cos θ_i|): one pixel's footprint on the surface (depth z_i, focal f_i, θ_i the angle
+//     between the ray and the normal): distance and grazing views make it large;
+//   - p_i: how precisely a matching window can be located there, in pixels: the image-noise limit of
+//     window matching (Cramér–Rao), ∝ 1 / sqrt(E) with E the gradient energy over the window that a gain-
+//     and bias-invariant match (NCC) can use: the gradients' variance less the part a linear function of the
+//     intensity explains (a smooth ramp shifted is the same ramp with another bias, so it fixes nothing).
+//     Weak, blurred or ramp-like texture makes p_i large (TexturePrecisionMap; the unknown noise level
+//     cancels below). Without a texture map p_i = 1.
+// Then Λ = Σ_i (I − d_i d_iᵀ) / σ_i² and σ_n = sqrt(nᵀ Λ⁻¹ n), which also grows when the view directions
+// are close together (small triangulation angle). Points whose σ_n exceeds max_relative_uncertainty times the
+// median σ_n of the cloud are dropped: surface resolved an order of magnitude worse than the scene's typical
+// surface (far, weakly textured land seen at grazing angles), which makes the tail of the cloud's error
+// distribution. The threshold is relative, so it does not depend on the scene's units, the working
+// resolution or the image noise; COLMAP's and OpenMVS's filters on triangulation angle and view count aim at
+// the same points with absolute thresholds.
 #pragma once
 
 #include <cstdint>
+#include <filesystem>
 #include <map>
 #include <opencv2/core.hpp>
 #include <vector>
@@ -39,15 +61,17 @@ struct FusionOptions {
   bool visibility_filter = true;
   int edge_erosion_px = 4;            // 0 = off; about PatchMatch's window radius
   double edge_depth_jump = 0.05;      // relative depth step that makes an occluding edge
+  double max_relative_uncertainty = 10;  // 0 = off; drop points with σ_n > this · the median σ_n (above)
   void Check() const;
 };
 
-// One view's map in compact form (fusion holds all of them: ~11 bytes per pixel).
+// One view's map in compact form (fusion holds all of them: ~13 bytes per pixel with the texture map).
 struct FusionView {
   ViewGeometry geom;
   cv::Mat depth;   // CV_32F, 0 = none
   cv::Mat normal;  // CV_8SC3, world-frame unit normal · 127
   cv::Mat color;   // CV_8UC3 BGR, at the map's size
+  cv::Mat texture; // CV_16F, TexturePrecisionMap of the colour (empty: every pixel counts as 1 pixel)
   std::vector<uint32_t> neighbours;  // image ids to check
 };
 
@@ -60,6 +84,9 @@ struct FusionStats {
   size_t rejected_support = 0;    // too few consistent views
   size_t rejected_visibility = 0; // free-space conflicts
   size_t edge_pixels = 0;         // pixels removed on the foreground side of depth discontinuities
+  size_t rejected_uncertainty = 0;  // fused points dropped by the uncertainty filter
+  double median_uncertainty = 0;    // median σ_n of the fused points before that filter (world units)
+  double max_uncertainty = 0;       // the threshold applied (0 when the filter is off)
   std::map<int, size_t> views_histogram;  // number of consistent views → points
 };
 
@@ -67,7 +94,23 @@ struct FusionStats {
 // above). Pixels without depth (0) are neither foreground nor background.
 cv::Mat OccludingEdgeMask(const cv::Mat& depth, int radius_px, double depth_jump);
 
+// σ_n of a point X with unit normal n seen by the given views (see above), with each view's pixel precision
+// p_i (empty: 1 pixel each); infinity when the views do not constrain it (fewer than two distinct directions).
+double NormalUncertainty(const Eigen::Vector3d& X, const Eigen::Vector3d& n,
+                         const std::vector<const ViewGeometry*>& views, const std::vector<double>& pixel_sigma = {});
+
+// p (see above) per pixel of a colour image (CV_8UC3), for matching windows of the given radius, up to a
+// common factor: 1 / sqrt(E), E = mean over x and y of [var(g) − cov(g, I)² / var(I)] over the window (g the
+// grey gradient component, I the grey level, 0..1); capped at 6e4 (flat windows). CV_16F.
+cv::Mat TexturePrecisionMap(const cv::Mat& color, int radius_px);
+
 io::OrientedPointCloud FuseDepthMaps(const std::map<uint32_t, FusionView>& views, const FusionOptions& options,
                                      FusionStats* stats = nullptr);
+
+// The same points written straight to a PLY file (io::WritePointCloudPly's layout) without holding the cloud:
+// the points go to a scratch file next to `ply` first, then the kept ones are copied behind the header. The
+// maps are eroded in place (pass them with std::move). Returns the number of points written.
+size_t FuseDepthMapsToPly(std::map<uint32_t, FusionView> views, const FusionOptions& options,
+                          const std::filesystem::path& ply, FusionStats* stats = nullptr);
 
 }  // namespace fmv3d::mvs
