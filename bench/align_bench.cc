@@ -22,6 +22,7 @@
 #include "fmv3d/align/icp.h"
 #include "fmv3d/align/merge.h"
 #include "fmv3d/align/point_index.h"
+#include "fmv3d/align/sim3_json.h"
 #include "fmv3d/core/error.h"
 #include "fmv3d/core/files.h"
 #include "fmv3d/geometry/mesh_distance.h"
@@ -29,6 +30,7 @@
 #include "fmv3d/io/obj_io.h"
 #include "fmv3d/io/point_cloud.h"
 #include "fmv3d/mvs/evaluation.h"
+#include "fmv3d/sfm/evaluation.h"
 #include "fmv3d/synth/scene.h"
 
 namespace {
@@ -204,6 +206,26 @@ void BM_TwoFlightsDifferentSides(benchmark::State& state) {
   if (report.contains("joint_bundle_adjustment"))
     std::printf("joint BA: %s\n", report.at("joint_bundle_adjustment").dump().c_str());
   std::printf("alignment: %s\n", report.at("tree")[0].dump().c_str());
+  // The similarity B → A against the truth (each track's own cameras aligned to its flight's truth).
+  const core::Reconstruction rec_ref = io::ReadColmapText(root / ref / "sparse");
+  const core::Reconstruction rec_mov = io::ReadColmapText(root / mov / "sparse");
+  const auto eval_ref = sfm::EvaluateSparse(rec_ref, sfm::LoadTruth((root / ("synth_" + ref) / "truth").string()));
+  const auto eval_mov = sfm::EvaluateSparse(rec_mov, sfm::LoadTruth((root / ("synth_" + mov) / "truth").string()));
+  Eigen::Vector3d centroid = Eigen::Vector3d::Zero();
+  for (const auto& [id, p] : rec_mov.points) centroid += eval_mov.alignment.Apply(p.xyz);
+  centroid /= static_cast<double>(std::max<size_t>(1, rec_mov.points.size()));
+  const auto& moving_track = report.at("tracks")[1 - ref_index];
+  std::printf("track centre RMSE vs truth: %s %.4f%%, %s %.4f%%\n", ref.c_str(), 100 * eval_ref.centre_rmse_fraction,
+              mov.c_str(), 100 * eval_mov.centre_rmse_fraction);
+  for (const char* key : {"to_reference", "to_reference_after_joint_ba"}) {
+    if (!moving_track.contains(key)) continue;
+    const auto e = sfm::CompareSimilarityToTruth(align::Sim3FromJson(moving_track.at(key)), eval_ref, eval_mov, centroid);
+    std::printf("similarity %s vs truth: rotation %.4f deg, scale %.4f%%, translation %.4f%% of the scene "
+                "(bounds 0.05 deg, 0.1%%, 0.1%%)\n",
+                key, e.rotation_deg, 100 * e.scale, 100 * e.translation_fraction);
+    state.counters[std::string(key) + "_rotation_deg"] = e.rotation_deg;
+    state.counters[std::string(key) + "_scale_pct"] = 100 * e.scale;
+  }
   state.counters["completeness_ref"] = rows[0].ev.completeness;
   state.counters["completeness_mov"] = rows[1].ev.completeness;
   state.counters["completeness_merged"] = rows[2].ev.completeness;

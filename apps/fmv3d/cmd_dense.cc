@@ -19,6 +19,13 @@ void Add(CLI::App& app) {
   cmd->add_option("--max-size", o.max_size, "Working resolution: longer image side in pixels (0 = full size)")
       ->capture_default_str();
   cmd->add_option("--max-sources", o.max_sources, "Source views per reference view (1-16)")->capture_default_str();
+  cmd->add_option("--reference-coverage", o.references.coverage,
+                  "Depth maps only for the fewest views that see every sparse point this many times; the others "
+                  "are stereo sources only (for redundant captures such as video; 0 = a map for every view)")
+      ->capture_default_str();
+  cmd->add_option("--reference-demand", o.references.demand_fraction,
+                  "Reference cover: stop when this fraction of the coverage demand is met")
+      ->capture_default_str();
   cmd->add_option("--iterations", o.patch_match.iterations, "PatchMatch rounds (photometric pass)")
       ->capture_default_str();
   cmd->add_option("--geom-iterations", o.patch_match.geom_iterations, "PatchMatch rounds of the geometric pass")

@@ -83,14 +83,6 @@ TEST(E2eAlign, TwoSyntheticFlightsOfOneScene) {
   const auto eval_ref = sfm::EvaluateSparse(rec_ref, sfm::LoadTruth((root / ("synth_" + ref.string()) / "truth").string()));
   const auto eval_mov = sfm::EvaluateSparse(rec_mov, sfm::LoadTruth((root / ("synth_" + mov.string()) / "truth").string()));
 
-  // E = S_ref ∘ found ∘ S_mov⁻¹ in the truth frame.
-  auto compose = [](const core::Sim3& a, const core::Sim3& b) {
-    core::Sim3 c;
-    c.s = a.s * b.s;
-    c.q = a.q * b.q;
-    c.t = a.s * (a.q * b.t) + a.t;
-    return c;
-  };
   Eigen::Vector3d centroid = Eigen::Vector3d::Zero();
   for (const auto& [id, p] : rec_mov.points) centroid += eval_mov.alignment.Apply(p.xyz);
   centroid /= rec_mov.points.size();
@@ -98,9 +90,8 @@ TEST(E2eAlign, TwoSyntheticFlightsOfOneScene) {
     double rotation_deg, scale_err, translation_frac;
   };
   auto errors = [&](const core::Sim3& sim) {
-    const core::Sim3 E = compose(eval_ref.alignment, compose(sim, eval_mov.alignment.Inverse()));
-    return Errors{core::RotationAngle(E.q, Eigen::Quaterniond::Identity()) * 180 / M_PI, std::abs(E.s - 1),
-                  (E.Apply(centroid) - centroid).norm() / eval_ref.extent};
+    const sfm::SimilarityError e = sfm::CompareSimilarityToTruth(sim, eval_ref, eval_mov, centroid);
+    return Errors{e.rotation_deg, e.scale, e.translation_fraction};
   };
   const auto [rotation_deg, scale_err, translation_frac] = errors(found);
   const Errors ba = errors(after_ba);

@@ -19,6 +19,11 @@ void DenseStageOptions::Check() const {
   if (max_size > 0 && max_size < 64) throw Error("dense: --max-size below 64 pixels leaves nothing to match");
   if (max_sources < 1 || max_sources > 16) throw Error("dense: --max-sources must be in [1, 16]");
   if (cache_views < 1) throw Error("dense: cache_views must be at least 1");
+  if (references.coverage < 0) throw Error("dense: --reference-coverage must be >= 0 (0 = every view)");
+  if (!(references.demand_fraction > 0 && references.demand_fraction <= 1))
+    throw Error("dense: the reference cover's demand fraction must be in (0, 1]");
+  if (!(references.cone_deg > 0 && references.cone_deg < 180))
+    throw Error("dense: the reference cover's cone must be in (0, 180) degrees");
   selection.Check();
   patch_match.Check();
   fusion.Check();
@@ -64,6 +69,18 @@ nlohmann::json RunDenseStage(const fs::path& workspace, const DenseStageOptions&
   if (usable.empty())
     throw Error(workspace.string() + ": no registered view has a usable stereo neighbour (" +
                 (selection.empty() ? std::string("empty model") : selection.begin()->second.problem) + ")");
+  // Reference views (depth maps); every usable view stays a stereo source. Fusion checks each reference
+  // against its neighbours among the references: selected again on those views alone.
+  const std::vector<uint32_t> all_usable = usable;
+  usable = SelectReferenceViews(rec, geoms, all_usable, options.references);
+  auto fusion_selection = selection;
+  if (usable.size() < all_usable.size()) {
+    std::map<uint32_t, ViewGeometry> ref_geoms;
+    for (uint32_t id : usable) ref_geoms[id] = geoms.at(id);
+    fusion_selection = SelectViews(rec, ref_geoms, options.selection);
+    spdlog::info("dense: {} of {} views are references (each sparse point in {} of them)", usable.size(),
+                 all_usable.size(), options.references.coverage);
+  }
   core::EnsureDirectory(maps_dir);
   core::EnsureDirectory(report_dir);
   ViewCache cache(rec, geoms, frames_dir, static_cast<size_t>(std::max(options.cache_views, options.max_sources + 2)));
@@ -155,7 +172,7 @@ nlohmann::json RunDenseStage(const fs::path& workspace, const DenseStageOptions&
   std::map<uint32_t, FusionView> fviews;
   std::map<uint32_t, std::set<uint32_t>> links;
   for (uint32_t id : usable)
-    for (const auto& nb : selection.at(id).neighbours) {
+    for (const auto& nb : fusion_selection.at(id).neighbours) {
       links[id].insert(nb.image_id);
       links[nb.image_id].insert(id);  // symmetric: a view checks every view that chose it too
     }
@@ -194,7 +211,9 @@ nlohmann::json RunDenseStage(const fs::path& workspace, const DenseStageOptions&
   const auto& g0 = geoms.at(usable.front());
   nlohmann::json report = {
       {"registered_images", rec.images.size()},
-      {"views_used", usable.size()},
+      {"views_used", all_usable.size()},
+      {"reference_views", usable.size()},
+      {"reference_coverage", options.references.coverage},
       {"views_skipped", skipped},
       {"working_resolution", {g0.width, g0.height}},
       {"max_size", options.max_size},

@@ -1,7 +1,8 @@
 // The `fmv3d dense WS` stage: WS/sparse (COLMAP text model) + WS/frames → dense oriented points.
 //   1. every registered frame is undistorted and scaled to the working resolution (streamed from disk,
 //      a bounded cache of views in memory);
-//   2. global view selection picks each view's stereo sources and fusion neighbours (view_selection.h);
+//   2. global view selection picks each view's stereo sources and fusion neighbours, and (optionally) the
+//      reference views that get a depth map (view_selection.h);
 //   3. PatchMatch photometric pass per view, then a geometric-consistency pass using the neighbours' maps
 //      (patch_match.h);
 //   4. fusion of the filtered maps into oriented points (fusion.h).
@@ -28,6 +29,9 @@ struct DenseStageOptions {
   bool previews = true;        // write the PNG previews of every map
   bool keep_photometric = false;  // keep the photometric-pass maps (<name>.photometric.dmap)
   int cache_views = 16;        // undistorted views kept in memory
+  // Depth maps only for a subset of views that sees every sparse point reference_coverage times
+  // (SelectReferenceViews); the others are stereo sources only.
+  ReferenceCoverOptions references;  // .coverage 0 = a map for every view
   bool fuse_only = false;      // reuse the final maps already in WS/dense/maps (e.g. to re-fuse with other options)
   ViewSelectionOptions selection;
   PatchMatchOptions patch_match;

@@ -46,6 +46,75 @@ void ViewSelectionOptions::Check() const {
   if (!(good_angle_deg > 0)) throw Error("view selection: good_angle_deg must be positive");
 }
 
+std::vector<uint32_t> SelectReferenceViews(const core::Reconstruction& rec,
+                                           const std::map<uint32_t, ViewGeometry>& geoms,
+                                           const std::vector<uint32_t>& candidates,
+                                           const ReferenceCoverOptions& options) {
+  std::vector<uint32_t> all = candidates;
+  std::sort(all.begin(), all.end());
+  if (options.coverage <= 0 || all.size() <= 2) return all;
+  std::map<uint32_t, size_t> index;
+  for (size_t i = 0; i < all.size(); ++i) index[all[i]] = i;
+  const double cos_cone = std::cos(options.cone_deg * kDeg);
+  // Per point: chosen views still needed; per view: the points it sees.
+  std::vector<int> need;
+  std::vector<std::vector<uint32_t>> points_of(all.size());
+  for (const auto& [pid, p] : rec.points) {
+    Eigen::Vector3d mean_dir = Eigen::Vector3d::Zero();
+    std::vector<double> dist;
+    std::vector<bool> seen(all.size(), false);
+    for (const auto& te : p.track) {
+      auto it = index.find(te.image_id);
+      if (it == index.end()) continue;
+      const Eigen::Vector3d v = geoms.at(te.image_id).Centre() - p.xyz;
+      mean_dir += v.normalized();
+      dist.push_back(v.norm());
+      seen[it->second] = true;
+    }
+    if (dist.empty() || mean_dir.norm() < 1e-9) continue;
+    mean_dir.normalize();
+    std::nth_element(dist.begin(), dist.begin() + static_cast<std::ptrdiff_t>(dist.size() / 2), dist.end());
+    const double d_obs = dist[dist.size() / 2];
+    for (size_t i = 0; i < all.size(); ++i) {
+      if (seen[i]) continue;
+      const ViewGeometry& g = geoms.at(all[i]);
+      const Eigen::Vector3d v = g.Centre() - p.xyz;
+      const double d = v.norm();
+      if (d < 0.5 * d_obs || d > 2 * d_obs || v.dot(mean_dir) < cos_cone * d) continue;
+      Eigen::Vector2d uv;
+      if (g.Project(p.xyz, &uv) && uv.x() >= 0 && uv.y() >= 0 && uv.x() < g.width && uv.y() < g.height)
+        seen[i] = true;
+    }
+    const auto k = static_cast<uint32_t>(need.size());
+    int n_seen = 0;
+    for (size_t i = 0; i < all.size(); ++i)
+      if (seen[i]) points_of[i].push_back(k), ++n_seen;
+    need.push_back(std::min(options.coverage, n_seen));
+  }
+  size_t demand = 0;
+  for (int n : need) demand += static_cast<size_t>(n);
+  if (demand == 0) return all;
+  size_t met = 0;
+  std::vector<bool> chosen(all.size(), false);
+  while (static_cast<double>(met) < options.demand_fraction * static_cast<double>(demand)) {
+    size_t best = all.size(), best_gain = 0;
+    for (size_t i = 0; i < all.size(); ++i) {
+      if (chosen[i]) continue;
+      size_t gain = 0;
+      for (uint32_t k : points_of[i]) gain += need[k] > 0 ? 1 : 0;
+      if (gain > best_gain) best_gain = gain, best = i;
+    }
+    if (best == all.size()) break;  // nothing left to gain
+    chosen[best] = true;
+    for (uint32_t k : points_of[best])
+      if (need[k] > 0) --need[k], ++met;
+  }
+  std::vector<uint32_t> out;
+  for (size_t i = 0; i < all.size(); ++i)
+    if (chosen[i]) out.push_back(all[i]);
+  return out;
+}
+
 std::map<uint32_t, ReferenceSelection> SelectViews(const core::Reconstruction& rec,
                                                    const std::map<uint32_t, ViewGeometry>& geoms,
                                                    const ViewSelectionOptions& options) {

@@ -43,6 +43,27 @@ struct ReferenceSelection {
   std::string problem;                  // why the view cannot be used (empty when it can)
 };
 
+// Reference views for a redundant capture (video keyframes, where every surface point is in ~20 views): the
+// fewest views, greedily, such that each sparse point is seen by min(coverage, views that see it) of them — a
+// set multi-cover after CMVS (Furukawa et al. 2010). Depth maps cost per reference and fusion merges the same
+// surface once per reference, so this cuts dense, fusion, Poisson and texture time in proportion; the views
+// left out still serve as stereo sources.
+// "Sees" is not the SfM track alone (video tracks break into many 2-view pieces, which would force every view
+// in): a view sees a point when the point projects into it, from within cone_deg of the point's mean observed
+// direction, at 0.5–2x its observed distance (occlusion is not modelled: the cone keeps views on the far side
+// of an object out). Stops when the chosen views meet `demand_fraction` of the total demand (the last points
+// are at the capture's edge and would pull in views for almost nothing). Returns every candidate when
+// coverage <= 0 or the model has no sparse points (e.g. ground-truth cameras only). Sorted by image id.
+struct ReferenceCoverOptions {
+  int coverage = 0;
+  double demand_fraction = 0.98;
+  double cone_deg = 45;
+};
+std::vector<uint32_t> SelectReferenceViews(const core::Reconstruction& rec,
+                                           const std::map<uint32_t, ViewGeometry>& geoms,
+                                           const std::vector<uint32_t>& candidates,
+                                           const ReferenceCoverOptions& options);
+
 std::map<uint32_t, ReferenceSelection> SelectViews(const core::Reconstruction& rec,
                                                    const std::map<uint32_t, ViewGeometry>& geoms,
                                                    const ViewSelectionOptions& options);

@@ -106,4 +106,21 @@ core::Reconstruction LoadTruth(const std::string& dir_str) {
   throw Error(dir_str + ": no ground truth (neither a COLMAP text model nor Strecha NAME.camera files)");
 }
 
+SimilarityError CompareSimilarityToTruth(const core::Sim3& found, const SparseEvaluation& reference,
+                                         const SparseEvaluation& moving, const Eigen::Vector3d& centre) {
+  auto compose = [](const core::Sim3& a, const core::Sim3& b) {
+    core::Sim3 c;
+    c.s = a.s * b.s;
+    c.q = a.q * b.q;
+    c.t = a.s * (a.q * b.t) + a.t;
+    return c;
+  };
+  const core::Sim3 E = compose(reference.alignment, compose(found, moving.alignment.Inverse()));
+  SimilarityError e;
+  e.rotation_deg = core::RotationAngle(E.q, Eigen::Quaterniond::Identity()) * 180 / M_PI;
+  e.scale = std::abs(E.s - 1);
+  e.translation_fraction = reference.extent > 0 ? (E.Apply(centre) - centre).norm() / reference.extent : 0;
+  return e;
+}
+
 }  // namespace fmv3d::sfm

@@ -34,6 +34,18 @@ struct SparseEvaluation {
 // Throws fmv3d::Error when fewer than 3 images can be matched by name (no alignment possible).
 SparseEvaluation EvaluateSparse(const core::Reconstruction& estimate, const core::Reconstruction& truth);
 
+// Error of a similarity found between two reconstructions (`moving` → `reference`, e.g. by `fmv3d align`)
+// against the truth composed from each one's own alignment to its ground truth (same world for both):
+// E = S_ref ∘ found ∘ S_mov⁻¹ should be the identity. Rotation of E, |scale − 1|, and how far E moves
+// `centre` (a truth-frame point, e.g. the moving model's centroid) as a fraction of the reference's extent.
+struct SimilarityError {
+  double rotation_deg = 0;
+  double scale = 0;
+  double translation_fraction = 0;
+};
+SimilarityError CompareSimilarityToTruth(const core::Sim3& found, const SparseEvaluation& reference,
+                                         const SparseEvaluation& moving, const Eigen::Vector3d& centre);
+
 // Median relative-rotation error (degrees) over all pairs of corresponding poses (same order in both lists).
 double MedianRelativeRotationErrorDeg(const std::vector<core::Pose>& estimate, const std::vector<core::Pose>& truth);
 
