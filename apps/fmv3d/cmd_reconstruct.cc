@@ -16,7 +16,7 @@ void Add(CLI::App& app) {
     std::vector<std::string> inputs;
     std::string ws, camera_file, sensor, pairs = "auto";
     pipeline::ReconstructOptions opt;
-    bool no_report = false;
+    bool no_report = false, fast = false;
   };
   auto a = std::make_shared<Args>();
   cmd->add_option("INPUT", a->inputs, "Image files, image folders, videos (any mix)")->required();
@@ -28,6 +28,9 @@ void Add(CLI::App& app) {
   cmd->add_option("--pairs", a->pairs, "auto | exhaustive | sequential | spatial")->capture_default_str();
   cmd->add_option("--from", a->opt.runner.from, "Re-run from this stage on, even if its outputs are up to date");
   cmd->add_option("--until", a->opt.runner.until, "Stop after this stage");
+  cmd->add_flag("--fast", a->fast,
+                "Video-speed preset: dense at 480 px with depth maps for a covering subset of the frames only "
+                "(about 3x faster end to end; see bench/RESULTS.md for its accuracy)");
   cmd->add_flag("--no-report", a->no_report, "Skip report/report.html and its pictures");
   cmd->callback([a] {
     auto& o = a->opt;
@@ -37,6 +40,7 @@ void Add(CLI::App& app) {
     o.prior.sensor_name = a->sensor;
     o.match.pairs.mode = features::ParsePairMode(a->pairs);
     o.report = !a->no_report;
+    if (a->fast) o.ApplyFastPreset();
     const auto report = pipeline::RunReconstruct(o);
     std::printf("reconstruction in %s\n", a->ws.c_str());
     if (o.report) std::printf("  report: %s/report/report.html\n", a->ws.c_str());

@@ -301,6 +301,38 @@ TEST(DenseStage, FusedPointsLieOnTheTrueSurface) {
   }
 }
 
+// With a reference cover only some views get a depth map; the others still serve as sources, and the fused
+// points are as accurate as with every view. (10 frames 36° apart see each point a few times only: a cover
+// of 2 leaves one view out; video keyframes, 20-30 views per point, leave out 1/2-2/3.)
+TEST(DenseStage, ReferenceCoverMapsASubsetOfTheViews) {
+  const Flight& flight = SmallFlight();
+  test::TempDir dir("mvs_cover");
+  const fs::path ws = MakeWorkspace(dir, flight);
+  DenseStageOptions opt;
+  opt.max_size = 0;
+  opt.patch_match.iterations = 3;
+  opt.geometric = false;
+  opt.previews = false;
+  opt.references.coverage = 2;
+  const auto report = RunDenseStage(ws, opt);
+  EXPECT_EQ(report.at("views_used").get<int>(), 10);
+  const int refs = report.at("reference_views").get<int>();
+  EXPECT_GE(refs, 3);
+  EXPECT_LT(refs, 10);
+  int maps = 0;
+  for (const auto& e : fs::directory_iterator(ws / "dense" / "maps")) maps += e.path().extension() == ".dmap";
+  EXPECT_EQ(maps, refs);
+  const io::OrientedPointCloud cloud = io::ReadPointCloudPly(ws / "dense" / "fused.ply");
+  ASSERT_GT(cloud.size(), 5000u);
+  const io::TexturedMesh scene = io::ReadObj(flight.dir / "scene.obj", false);
+  const auto ev = EvaluateDense(cloud, flight.result.truth, flight.result.truth, scene,
+                                flight.result.characteristic_length, {});
+  std::printf("cover of 2: %d of 10 views mapped, %zu points, median %.5f, p90 %.5f of the height\n", refs,
+              cloud.size(), ev.median_fraction(), ev.p90_fraction());
+  EXPECT_LT(ev.median_fraction(), 0.004) << ev.ToJson().dump();
+  EXPECT_LT(ev.p90_fraction(), 0.015) << ev.ToJson().dump();
+}
+
 TEST(DenseStage, ViewWithoutNeighboursIsSkipped) {
   const Flight& flight = SmallFlight();
   test::TempDir dir("mvs_skip");

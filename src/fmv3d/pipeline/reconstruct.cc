@@ -29,6 +29,15 @@ void ReconstructOptions::Check() const {
   dsm.Check();
 }
 
+void ReconstructOptions::ApplyFastPreset() {
+  fast = true;
+  dense.max_size = 480;
+  dense.max_sources = 4;
+  dense.patch_match.iterations = 3;
+  dense.geometric = false;
+  dense.references.coverage = 8;
+}
+
 std::vector<Stage> ReconstructStages(const ReconstructOptions& o) {
   const Workspace ws(o.workspace);
   const fs::path root = ws.root();
@@ -115,6 +124,7 @@ nlohmann::json RunReconstruct(const ReconstructOptions& o, std::vector<StageResu
                         {"sensor", o.prior.sensor_name},
                         {"max_frames", o.frames.max_frames},
                         {"sift_max_features", o.sift.max_features},
+                        {"fast", o.fast},
                         {"from", o.runner.from},
                         {"until", o.runner.until}};
   core::WriteJson(ws.project_json(), project);
