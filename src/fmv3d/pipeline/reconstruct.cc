@@ -36,6 +36,7 @@ void ReconstructOptions::ApplyFastPreset() {
   dense.patch_match.iterations = 3;
   dense.geometric = false;
   dense.references.coverage = 8;
+  texture.view_coverage = 8;
 }
 
 std::vector<Stage> ReconstructStages(const ReconstructOptions& o) {

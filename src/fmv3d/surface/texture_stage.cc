@@ -3,6 +3,7 @@
 #include <spdlog/spdlog.h>
 #include <tbb/parallel_for.h>
 
+#include <algorithm>
 #include <chrono>
 
 #include "fmv3d/core/error.h"
@@ -10,6 +11,8 @@
 #include "fmv3d/io/colmap_model.h"
 #include "fmv3d/io/image_io.h"
 #include "fmv3d/io/obj_io.h"
+#include "fmv3d/mvs/view.h"
+#include "fmv3d/mvs/view_selection.h"
 #include "fmv3d/surface/gltf_writer.h"
 
 namespace fmv3d::surface {
@@ -70,8 +73,24 @@ nlohmann::json RunTextureStage(const fs::path& workspace, const TextureStageOpti
   if (!fs::exists(mesh_path))
     throw Error(workspace.string() + ": no mesh/poisson.ply — run `fmv3d mesh " + workspace.string() + "` first");
   const ColoredMesh mesh = ReadMeshPly(mesh_path);
-  const core::Reconstruction model = io::ReadColmapText(sparse);
+  core::Reconstruction model = io::ReadColmapText(sparse);
   if (model.images.empty()) throw Error((sparse / "images.txt").string() + ": no registered images");
+  const size_t registered = model.images.size();
+  if (options.view_coverage > 0) {
+    std::map<uint32_t, mvs::ViewGeometry> geoms;
+    std::vector<uint32_t> ids;
+    for (const auto& [id, im] : model.images) {
+      geoms[id] = mvs::MakeViewGeometry(model, id, 0);
+      ids.push_back(id);
+    }
+    mvs::ReferenceCoverOptions cover;
+    cover.coverage = options.view_coverage;
+    const auto keep = mvs::SelectReferenceViews(model, geoms, ids, cover);
+    for (auto it = model.images.begin(); it != model.images.end();)
+      it = std::binary_search(keep.begin(), keep.end(), it->first) ? std::next(it) : model.images.erase(it);
+    spdlog::info("texture: colour from {} of {} views (each sparse point in {} of them)", model.images.size(),
+                 registered, options.view_coverage);
+  }
   const std::vector<TextureView> views = LoadTextureViews(model, workspace / "frames");
   const double load_seconds = std::chrono::duration<double>(Clock::now() - start).count();
 
@@ -101,6 +120,7 @@ nlohmann::json RunTextureStage(const fs::path& workspace, const TextureStageOpti
   for (size_t p = 0; p < textured.mesh.materials.size(); ++p)
     report["outputs"].push_back("mesh/textured_" + textured.mesh.materials[p].name + ".png");
   report["views"] = views.size();
+  report["registered_views"] = registered;
   report["faces"] = textured.mesh.faces.size();
   report["seconds"] = {{"load", load_seconds},
                        {"texturing", textured.stats["seconds"]},

@@ -7,6 +7,8 @@
 //   WS/report/texture.json                                          views, candidates, patches, pages, timings
 #pragma once
 
+#include "fmv3d/core/error.h"
+
 #include <filesystem>
 #include <nlohmann/json.hpp>
 #include <vector>
@@ -20,9 +22,14 @@ namespace fmv3d::surface {
 struct TextureStageOptions {
   ViewSelectionOptions selection;
   AtlasOptions atlas;
+  // > 0: colour from the fewest views that see every sparse point this many times (mvs::SelectReferenceViews)
+  // instead of every registered view; the visibility pass costs per view, and video keyframes see each face
+  // from 20-30 views, most of them near-duplicates. 0 = every view.
+  int view_coverage = 0;
   void Check() const {
     selection.Check();
     atlas.Check();
+    if (view_coverage < 0) throw Error("texture: --view-coverage must be >= 0 (0 = every view)");
   }
 };
 
