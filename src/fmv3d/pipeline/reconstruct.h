@@ -42,8 +42,8 @@ struct ReconstructOptions {
   // `--fast`: the video-speed preset (bench/RESULTS.md has its time and accuracy next to the defaults).
   // Dense as the demo runs it — half the default working size (480 px), 4 sources, 3 rounds, no
   // geometric pass — with depth maps only for the reference views that cover every sparse point 8 times
-  // (video keyframes see each surface point ~20-30 times; the rest stay stereo sources); texture colours
-  // from the same kind of cover.
+  // (video keyframes see each surface point ~20-30 times; the rest stay stereo sources); Poisson one octree
+  // level coarser than the point density allows; texture colours from the same kind of cover.
   void ApplyFastPreset();
   // Throws fmv3d::Error naming the bad option (no inputs, missing file, stage options).
   void Check() const;
