@@ -196,9 +196,32 @@ void BM_TwoFlightsDifferentSides(benchmark::State& state) {
   finer.dense_ranges = {{0, ref_points}, {ref_points, merged.size()}};
   align::KeepFinerInOverlap(&finer);
   eval("merged, finer", finer.dense);
+  // The surface both tracks cover: points with a point of the other track within 2 median spacings (of the
+  // other track). There the union is compared with each track on the same surface.
+  auto in_overlap = [&](size_t begin, size_t end, size_t obegin, size_t oend) {
+    std::vector<Eigen::Vector3d> other(merged.positions.begin() + obegin, merged.positions.begin() + oend);
+    const align::PointIndex index(other);
+    const double r = 2 * align::MedianSpacing(other, index);
+    io::OrientedPointCloud out;
+    for (size_t i = begin; i < end; ++i) {
+      double d2 = 0;
+      if (index.Nearest(merged.positions[i], &d2) >= 0 && d2 <= r * r) {
+        out.positions.push_back(merged.positions[i]);
+        if (merged.has_normals()) out.normals.push_back(merged.normals[i]);
+      }
+    }
+    return out;
+  };
+  const io::OrientedPointCloud ref_common = in_overlap(0, ref_points, ref_points, merged.size());
+  const io::OrientedPointCloud mov_common = in_overlap(ref_points, merged.size(), 0, ref_points);
+  io::OrientedPointCloud union_common = ref_common;
+  union_common.Append(mov_common);
+  eval(ref + " where both", ref_common);
+  eval(mov + " where both", mov_common);
+  eval("merged where both", union_common);
   std::printf("\n%-16s %9s %14s %12s %14s\n", "cloud", "points", "median err %L", "p90 err %L", "completeness");
   for (const auto& r : rows)
-    std::printf("%-16s %9zu %14.3f %12.3f %13.2f%%\n", r.what.c_str(), r.ev.points, 100 * r.ev.median_fraction(),
+    std::printf("%-18s %9zu %14.3f %12.3f %13.2f%%\n", r.what.c_str(), r.ev.points, 100 * r.ev.median_fraction(),
                 100 * r.ev.p90_fraction(), 100 * r.ev.completeness);
   const double better = std::max(rows[0].ev.completeness, rows[1].ev.completeness);
   std::printf("completeness gain over the better single track: %+.2f points union, %+.2f finer kept (target >= +5)\n",
