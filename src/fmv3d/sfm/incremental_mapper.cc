@@ -109,6 +109,14 @@ class ModelBuilder {
   int RelocaliseImages();
   void LocalBundleAdjust(uint32_t image_id);
   BundleAdjustmentSummary GlobalBundleAdjust(bool final_pass, bool principal_point = false);
+  // After an image was registered: whether the model has grown enough for an intermediate global adjustment
+  // (or the dolly-zoom scan, which ends with one, is about to run).
+  bool GlobalBundleAdjustDue() const {
+    const size_t n = rec_.images.size();
+    if (focal_from_plateau_ && !dolly_done_ && static_cast<int>(n) >= opt_.focal_dolly_min_images) return true;
+    return static_cast<int>(n) < opt_.global_ba_every_image_below ||
+           n >= opt_.global_ba_growth_ratio * images_at_last_global_;
+  }
   void TryPrincipalPoint();
   BundleAdjustmentOptions BaOptions() const;
 
@@ -943,7 +951,9 @@ void ModelBuilder::Grow() {
     for (const auto& [neg, id] : cands) {
       if (TryRegister(id)) {
         const int made = TriangulateImage(id);
-        LocalBundleAdjust(id);
+        // A global adjustment due now covers the new image and its neighbours too: the local one would only
+        // be repeated by it (while the model is small, both used to run after every image).
+        if (!GlobalBundleAdjustDue()) LocalBundleAdjust(id);
         spdlog::debug("registered {} ({} images, +{} points)", images_.at(id)->name, rec_.images.size(), made);
         registered = true;
         break;
@@ -952,15 +962,13 @@ void ModelBuilder::Grow() {
       visible_at_failure_[id] = VisiblePoints(id, nullptr);
     }
     if (!registered) break;
-    const size_t n = rec_.images.size();
-    if (focal_from_plateau_ && !dolly_done_ && static_cast<int>(n) >= opt_.focal_dolly_min_images) {
+    if (focal_from_plateau_ && !dolly_done_ && static_cast<int>(rec_.images.size()) >= opt_.focal_dolly_min_images) {
       DollyZoomFocalScan();
       GlobalBundleAdjust(false);
       Retriangulate();
       continue;
     }
-    if (static_cast<int>(n) < opt_.global_ba_every_image_below ||
-        n >= opt_.global_ba_growth_ratio * images_at_last_global_) {
+    if (GlobalBundleAdjustDue()) {
       GlobalBundleAdjust(false);
       Retriangulate();
     }
