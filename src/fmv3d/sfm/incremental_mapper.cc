@@ -114,8 +114,12 @@ class ModelBuilder {
   bool GlobalBundleAdjustDue() const {
     const size_t n = rec_.images.size();
     if (focal_from_plateau_ && !dolly_done_ && static_cast<int>(n) >= opt_.focal_dolly_min_images) return true;
-    return static_cast<int>(n) < opt_.global_ba_every_image_below ||
-           n >= opt_.global_ba_growth_ratio * images_at_last_global_;
+    if (static_cast<int>(n) < opt_.global_ba_every_image_below) return true;
+    if (n < opt_.global_ba_growth_ratio * images_at_last_global_) return false;
+    // Growth ends with a global adjustment anyway: when even the pool's remaining images cannot grow the model
+    // by the ratio once more, that one comes sooner than the next intermediate one would, so this is skipped.
+    const size_t remaining = pool_.size() - n;
+    return remaining >= (opt_.global_ba_growth_ratio - 1) * n;
   }
   void TryPrincipalPoint();
   BundleAdjustmentOptions BaOptions() const;
