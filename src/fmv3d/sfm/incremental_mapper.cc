@@ -878,7 +878,9 @@ void ModelBuilder::DollyZoomFocalScan() {
   BundleAdjustmentOptions o = BaOptions();
   o.refine_focal = false;
   o.refine_k1 = o.refine_k2 = false;  // distortion would absorb the perspective the scan measures
-  o.max_iterations = opt_.global_ba_max_iterations * 2;
+  // Each candidate's rms is compared with the others': the budget the scan was tuned with (2x the former
+  // intermediate global BA limit of 10), independent of the intermediate BAs' own.
+  o.max_iterations = 20;
   o.function_tolerance = 1e-6;
   double best_rms = std::numeric_limits<double>::infinity(), best_k = 1, rms_at_lower_bound = 0, rms_next = 0;
   core::Reconstruction best_rec;

@@ -77,7 +77,9 @@ struct MapperOptions {
   // at about half the global BA work (the final BA still converges the whole model).
   double global_ba_growth_ratio = 1.5;
   int global_ba_every_image_below = 12; // ... and after every image while the model is small
-  int global_ba_max_iterations = 10;    // intermediate global BAs: near the optimum is enough
+  // Intermediate global BAs: near the optimum is enough. 5 instead of 10 left the final accuracy of the clip
+  // and the orbit above unchanged (the final BA converges the whole model) at ~20% less global BA work.
+  int global_ba_max_iterations = 5;
   int final_ba_max_iterations = 100;
   double final_ba_function_tolerance = 1e-7;
   int refine_focal_min_images = 3;
