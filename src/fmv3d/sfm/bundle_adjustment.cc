@@ -3,9 +3,11 @@
 #include <ceres/ceres.h>
 #include <spdlog/spdlog.h>
 
+#include <algorithm>
 #include <array>
 #include <chrono>
 #include <cmath>
+#include <deque>
 #include <limits>
 #include <map>
 #include <memory>
@@ -78,20 +80,31 @@ BundleAdjustmentSummary BundleAdjust(core::Reconstruction* rec, const BundleAdju
     for (const auto& [id, im] : rec->images) variable.insert(id);
 
   // Points seen by a variable image, and every image observing them.
-  std::set<uint64_t> point_ids;
+  std::vector<uint64_t> point_ids;
   for (uint32_t id : variable) {
     auto it = rec->images.find(id);
     if (it == rec->images.end()) continue;
     for (int64_t pid : it->second.point3d_ids)
-      if (pid != core::kNoPoint3D) point_ids.insert(static_cast<uint64_t>(pid));
+      if (pid != core::kNoPoint3D) point_ids.push_back(static_cast<uint64_t>(pid));
   }
+  std::sort(point_ids.begin(), point_ids.end());
+  point_ids.erase(std::unique(point_ids.begin(), point_ids.end()), point_ids.end());
   if (point_ids.empty()) return out;
 
+  // Parameter and cost blocks live in flat arrays owned here (the problem does not own them): a global
+  // adjustment has hundreds of thousands of residuals, and one allocation each (plus Ceres' bookkeeping of
+  // owned objects) was a visible share of a short adjustment's time.
   std::map<uint32_t, PoseBlock> poses;
   std::map<uint32_t, std::array<double, core::kNumIntrinsics>> intr;
-  std::map<uint64_t, std::array<double, 3>> pts;
+  std::vector<std::array<double, 3>> pts(point_ids.size());
+  size_t num_obs = 0;
+  for (uint64_t pid : point_ids) num_obs += rec->points.at(pid).track.size();
+  std::deque<geometry::AnalyticReprojectionError> costs;  // stable addresses, allocated in chunks
+  ceres::EigenQuaternionManifold quaternion_manifold;
   ceres::Problem::Options popts;
   popts.loss_function_ownership = ceres::DO_NOT_TAKE_OWNERSHIP;  // shared_loss below outlives the problem
+  popts.cost_function_ownership = ceres::DO_NOT_TAKE_OWNERSHIP;  // costs above
+  popts.manifold_ownership = ceres::DO_NOT_TAKE_OWNERSHIP;       // quaternion_manifold, subset_manifolds
   // One loss object for every residual: hundreds of thousands of residuals in a global adjustment would
   // otherwise mean as many allocations. Declared before the problem, so it is destroyed after it.
   std::unique_ptr<ceres::LossFunction> shared_loss;
@@ -100,15 +113,21 @@ BundleAdjustmentSummary BundleAdjust(core::Reconstruction* rec, const BundleAdju
     case BundleAdjustmentOptions::Loss::kHuber: shared_loss.reset(new ceres::HuberLoss(options.loss_scale_px)); break;
     default: break;
   }
+  std::vector<std::unique_ptr<ceres::Manifold>> subset_manifolds;
+  std::unique_ptr<ceres::CostFunction> gauge_prior;
   ceres::Problem problem(popts);
 
   auto loss = [&]() { return shared_loss.get(); };
 
-  std::vector<std::pair<uint32_t, uint32_t>> residual_obs;  // (image, point2d) per residual, for RMS
-  std::vector<ceres::ResidualBlockId> reprojection_blocks;   // RMS over these only (not the gauge prior)
-  for (uint64_t pid : point_ids) {
-    auto& P = rec->points.at(pid);
-    auto& X = pts[pid];
+  // Per residual: (image, point2d) for the caller and the parameter blocks, to evaluate the plain RMS directly
+  // (ceres::Problem::Evaluate builds a whole program for it: measured ~10% of a local adjustment).
+  std::vector<std::pair<uint32_t, uint32_t>> residual_obs;
+  std::vector<std::array<double*, 4>> residual_params;
+  residual_obs.reserve(num_obs);
+  residual_params.reserve(num_obs);
+  for (size_t i = 0; i < point_ids.size(); ++i) {
+    auto& P = rec->points.at(point_ids[i]);
+    auto& X = pts[i];
     X = {P.xyz.x(), P.xyz.y(), P.xyz.z()};
     for (const auto& el : P.track) {
       auto& image = rec->images.at(el.image_id);
@@ -121,9 +140,9 @@ BundleAdjustmentSummary BundleAdjust(core::Reconstruction* rec, const BundleAdju
       }
       auto cit = intr.find(image.camera_id);
       if (cit == intr.end()) cit = intr.emplace(image.camera_id, rec->cameras.at(image.camera_id).Params()).first;
-      reprojection_blocks.push_back(problem.AddResidualBlock(
-          new geometry::AnalyticReprojectionError(image.points2d[el.point2d_idx]), loss(), cit->second.data(),
-          pit->second.q.data(), pit->second.t.data(), X.data()));
+      costs.emplace_back(image.points2d[el.point2d_idx]);
+      residual_params.push_back({cit->second.data(), pit->second.q.data(), pit->second.t.data(), X.data()});
+      problem.AddResidualBlock(&costs.back(), loss(), residual_params.back().data(), 4);
       residual_obs.emplace_back(el.image_id, el.point2d_idx);
     }
     if (!options.refine_points) problem.SetParameterBlockConstant(X.data());
@@ -132,7 +151,7 @@ BundleAdjustmentSummary BundleAdjust(core::Reconstruction* rec, const BundleAdju
   // Poses: variable unless constant or outside the variable set; gauge fixed when nothing else anchors it.
   bool any_constant = false;
   for (auto& [id, b] : poses) {
-    problem.SetManifold(b.q.data(), new ceres::EigenQuaternionManifold);
+    problem.SetManifold(b.q.data(), &quaternion_manifold);
     if (!variable.count(id) || config.constant_images.count(id)) {
       problem.SetParameterBlockConstant(b.q.data());
       problem.SetParameterBlockConstant(b.t.data());
@@ -157,7 +176,8 @@ BundleAdjustmentSummary BundleAdjust(core::Reconstruction* rec, const BundleAdju
     // with poses (3 + 3) and the usual free intrinsics (f, k1, k2) all camera blocks then have size 3 and Ceres
     // uses its compiled <2, 3, 3> Schur eliminator instead of the dynamic-size one (measured: the Schur
     // elimination was the largest share of global BA time).
-    problem.AddResidualBlock(new ScaleGaugePrior(largest, t2[largest]), nullptr, t2.data());
+    gauge_prior = std::make_unique<ScaleGaugePrior>(largest, t2[largest]);
+    problem.AddResidualBlock(gauge_prior.get(), nullptr, t2.data());
   }
   for (auto& [cid, params] : intr) {
     std::vector<int> fixed;
@@ -175,8 +195,10 @@ BundleAdjustmentSummary BundleAdjust(core::Reconstruction* rec, const BundleAdju
     keep(core::kP2, options.refine_tangential);
     if (fixed.size() == core::kNumIntrinsics)
       problem.SetParameterBlockConstant(params.data());
-    else if (!fixed.empty())
-      problem.SetManifold(params.data(), new ceres::SubsetManifold(core::kNumIntrinsics, fixed));
+    else if (!fixed.empty()) {
+      subset_manifolds.emplace_back(new ceres::SubsetManifold(core::kNumIntrinsics, fixed));
+      problem.SetManifold(params.data(), subset_manifolds.back().get());
+    }
   }
 
   ceres::Solver::Options sopts;
@@ -184,7 +206,7 @@ BundleAdjustmentSummary BundleAdjust(core::Reconstruction* rec, const BundleAdju
   sopts.linear_solver_type = num_var_images <= options.dense_schur_max_images ? ceres::DENSE_SCHUR
                                                                                 : ceres::SPARSE_SCHUR;
   auto ordering = std::make_shared<ceres::ParameterBlockOrdering>();
-  for (auto& [pid, X] : pts) ordering->AddElementToGroup(X.data(), 0);
+  for (auto& X : pts) ordering->AddElementToGroup(X.data(), 0);
   for (auto& [id, b] : poses) {
     ordering->AddElementToGroup(b.q.data(), 1);
     ordering->AddElementToGroup(b.t.data(), 1);
@@ -199,22 +221,29 @@ BundleAdjustmentSummary BundleAdjust(core::Reconstruction* rec, const BundleAdju
   sopts.minimizer_progress_to_stdout = false;
   sopts.logging_type = ceres::SILENT;
 
+  // RMS of the raw (un-robustified) reprojection residuals, the gauge prior left out.
   auto rms = [&]() {
     double sum = 0;
-    ceres::Problem::EvaluateOptions eopts;
-    eopts.apply_loss_function = false;
-    eopts.num_threads = sopts.num_threads;
-    eopts.residual_blocks = reprojection_blocks;
-    std::vector<double> res;
-    problem.Evaluate(eopts, nullptr, &res, nullptr, nullptr);
-    for (double r : res) sum += r * r;
-    const size_t n = res.size() / 2;
-    return n ? std::sqrt(sum / n) : 0.0;
+    double r[2];
+    for (size_t i = 0; i < costs.size(); ++i) {
+      costs[i].Evaluate(residual_params[i].data(), r, nullptr);
+      sum += r[0] * r[0] + r[1] * r[1];
+    }
+    return costs.empty() ? 0.0 : std::sqrt(sum / costs.size());
   };
+  const auto t_setup = std::chrono::steady_clock::now();
   out.initial_rms_px = rms();
   ceres::Solver::Summary summary;
   ceres::Solve(sopts, &problem, &summary);
   out.final_rms_px = rms();
+  spdlog::debug("BA: {} var images, {} points, {} residuals, {} iterations; setup {:.3f} s, solve {:.3f} s "
+                "(pre {:.3f}, jac {:.3f}, res {:.3f}, lin {:.3f}), rms {:.3f} s",
+                variable.size(), point_ids.size(), residual_obs.size(), summary.iterations.size(),
+                std::chrono::duration<double>(t_setup - start).count(), summary.total_time_in_seconds,
+                summary.preprocessor_time_in_seconds, summary.jacobian_evaluation_time_in_seconds,
+                summary.residual_evaluation_time_in_seconds, summary.linear_solver_time_in_seconds,
+                std::chrono::duration<double>(std::chrono::steady_clock::now() - t_setup).count() -
+                    summary.total_time_in_seconds);
   out.num_residuals = static_cast<int>(residual_obs.size());
   out.num_iterations = static_cast<int>(summary.iterations.size());
   out.success = summary.IsSolutionUsable();
@@ -226,7 +255,8 @@ BundleAdjustmentSummary BundleAdjust(core::Reconstruction* rec, const BundleAdju
       pose.t = Eigen::Vector3d(b.t[0], b.t[1], b.t[2]);
     }
     for (auto& [cid, params] : intr) rec->cameras.at(cid).SetParams(params.data());
-    for (auto& [pid, X] : pts) rec->points.at(pid).xyz = Eigen::Vector3d(X[0], X[1], X[2]);
+    for (size_t i = 0; i < point_ids.size(); ++i)
+      rec->points.at(point_ids[i]).xyz = Eigen::Vector3d(pts[i][0], pts[i][1], pts[i][2]);
     for (uint64_t pid : point_ids) {
       auto& P = rec->points.at(pid);
       double sum = 0;

@@ -31,7 +31,11 @@ struct BundleAdjustmentOptions {
   double function_tolerance = 1e-6;
   double gradient_tolerance = 1e-10;
   double parameter_tolerance = 1e-8;
-  int dense_schur_max_images = 60;  // larger problems use SPARSE_SCHUR
+  // Larger problems use SPARSE_SCHUR. Both spend their time forming the reduced camera system (the Schur
+  // elimination), where the dense matrix's direct cell access beats the sparse one's look-ups and locks; the
+  // dense factorisation (6n + 3 unknowns, n³ flops) only costs as much past a few hundred images. Measured on a
+  // 61-image 960x540 video model (424k residuals): dense 4.7 CPU-s vs sparse 6.2 for 6 iterations.
+  int dense_schur_max_images = 200;
   int num_threads = 0;              // 0: core::NumThreads()
   void Check() const;
 };

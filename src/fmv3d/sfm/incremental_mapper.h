@@ -72,9 +72,14 @@ struct MapperOptions {
   // final BA at 1e-9 took 120 iterations, at 1e-7 it stops after 28 with centre 0.0036%, rotation 0.032°,
   // focal 0.026%; local and intermediate global BAs only need to stay near the optimum for the next image.
   int local_ba_max_iterations = 10;
-  double global_ba_growth_ratio = 1.1;  // global BA when the model grew by 10%
+  // Global BA when the model grew by 50%. Local BAs keep a video model near its optimum between them: on a
+  // 61-keyframe 960x540 clip and a 40-frame orbit, 1.5 instead of 1.1 (COLMAP's) gave the same final accuracy
+  // at about half the global BA work (the final BA still converges the whole model).
+  double global_ba_growth_ratio = 1.5;
   int global_ba_every_image_below = 12; // ... and after every image while the model is small
-  int global_ba_max_iterations = 10;    // intermediate global BAs: near the optimum is enough
+  // Intermediate global BAs: near the optimum is enough. 5 instead of 10 left the final accuracy of the clip
+  // and the orbit above unchanged (the final BA converges the whole model) at ~20% less global BA work.
+  int global_ba_max_iterations = 5;
   int final_ba_max_iterations = 100;
   double final_ba_function_tolerance = 1e-7;
   int refine_focal_min_images = 3;
