@@ -40,7 +40,7 @@ struct ReconstructOptions {
   bool report = true;                 // write report/report.html (renders take a few seconds)
   bool fast = false;                  // set by ApplyFastPreset (recorded in project.json)
   // `--fast`: the video-speed preset (bench/RESULTS.md has its time and accuracy next to the defaults).
-  // Dense as the demo runs it — half the default working size (480 px), 4 sources, 3 rounds, no
+  // 5000 SIFT features (not 8000), sequential pairs with the next 5 frames (not 10); dense as the demo runs it — half the default working size (480 px), 4 sources, 3 rounds, no
   // geometric pass — with depth maps only for the reference views that cover every sparse point 8 times
   // (video keyframes see each surface point ~20-30 times; the rest stay stereo sources); Poisson one octree
   // level coarser than the point density allows; texture colours from the same kind of cover.
