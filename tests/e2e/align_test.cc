@@ -102,11 +102,39 @@ TEST(E2eAlign, TwoSyntheticFlightsOfOneScene) {
             << 100 * eval_ref.centre_rmse_fraction << " % and " << 100 * eval_mov.centre_rmse_fraction << " %\n"
             << report.at("tree")[0].dump(2) << "\n"
             << report.at("joint_bundle_adjustment").dump(2) << "\n";
-  // The merged model's alignment (after the joint BA) must meet the bounds; the coarse similarity
-  // alone (cross-track correspondences + refit) measured 0.044°, 0.116%, 0.046% here — bounded at twice.
-  EXPECT_LE(ba.rotation_deg, 0.05);
-  EXPECT_LE(ba.scale_err, 0.001);
-  EXPECT_LE(ba.translation_frac, 0.001);
+  // The merged model: after the joint BA both tracks' cameras have moved (the reference's too), so the
+  // registration of B onto A is measured inside the merged model — each track's part aligned to its own truth
+  // (one world): a perfect merge needs one and the same similarity for both parts.
+  const core::Reconstruction merged_model = io::ReadColmapText(root / "AB/sparse");
+  auto part = [&](bool moving) {
+    core::Reconstruction r;
+    r.cameras = merged_model.cameras;
+    const std::string prefix = mov.string() + "-";
+    for (const auto& [id, im] : merged_model.images) {
+      const bool is_moving = im.name.rfind(prefix, 0) == 0;
+      if (is_moving != moving) continue;
+      core::Image copy = im;
+      if (moving) copy.name = im.name.substr(prefix.size());
+      r.images[id] = copy;
+    }
+    return r;
+  };
+  const auto in_merged_ref =
+      sfm::EvaluateSparse(part(false), sfm::LoadTruth((root / ("synth_" + ref.string()) / "truth").string()));
+  const auto in_merged_mov =
+      sfm::EvaluateSparse(part(true), sfm::LoadTruth((root / ("synth_" + mov.string()) / "truth").string()));
+  ASSERT_EQ(in_merged_ref.num_matched, eval_ref.num_matched);
+  ASSERT_EQ(in_merged_mov.num_matched, eval_mov.num_matched);
+  const sfm::SimilarityError merged_err =
+      sfm::CompareSimilarityToTruth(core::Sim3{}, in_merged_ref, in_merged_mov, centroid);
+  std::cout << "in the merged model, B registered onto A vs truth: rotation " << merged_err.rotation_deg
+            << " deg, scale " << 100 * merged_err.scale << " %, translation " << 100 * merged_err.translation_fraction
+            << " %\n";
+  // The merged model must meet the bounds; the coarse similarity alone (cross-track correspondences +
+  // refit) measured 0.044°, 0.116%, 0.046% in session 3 and 0.007°, 0.125%, 0.008% in session 6 — bounded at twice.
+  EXPECT_LE(merged_err.rotation_deg, 0.05);
+  EXPECT_LE(merged_err.scale, 0.001);
+  EXPECT_LE(merged_err.translation_fraction, 0.001);
   EXPECT_LE(rotation_deg, 0.1);
   EXPECT_LE(scale_err, 0.002);
   EXPECT_LE(translation_frac, 0.002);
