@@ -251,20 +251,9 @@ void BM_TwoFlightsDifferentSides(benchmark::State& state) {
   }
   // B's registration onto A inside the merged model: each part aligned to its own truth (one world); the joint
   // BA moves the reference's cameras too, which the composed similarity above counts as error.
-  auto part = [&](bool moving) {
-    core::Reconstruction r;
-    r.cameras = merged_sparse.cameras;
-    const std::string prefix = mov + "-";
-    for (const auto& [id, im] : merged_sparse.images) {
-      if ((im.name.rfind(prefix, 0) == 0) != moving) continue;
-      core::Image copy = im;
-      if (moving) copy.name = im.name.substr(prefix.size());
-      r.images[id] = copy;
-    }
-    return r;
-  };
-  const auto in_ref = sfm::EvaluateSparse(part(false), sfm::LoadTruth((root / ("synth_" + ref) / "truth").string()));
-  const auto in_mov = sfm::EvaluateSparse(part(true), sfm::LoadTruth((root / ("synth_" + mov) / "truth").string()));
+  const auto [merged_ref_part, merged_mov_part] = align::SplitByNamePrefix(merged_sparse, mov + "-");
+  const auto in_ref = sfm::EvaluateSparse(merged_ref_part, sfm::LoadTruth((root / ("synth_" + ref) / "truth").string()));
+  const auto in_mov = sfm::EvaluateSparse(merged_mov_part, sfm::LoadTruth((root / ("synth_" + mov) / "truth").string()));
   const auto m = sfm::CompareSimilarityToTruth(core::Sim3{}, in_ref, in_mov, centroid);
   std::printf("in the merged model, %s registered onto %s vs truth: rotation %.4f deg, scale %.4f%%, translation "
               "%.4f%% of the scene\n",

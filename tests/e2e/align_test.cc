@@ -20,6 +20,7 @@
 
 #include <thread>
 
+#include "fmv3d/align/merge.h"
 #include "fmv3d/align/sim3_json.h"
 #include "fmv3d/core/files.h"
 #include "fmv3d/io/colmap_model.h"
@@ -106,23 +107,11 @@ TEST(E2eAlign, TwoSyntheticFlightsOfOneScene) {
   // registration of B onto A is measured inside the merged model — each track's part aligned to its own truth
   // (one world): a perfect merge needs one and the same similarity for both parts.
   const core::Reconstruction merged_model = io::ReadColmapText(root / "AB/sparse");
-  auto part = [&](bool moving) {
-    core::Reconstruction r;
-    r.cameras = merged_model.cameras;
-    const std::string prefix = mov.string() + "-";
-    for (const auto& [id, im] : merged_model.images) {
-      const bool is_moving = im.name.rfind(prefix, 0) == 0;
-      if (is_moving != moving) continue;
-      core::Image copy = im;
-      if (moving) copy.name = im.name.substr(prefix.size());
-      r.images[id] = copy;
-    }
-    return r;
-  };
+  const auto [merged_ref_part, merged_mov_part] = align::SplitByNamePrefix(merged_model, mov.string() + "-");
   const auto in_merged_ref =
-      sfm::EvaluateSparse(part(false), sfm::LoadTruth((root / ("synth_" + ref.string()) / "truth").string()));
+      sfm::EvaluateSparse(merged_ref_part, sfm::LoadTruth((root / ("synth_" + ref.string()) / "truth").string()));
   const auto in_merged_mov =
-      sfm::EvaluateSparse(part(true), sfm::LoadTruth((root / ("synth_" + mov.string()) / "truth").string()));
+      sfm::EvaluateSparse(merged_mov_part, sfm::LoadTruth((root / ("synth_" + mov.string()) / "truth").string()));
   ASSERT_EQ(in_merged_ref.num_matched, eval_ref.num_matched);
   ASSERT_EQ(in_merged_mov.num_matched, eval_mov.num_matched);
   const sfm::SimilarityError merged_err =

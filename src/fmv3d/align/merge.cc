@@ -133,6 +133,23 @@ MergedModel MergeTracks(const std::vector<Track>& tracks, const MultiTrackAlignm
   return m;
 }
 
+std::pair<core::Reconstruction, core::Reconstruction> SplitByNamePrefix(const core::Reconstruction& merged,
+                                                                        const std::string& prefix) {
+  std::pair<core::Reconstruction, core::Reconstruction> parts;
+  parts.first.cameras = parts.second.cameras = merged.cameras;
+  for (const auto& [id, im] : merged.images) {
+    core::Image copy = im;
+    copy.point3d_ids.assign(copy.points2d.size(), core::kNoPoint3D);  // the points are not copied
+    if (!prefix.empty() && im.name.rfind(prefix, 0) == 0) {
+      copy.name = im.name.substr(prefix.size());
+      parts.second.images[id] = std::move(copy);
+    } else {
+      parts.first.images[id] = std::move(copy);
+    }
+  }
+  return parts;
+}
+
 size_t KeepFinerInOverlap(MergedModel* merged, double radius_spacings) {
   io::OrientedPointCloud& d = merged->dense;
   if (!d.has_visibility()) return 0;

@@ -41,6 +41,12 @@ struct MergedModel {
   std::vector<std::string> name_prefix;  // per track, "" when its names are kept
 };
 
+// The images of a merged model split by a track's name prefix (e.g. "B-"): .first the images without it, .second
+// those with it under their original names; cameras copied, no points. Lets each track's part be checked
+// against that track's own ground truth.
+std::pair<core::Reconstruction, core::Reconstruction> SplitByNamePrefix(const core::Reconstruction& merged,
+                                                                        const std::string& prefix);
+
 // Moves every track by alignment.to_reference and unions the models (see the header comment).
 MergedModel MergeTracks(const std::vector<Track>& tracks, const MultiTrackAlignment& alignment);
 
