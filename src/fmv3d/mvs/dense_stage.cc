@@ -73,11 +73,13 @@ nlohmann::json RunDenseStage(const fs::path& workspace, const DenseStageOptions&
   // against its neighbours among the references: selected again on those views alone.
   const std::vector<uint32_t> all_usable = usable;
   usable = SelectReferenceViews(rec, geoms, all_usable, options.references);
-  auto fusion_selection = selection;
+  std::map<uint32_t, ReferenceSelection> reference_selection;
+  const auto* fusion_selection = &selection;
   if (usable.size() < all_usable.size()) {
     std::map<uint32_t, ViewGeometry> ref_geoms;
     for (uint32_t id : usable) ref_geoms[id] = geoms.at(id);
-    fusion_selection = SelectViews(rec, ref_geoms, options.selection);
+    reference_selection = SelectViews(rec, ref_geoms, options.selection);
+    fusion_selection = &reference_selection;
     spdlog::info("dense: {} of {} views are references (each sparse point in {} of them)", usable.size(),
                  all_usable.size(), options.references.coverage);
   }
@@ -172,7 +174,7 @@ nlohmann::json RunDenseStage(const fs::path& workspace, const DenseStageOptions&
   std::map<uint32_t, FusionView> fviews;
   std::map<uint32_t, std::set<uint32_t>> links;
   for (uint32_t id : usable)
-    for (const auto& nb : fusion_selection.at(id).neighbours) {
+    for (const auto& nb : fusion_selection->at(id).neighbours) {
       links[id].insert(nb.image_id);
       links[nb.image_id].insert(id);  // symmetric: a view checks every view that chose it too
     }
