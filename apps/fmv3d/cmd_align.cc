@@ -47,6 +47,9 @@ void Add(CLI::App& app) {
   cmd->add_flag("--no-icp", a->no_icp, "Skip the fine ICP on dense clouds");
   cmd->add_flag("!--no-joint-ba", a->merge.joint_bundle_adjustment,
                 "Skip the joint bundle adjustment of all tracks over the fused cross-track points");
+  cmd->add_flag("!--union", a->merge.recompute_dense,
+                "Merge the tracks' dense clouds as they are (default: run multi-view stereo again over the merged "
+                "model when every track has a dense cloud)");
   cmd->add_flag("--keep-finer", a->merge.keep_finer_in_overlap,
                 "Where tracks overlap, keep only the dense points of the track with the finer pixel footprint");
   cmd->add_option("--seed", a->opt.seed, "Random seed")->capture_default_str();

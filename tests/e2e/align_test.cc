@@ -10,7 +10,10 @@
 // CI cost: 30 frames of 800x450 and 864x486, 3000 features per image, sequential matching (each frame with
 // the next 5, 2^k and loop-closure pairs) instead of 36 frames of ~1000x560, 8000 features, exhaustive
 // pairs (469 s in session 2). The two flights run concurrently (their sparse stages are largely serial).
-// The merged model then gets the joint bundle adjustment; its reprojection RMS is checked too.
+// The merged model then gets the joint bundle adjustment; its reprojection RMS is checked too. Then both
+// tracks get a small dense cloud (240 px) and are merged again: the merge's recomputed dense cloud must be no
+// less accurate (median) than the better track's and at least as complete (both flights are full orbits here,
+// so the completeness gain is small; the +5 points of different sides are measured in bench/align_bench).
 // Measured (heavily shared 2 cores): coarse similarity 0.044°, 0.116%, 0.046%; after the joint BA (4369 of
 // 5386 cross-track links fused, 0.46 → 0.42 px) 0.046°, 0.043%, 0.018% of the scene size; the models' centre
 // RMSE 0.019% and 0.043%. The cheaper flights' B model is the yardstick's weak side (scale alone fails 0.1%).
@@ -137,6 +140,31 @@ TEST(E2eAlign, TwoSyntheticFlightsOfOneScene) {
   EXPECT_GE(joint.at("links_fused").get<size_t>(), 100u);
   EXPECT_LE(joint.at("reprojection_rms_after_px").get<double>(), 1.0);
   EXPECT_TRUE(fs::exists(root / "AB/frames/frames.json"));
+
+  // With dense clouds (small working size to keep CI short), the merge runs multi-view stereo again over both
+  // tracks' views; that cloud must be at least as accurate as the better track's own and as complete.
+  for (const std::string t : {"A", "B"}) {
+    Cli("-q dense --max-size 240 --no-previews " + (root / t).string());
+    Cli("-q evaluate-dense " + (root / t).string() + " --truth " + (root / ("synth_" + t)).string());
+  }
+  fs::remove_all(root / "ABd");
+  Cli("-q align " + (root / "A").string() + " " + (root / "B").string() + " -o " + (root / "ABd").string());
+  const auto dense_report = core::ReadJson(root / "ABd/report/align.json").at("dense");
+  EXPECT_EQ(dense_report.at("method").get<std::string>(), "recomputed over every track's views");
+  EXPECT_EQ(dense_report.at("max_size").get<int>(), 240);
+  Cli("-q evaluate-dense " + (root / "ABd").string() + " --truth " + (root / ("synth_" + ref.string())).string());
+  auto figures = [&](const fs::path& ws) {
+    const auto j = core::ReadJson(ws / "report/dense_eval.json");
+    return std::make_pair(j.at("accuracy").at("median_percent_of_length").get<double>(),
+                          j.at("completeness").at("fraction").get<double>());
+  };
+  const auto [median_a, complete_a] = figures(root / "A");
+  const auto [median_b, complete_b] = figures(root / "B");
+  const auto [median_ab, complete_ab] = figures(root / "ABd");
+  std::cout << "dense median error % of H / completeness: A " << median_a << " / " << complete_a << ", B " << median_b
+            << " / " << complete_b << ", merged " << median_ab << " / " << complete_ab << "\n";
+  EXPECT_LE(median_ab, std::min(median_a, median_b));
+  EXPECT_GE(complete_ab, std::max(complete_a, complete_b));
 }
 
 }  // namespace

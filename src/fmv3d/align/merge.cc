@@ -4,6 +4,7 @@
 
 #include <tbb/parallel_for.h>
 
+#include <algorithm>
 #include <limits>
 #include <memory>
 #include <optional>
@@ -289,6 +290,30 @@ JointAdjustmentResult JointBundleAdjust(MergedModel* merged, const MultiTrackAli
   return res;
 }
 
+mvs::DenseStageOptions MergedDenseOptions(const std::vector<Track>& tracks) {
+  mvs::DenseStageOptions o;
+  o.previews = false;
+  bool seen = false, full = false, geometric = false;
+  int max_size = 0, max_sources = 0, coverage = 0;
+  for (const auto& t : tracks) {
+    const auto& r = t.dense_report;
+    if (!r.is_object()) continue;
+    seen = true;
+    const int size = r.value("max_size", o.max_size);
+    if (size == 0) full = true;
+    max_size = std::max(max_size, size);
+    max_sources = std::max(max_sources, r.value("max_sources", o.max_sources));
+    geometric = geometric || r.value("geometric_pass", o.geometric);
+    coverage = std::max(coverage, r.value("reference_coverage", 0));
+  }
+  if (!seen) return o;
+  o.max_size = full ? 0 : max_size;
+  o.max_sources = max_sources;
+  o.geometric = geometric;
+  o.references.coverage = coverage;
+  return o;
+}
+
 nlohmann::json RunAlignStage(const std::vector<fs::path>& workspaces, const fs::path& output,
                              const TrackAlignOptions& options, const MergeOptions& merge_options) {
   options.Check();
@@ -348,9 +373,37 @@ nlohmann::json RunAlignStage(const std::vector<fs::path>& workspaces, const fs::
   }
   if (!index.frames.empty()) io::WriteFramesIndex(index, output / "frames" / "frames.json");
   if (frames_missing) spdlog::warn("align: {} frame images not found in the input workspaces", frames_missing);
+  nlohmann::json dense_json = {{"method", "none"}};
   if (!merged.dense.empty()) {
-    core::EnsureDirectory(output / "dense");
-    io::WritePointCloudPly(merged.dense, output / "dense" / "fused.ply");
+    const bool every_track_dense =
+        std::all_of(tracks.begin(), tracks.end(), [](const Track& t) { return !t.dense.empty(); });
+    if (merge_options.recompute_dense && every_track_dense && frames_missing == 0) {
+      const mvs::DenseStageOptions dense_options = MergedDenseOptions(tracks);
+      spdlog::info("align: multi-view stereo over the merged model ({} views, {} px)", merged.sparse.images.size(),
+                   dense_options.max_size);
+      try {
+        const nlohmann::json r = mvs::RunDenseStage(output, dense_options);
+        dense_json = {{"method", "recomputed over every track's views"}, {"points", r.at("points")},
+                      {"max_size", dense_options.max_size}, {"max_sources", dense_options.max_sources},
+                      {"geometric_pass", dense_options.geometric},
+                      {"reference_coverage", dense_options.references.coverage}};
+      } catch (const Error& e) {
+        spdlog::warn("align: multi-view stereo over the merged model failed ({}); writing the union of the "
+                     "tracks' dense clouds instead",
+                     e.what());
+        dense_json = {{"method", "union"}, {"recompute_failed", e.what()}};
+      }
+    } else {
+      dense_json = {{"method", "union"}};
+      if (merge_options.recompute_dense)
+        dense_json["why_not_recomputed"] = !every_track_dense ? "a track has no dense cloud"
+                                                               : "frame images of the tracks are missing";
+    }
+    if (dense_json.at("method") == "union") {
+      core::EnsureDirectory(output / "dense");
+      io::WritePointCloudPly(merged.dense, output / "dense" / "fused.ply");
+      dense_json["points"] = merged.dense.size();
+    }
   }
 
   nlohmann::json report;
@@ -378,6 +431,7 @@ nlohmann::json RunAlignStage(const std::vector<fs::path>& workspaces, const fs::
                       {"dense_points_dropped_in_overlap", overlap_dropped},
                       {"frames_linked", frames_linked},
                       {"frames_missing", frames_missing}};
+  report["dense"] = dense_json;
   if (joint) report["joint_bundle_adjustment"] = joint->ToJson();
   report["notes"] =
       "residual_rms_*: fine step 'correspondences' — RMS of the inlier 3D-3D distances with the RANSAC model "

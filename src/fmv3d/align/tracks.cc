@@ -11,6 +11,7 @@
 
 #include "fmv3d/align/sim3_json.h"
 #include "fmv3d/core/error.h"
+#include "fmv3d/core/files.h"
 #include "fmv3d/core/logging.h"
 #include "fmv3d/features/feature_io.h"
 #include "fmv3d/features/pairs.h"
@@ -282,6 +283,8 @@ Track LoadTrack(const fs::path& workspace) {
                 " points)");
   const fs::path fused = workspace / "dense" / "fused.ply";
   if (fs::exists(fused)) t.dense = io::ReadPointCloudPly(fused);
+  const fs::path dense_report = workspace / "report" / "dense.json";
+  if (fs::exists(dense_report)) t.dense_report = core::ReadJson(dense_report);
   t.radius = RmsRadius(Positions(t.sparse));
   return t;
 }

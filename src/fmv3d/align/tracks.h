@@ -36,6 +36,7 @@ struct Track {
   std::string name;                 // the workspace folder's name (for messages and reports)
   core::Reconstruction sparse;      // WS/sparse (COLMAP text)
   io::OrientedPointCloud dense;     // WS/dense/fused.ply, empty when absent
+  nlohmann::json dense_report;      // WS/report/dense.json (the dense stage's settings), null when absent
   double radius = 0;                // RMS distance of the sparse points to their centroid (model units)
 };
 

@@ -1,5 +1,6 @@
 #include "fmv3d/sfm/bundle_adjustment.h"
 
+#include <ceres/autodiff_cost_function.h>
 #include <ceres/ceres.h>
 #include <spdlog/spdlog.h>
 
@@ -59,6 +60,22 @@ class ScaleGaugePrior : public ceres::SizedCostFunction<1, 3> {
  private:
   int k_;
   double t0_, w_;
+};
+
+// (C − prior) / σ with C = −Rᵀt, the camera centre of pose (q, t) (q in Eigen's x y z w order).
+struct CentrePrior {
+  CentrePrior(const Eigen::Vector3d& prior, double sigma) : prior_(prior), inv_sigma_(1 / sigma) {}
+  template <typename T>
+  bool operator()(const T* q, const T* t, T* residual) const {
+    const Eigen::Quaternion<T> rot(q[3], q[0], q[1], q[2]);
+    const Eigen::Matrix<T, 3, 1> c = -(rot.conjugate() * Eigen::Matrix<T, 3, 1>(t[0], t[1], t[2]));
+    for (int k = 0; k < 3; ++k) residual[k] = (c[k] - T(prior_[k])) * T(inv_sigma_);
+    return true;
+  }
+
+ private:
+  Eigen::Vector3d prior_;
+  double inv_sigma_;
 };
 
 struct PoseBlock {
@@ -158,7 +175,21 @@ BundleAdjustmentSummary BundleAdjust(core::Reconstruction* rec, const BundleAdju
       any_constant = true;
     }
   }
-  if (!any_constant) {
+  // Centre priors (see the header): they anchor the gauge when at least three variable images have one.
+  std::vector<std::unique_ptr<ceres::CostFunction>> prior_costs;
+  std::unique_ptr<ceres::LossFunction> prior_loss;
+  if (!config.centre_priors.empty()) {
+    if (!(config.centre_prior_sigma > 0)) throw Error("bundle adjustment: centre_prior_sigma must be positive");
+    prior_loss = std::make_unique<ceres::HuberLoss>(config.centre_prior_huber);
+    for (const auto& [id, c] : config.centre_priors) {
+      const auto it = poses.find(id);
+      if (it == poses.end() || !variable.count(id) || config.constant_images.count(id)) continue;
+      prior_costs.emplace_back(new ceres::AutoDiffCostFunction<CentrePrior, 3, 4, 3>(
+          new CentrePrior(c, config.centre_prior_sigma)));
+      problem.AddResidualBlock(prior_costs.back().get(), prior_loss.get(), it->second.q.data(), it->second.t.data());
+    }
+  }
+  if (!any_constant && prior_costs.size() < 3) {
     uint32_t g1 = config.gauge_image1, g2 = config.gauge_image2;
     if (!poses.count(g1) || !poses.count(g2) || g1 == g2) {
       auto it = poses.begin();

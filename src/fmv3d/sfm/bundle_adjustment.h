@@ -8,7 +8,9 @@
 // coordinate of the second (its largest) too, which removes rotation, translation and scale freedom.
 #pragma once
 
+#include <Eigen/Core>
 #include <cstdint>
+#include <map>
 #include <set>
 #include <vector>
 
@@ -46,6 +48,13 @@ struct BundleAdjustmentConfig {
   std::set<uint32_t> constant_images;  // images whose poses stay fixed even if in variable_images
   std::set<uint32_t> constant_cameras; // cameras whose intrinsics stay fixed whatever the options say
   uint32_t gauge_image1 = 0, gauge_image2 = 0;  // 0: choose the two lowest image ids
+  // Soft priors on camera centres in the model's frame (e.g. telemetry positions in local metres): residual
+  // (C − prior) / centre_prior_sigma per axis, Huber loss beyond centre_prior_huber σ. With priors on at least
+  // three variable images no gauge is fixed: the priors anchor translation and scale (and rotation unless
+  // their positions are collinear; the roll about a straight line then stays where it started).
+  std::map<uint32_t, Eigen::Vector3d> centre_priors;
+  double centre_prior_sigma = 3.0;
+  double centre_prior_huber = 3.0;
 };
 
 struct BundleAdjustmentSummary {
