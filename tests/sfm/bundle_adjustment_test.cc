@@ -93,6 +93,44 @@ TEST(BundleAdjustment, PerturbedPosesPointsAndFocalConverge) {
   EXPECT_NEAR(rec.cameras.at(1).k1, truth.cameras.at(1).k1, 1e-6);
 }
 
+// Reprojection errors cannot tell a model from any similarity of it; camera-centre priors (e.g. telemetry) can.
+// The true model moved by a similarity must come back to the priors' frame, with no gauge image held.
+TEST(BundleAdjustment, CentrePriorsFixTheGaugeInTheirFrame) {
+  SyntheticSceneOptions so;
+  so.num_cameras = 10;
+  so.num_points = 300;
+  so.noise_px = 0;
+  so.outlier_ratio = 0;
+  so.clutter_ratio = 0;
+  const core::Reconstruction truth = TrueModelWithObservations(so);
+  core::Reconstruction rec = truth;
+  core::Sim3 moved;
+  moved.s = 0.8;
+  moved.q = Eigen::AngleAxisd(0.08, Eigen::Vector3d(1, 2, 3).normalized());
+  moved.t = Eigen::Vector3d(0.3, -0.2, 0.1);
+  rec.Transform(moved);
+  BundleAdjustmentConfig cfg;
+  for (const auto& [id, im] : truth.images) cfg.centre_priors[id] = im.pose.Centre();
+  cfg.centre_prior_sigma = 0.01;
+  BundleAdjustmentOptions o;
+  o.refine_focal = o.refine_k1 = o.refine_k2 = false;
+  o.function_tolerance = 1e-14;
+  o.parameter_tolerance = 1e-12;
+  o.max_iterations = 200;
+  double extent = 0, before = 0, after = 0;
+  for (const auto& [id, im] : truth.images) {
+    before = std::max(before, (rec.images.at(id).pose.Centre() - im.pose.Centre()).norm());
+    for (const auto& [id2, im2] : truth.images) extent = std::max(extent, (im.pose.Centre() - im2.pose.Centre()).norm());
+  }
+  const auto s = BundleAdjust(&rec, cfg, o);
+  ASSERT_TRUE(s.success);
+  for (const auto& [id, im] : truth.images)
+    after = std::max(after, (rec.images.at(id).pose.Centre() - im.pose.Centre()).norm());
+  EXPECT_GT(before, 0.05 * extent);
+  EXPECT_LT(after, 1e-5 * extent);
+  EXPECT_LT(s.final_rms_px, 1e-3);
+}
+
 TEST(BundleAdjustment, SelfCalibratesFocalAndK1FromTheGuess) {
   SyntheticSceneOptions so;  // f = 1000, k1 = -0.08, 0.5 px noise
   so.num_cameras = 16;
