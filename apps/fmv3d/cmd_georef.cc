@@ -15,7 +15,7 @@ namespace {
 void Add(CLI::App& app) {
   auto* cmd = app.add_subcommand("georef", "Georeference the sparse model with telemetry (WS/geo/georef.json, sparse_enu/)");
   struct Args {
-    std::string ws, origin;
+    std::string ws, origin, constrain = "auto";
     geo::GeorefOptions opt;
   };
   auto a = std::make_shared<Args>();
@@ -24,8 +24,20 @@ void Add(CLI::App& app) {
   cmd->add_option("--seed", a->opt.seed, "Random seed of the robust fit")->capture_default_str();
   auto* kf_only = cmd->add_flag("--keyframes-only",
                                 "Fit only the registered keyframes' telemetry, not every packet of frames/telemetry.json");
+  cmd->add_option("--constrain", a->constrain,
+                  "Build the model again from the telemetry's cameras and replace WS/sparse when it fits the "
+                  "flight better (the image-only model goes to WS/geo/sparse_image_only/): auto = when the "
+                  "model's trajectory disagrees with the telemetry")
+      ->check(CLI::IsMember({"auto", "always", "never"}))
+      ->capture_default_str();
+  cmd->add_option("--prior-sigma", a->opt.prior_sigma_m, "Telemetry position accuracy per axis, metres (priors' sigma)")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
   cmd->callback([a, kf_only] {
     a->opt.use_track = kf_only->count() == 0;
+    a->opt.constrain = a->constrain == "always"  ? geo::GeorefOptions::Constrain::kAlways
+                       : a->constrain == "never" ? geo::GeorefOptions::Constrain::kNever
+                                                 : geo::GeorefOptions::Constrain::kAuto;
     if (!a->origin.empty()) {
       geo::GeoPoint g;
       char extra = 0;
@@ -41,6 +53,11 @@ void Add(CLI::App& app) {
                 j["expected_translation_error_m"].get<double>(),
                 j["similarity"]["scale"].get<double>(), j["utm"]["name"].get<std::string>().c_str(),
                 j["utm"]["epsg"].get<int>());
+    if (j.contains("telemetry_constrained") && j["telemetry_constrained"].value("applied", false))
+      std::printf("georef: model built again from the telemetry (fit %.0f%% → %.0f%% of the packets); WS/sparse "
+                  "replaced, run the later stages again\n",
+                  100 * j["telemetry_constrained"]["fit_fraction_image_only"].get<double>(),
+                  100 * j["fit_fraction"].get<double>());
   });
 }
 

@@ -216,6 +216,55 @@ TEST(Georef, ModelThatDisagreesWithTheFlightIsFlagged) {
   EXPECT_FALSE(ReadGeoref(g.dir.path()).consistent_with_telemetry);
 }
 
+// The same kind of model (the last 30% of its cameras 60 m off the flight), but this time with image
+// observations (true projections of the ground points, 0.3 px noise) and ST 0601 attitudes (σ 0.5°) in the
+// telemetry: georef builds the model again from the telemetry's cameras and the observations, keeps it because it
+// fits the flight, and the cameras land within the telemetry's noise of the truth.
+TEST(Georef, ModelThatDisagreesIsBuiltAgainFromTheTelemetry) {
+  GeorefCase g;
+  const int n = 40;
+  MakeGeorefCase(&g, n, 3.0, false, -1, 0.5, 0, 200, 0);
+  core::Reconstruction rec = io::ReadColmapText(g.dir / "sparse");
+  std::mt19937_64 rng(3);
+  std::normal_distribution<double> N(0, 0.3);
+  const core::Sim3 model_to_true = g.true_to_model.Inverse();
+  for (auto& [pid, pt] : rec.points) {
+    const Eigen::Vector3d X = model_to_true.Apply(pt.xyz);
+    for (auto& [id, img] : rec.images) {
+      const core::Pose truth = core::Pose::LookAt(g.true_centres[id - 1], {0, 0, 0});
+      const Eigen::Vector3d xc = truth.Transform(X);
+      if (xc.z() <= 0) continue;
+      const Eigen::Vector2d uv = rec.cameras.at(1).Project(xc) + Eigen::Vector2d(N(rng), N(rng));
+      if (!rec.cameras.at(1).InImage(uv, 2)) continue;
+      pt.track.push_back({static_cast<uint32_t>(id), static_cast<uint32_t>(img.points2d.size())});
+      img.points2d.push_back(uv);
+      img.point3d_ids.push_back(static_cast<int64_t>(pid));
+    }
+  }
+  for (auto& [id, img] : rec.images) {
+    if (10 * (id - 1) < 7 * n) continue;
+    const Eigen::Vector3d c = img.pose.Centre() + g.true_to_model.s * (g.true_to_model.q * Eigen::Vector3d(60, 0, 0));
+    img.pose.t = -(img.pose.q * c);
+  }
+  rec.Validate();
+  io::WriteColmapText(rec, g.dir / "sparse");
+  GeorefOptions o;
+  o.origin = kOrigin;
+  const auto j = RunGeorefStage(g.dir.path(), o);
+  ASSERT_TRUE(j.contains("telemetry_constrained"));
+  const auto& t = j["telemetry_constrained"];
+  EXPECT_TRUE(t.value("applied", false)) << t.dump();
+  EXPECT_LT(t.value("fit_fraction_image_only", 1.0), 0.8);
+  EXPECT_TRUE(j["consistent_with_telemetry"].get<bool>()) << j["fit_fraction"];
+  EXPECT_LT(t.value("reprojection_rms_px", 1e9), 1.0);
+  // Measured 1.73 m (40 keyframes with σ 3 m per axis: ~1.2 m from the similarity alone; the priors bend the
+  // shape a little). The bent image model's last 12 cameras were 60 m off.
+  EXPECT_LT(CentreRms(g), 2.0);
+  EXPECT_TRUE(fs::exists(g.dir / "geo/sparse_image_only/images.txt"));
+  // WS/sparse now holds the rebuilt model, and georef.json's similarity maps it into ENU.
+  EXPECT_EQ(io::ReadColmapText(g.dir / "sparse").images.size(), static_cast<size_t>(n));
+}
+
 // The fusion weighs each source by its information: precise positions on a wide orbit are not pulled off by
 // 1° attitudes; noisy positions on a tight orbit (rotation known to ~1.4°) are sharpened by 0.2° attitudes.
 double RotationErrorDeg(const GeorefCase& g) {

@@ -9,6 +9,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <functional>
 #include <map>
 #include <optional>
 #include <random>
@@ -17,10 +18,12 @@
 #include "fmv3d/core/files.h"
 #include "fmv3d/core/reconstruction.h"
 #include "fmv3d/geometry/similarity.h"
+#include "fmv3d/geometry/triangulation.h"
 #include "fmv3d/io/colmap_model.h"
 #include "fmv3d/io/frames_index.h"
 #include "fmv3d/io/klv_st0601_writer.h"
 #include "fmv3d/io/telemetry.h"
+#include "fmv3d/sfm/bundle_adjustment.h"
 #include "fmv3d/geo/trajectory.h"
 
 namespace fmv3d::geo {
@@ -32,6 +35,9 @@ void GeorefOptions::Check() const {
   if (!(min_inlier_threshold > 0)) throw Error("georef: min_inlier_threshold must be positive");
   if (origin && !(std::abs(origin->lat) <= 90 && std::abs(origin->lon) <= 180 && std::isfinite(origin->alt)))
     throw Error(fmt::format("georef: bad origin {}, {}, {}", origin->lat, origin->lon, origin->alt));
+  if (!(min_fit_fraction >= 0 && min_fit_fraction <= 1)) throw Error("georef: min_fit_fraction must be in [0, 1]");
+  if (!(prior_sigma_m > 0)) throw Error("georef: --prior-sigma must be positive");
+  if (!(attitude_sigma_deg > 0)) throw Error("georef: attitude_sigma_deg must be positive");
 }
 
 namespace {
@@ -167,6 +173,8 @@ struct Pair {
   GeoPoint pos;                  // alt set once the vertical datum is chosen
   std::optional<double> hae, msl;
   std::optional<Eigen::Matrix3d> attitude;  // telemetry camera-to-ENU
+  std::optional<GeoPoint> frame_centre;     // latitude, longitude (alt unused)
+  std::optional<double> slant_range;
   double time = 0;
   int track = -1;  // video of a packet pair; -1 for keyframes
 };
@@ -182,6 +190,9 @@ Pair MakePair(const std::string& name, const Eigen::Vector3d& centre, const Eige
   p.hae = s.sensor_altitude_hae;
   p.msl = s.sensor_altitude_msl;
   p.attitude = TelemetryAttitude(s);
+  if (s.frame_center_latitude && s.frame_center_longitude)
+    p.frame_centre = GeoPoint{*s.frame_center_latitude, *s.frame_center_longitude, 0};
+  p.slant_range = s.slant_range;
   p.time = s.time;
   return p;
 }
@@ -297,6 +308,195 @@ Georef ReadGeoref(const fs::path& ws) {
   }
 }
 
+namespace {
+
+// Drops observations whose reprojection error exceeds max_px, then points left with fewer than two.
+size_t DropBadObservations(core::Reconstruction* rec, double max_px) {
+  size_t removed = 0;
+  for (auto it = rec->points.begin(); it != rec->points.end();) {
+    auto& p = it->second;
+    std::vector<core::TrackElement> kept;
+    for (const auto& el : p.track) {
+      if (sfm::ObservationError(*rec, el.image_id, el.point2d_idx, p.xyz) <= max_px) {
+        kept.push_back(el);
+      } else {
+        rec->images.at(el.image_id).point3d_ids[el.point2d_idx] = core::kNoPoint3D;
+        ++removed;
+      }
+    }
+    p.track = std::move(kept);
+    if (p.track.size() < 2) {
+      for (const auto& el : p.track) rec->images.at(el.image_id).point3d_ids[el.point2d_idx] = core::kNoPoint3D;
+      it = rec->points.erase(it);
+    } else {
+      ++it;
+    }
+  }
+  return removed;
+}
+
+// Camera-to-ENU rotation of a keyframe from its telemetry: the full ST 0601 angle chain when present, else the
+// line of sight from the sensor to the frame centre (EG0104), with no roll about it (image rows level); and the
+// ground height under the frame centre. nullopt when the telemetry has neither.
+struct TelemetryView {
+  Eigen::Matrix3d camera_to_enu;
+  std::optional<double> ground_z;
+};
+std::optional<TelemetryView> ViewFromTelemetry(const Pair& p, const LocalFrame& frame) {
+  const Eigen::Vector3d c = frame.ToEnu(p.pos);
+  std::optional<double> ground_z;
+  std::optional<Eigen::Vector3d> target;
+  if (p.frame_centre && p.slant_range && *p.slant_range > 0) {
+    GeoPoint fc = *p.frame_centre;
+    fc.alt = p.pos.alt;  // horizontal position only: the height follows from the slant range
+    const Eigen::Vector3d f = frame.ToEnu(fc);
+    const double horizontal = (f - c).head<2>().norm();
+    if (horizontal < *p.slant_range) {
+      const double drop = std::sqrt(*p.slant_range * *p.slant_range - horizontal * horizontal);
+      target = Eigen::Vector3d(f.x(), f.y(), c.z() - drop);
+      ground_z = c.z() - drop;
+    }
+  }
+  if (p.attitude) return TelemetryView{*p.attitude, ground_z};
+  if (!target) return std::nullopt;
+  const Eigen::Vector3d d = (*target - c).normalized();
+  const Eigen::Vector3d x = d.cross(Eigen::Vector3d::UnitZ());
+  if (x.norm() < 1e-6) return std::nullopt;  // looking straight down: the roll is undefined
+  TelemetryView v;
+  v.camera_to_enu.col(0) = x.normalized();
+  v.camera_to_enu.col(2) = d;
+  v.camera_to_enu.col(1) = d.cross(v.camera_to_enu.col(0));
+  v.ground_z = ground_z;
+  return v;
+}
+
+// The telemetry-initialised model (see GeorefOptions::constrain): cameras at the telemetry positions and
+// attitudes (ENU of `frame`), the telemetry focal, the image model's tracks with every point started on the
+// ground plane under the frame centres, then bundle adjustments with the positions as priors (σ prior_sigma_m)
+// and the intrinsics held: first with a plain loss (the telemetry's pointing error is common to a frame's
+// points), then robust. Throws fmv3d::Error when too few keyframes carry an attitude or frame centre.
+core::Reconstruction TelemetryInitialisedModel(const io::FramesIndex& index, core::Reconstruction rec,
+                                               const std::vector<Pair>& keyframe_pairs, const LocalFrame& frame,
+                                               const GeorefOptions& o, nlohmann::json* info) {
+  std::map<uint32_t, Eigen::Vector3d> centres, axes;
+  std::vector<double> ground;
+  for (const auto& p : keyframe_pairs) {
+    const core::Image* img = rec.FindImageByName(p.name);
+    if (!img) continue;
+    const auto v = ViewFromTelemetry(p, frame);
+    if (!v) continue;
+    const Eigen::Vector3d c = frame.ToEnu(p.pos);
+    auto& pose = rec.images.at(img->id).pose;
+    pose.q = Eigen::Quaterniond(v->camera_to_enu.transpose()).normalized();
+    pose.t = -(pose.q * c);
+    centres[img->id] = c;
+    axes[img->id] = v->camera_to_enu.col(2);
+    if (v->ground_z) ground.push_back(*v->ground_z);
+  }
+  if (centres.size() < 3)
+    throw Error(fmt::format("georef: only {} keyframes have a telemetry attitude or frame centre (3 needed)",
+                            centres.size()));
+  // Frames without telemetry leave the model.
+  std::vector<uint32_t> drop;
+  for (const auto& [id, im] : rec.images)
+    if (!centres.count(id)) drop.push_back(id);
+  for (uint32_t id : drop) {
+    for (int64_t pid : rec.images.at(id).point3d_ids) {
+      if (pid == core::kNoPoint3D) continue;
+      auto& track = rec.points.at(static_cast<uint64_t>(pid)).track;
+      track.erase(std::remove_if(track.begin(), track.end(), [id](const core::TrackElement& e) { return e.image_id == id; }),
+                  track.end());
+    }
+    rec.images.erase(id);
+  }
+  nlohmann::json focal = nlohmann::json::array();
+  for (const auto& cp : index.cameras) {
+    const auto it = rec.cameras.find(cp.camera.id);
+    if (it == rec.cameras.end() || cp.prior_source != "telemetry-hfov") continue;
+    focal.push_back({{"camera", cp.camera.id}, {"f_image_model", it->second.f}, {"f", cp.camera.f}});
+    it->second.f = cp.camera.f;
+  }
+  // Every point starts where its middle observation's ray meets the ground plane under the frame centres (a
+  // telephoto clip's rays are too close to parallel to triangulate before the attitudes are refined); without
+  // frame centres and slant ranges, it is triangulated from the telemetry cameras.
+  const std::optional<double> ground_z = ground.empty() ? std::nullopt : std::optional<double>(Median(ground));
+  for (auto it = rec.points.begin(); it != rec.points.end();) {
+    auto& p = it->second;
+    bool placed = false;
+    if (p.track.size() >= 2 && ground_z) {
+      const auto& el = p.track[p.track.size() / 2];
+      const auto& im = rec.images.at(el.image_id);
+      const Eigen::Vector3d ray =
+          im.pose.q.conjugate() * rec.cameras.at(im.camera_id).Unproject(im.points2d[el.point2d_idx]);
+      const Eigen::Vector3d c = im.pose.Centre();
+      if (ray.z() < -1e-9) {
+        p.xyz = c + (*ground_z - c.z()) / ray.z() * ray;
+        placed = true;
+      }
+    } else if (p.track.size() >= 2) {
+      std::vector<core::Pose> poses;
+      std::vector<Eigen::Vector2d> rays;
+      for (const auto& el : p.track) {
+        const auto& im = rec.images.at(el.image_id);
+        poses.push_back(im.pose);
+        rays.push_back(rec.cameras.at(im.camera_id).Unproject(im.points2d[el.point2d_idx]).head<2>());
+      }
+      Eigen::Vector3d X;
+      placed = geometry::TriangulateDLT(poses, rays, &X);
+      for (const auto& pose : poses) placed = placed && geometry::HasPositiveDepth(pose, X);
+      if (placed) p.xyz = X;
+    }
+    if (!placed) {
+      for (const auto& el : p.track) rec.images.at(el.image_id).point3d_ids[el.point2d_idx] = core::kNoPoint3D;
+      it = rec.points.erase(it);
+    } else {
+      ++it;
+    }
+  }
+  sfm::BundleAdjustmentConfig config;
+  config.centre_priors = centres;
+  config.centre_prior_sigma = o.prior_sigma_m;
+  config.centre_prior_huber = 1e6;
+  // The optical axes hold the rotation about the flight line, which straight-line positions leave free.
+  config.axis_priors = axes;
+  config.axis_prior_sigma_rad = o.attitude_sigma_deg * M_PI / 180;
+  for (const auto& [id, cam] : rec.cameras) config.constant_cameras.insert(id);
+  sfm::BundleAdjustmentOptions ba;
+  ba.max_iterations = 200;
+  ba.loss = sfm::BundleAdjustmentOptions::Loss::kTrivial;
+  ba.refine_k1 = ba.refine_k2 = false;
+  sfm::UpdatePointErrors(&rec);
+  const double start_px = rec.MeanReprojectionError();
+  const auto plain = sfm::BundleAdjust(&rec, config, ba);
+  size_t dropped = DropBadObservations(&rec, 10.0);
+  ba.loss = sfm::BundleAdjustmentOptions::Loss::kCauchy;
+  ba.loss_scale_px = 1.0;
+  sfm::BundleAdjust(&rec, config, ba);
+  dropped += DropBadObservations(&rec, 4.0);
+  const auto last = sfm::BundleAdjust(&rec, config, ba);
+  if (!plain.success || !last.success) throw Error("georef: the bundle adjustment of the telemetry model failed");
+  sfm::UpdatePointErrors(&rec);
+  double prior_sq = 0;
+  for (const auto& [id, c] : centres) prior_sq += (rec.images.at(id).pose.Centre() - c).squaredNorm();
+  *info = {{"keyframes", centres.size()},
+           {"frames_left_out", drop.size()},
+           {"ground_z_start_m", ground_z ? nlohmann::json(*ground_z) : nlohmann::json()},
+           {"focal_from_telemetry", focal},
+           {"prior_sigma_m", o.prior_sigma_m},
+           {"attitude_sigma_deg", o.attitude_sigma_deg},
+           {"mean_reprojection_px_start", start_px},
+           {"reprojection_rms_px", last.final_rms_px},
+           {"points", rec.points.size()},
+           {"observations_dropped", dropped},
+           {"centre_rms_from_telemetry_m", std::sqrt(prior_sq / centres.size())}};
+  spdlog::info("georef: telemetry-initialised model: {} keyframes, {} points, reprojection {:.2f} → {:.3f} px RMS, "
+               "centres {:.2f} m RMS from the telemetry",
+               centres.size(), rec.points.size(), start_px, last.final_rms_px, std::sqrt(prior_sq / centres.size()));
+  return rec;
+}
+
+}  // namespace
+
 nlohmann::json RunGeorefStage(const fs::path& ws, const GeorefOptions& o) {
   o.Check();
   const fs::path frames_json = ws / "frames" / "frames.json", sparse = ws / "sparse";
@@ -402,11 +602,6 @@ nlohmann::json RunGeorefStage(const fs::path& ws, const GeorefOptions& o) {
     }
   }
 
-  // Telemetry attitude (sensor angles of every inlier frame) as a second, independent measurement of the
-  // rotation: each frame gives R ≈ R_telemetry · R_model⁻¹. Positions constrain a rotation by their spread
-  // (information Σ [d]ₓᵀ[d]ₓ / σ²), the attitudes by their count over their scatter (N / σₐ²); the two are
-  // fused in the information form and s, t refitted for the fused rotation. Skipped (with a note) when the
-  // two disagree beyond their uncertainties, e.g. an attitude convention the source does not follow.
   nlohmann::json attitude_json = {{"used", false}};
   if (roll_source == "camera positions") {
     std::vector<Eigen::Matrix3d> rel;
@@ -540,9 +735,53 @@ nlohmann::json RunGeorefStage(const fs::path& ws, const GeorefOptions& o) {
   // a large part does not fit, the reconstruction's shape is wrong (too little parallax, a telephoto pair's
   // ambiguous pose) and every product placed by this similarity inherits it. Say so, loudly, in the file too.
   const double fit_fraction = pairs.empty() ? 0.0 : static_cast<double>(fit_in) / pairs.size();
-  j["consistent_with_telemetry"] = fit_fraction >= 0.8;
+  j["consistent_with_telemetry"] = fit_fraction >= o.min_fit_fraction;
   j["fit_fraction"] = fit_fraction;
-  if (fit_fraction < 0.8)
+  if (o.constrain == GeorefOptions::Constrain::kAlways ||
+      (o.constrain == GeorefOptions::Constrain::kAuto && fit_fraction < o.min_fit_fraction)) {
+    spdlog::info("georef: {:.0f}% of the telemetry fits the model's trajectory; building the model again from the "
+                 "telemetry's cameras",
+                 100 * fit_fraction);
+    nlohmann::json info;
+    core::Reconstruction model;
+    try {
+      model = TelemetryInitialisedModel(index, rec, keyframe_pairs, frame, o, &info);
+    } catch (const Error& e) {
+      spdlog::warn("{}; keeping the image-only model", e.what());
+      info = {{"applied", false}, {"why", e.what()}};
+    }
+    if (!model.images.empty()) {
+      const fs::path keep = geo_dir / "sparse_image_only";
+      core::EnsureDirectory(keep);
+      for (const char* f : {"cameras.txt", "images.txt", "points3D.txt"})
+        fs::copy_file(ws / "sparse" / f, keep / f, fs::copy_options::overwrite_existing);
+      io::WriteColmapText(model, ws / "sparse");
+      GeorefOptions again = o;
+      again.constrain = GeorefOptions::Constrain::kNever;
+      again.origin = origin;
+      nlohmann::json rebuilt = RunGeorefStage(ws, again);
+      if (o.constrain == GeorefOptions::Constrain::kAlways || rebuilt.at("fit_fraction").get<double>() > fit_fraction) {
+        info["applied"] = true;
+        info["fit_fraction_image_only"] = fit_fraction;
+        info["image_only_model"] = keep.string();
+        rebuilt["telemetry_constrained"] = info;
+        core::WriteJson(geo_dir / "georef.json", rebuilt);
+        return rebuilt;
+      }
+      spdlog::warn("georef: the telemetry-initialised model fits the flight no better ({:.0f}%); keeping the "
+                   "image-only model",
+                   100 * rebuilt.at("fit_fraction").get<double>());
+      for (const char* f : {"cameras.txt", "images.txt", "points3D.txt"})
+        fs::copy_file(keep / f, ws / "sparse" / f, fs::copy_options::overwrite_existing);
+      io::WriteColmapText(rec, geo_dir / "sparse_enu");  // rewritten by the attempt
+      info["applied"] = false;
+      info["fit_fraction_telemetry_model"] = rebuilt.at("fit_fraction");
+    }
+    j["telemetry_constrained"] = info;
+  } else {
+    j["telemetry_constrained"] = {{"applied", false}};
+  }
+  if (fit_fraction < o.min_fit_fraction)
     spdlog::warn("georef: only {:.0f}% of the telemetry fits the model's trajectory: the reconstruction's shape "
                  "disagrees with the flight (too little parallax?); georeferenced products are not reliable",
                  100 * fit_fraction);

@@ -23,6 +23,8 @@
 // independent pairs, the translation is known to about σ·√(3/N) (3D) — georef.json's
 // expected_translation_error_m, with N discounted by the residuals' autocorrelation along the track ("fit").
 // "cameras"/"inliers"/"residuals" describe the registered keyframes.
+// A model that disagrees with the flight (a telephoto clip's ambiguous shape) is built again from the telemetry
+// (GeorefOptions::constrain); georef.json's "telemetry_constrained" says whether, and how well.
 #pragma once
 
 #include <filesystem>
@@ -41,6 +43,18 @@ struct GeorefOptions {
   double min_inlier_threshold = 0.05;  // metres: floor of the 3σ inlier bound (noise-free telemetry)
   uint64_t seed = 42;
   bool use_track = true;  // fit every packet of frames/telemetry.json (else the keyframes' telemetry only)
+  // When the model's trajectory disagrees with the telemetry (fit fraction below min_fit_fraction: a telephoto
+  // clip over flat ground is nearly affine, its images alone leave the shape ambiguous), the model is built
+  // again from the telemetry: cameras at the keyframes' telemetry positions and attitudes (the ST 0601 angle
+  // chain, else the line of sight to the frame centre at the slant range), the telemetry-HFOV focal, the image
+  // model's tracks started on the ground plane, then bundle-adjusted with the positions as priors (σ =
+  // prior_sigma_m per axis) and the intrinsics held. Kept when it fits the telemetry better (kAlways: kept): WS/sparse is
+  // replaced (the image-only model goes to WS/geo/sparse_image_only/), so the later stages use it.
+  enum class Constrain { kAuto, kAlways, kNever };
+  Constrain constrain = Constrain::kAuto;
+  double min_fit_fraction = 0.8;
+  double prior_sigma_m = 3.0;
+  double attitude_sigma_deg = 1.0;  // the telemetry line of sight's accuracy (priors on the optical axes)
   void Check() const;
 };
 

@@ -80,14 +80,6 @@ std::vector<Stage> ReconstructStages(const ReconstructOptions& o) {
   stages.push_back({"sparse",
                     [ws] { return std::vector<fs::path>{features::MatchesSummaryPath(ws.matches_dir())}; },
                     ws.sparse_dir() / "images.txt", [o, root] { return sfm::RunSparseStage(root, o.sparse); }});
-  stages.push_back({"dense", [ws] { return std::vector<fs::path>{ws.sparse_dir() / "images.txt"}; },
-                    ws.dense_dir() / "fused.ply", [o, root] { return mvs::RunDenseStage(root, o.dense); }});
-  stages.push_back({"mesh", [ws] { return std::vector<fs::path>{ws.dense_dir() / "fused.ply"}; },
-                    ws.mesh_dir() / "poisson.ply", [o, root] { return surface::RunMeshStage(root, o.mesh); }});
-  // report/texture.json is written after the OBJ, GLB and PLY: it marks the stage complete.
-  stages.push_back({"texture", [ws] { return std::vector<fs::path>{ws.mesh_dir() / "poisson.ply"}; },
-                    ws.report_dir() / "texture.json",
-                    [o, root] { return surface::RunTextureStage(root, o.texture); }});
   // Terrain products need telemetry (KLV, DJI SRT, EXIF GPS): without it these stages say so and write
   // nothing (their markers stay absent, so adding telemetry later and re-running makes them).
   auto with_telemetry = [ws](const char* stage, std::function<nlohmann::json()> run) {
@@ -99,12 +91,35 @@ std::vector<Stage> ReconstructStages(const ReconstructOptions& o) {
         spdlog::info("{}: no telemetry in frames.json (KLV, SRT or GPS), no georeferenced products", stage);
         return nlohmann::json{{"skipped", "no telemetry"}};
       }
+      if (std::string(stage) != "georef" && !fs::exists(ws.geo_dir() / "georef.json")) {
+        spdlog::info("{}: no georeference (see the georef stage's warning), skipped", stage);
+        return nlohmann::json{{"skipped", "no georeference"}};
+      }
       return run();
     };
   };
+  // georef runs before dense: when the image-only model disagrees with the flight it replaces WS/sparse with the
+  // telemetry-initialised model (geo/georef.h), which the dense cloud, mesh and DSM must then be built on.
   stages.push_back({"georef", [ws] { return std::vector<fs::path>{ws.sparse_dir() / "images.txt"}; },
                     ws.geo_dir() / "georef.json",
-                    with_telemetry("georef", [o, root] { return geo::RunGeorefStage(root, o.georef); })});
+                    with_telemetry("georef", [o, root] {
+                      // Unusable telemetry must not cost the user the model: the georeferenced products are
+                      // skipped instead (dsm and ortho then say so).
+                      try {
+                        return geo::RunGeorefStage(root, o.georef);
+                      } catch (const Error& e) {
+                        spdlog::warn("georef: {} — no georeferenced products", e.what());
+                        return nlohmann::json{{"skipped", e.what()}};
+                      }
+                    })});
+  stages.push_back({"dense", [ws] { return std::vector<fs::path>{ws.sparse_dir() / "images.txt"}; },
+                    ws.dense_dir() / "fused.ply", [o, root] { return mvs::RunDenseStage(root, o.dense); }});
+  stages.push_back({"mesh", [ws] { return std::vector<fs::path>{ws.dense_dir() / "fused.ply"}; },
+                    ws.mesh_dir() / "poisson.ply", [o, root] { return surface::RunMeshStage(root, o.mesh); }});
+  // report/texture.json is written after the OBJ, GLB and PLY: it marks the stage complete.
+  stages.push_back({"texture", [ws] { return std::vector<fs::path>{ws.mesh_dir() / "poisson.ply"}; },
+                    ws.report_dir() / "texture.json",
+                    [o, root] { return surface::RunTextureStage(root, o.texture); }});
   stages.push_back({"dsm",
                     [ws] {
                       return std::vector<fs::path>{ws.geo_dir() / "georef.json", ws.mesh_dir() / "poisson.ply"};

@@ -78,6 +78,22 @@ struct CentrePrior {
   double inv_sigma_;
 };
 
+// (Rᵀ·z − axis) / σ: the optical axis of pose q (world-to-camera, Eigen x y z w order) in the world frame.
+struct AxisPrior {
+  AxisPrior(const Eigen::Vector3d& axis, double sigma) : axis_(axis.normalized()), inv_sigma_(1 / sigma) {}
+  template <typename T>
+  bool operator()(const T* q, T* residual) const {
+    const Eigen::Quaternion<T> rot(q[3], q[0], q[1], q[2]);
+    const Eigen::Matrix<T, 3, 1> z = rot.conjugate() * Eigen::Matrix<T, 3, 1>(T(0), T(0), T(1));
+    for (int k = 0; k < 3; ++k) residual[k] = (z[k] - T(axis_[k])) * T(inv_sigma_);
+    return true;
+  }
+
+ private:
+  Eigen::Vector3d axis_;
+  double inv_sigma_;
+};
+
 struct PoseBlock {
   std::array<double, 4> q;  // Eigen order x y z w
   std::array<double, 3> t;
@@ -178,6 +194,7 @@ BundleAdjustmentSummary BundleAdjust(core::Reconstruction* rec, const BundleAdju
   // Centre priors (see the header): they anchor the gauge when at least three variable images have one.
   std::vector<std::unique_ptr<ceres::CostFunction>> prior_costs;
   std::unique_ptr<ceres::LossFunction> prior_loss;
+  size_t centre_prior_count = 0;
   if (!config.centre_priors.empty()) {
     if (!(config.centre_prior_sigma > 0)) throw Error("bundle adjustment: centre_prior_sigma must be positive");
     prior_loss = std::make_unique<ceres::HuberLoss>(config.centre_prior_huber);
@@ -187,9 +204,20 @@ BundleAdjustmentSummary BundleAdjust(core::Reconstruction* rec, const BundleAdju
       prior_costs.emplace_back(new ceres::AutoDiffCostFunction<CentrePrior, 3, 4, 3>(
           new CentrePrior(c, config.centre_prior_sigma)));
       problem.AddResidualBlock(prior_costs.back().get(), prior_loss.get(), it->second.q.data(), it->second.t.data());
+      ++centre_prior_count;
     }
   }
-  if (!any_constant && prior_costs.size() < 3) {
+  if (!config.axis_priors.empty()) {
+    if (!(config.axis_prior_sigma_rad > 0)) throw Error("bundle adjustment: axis_prior_sigma_rad must be positive");
+    for (const auto& [id, axis] : config.axis_priors) {
+      const auto it = poses.find(id);
+      if (it == poses.end() || !variable.count(id) || config.constant_images.count(id)) continue;
+      prior_costs.emplace_back(
+          new ceres::AutoDiffCostFunction<AxisPrior, 3, 4>(new AxisPrior(axis, config.axis_prior_sigma_rad)));
+      problem.AddResidualBlock(prior_costs.back().get(), nullptr, it->second.q.data());
+    }
+  }
+  if (!any_constant && centre_prior_count < 3) {
     uint32_t g1 = config.gauge_image1, g2 = config.gauge_image2;
     if (!poses.count(g1) || !poses.count(g2) || g1 == g2) {
       auto it = poses.begin();

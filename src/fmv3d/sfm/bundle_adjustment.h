@@ -55,6 +55,10 @@ struct BundleAdjustmentConfig {
   std::map<uint32_t, Eigen::Vector3d> centre_priors;
   double centre_prior_sigma = 3.0;
   double centre_prior_huber = 3.0;
+  // Soft priors on the optical axes (unit, model frame; e.g. a telemetry line of sight): residual
+  // (Rᵀ·z − axis) / axis_prior_sigma_rad. They hold the rotation that collinear centre priors leave free.
+  std::map<uint32_t, Eigen::Vector3d> axis_priors;
+  double axis_prior_sigma_rad = 0.0175;
 };
 
 struct BundleAdjustmentSummary {
