@@ -100,6 +100,26 @@ TEST(TextureStage, HeldOutViewIsReproduced) {
   EXPECT_EQ(colored.colors.size(), colored.vertices.size());
 }
 
+// The per-face candidate cap (memory on long videos) keeps the best views: with 3 per face instead of every
+// view that sees the face, the held-out view is reproduced as well.
+TEST(TextureStage, CappedCandidatesKeepTheBestViews) {
+  double psnr[2];
+  double mean_candidates[2];
+  for (int capped = 0; capped < 2; ++capped) {
+    test::TempDir ws("fmv3d-texture");
+    PrepareMeshed(ws.path());
+    TextureStageOptions o;
+    o.selection.max_candidates_per_face = capped ? 3 : 255;
+    const nlohmann::json report = RunTextureStage(ws.path(), o);
+    mean_candidates[capped] = report["selection"]["mean_candidates_per_face"].get<double>();
+    const cv::Mat frame = cv::imread((testing::Flight().synth_dir / "frames" / testing::kHeldOut).string());
+    psnr[capped] = CompareWithFrame(ws.path(), testing::kHeldOut, frame).psnr;
+  }
+  EXPECT_GT(mean_candidates[0], 4.0);  // the cap binds
+  EXPECT_LE(mean_candidates[1], 3.0);
+  EXPECT_GE(psnr[1], psnr[0] - 0.5) << "uncapped " << psnr[0] << " dB";
+}
+
 TEST(TextureStage, OccludedViewIsNotUsed) {
   test::TempDir ws("fmv3d-texture");
   PrepareMeshed(ws.path());

@@ -1,5 +1,6 @@
 #include "fmv3d/surface/view_selection.h"
 
+#include <array>
 #include <spdlog/spdlog.h>
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
@@ -17,12 +18,56 @@ namespace {
 
 using Clock = std::chrono::steady_clock;
 
+// 12 bytes: a long video's mesh has millions of faces, each seen by tens of views (61 views of a 7.7 M-face mesh:
+// 209 M candidates, 10 GB at the former 24 bytes and two copies).
 struct Candidate {
-  int face;
-  int view;
   float quality;
-  Eigen::Vector3f color;  // BGR mean over the face's pixels
+  uint16_t view;
+  std::array<uint8_t, 3> color;  // BGR mean over the face's pixels, rounded
+  Eigen::Vector3f Color() const { return Eigen::Vector3f(color[0], color[1], color[2]); }
 };
+
+// Per face, the `k` best candidates by quality (a fixed slot array; faces are only ever touched by one thread).
+class CandidateStore {
+ public:
+  CandidateStore(size_t faces, int k) : k_(k), slots_(faces * k), count_(faces, 0) {}
+  void Offer(size_t f, const Candidate& c) {
+    Candidate* s = &slots_[f * k_];
+    if (count_[f] < k_) {
+      s[count_[f]++] = c;
+      return;
+    }
+    int worst = 0;
+    for (int i = 1; i < k_; ++i)
+      if (s[i].quality < s[worst].quality) worst = i;
+    if (c.quality > s[worst].quality) s[worst] = c;
+  }
+  // Into CSR form ordered by view within each face, in place (a face's CSR start never passes its slots).
+  void ToCsr(std::vector<size_t>* offset, std::vector<Candidate>* out) {
+    const size_t nf = count_.size();
+    offset->assign(nf + 1, 0);
+    for (size_t f = 0; f < nf; ++f) (*offset)[f + 1] = (*offset)[f] + count_[f];
+    for (size_t f = 0; f < nf; ++f) {
+      Candidate* s = &slots_[f * k_];
+      std::sort(s, s + count_[f], [](const Candidate& a, const Candidate& b) { return a.view < b.view; });
+      std::copy(s, s + count_[f], slots_.begin() + (*offset)[f]);
+    }
+    slots_.resize((*offset)[nf]);
+    slots_.shrink_to_fit();
+    *out = std::move(slots_);
+  }
+
+ private:
+  int k_;
+  std::vector<Candidate> slots_;
+  std::vector<uint8_t> count_;
+};
+
+std::array<uint8_t, 3> Rounded(const Eigen::Vector3f& c) {
+  std::array<uint8_t, 3> out;
+  for (int k = 0; k < 3; ++k) out[k] = static_cast<uint8_t>(std::clamp(std::lround(c[k]), 0L, 255L));
+  return out;
+}
 
 // Bilinear BGR colour at a continuous pixel position (pixel centres at +0.5), clamped to the image.
 Eigen::Vector3f SampleBilinear(const cv::Mat& img, double u, double v) {
@@ -42,10 +87,10 @@ Eigen::Vector3f SampleBilinear(const cv::Mat& img, double u, double v) {
   return c;
 }
 
-// All candidates of one view, in face order.
-std::vector<Candidate> ViewCandidates(const ColoredMesh& mesh, const std::vector<Eigen::Vector3d>& face_normals,
-                                      const render::Renderer& renderer, const TextureView& view, int view_index,
-                                      const ViewSelectionOptions& options) {
+// The candidates of one view, offered to the store.
+void ViewCandidates(const ColoredMesh& mesh, const std::vector<Eigen::Vector3d>& face_normals,
+                    const render::Renderer& renderer, const TextureView& view, int view_index,
+                    const ViewSelectionOptions& options, CandidateStore* store) {
   const core::Camera& cam = view.camera;
   const double s = options.visibility_scale;
   core::Camera small = cam;
@@ -81,8 +126,7 @@ std::vector<Candidate> ViewCandidates(const ColoredMesh& mesh, const std::vector
 
   const double min_cos = std::cos(options.max_angle_deg * M_PI / 180.0);
   const Eigen::Vector3d centre = view.pose.Centre();
-  constexpr size_t kChunks = 64;  // fixed chunks keep the output order independent of scheduling
-  std::vector<std::vector<Candidate>> parts(kChunks);
+  constexpr size_t kChunks = 64;  // chunks of faces: each face is offered by one thread only
   tbb::parallel_for(size_t{0}, kChunks, [&](size_t c) {
     const size_t begin = nf * c / kChunks, end = nf * (c + 1) / kChunks;
     for (size_t f = begin; f < end; ++f) {
@@ -101,9 +145,9 @@ std::vector<Candidate> ViewCandidates(const ColoredMesh& mesh, const std::vector
       const double area = 0.5 * std::abs((uv[1] - uv[0]).x() * (uv[2] - uv[0]).y() -
                                          (uv[1] - uv[0]).y() * (uv[2] - uv[0]).x());
       const double area_small = area * sx * sy;
-      Candidate cand{static_cast<int>(f), view_index, static_cast<float>(area), Eigen::Vector3f::Zero()};
+      Candidate cand{static_cast<float>(area), static_cast<uint16_t>(view_index), {0, 0, 0}};
       if (count[f] > 0) {
-        cand.color = sum[f] / static_cast<float>(count[f]);
+        cand.color = Rounded(sum[f] / static_cast<float>(count[f]));
         // Partly hidden faces show fewer pixels than their projected area (small faces' counts are too noisy).
         if (area_small >= 8) cand.quality *= static_cast<float>(std::min(1.0, count[f] / area_small));
       } else {
@@ -117,14 +161,11 @@ std::vector<Candidate> ViewCandidates(const ColoredMesh& mesh, const std::vector
         const double footprint = xc.z() / small.f;
         if (!(d > 0) || std::abs(xc.z() - d) > 0.01 * xc.z() + 3 * footprint) continue;
         const Eigen::Vector2d pf = cam.Project(xc);
-        cand.color = SampleBilinear(view.image, pf.x(), pf.y());
+        cand.color = Rounded(SampleBilinear(view.image, pf.x(), pf.y()));
       }
-      parts[c].push_back(cand);
+      store->Offer(f, cand);
     }
   });
-  std::vector<Candidate> out;
-  for (auto& p : parts) out.insert(out.end(), p.begin(), p.end());
-  return out;
 }
 
 }  // namespace
@@ -135,6 +176,8 @@ void ViewSelectionOptions::Check() const {
   if (!(smoothness >= 0)) throw Error("texture: smoothness must be >= 0");
   if (smoothing_iterations < 0) throw Error("texture: smoothing iterations must be >= 0");
   if (!(visibility_scale > 0 && visibility_scale <= 1)) throw Error("texture: visibility scale must be in (0, 1]");
+  if (max_candidates_per_face < 1 || max_candidates_per_face > 255)
+    throw Error("texture: max candidates per face must be in [1, 255]");
 }
 
 std::vector<Eigen::Vector3i> FaceAdjacency(const std::vector<Eigen::Vector3i>& triangles) {
@@ -173,33 +216,26 @@ ViewSelection SelectViews(const ColoredMesh& mesh, const std::vector<Eigen::Vect
   result.labels.assign(nf, -1);
   if (nf == 0 || views.empty()) return result;
 
-  // 1. Candidates of every view, gathered into per-face lists (CSR, ordered by view).
+  // 1. Candidates of every view: per face the best max_candidates_per_face by quality, then in CSR form
+  // ordered by view.
+  if (views.size() > 65535) throw Error("texture: at most 65535 views");
   const io::TexturedMesh geometry = mesh.ToTexturedMesh();
   const render::Renderer renderer(geometry);
   std::vector<Eigen::Vector3d> face_normals(nf);
   for (size_t f = 0; f < nf; ++f) face_normals[f] = geometry.FaceNormal(f);
-  std::vector<std::vector<Candidate>> per_view(views.size());
+  std::vector<size_t> offset;
+  std::vector<Candidate> cand;
   {
+    CandidateStore store(nf, options.max_candidates_per_face);
     core::Progress progress("texture: visibility", views.size());
     for (size_t v = 0; v < views.size(); ++v) {
-      per_view[v] = ViewCandidates(mesh, face_normals, renderer, views[v], static_cast<int>(v), options);
+      ViewCandidates(mesh, face_normals, renderer, views[v], static_cast<int>(v), options, &store);
       progress.Add();
     }
-  }
-  std::vector<size_t> offset(nf + 1, 0);
-  for (const auto& pv : per_view)
-    for (const auto& c : pv) ++offset[c.face + 1];
-  for (size_t f = 0; f < nf; ++f) offset[f + 1] += offset[f];
-  std::vector<Candidate> cand(offset[nf]);
-  {
-    std::vector<size_t> fill(offset.begin(), offset.end() - 1);
-    for (auto& pv : per_view) {
-      for (const auto& c : pv) cand[fill[c.face]++] = c;
-      std::vector<Candidate>().swap(pv);
-    }
+    store.ToCsr(&offset, &cand);
   }
   const double seconds_visibility = std::chrono::duration<double>(Clock::now() - start).count();
-  auto find = [&](int f, int view) -> const Candidate* {
+  auto find = [&](int f, int view) -> const Candidate* {  // a handful of candidates per face
     for (size_t i = offset[f]; i < offset[f + 1]; ++i)
       if (cand[i].view == view) return &cand[i];
     return nullptr;
@@ -216,11 +252,11 @@ ViewSelection SelectViews(const ColoredMesh& mesh, const std::vector<Eigen::Vect
       if (n < 3) continue;
       colors.clear();
       for (size_t i = offset[f]; i < offset[f + 1]; ++i) {
-        Eigen::Vector3f c = cand[i].color;
+        Eigen::Vector3f c = cand[i].Color();
         int m = 1;
         for (int k = 0; k < 3; ++k)
           if (adjacency[f][k] >= 0)
-            if (const Candidate* o = find(adjacency[f][k], cand[i].view)) c += o->color, ++m;
+            if (const Candidate* o = find(adjacency[f][k], cand[i].view)) c += o->Color(), ++m;
         colors.push_back(c / static_cast<float>(m));
       }
       Eigen::Vector3f median;
