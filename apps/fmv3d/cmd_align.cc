@@ -73,8 +73,10 @@ void Add(CLI::App& app) {
                                j.at("reprojection_rms_after_px").get<double>());
     }
     const auto& m = report.at("merged");
-    std::cout << fmt::format("  merged: {} images, {} points, {} dense points\n", m.at("images").get<size_t>(),
-                             m.at("points").get<size_t>(), m.at("dense_points").get<size_t>());
+    const auto& d = report.at("dense");
+    std::cout << fmt::format("  merged: {} images, {} points, {} dense points ({})\n", m.at("images").get<size_t>(),
+                             m.at("points").get<size_t>(), d.value("points", size_t{0}),
+                             d.value("method", std::string("none")));
   });
 }
 

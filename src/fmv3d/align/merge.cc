@@ -426,7 +426,7 @@ nlohmann::json RunAlignStage(const std::vector<fs::path>& workspaces, const fs::
   report["merged"] = {{"cameras", merged.sparse.cameras.size()},
                       {"images", merged.sparse.images.size()},
                       {"points", merged.sparse.points.size()},
-                      {"dense_points", merged.dense.size()},
+                      {"dense_points", dense_json.value("points", size_t{0})},
                       {"dense_points_union", dense_before_overlap},
                       {"dense_points_dropped_in_overlap", overlap_dropped},
                       {"frames_linked", frames_linked},
