@@ -773,6 +773,7 @@ nlohmann::json RunGeorefStage(const fs::path& ws, const GeorefOptions& o) {
                    100 * rebuilt.at("fit_fraction").get<double>());
       for (const char* f : {"cameras.txt", "images.txt", "points3D.txt"})
         fs::copy_file(keep / f, ws / "sparse" / f, fs::copy_options::overwrite_existing);
+      fs::remove_all(keep);
       io::WriteColmapText(rec, geo_dir / "sparse_enu");  // rewritten by the attempt
       info["applied"] = false;
       info["fit_fraction_telemetry_model"] = rebuilt.at("fit_fraction");
