@@ -1,5 +1,6 @@
 #include "fmv3d/geo/evaluation.h"
 
+#include <Eigen/Eigenvalues>
 #include <fmt/format.h>
 
 #include <algorithm>
@@ -48,13 +49,36 @@ template <typename ToWs>
 core::Sim3 GeorefErrorSimilarity(const core::Reconstruction& est, const core::Reconstruction& tru, const ToWs& to_ws,
                                  double* fit_rms) {
   std::vector<Eigen::Vector3d> src, dst;
+  std::vector<std::pair<const core::Image*, const core::Image*>> matched;
   for (const auto& [id, img] : est.images)
-    if (const core::Image* t = tru.FindImageByName(img.name)) src.push_back(img.pose.Centre()), dst.push_back(to_ws(t->pose.Centre()));
+    if (const core::Image* t = tru.FindImageByName(img.name)) {
+      src.push_back(img.pose.Centre()), dst.push_back(to_ws(t->pose.Centre()));
+      matched.emplace_back(&img, t);
+    }
+  // Centres on a nearly straight line leave the roll about it free (the fit would pick it from their noise):
+  // then each camera also contributes a point one track length along its optical axis, so the cameras'
+  // orientations fix the roll.
+  if (src.size() >= 3) {
+    Eigen::Vector3d mean = Eigen::Vector3d::Zero();
+    for (const auto& p : dst) mean += p;
+    mean /= static_cast<double>(dst.size());
+    Eigen::Matrix3d cov = Eigen::Matrix3d::Zero();
+    for (const auto& p : dst) cov += (p - mean) * (p - mean).transpose();
+    const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eig(cov / static_cast<double>(dst.size()));
+    const double along = std::sqrt(std::max(0.0, eig.eigenvalues()(2))), lateral = std::sqrt(std::max(0.0, eig.eigenvalues()(1)));
+    if (lateral < 0.05 * along) {
+      const double reach = 2 * along;
+      for (const auto& [e, t] : matched) {
+        src.push_back(e->pose.Centre() + reach * (e->pose.q.conjugate() * Eigen::Vector3d::UnitZ()));
+        dst.push_back(to_ws(t->pose.Centre() + reach * (t->pose.q.conjugate() * Eigen::Vector3d::UnitZ())));
+      }
+    }
+  }
   core::Sim3 s;
   if (src.size() < 3 || !geometry::EstimateSimilarity(src, dst, &s))
     throw Error("evaluate-geo: fewer than 3 non-collinear cameras match the truth; no surface error");
   Stats fit;
-  for (size_t i = 0; i < src.size(); ++i) fit.Add((s.Apply(src[i]) - dst[i]).norm());
+  for (size_t i = 0; i < matched.size(); ++i) fit.Add((s.Apply(src[i]) - dst[i]).norm());  // the centres
   *fit_rms = fit.Rms();
   return s;
 }
