@@ -413,8 +413,13 @@ core::Reconstruction TelemetryInitialisedModel(const io::FramesIndex& index, cor
   for (const auto& cp : index.cameras) {
     const auto it = rec.cameras.find(cp.camera.id);
     if (it == rec.cameras.end() || cp.prior_source != "telemetry-hfov") continue;
-    focal.push_back({{"camera", cp.camera.id}, {"f_image_model", it->second.f}, {"f", cp.camera.f}});
-    it->second.f = cp.camera.f;
+    focal.push_back({{"camera", cp.camera.id}, {"f_image_model", it->second.f}, {"f", cp.camera.f},
+                     {"k1_image_model", it->second.k1}, {"k2_image_model", it->second.k2}});
+    // The whole prior camera: the image model's distortion was fitted along with its degenerate shape (a
+    // synthetic telephoto pass: k2 −1.84 on a lens without distortion).
+    const uint32_t id = it->second.id;
+    it->second = cp.camera;
+    it->second.id = id;
   }
   // Every point starts where its middle observation's ray meets the ground plane under the frame centres (a
   // telephoto clip's rays are too close to parallel to triangulate before the attitudes are refined); without
