@@ -13,6 +13,7 @@
 #include <map>
 #include <optional>
 #include <random>
+#include <tuple>
 
 #include "fmv3d/core/error.h"
 #include "fmv3d/core/files.h"
@@ -71,18 +72,46 @@ nlohmann::json SimJson(const core::Sim3& s) {
   return j;
 }
 
-// Unit normal of the best-fit plane of the points (smallest principal axis), pointing towards `above`.
+// Unit normal of the ground plane of the sparse points, pointing towards `above`: the plane with the most points
+// within 1% of the points' spread (deterministic RANSAC over 3-point samples), refitted to those points by their
+// smallest principal axis. A plain fit to every point is tilted by walls and roofs (a synthetic pass by a
+// building: +5 m of DSM bias).
 std::optional<Eigen::Vector3d> GroundNormal(const core::Reconstruction& rec, const Eigen::Vector3d& above) {
   if (rec.points.size() < 10) return std::nullopt;
-  Eigen::Vector3d mean = Eigen::Vector3d::Zero();
-  for (const auto& [id, p] : rec.points) mean += p.xyz;
-  mean /= static_cast<double>(rec.points.size());
-  Eigen::Matrix3d cov = Eigen::Matrix3d::Zero();
-  for (const auto& [id, p] : rec.points) cov += (p.xyz - mean) * (p.xyz - mean).transpose();
-  Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eig(cov);
-  Eigen::Vector3d n = eig.eigenvectors().col(0);
-  if (n.dot(above - mean) < 0) n = -n;
-  return n;
+  std::vector<Eigen::Vector3d> pts;
+  pts.reserve(rec.points.size());
+  for (const auto& [id, p] : rec.points) pts.push_back(p.xyz);
+  auto fit = [](const std::vector<Eigen::Vector3d>& v) {
+    Eigen::Vector3d mean = Eigen::Vector3d::Zero();
+    for (const auto& p : v) mean += p;
+    mean /= static_cast<double>(v.size());
+    Eigen::Matrix3d cov = Eigen::Matrix3d::Zero();
+    for (const auto& p : v) cov += (p - mean) * (p - mean).transpose();
+    const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eig(cov);
+    return std::make_pair(Eigen::Vector3d(eig.eigenvectors().col(0)), mean);
+  };
+  auto [normal, centre] = fit(pts);
+  std::vector<double> dist(pts.size());
+  for (size_t i = 0; i < pts.size(); ++i) dist[i] = (pts[i] - centre).norm();
+  const double threshold = 0.01 * Median(dist);
+  std::mt19937_64 rng(7);
+  std::uniform_int_distribution<size_t> pick(0, pts.size() - 1);
+  size_t best = 0;
+  for (int it = 0; it < 500; ++it) {
+    const Eigen::Vector3d a = pts[pick(rng)], b = pts[pick(rng)], c = pts[pick(rng)];
+    Eigen::Vector3d n = (b - a).cross(c - a);
+    if (n.norm() < 1e-12) continue;
+    n.normalize();
+    size_t count = 0;
+    for (const auto& p : pts) count += std::abs(n.dot(p - a)) <= threshold;
+    if (count > best) best = count, normal = n, centre = a;
+  }
+  std::vector<Eigen::Vector3d> inliers;
+  for (const auto& p : pts)
+    if (std::abs(normal.dot(p - centre)) <= threshold) inliers.push_back(p);
+  if (inliers.size() >= 10) std::tie(normal, centre) = fit(inliers);
+  if (normal.dot(above - centre) < 0) normal = -normal;
+  return normal;
 }
 
 // Rotates the similarity about the (ENU) line through `centre` along `axis` so that the model's ground
