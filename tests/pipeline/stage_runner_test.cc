@@ -59,8 +59,13 @@ TEST(StageRunner, ChangedInputRerunsEverythingDownstream) {
   test::TempDir dir;
   Chain chain(dir.path());
   RunStages(chain.stages, {});
-  // A newer input (file times can be coarse: push it clearly into the future).
-  fs::last_write_time(dir / "input", fs::file_time_type::clock::now() + std::chrono::seconds(5));
+  // A newer input. File times are coarse (the kernel's clock tick): markers written within one tick of each other
+  // compare equal, so every file of the first run is aged first (the run takes a few milliseconds) — the rerun's
+  // markers are then newer than the old ones whatever the tick.
+  const auto now = fs::file_time_type::clock::now();
+  for (const auto& e : fs::recursive_directory_iterator(dir.path()))
+    if (e.is_regular_file()) fs::last_write_time(e.path(), now - std::chrono::seconds(10));
+  fs::last_write_time(dir / "input", now);
   RunStages(chain.stages, {});
   EXPECT_EQ(chain.runs[0], 2);
   // b and c see their input (a's marker) rewritten now, older than... it is newer than their markers.
