@@ -24,6 +24,8 @@ void Add(CLI::App& app) {
   cmd->add_option("--seed", a->opt.seed, "Random seed of the robust fit")->capture_default_str();
   auto* kf_only = cmd->add_flag("--keyframes-only",
                                 "Fit only the registered keyframes' telemetry, not every packet of frames/telemetry.json");
+  auto* no_fc = cmd->add_flag("--no-frame-centres",
+                              "Fit the positions (and attitudes) only; ignore the frame centres at their slant range");
   cmd->add_option("--constrain", a->constrain,
                   "Build the model again from the telemetry's cameras and replace WS/sparse when it fits the "
                   "flight better (the image-only model goes to WS/geo/sparse_image_only/): auto = when the "
@@ -33,8 +35,9 @@ void Add(CLI::App& app) {
   cmd->add_option("--prior-sigma", a->opt.prior_sigma_m, "Telemetry position accuracy per axis, metres (priors' sigma)")
       ->check(CLI::PositiveNumber)
       ->capture_default_str();
-  cmd->callback([a, kf_only] {
+  cmd->callback([a, kf_only, no_fc] {
     a->opt.use_track = kf_only->count() == 0;
+    a->opt.use_frame_centres = no_fc->count() == 0;
     a->opt.constrain = a->constrain == "always"  ? geo::GeorefOptions::Constrain::kAlways
                        : a->constrain == "never" ? geo::GeorefOptions::Constrain::kNever
                                                  : geo::GeorefOptions::Constrain::kAuto;

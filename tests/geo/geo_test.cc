@@ -104,8 +104,11 @@ struct GeorefCase {
 };
 
 // attitude_noise < 0: no attitude in the telemetry; heading_offset: a systematic heading error (degrees).
+// frame_centre_noise < 0: no frame centres; else each packet states the true look-at point (plus that noise per
+// axis and frame_centre_offset) with its slant range. ground_tilt_deg tilts the model's ground about the x axis.
 void MakeGeorefCase(GeorefCase* g, int n, double noise, bool straight, int outlier, double attitude_noise = -1,
-                    double heading_offset = 0, double radius = 200, double bend = 0) {
+                    double heading_offset = 0, double radius = 200, double bend = 0, double frame_centre_noise = -1,
+                    const Eigen::Vector3d& frame_centre_offset = Eigen::Vector3d::Zero(), double ground_tilt_deg = 0) {
   std::mt19937_64 rng(5);
   std::normal_distribution<double> N(0, 1);
   std::mt19937_64 rng_att(9);  // separate, so positions are the same with and without attitude
@@ -151,13 +154,24 @@ void MakeGeorefCase(GeorefCase* g, int n, double noise, bool straight, int outli
       f.telemetry["sensor_relative_elevation"] = a.sensor_relative_elevation;
       f.telemetry["sensor_relative_roll"] = a.sensor_relative_roll;
     }
+    if (frame_centre_noise >= 0) {
+      std::normal_distribution<double> Nf(0, frame_centre_noise);
+      const Eigen::Vector3d fc = Eigen::Vector3d(Nf(rng_att), Nf(rng_att), Nf(rng_att)) + frame_centre_offset;
+      const GeoPoint q = frame.ToGeodetic(fc);
+      f.telemetry["frame_center_latitude"] = q.lat;
+      f.telemetry["frame_center_longitude"] = q.lon;
+      f.telemetry["frame_center_elevation"] = q.alt;
+      f.telemetry["slant_range"] = c.norm();  // to the true look-at point, the ENU origin
+    }
     index.frames.push_back(f);
   }
   // Ground points (a plane with small bumps) so the model has a ground.
   for (int i = 0; i < 400; ++i) {
     core::Point3D pt;
     pt.id = i + 1;
-    pt.xyz = g->true_to_model.Apply(Eigen::Vector3d(-200 + 20.0 * (i % 20), -200 + 20.0 * (i / 20), 0.5 * N(rng)));
+    const double y = -200 + 20.0 * (i / 20);
+    pt.xyz = g->true_to_model.Apply(Eigen::Vector3d(-200 + 20.0 * (i % 20), y,
+                                                    0.5 * N(rng) + y * std::tan(ground_tilt_deg * M_PI / 180)));
     rec.points[pt.id] = pt;
   }
   core::EnsureDirectory(g->dir / "frames");
@@ -308,6 +322,65 @@ TEST(Georef, StraightTrackTakesItsRollFromTheGround) {
   const Georef r = ReadGeoref(g.dir.path());
   const double angle = core::RotationAngle(r.sparse_to_enu.q * g.true_to_model.q, Eigen::Quaterniond::Identity());
   EXPECT_LT(angle * 180 / M_PI, 1.0);
+}
+
+// Error of the georeferenced model at a true ENU point X (the model's X mapped back to ENU).
+double ErrorAt(const GeorefCase& g, const Eigen::Vector3d& X) {
+  return (ReadGeoref(g.dir.path()).sparse_to_enu.Apply(g.true_to_model.Apply(X)) - X).norm();
+}
+
+// 12 packets with σ = 3 m GPS know the translation to ~1.5 m; their frame centres (1 cm) at the slant range
+// place every sensor along the model's own line of sight, and pin the ground the cameras look at.
+TEST(Georef, FrameCentresPinTheTranslationAndScale) {
+  double err[2];
+  for (int use = 0; use < 2; ++use) {
+    GeorefCase g;
+    MakeGeorefCase(&g, 12, 3.0, false, -1, 0.5, 0, 200, 0, 0.01);
+    GeorefOptions o;
+    o.origin = kOrigin;
+    o.use_frame_centres = use == 1;
+    const auto j = RunGeorefStage(g.dir.path(), o);
+    EXPECT_EQ(j["frame_centres"]["used"].get<bool>(), use == 1) << j["frame_centres"].dump();
+    err[use] = ErrorAt(g, Eigen::Vector3d::Zero());
+    if (use) {
+      EXPECT_EQ(j["frame_centres"]["inliers"].get<int>(), 12);
+      EXPECT_LT(j["frame_centres"]["sigma_per_axis_m"].get<double>(), 0.1);
+    }
+  }
+  std::cout << "error at the look-at point: positions " << err[0] << " m, frame centres " << err[1] << " m\n";
+  EXPECT_GT(err[0], 0.3);  // positions and attitudes only
+  EXPECT_LT(err[1], 0.1) << "positions only: " << err[0];
+}
+
+// A datum mistake (every frame centre 30 m too low) must not drag the model: the frame centres' own fit
+// disagrees with the positions', and they are left out.
+TEST(Georef, FrameCentresThatDisagreeAreNotUsed) {
+  GeorefCase g;
+  MakeGeorefCase(&g, 40, 3.0, false, -1, 0.5, 0, 200, 0, 0.01, Eigen::Vector3d(0, 0, -30));
+  GeorefOptions o;
+  o.origin = kOrigin;
+  const auto j = RunGeorefStage(g.dir.path(), o);
+  EXPECT_FALSE(j["frame_centres"]["used"].get<bool>()) << j["frame_centres"].dump();
+  EXPECT_NE(j["frame_centres"]["why"].get<std::string>().find("disagree"), std::string::npos);
+  EXPECT_LT(CentreRms(g), 3.0);  // the positions' own accuracy (measured 1.6 m), not 30 m
+}
+
+// A straight track over ground that is not level: the level-ground roll is 4° off, and the frame centres
+// (beside the track) put it right.
+TEST(Georef, FrameCentresFixTheRollAboutAStraightTrack) {
+  double angle[2];
+  for (int use = 0; use < 2; ++use) {
+    GeorefCase g;
+    MakeGeorefCase(&g, 30, 1.0, true, -1, -1, 0, 200, 0, 0.05, Eigen::Vector3d::Zero(), 4.0);
+    GeorefOptions o;
+    o.use_frame_centres = use == 1;
+    const auto j = RunGeorefStage(g.dir.path(), o);
+    EXPECT_EQ(j["frame_centres"]["used"].get<bool>(), use == 1) << j["frame_centres"].dump();
+    angle[use] = RotationErrorDeg(g);
+  }
+  std::cout << "rotation error: level ground " << angle[0] << "°, frame centres " << angle[1] << "°\n";
+  EXPECT_GT(angle[0], 2.0);
+  EXPECT_LT(angle[1], 0.2) << "level ground: " << angle[0];
 }
 
 TEST(Georef, ClearErrors) {

@@ -22,6 +22,8 @@
 // disagree beyond their uncertainties) and scale/translation refitted. With GPS noise σ per axis and N
 // independent pairs, the translation is known to about σ·√(3/N) (3D) — georef.json's
 // expected_translation_error_m, with N discounted by the residuals' autocorrelation along the track ("fit").
+// Frame centres with slant ranges are a second measurement of the sensor positions (geo/frame_centres.h): when
+// they agree with the GPS, scale and translation are fused by information ("frame_centres").
 // "cameras"/"inliers"/"residuals" describe the registered keyframes.
 // A model that disagrees with the flight (a telephoto clip's ambiguous shape) is built again from the telemetry
 // (GeorefOptions::constrain); georef.json's "telemetry_constrained" says whether, and how well.
@@ -43,6 +45,7 @@ struct GeorefOptions {
   double min_inlier_threshold = 0.05;  // metres: floor of the 3σ inlier bound (noise-free telemetry)
   uint64_t seed = 42;
   bool use_track = true;  // fit every packet of frames/telemetry.json (else the keyframes' telemetry only)
+  bool use_frame_centres = true;  // fuse the frame centres at their slant range when they agree (frame_centres.h)
   // When the model's trajectory disagrees with the telemetry (fit fraction below min_fit_fraction: a telephoto
   // clip over flat ground is nearly affine, its images alone leave the shape ambiguous), the model is built
   // again from the telemetry: cameras at the keyframes' telemetry positions and attitudes (the ST 0601 angle

@@ -1,0 +1,78 @@
+// Frame centres as a second measurement of where the sensor was. A packet that states the frame centre F (the
+// ground point on the line of sight) and the slant range r to it places the sensor at F − r·d, d the line of
+// sight's direction in ENU. Georef takes d from the model's own camera rotated by the fitted similarity — not
+// from the telemetry's attitude, whose error times r would dominate — so this "line-of-sight centre" carries
+// the frame centre's error plus r times the fit's rotation error, independent of the GPS position's noise.
+//
+// How much it is worth depends on the sensor: a frame centre computed by the platform from its own GPS and
+// attitude repeats their errors (aphill's EG0104 stream, ~20 m here); a rangefinder with a precise gimbal, or
+// `fmv3d synth --klv` (frame centre and range from the true pose, i.e. a perfect sensor) gives centimetres. So
+// nothing is assumed: the line-of-sight centres get their own scale and translation fit (rotation held at the
+// positions' and attitudes'), their own robust σ and effective sample count, and are fused with the positions'
+// fit by information only when the two fits agree within their uncertainties (χ², 4 dof, 99.9%).
+#pragma once
+
+#include <Eigen/Core>
+#include <nlohmann/json.hpp>
+#include <vector>
+
+#include "fmv3d/core/pose.h"
+
+namespace fmv3d::geo {
+
+// One packet's (or keyframe's) line of sight: the model camera and the telemetry's frame centre and range.
+struct LineOfSight {
+  Eigen::Vector3d model_centre;   // model camera centre (sparse coordinates)
+  Eigen::Vector3d model_axis;     // model optical axis, unit (sparse coordinates)
+  double slant_range = 0;         // metres
+  Eigen::Vector3d frame_centre;   // ENU metres
+  int track = -1;                 // consecutive entries of one track are correlated in time
+};
+
+// Scale and translation of a similarity whose rotation is held, with their 4×4 covariance (s, tx, ty, tz).
+struct ScaleShift {
+  double scale = 1;
+  Eigen::Vector3d translation = Eigen::Vector3d::Zero();
+  Eigen::Matrix4d covariance = Eigen::Matrix4d::Zero();
+};
+
+struct FrameCentreFusion {
+  bool used = false;
+  std::string why;                // when not used
+  size_t observations = 0, inliers = 0;
+  std::vector<char> inlier_mask;  // per line of sight
+  double sigma_m = 0;             // per axis, of the line-of-sight centres about their own fit
+  double autocorrelation = 0, effective_samples = 0;
+  double chi2 = 0;                // disagreement with the positions' fit
+  ScaleShift fused;               // when used
+  nlohmann::json ToJson() const;
+};
+
+// Weighted least squares of (s, t) in dst ≈ s·R·src + t with R held; weights are 1/σ² per point.
+// Requires ≥ 2 points with distinct src; returns false otherwise.
+bool FitScaleShift(const Eigen::Matrix3d& R, const std::vector<Eigen::Vector3d>& src,
+                   const std::vector<Eigen::Vector3d>& dst, const std::vector<double>& weights, ScaleShift* out);
+
+// positions: the positions' fit (s, t under R), with its covariance already scaled by σ² and the effective
+// sample count. min_threshold: floor of the inlier bound, metres. systematic: σ per ENU axis of an error common
+// to every frame centre (the fields' encoding resolution), added to the translation's covariance.
+FrameCentreFusion FuseFrameCentres(const Eigen::Matrix3d& R, const ScaleShift& positions,
+                                   const std::vector<LineOfSight>& sights, double min_threshold,
+                                   const Eigen::Vector3d& systematic = Eigen::Vector3d::Zero());
+
+// The similarity refined on every measurement at once (Ceres, from `start`): positions src → dst, lines of
+// sight (sensor position F − r·R·a, i.e. the frame centre F ≈ s·R·c + t + r·R·a, which also fixes the rotation
+// wherever the frame centres spread), and telemetry attitudes (model-to-ENU rotations, compared with R). Each
+// σ is the effective one per axis (already discounted for correlated samples); a set may be empty. A weak
+// prior (5°) keeps a rotation no measurement determines (the roll about a straight track) where it started.
+struct JointMeasurements {
+  std::vector<Eigen::Vector3d> src, dst;
+  double position_sigma = 1;
+  std::vector<LineOfSight> sights;
+  double sight_sigma = 1;
+  std::vector<Eigen::Matrix3d> attitudes;
+  double attitude_sigma_rad = 1;
+};
+core::Sim3 RefineSimilarity(const core::Sim3& start, const JointMeasurements& m);
+
+}  // namespace fmv3d::geo
