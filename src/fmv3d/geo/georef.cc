@@ -23,9 +23,9 @@
 #include "fmv3d/io/frames_index.h"
 #include "fmv3d/io/klv_st0601_writer.h"
 #include "fmv3d/io/telemetry.h"
-#include "fmv3d/sfm/bundle_adjustment.h"
 #include "fmv3d/geo/frame_centres.h"
 #include "fmv3d/geo/trajectory.h"
+#include "fmv3d/sfm/bundle_adjustment.h"
 
 namespace fmv3d::geo {
 namespace fs = std::filesystem;
@@ -749,11 +749,16 @@ nlohmann::json RunGeorefStage(const fs::path& ws, const GeorefOptions& o) {
     }
     const double rho_p = use_track ? ResidualAutocorrelation(pairs, res, inliers) : 0.0;
     const double n_eff_p = std::max(1.0, s_in.size() * (1 - rho_p) / (1 + rho_p));
+    // The positions' scale and translation under a rotation, with their covariance (σ², effective samples).
+    const auto positions_under = [&](const Eigen::Matrix3d& rotation, ScaleShift* out) {
+      if (!FitScaleShift(rotation, s_in, d_in, std::vector<double>(s_in.size(), 1.0), out)) return false;
+      out->covariance *= sigma * sigma * static_cast<double>(s_in.size()) / n_eff_p;
+      return true;
+    };
     ScaleShift positions;
     if (sights.empty())
       frame_centres_json["why"] = "no packet states a frame centre with its elevation and a slant range";
-    if (!sights.empty() && FitScaleShift(R, s_in, d_in, std::vector<double>(s_in.size(), 1.0), &positions)) {
-      positions.covariance *= sigma * sigma * static_cast<double>(s_in.size()) / n_eff_p;
+    if (!sights.empty() && positions_under(R, &positions)) {
       // The frame centre's elevation is encoded in 2 bytes over 19.9 km (ST 0601 tag 25): 0.30 m steps, an
       // error that does not average when the ground is flat — a floor on the vertical (uniform: step/√12).
       const Eigen::Vector3d systematic(0, 0, 19900.0 / 65535 / std::sqrt(12.0));
@@ -773,8 +778,7 @@ nlohmann::json RunGeorefStage(const fs::path& ws, const GeorefOptions& o) {
         const core::Sim3 joint = RefineSimilarity(sim, m);
         const Eigen::Matrix3d R2 = joint.q.toRotationMatrix();
         ScaleShift positions2;
-        if (FitScaleShift(R2, s_in, d_in, std::vector<double>(s_in.size(), 1.0), &positions2)) {
-          positions2.covariance *= sigma * sigma * static_cast<double>(s_in.size()) / n_eff_p;
+        if (positions_under(R2, &positions2)) {
           FrameCentreFusion again = FuseFrameCentres(R2, positions2, sights, o.min_inlier_threshold, systematic);
           spdlog::debug("georef: joint refinement turned the rotation {:.3f}°; frame centres χ² {:.1f} → {:.1f}, σ {:.2f} → {:.2f} m",
                        core::RotationAngle(joint.q, sim.q) * 180 / M_PI, fusion.chi2, again.chi2, fusion.sigma_m, again.sigma_m);
