@@ -108,7 +108,8 @@ struct GeorefCase {
 // axis and frame_centre_offset) with its slant range. ground_tilt_deg tilts the model's ground about the x axis.
 void MakeGeorefCase(GeorefCase* g, int n, double noise, bool straight, int outlier, double attitude_noise = -1,
                     double heading_offset = 0, double radius = 200, double bend = 0, double frame_centre_noise = -1,
-                    const Eigen::Vector3d& frame_centre_offset = Eigen::Vector3d::Zero(), double ground_tilt_deg = 0) {
+                    const Eigen::Vector3d& frame_centre_offset = Eigen::Vector3d::Zero(), double ground_tilt_deg = 0,
+                    double look_at_spread = 0) {
   std::mt19937_64 rng(5);
   std::normal_distribution<double> N(0, 1);
   std::mt19937_64 rng_att(9);  // separate, so positions are the same with and without attitude
@@ -127,11 +128,13 @@ void MakeGeorefCase(GeorefCase* g, int n, double noise, bool straight, int outli
     if (straight) c = Eigen::Vector3d(-300 + 600.0 * k / (n - 1), -150, 120);
     else c = Eigen::Vector3d(radius * std::cos(2 * M_PI * k / n), radius * std::sin(2 * M_PI * k / n), 120 + 10 * std::sin(3.0 * k));
     g->true_centres.push_back(c);
+    // The point the camera looks at (the frame centre): the origin, or spread about it as a jittery gimbal's.
+    const Eigen::Vector3d look_at = look_at_spread * Eigen::Vector3d(std::cos(2.7 * k), std::sin(2.7 * k), 0);
     core::Image img;
     img.id = k + 1;
     img.camera_id = 1;
     img.name = fmt::format("flight-{:06d}.png", k);
-    img.pose = g->true_to_model.Apply(core::Pose::LookAt(c, {0, 0, 0}));
+    img.pose = g->true_to_model.Apply(core::Pose::LookAt(c, look_at));
     rec.images[img.id] = img;
     io::FrameRecord f;
     f.name = img.name;
@@ -145,7 +148,7 @@ void MakeGeorefCase(GeorefCase* g, int n, double noise, bool straight, int outli
     if (attitude_noise >= 0) {
       // Split the true attitude for a nominal platform, then state a noisy (and offset) platform, as synth does:
       // the telemetry's camera attitude is off by about attitude_noise per axis (and by heading_offset).
-      const Eigen::Matrix3d cam_to_enu = core::Pose::LookAt(c, {0, 0, 0}).R().transpose();
+      const Eigen::Matrix3d cam_to_enu = core::Pose::LookAt(c, look_at).R().transpose();
       const auto a = io::klv::St0601FromCameraToEnu(cam_to_enu, 90, 0, 0);
       f.telemetry["platform_heading"] = 90 + heading_offset + attitude_noise * Na(rng_att);
       f.telemetry["platform_pitch"] = attitude_noise * Na(rng_att);
@@ -156,12 +159,12 @@ void MakeGeorefCase(GeorefCase* g, int n, double noise, bool straight, int outli
     }
     if (frame_centre_noise >= 0) {
       std::normal_distribution<double> Nf(0, frame_centre_noise);
-      const Eigen::Vector3d fc = Eigen::Vector3d(Nf(rng_att), Nf(rng_att), Nf(rng_att)) + frame_centre_offset;
+      const Eigen::Vector3d fc = look_at + Eigen::Vector3d(Nf(rng_att), Nf(rng_att), Nf(rng_att)) + frame_centre_offset;
       const GeoPoint q = frame.ToGeodetic(fc);
       f.telemetry["frame_center_latitude"] = q.lat;
       f.telemetry["frame_center_longitude"] = q.lon;
       f.telemetry["frame_center_elevation"] = q.alt;
-      f.telemetry["slant_range"] = c.norm();  // to the true look-at point, the ENU origin
+      f.telemetry["slant_range"] = (c - look_at).norm();  // to the true look-at point
     }
     index.frames.push_back(f);
   }
@@ -365,6 +368,99 @@ TEST(Georef, FrameCentresThatDisagreeAreNotUsed) {
   EXPECT_LT(CentreRms(g), 3.0);  // the positions' own accuracy (measured 1.6 m), not 30 m
 }
 
+// A platform that computes its frame centre itself — its own (noisy) GPS position and attitude, intersected with
+// its terrain (here the level ground) — repeats the GPS error in every frame centre. Such frame centres agree
+// with the positions (they share their error), so the χ² gate passes them; what must hold is that they do not
+// make the result worse than the positions alone, nor claim an accuracy the positions do not have.
+TEST(Georef, FrameCentresFromThePlatformsOwnGpsDoNotHurt) {
+  // GPS error white (3 m per packet) or smooth (a 3 m drift at the orbit's period, which the positions alone
+  // cannot tell from a 0.9° tilt, plus 0.5 m white).
+  for (const bool smooth : {false, true}) {
+  double rms[2], tilt[2];
+  nlohmann::json with;
+  for (int use = 0; use < 2; ++use) {
+    GeorefCase g;
+    const int n = 60;
+    MakeGeorefCase(&g, n, smooth ? 0.5 : 3.0, false, -1, 1.0);
+    io::FramesIndex index = io::ReadFramesIndex(g.dir / "frames/frames.json");
+    const LocalFrame frame(kOrigin);
+    for (size_t k = 0; k < index.frames.size(); ++k) {
+      auto& f = index.frames[k];
+      auto& t = f.telemetry;
+      if (smooth) {
+        const double a = 2 * M_PI * k / n;
+        const Eigen::Vector3d drift = 3.0 * Eigen::Vector3d(std::sin(a + 1), std::cos(a + 2), std::sin(a));
+        const GeoPoint p = frame.ToGeodetic(
+            frame.ToEnu({t["sensor_latitude"], t["sensor_longitude"], t["sensor_altitude_hae"]}) + drift);
+        t["sensor_latitude"] = p.lat, t["sensor_longitude"] = p.lon, t["sensor_altitude_hae"] = p.alt;
+        t["sensor_altitude_msl"] = p.alt;
+      }
+      io::klv::St0601Attitude a;
+      a.platform_heading = t["platform_heading"], a.platform_pitch = t["platform_pitch"];
+      a.platform_roll = t["platform_roll"];
+      a.sensor_relative_azimuth = t["sensor_relative_azimuth"];
+      a.sensor_relative_elevation = t["sensor_relative_elevation"];
+      a.sensor_relative_roll = t["sensor_relative_roll"];
+      const Eigen::Vector3d d = io::klv::CameraToEnuFromSt0601(a).col(2);
+      const Eigen::Vector3d p = frame.ToEnu({t["sensor_latitude"], t["sensor_longitude"], t["sensor_altitude_hae"]});
+      ASSERT_LT(d.z(), 0);
+      const double range = -p.z() / d.z();
+      const GeoPoint q = frame.ToGeodetic(p + range * d);
+      f.telemetry["frame_center_latitude"] = q.lat;
+      f.telemetry["frame_center_longitude"] = q.lon;
+      f.telemetry["frame_center_elevation"] = q.alt;
+      f.telemetry["slant_range"] = range;
+    }
+    io::WriteFramesIndex(index, g.dir / "frames/frames.json");
+    GeorefOptions o;
+    o.origin = kOrigin;
+    o.use_frame_centres = use == 1;
+    const auto j = RunGeorefStage(g.dir.path(), o);
+    rms[use] = CentreRms(g);
+    tilt[use] = RotationErrorDeg(g);
+    if (use == 1) with = j;
+  }
+  std::cout << (smooth ? "smooth" : "white") << " GPS error: camera centres RMS / rotation error: positions "
+            << rms[0] << " m / " << tilt[0] << "°, with the platform's frame centres " << rms[1] << " m / "
+            << tilt[1] << "°; " << with["frame_centres"].dump() << "\n";
+  EXPECT_LT(rms[1], 1.1 * rms[0]);
+  EXPECT_LT(tilt[1], 1.1 * tilt[0] + 0.05);
+  if (with["frame_centres"]["used"].get<bool>() && !smooth) {
+    // The stated accuracy must not be below the positions' own (σ·√(3/N) ≈ 0.7 m): the frame centres add none.
+    EXPECT_GT(with["frame_centres"]["expected_translation_error_m"].get<double>(), 0.5);
+  }
+  }
+}
+
+// Frame centres spread about the look-at point (a gimbal's jitter: 17 m at 140 m, as synth's orbits) and
+// precise (1 cm): their own fit measures them at that precision, so they fix the whole rotation far below the
+// 1° attitudes' floor — which the joint refinement reaches only when it weighs them by their own scatter, not
+// by their scatter under the positions' rotation. georef.json's expected accuracy says so too.
+TEST(Georef, SpreadFrameCentresFixTheRotation) {
+  double angle[2];
+  nlohmann::json acc[2];
+  for (int use = 0; use < 2; ++use) {
+    GeorefCase g;
+    MakeGeorefCase(&g, 40, 3.0, false, -1, 1.0, 0, 200, 0, 0.01, Eigen::Vector3d::Zero(), 0, 17);
+    GeorefOptions o;
+    o.origin = kOrigin;
+    o.use_frame_centres = use == 1;
+    const auto j = RunGeorefStage(g.dir.path(), o);
+    EXPECT_EQ(j["frame_centres"]["used"].get<bool>(), use == 1) << j["frame_centres"].dump();
+    angle[use] = RotationErrorDeg(g);
+    acc[use] = j["expected_accuracy"];
+  }
+  std::cout << "rotation error: positions + attitudes " << angle[0] << "° (expected tilt "
+            << acc[0]["tilt_deg"] << "°), + frame centres " << angle[1] << "° (expected " << acc[1]["tilt_deg"]
+            << "°)\n";
+  EXPECT_GT(angle[0], 0.05);
+  EXPECT_LT(angle[1], 0.01);
+  // The expected tilt follows: near the attitudes' floor (1°/√40 per axis) without, far below it with.
+  EXPECT_NEAR(acc[0]["tilt_deg"].get<double>(), std::sqrt(2.0) / std::sqrt(40.0), 0.08);
+  EXPECT_LT(acc[1]["tilt_deg"].get<double>(), 0.02);
+  EXPECT_EQ(acc[1]["from"].size(), 3u);
+}
+
 // A straight track over ground that is not level: the level-ground roll is 4° off, and the frame centres
 // (beside the track) put it right.
 TEST(Georef, FrameCentresFixTheRollAboutAStraightTrack) {
@@ -437,6 +533,40 @@ void MakeDsmWorkspace(const test::TempDir& dir, const core::Sim3& enu_to_model) 
   j["utm"] = {{"zone", 18}, {"north", true}};
   core::EnsureDirectory(dir / "geo");
   core::WriteJson(dir / "geo/georef.json", j);
+}
+
+// dsm.json states the absolute height error georef expects over its cells (geo/accuracy.h): 0.1 m of vertical
+// translation, and a 1 mrad tilt about east that grows with the northing (cells span ±50 m: E[y²] = 100²/12).
+TEST(Dsm, ExpectedHeightErrorFromTheGeoreference) {
+  test::TempDir dir("dsm-acc");
+  core::Sim3 enu_to_model;
+  MakeDsmWorkspace(dir, enu_to_model);
+  DsmOptions o;
+  o.gsd = 0.5;
+  o.write_las = false;
+  auto j = RunDsmStage(dir.path(), o);
+  EXPECT_TRUE(j["expected_height_error_m"].is_null());
+  EXPECT_NE(j["expected_height_error_why"].get<std::string>().find("no expected accuracy"), std::string::npos);
+  nlohmann::json g = core::ReadJson(dir / "geo/georef.json");
+  GeorefAccuracy acc;
+  acc.pivot = Eigen::Vector3d(0, 0, 0);
+  acc.position_cov = Eigen::Vector3d(0.04, 0.04, 0.01).asDiagonal();
+  g["expected_accuracy"] = acc.ToJson();
+  core::WriteJson(dir / "geo/georef.json", g);
+  j = RunDsmStage(dir.path(), o);
+  EXPECT_NEAR(j["expected_height_error_m"].get<double>(), 0.1, 1e-6);
+  acc.rotation_cov(0, 0) = 1e-6;
+  g["expected_accuracy"] = acc.ToJson();
+  core::WriteJson(dir / "geo/georef.json", g);
+  j = RunDsmStage(dir.path(), o);
+  EXPECT_NEAR(j["expected_height_error_m"].get<double>(), std::sqrt(0.01 + 1e-6 * 100.0 * 100.0 / 12), 0.002);
+  // A rotation the georeference could not fix: no figure, and why.
+  acc.rotation_known = false;
+  g["expected_accuracy"] = acc.ToJson();
+  core::WriteJson(dir / "geo/georef.json", g);
+  j = RunDsmStage(dir.path(), o);
+  EXPECT_TRUE(j["expected_height_error_m"].is_null());
+  EXPECT_NE(j["expected_height_error_why"].get<std::string>().find("rotation unknown"), std::string::npos);
 }
 
 TEST(Dsm, MeshRasterisedToHighestSurfaceInUtm) {

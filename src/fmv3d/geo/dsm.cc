@@ -219,6 +219,26 @@ nlohmann::json RunDsmStage(const fs::path& ws, const DsmOptions& o) {
                  "positions of this DSM are not reliable");
   j["height_range_m"] = {hmin, hmax};
   const LocalFrame frame(g.origin, g.utm);
+  // The absolute height error the georeference alone predicts over these cells (geo/accuracy.h): translation,
+  // tilt and scale as the telemetry knows them. (UTM's grid convergence, < 2°, is ignored in the offsets.)
+  if (g.accuracy && g.accuracy->rotation_known && valid > 0) {
+    const Eigen::Vector3d pivot = frame.EnuToUtm(g.accuracy->pivot);
+    double sq = 0;
+    for (int r = 0; r < h.rows; ++r)
+      for (int c = 0; c < h.cols; ++c) {
+        const float v = h.at<float>(r, c);
+        if (!std::isfinite(v)) continue;
+        const Eigen::Vector2d e = grid.CellCentre(r, c);
+        sq += std::pow(g.accuracy->HeightSigma(Eigen::Vector3d(e.x() - pivot.x(), e.y() - pivot.y(), v - pivot.z())), 2);
+      }
+    j["expected_height_error_m"] = std::sqrt(sq / static_cast<double>(valid));
+    spdlog::info("dsm: expected absolute height error from the georeference {:.3f} m RMS (1σ, telemetry alone)",
+                 j["expected_height_error_m"].get<double>());
+  } else {
+    j["expected_height_error_m"] = nullptr;
+    j["expected_height_error_why"] = g.accuracy ? "the georeference leaves a rotation unknown (straight track)"
+                                                : "geo/georef.json states no expected accuracy";
+  }
   const GeoPoint centre = frame.UtmToGeodetic({grid.min_e + 0.5 * grid.width * gsd, grid.max_n - 0.5 * grid.height * gsd, 0});
   j["centre_wgs84"] = {{"lat", centre.lat}, {"lon", centre.lon}};
   if (o.write_las) {

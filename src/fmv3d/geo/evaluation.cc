@@ -86,7 +86,7 @@ core::Sim3 GeorefErrorSimilarity(const core::Reconstruction& est, const core::Re
 template <typename ToWs>
 nlohmann::json SurfaceError(const core::Reconstruction& est, const core::Reconstruction& tru, const core::Sim3& s,
                             double fit_rms, const io::TexturedMesh& mesh, const nlohmann::json& truth,
-                            const ToWs& to_ws) {
+                            const ToWs& to_ws, const std::optional<GeorefAccuracy>& accuracy) {
   // Region: truth.json bounds (world frame of the truth), else the whole mesh.
   Eigen::AlignedBox3d region;
   if (truth.contains("bounds")) {
@@ -108,7 +108,8 @@ nlohmann::json SurfaceError(const core::Reconstruction& est, const core::Reconst
   for (const auto& [id, img] : est.images)
     if (const core::Image* t = tru.FindImageByName(img.name)) views.push_back(t);
   const core::Sim3 inv = s.Inverse();
-  Stats e3, eh, ev;
+  Stats e3, eh, ev, expected;  // expected: the height σ georef predicts at the sample (geo/accuracy.h)
+  const bool predict = accuracy && accuracy->rotation_known;
   double worst = 0;
   size_t all = 0;
   for (const auto& x : surface.SampleSurface(std::max(0.05, std::sqrt(area / 5e4)), nullptr, 11)) {
@@ -121,10 +122,11 @@ nlohmann::json SurfaceError(const core::Reconstruction& est, const core::Reconst
     if (seen < 2) continue;
     const Eigen::Vector3d xw = to_ws(x), d = inv.Apply(xw) - xw;
     e3.Add(d.norm()), eh.Add(d.head<2>().norm()), ev.Add(d.z());
+    if (predict) expected.Add(accuracy->HeightSigma(xw - accuracy->pivot));
     worst = std::max(worst, d.norm());
   }
   if (e3.n == 0) throw Error("evaluate-geo: no sample of the true mesh is in view of 2 registered cameras");
-  return {{"samples", e3.n},
+  nlohmann::json j = {{"samples", e3.n},
           {"samples_in_region", all},
           {"region", std::string(region.isEmpty() ? "whole mesh" : "truth.json bounds") +
                          ", in the field of view of >= 2 registered cameras (true poses; no occlusion test)"},
@@ -139,6 +141,9 @@ nlohmann::json SurfaceError(const core::Reconstruction& est, const core::Reconst
           {"tilt_error_deg", std::acos(std::clamp((s.q * Eigen::Vector3d::UnitZ()).z(), -1.0, 1.0)) * 180 / M_PI},
           {"scale_error", s.s - 1},
           {"maps", "error of true point X = S^-1(X) - X, S = similarity of geo/sparse_enu camera centres onto the true ones"}};
+  // What georef expected of the vertical here (1σ RMS over the same samples), beside what it got.
+  j["expected_vertical_rms_m"] = predict ? nlohmann::json(expected.Rms()) : nlohmann::json();
+  return j;
 }
 
 }  // namespace
@@ -236,7 +241,7 @@ nlohmann::json EvaluateGeoAgainstSynth(const fs::path& ws, const fs::path& synth
   double fit_rms = 0;
   const core::Sim3 s_err = GeorefErrorSimilarity(est, tru, to_ws, &fit_rms);
   const core::Sim3 s_inv = s_err.Inverse();
-  j["surface"] = SurfaceError(est, tru, s_err, fit_rms, mesh, truth, to_ws);
+  j["surface"] = SurfaceError(est, tru, s_err, fit_rms, mesh, truth, to_ws, g.accuracy);
   for (auto& v : mesh.vertices) v = to_ws(v);
   // Points against the true mesh.
   const geometry::MeshDistance dist(mesh);
@@ -278,6 +283,7 @@ nlohmann::json EvaluateGeoAgainstSynth(const fs::path& ws, const fs::path& synth
     cv::erode(t_min, t_min, disc, cv::Point(-1, -1), 1, cv::BORDER_CONSTANT, -kInf);
     cv::dilate(t_max, t_max, disc, cv::Point(-1, -1), 1, cv::BORDER_CONSTANT, kInf);
     Stats dz, dz_model;
+    Stats dz_expected;  // georef's predicted height σ (geo/accuracy.h) at the compared cells
     size_t seen = 0;
     std::vector<double> abs_dz;
     // Signed error per compared cell, for dsm_error.png: blue below the truth, red above, full colour at 1% of
@@ -299,6 +305,7 @@ nlohmann::json EvaluateGeoAgainstSynth(const fs::path& ws, const fs::path& synth
         const Eigen::Vector2d en = grid.CellCentre(r, c);
         const Eigen::Vector3d xw = fg.ToEnu(fg.UtmToGeodetic({en.x(), en.y(), th.at<float>(r, c)}));
         dz_model.Add(e - (s_inv.Apply(xw) - xw).z());
+        if (g.accuracy && g.accuracy->rotation_known) dz_expected.Add(g.accuracy->HeightSigma(xw - g.accuracy->pivot));
         const double t = std::clamp(e / (0.01 * building), -1.0, 1.0);
         const auto lift = [](double a) { return static_cast<uchar>(255 * (1 - std::abs(a))); };
         err_png.at<cv::Vec3b>(r, c) = t < 0 ? cv::Vec3b(255, lift(t), lift(t)) : cv::Vec3b(lift(t), lift(t), 255);
@@ -329,7 +336,9 @@ nlohmann::json EvaluateGeoAgainstSynth(const fs::path& ws, const fs::path& synth
                 {"error_map", "report/dsm_error.png (blue below, red above the truth, saturated at 1% of H)"},
                 {"height_rms_without_bias_m", dz.CentredRms()},
                 {"height_rms_percent_of_building", 100 * dz.Rms() / building},
-                {"height_rms_without_bias_percent_of_building", 100 * dz.CentredRms() / building}};
+                {"height_rms_without_bias_percent_of_building", 100 * dz.CentredRms() / building},
+                {"expected_height_rms_from_georef_m",
+                 dz_expected.n ? nlohmann::json(dz_expected.Rms()) : nlohmann::json()}};
   }
   return j;
 }

@@ -8,6 +8,7 @@
 #include <Eigen/LU>
 #include <algorithm>
 #include <cmath>
+#include <limits>
 
 namespace fmv3d::geo {
 
@@ -114,9 +115,33 @@ core::Sim3 RefineSimilarity(const core::Sim3& start, const JointMeasurements& m)
   return out;
 }
 
+SightScatter OwnScatter(const core::Sim3& start, const std::vector<LineOfSight>& sights, double sigma_start) {
+  SightScatter out;
+  const size_t n = sights.size();
+  if (n < 3) return out;
+  JointMeasurements m;
+  m.sights = sights;
+  m.sight_sigma = std::max(sigma_start, 1e-3);
+  const core::Sim3 own = RefineSimilarity(start, m);
+  const Eigen::Matrix3d R = own.q.toRotationMatrix();
+  double sq = 0, num = 0;
+  std::vector<Eigen::Vector3d> r(n);
+  for (size_t i = 0; i < n; ++i) {
+    r[i] = own.s * (R * sights[i].model_centre) + own.t + sights[i].slant_range * (R * sights[i].model_axis) -
+           sights[i].frame_centre;
+    sq += r[i].squaredNorm();
+    if (i > 0 && sights[i].track == sights[i - 1].track) num += r[i].dot(r[i - 1]);
+  }
+  out.sigma = std::max(1e-3, std::sqrt(sq / std::max(1.0, 3.0 * n - 7)));  // 7 parameters fitted
+  out.autocorrelation = sq > 0 ? std::clamp(num / sq, 0.0, 0.999) : 0.0;
+  out.effective_samples = std::max(1.0, n * (1 - out.autocorrelation) / (1 + out.autocorrelation));
+  out.sigma_effective = out.sigma * std::sqrt(n / out.effective_samples);
+  return out;
+}
+
 FrameCentreFusion FuseFrameCentres(const Eigen::Matrix3d& R, const ScaleShift& positions,
                                    const std::vector<LineOfSight>& sights, double min_threshold,
-                                   const Eigen::Vector3d& systematic) {
+                                   const Eigen::Vector3d& systematic, double common_vertical_step) {
   FrameCentreFusion f;
   f.observations = sights.size();
   if (sights.size() < 3) {
@@ -182,24 +207,48 @@ FrameCentreFusion FuseFrameCentres(const Eigen::Matrix3d& R, const ScaleShift& p
   ScaleShift los = fit;
   los.covariance *= sigma * sigma * static_cast<double>(n_in) / f.effective_samples;
   los.covariance.bottomRightCorner<3, 3>() += systematic.cwiseAbs2().asDiagonal();
-  const Eigen::Vector4d d = Params(los) - Params(positions);
+  // The common height offset u of the frame centres, uniform over the step: a grid of u, each a Gaussian fusion
+  // of the positions with the frame centres shifted by u, weighted by how well the two then agree. One node
+  // (u = 0) when there is no such offset. The mixture's mean and covariance are the answer.
+  const int nodes = common_vertical_step > 0 ? 61 : 1;
   const Eigen::Matrix4d c = los.covariance + positions.covariance;
-  f.chi2 = d.dot(c.fullPivLu().solve(d));
-  if (!std::isfinite(f.chi2) || f.chi2 > 18.47) {  // 99.9% of a 4-dof χ²
+  const Eigen::FullPivLU<Eigen::Matrix4d> c_lu(c);
+  const Eigen::Matrix4d info_p = positions.covariance.inverse(), info_l = los.covariance.inverse();
+  const Eigen::Matrix4d cov = (info_p + info_l).inverse();
+  std::vector<double> chi2(nodes);
+  std::vector<Eigen::Vector4d> x(nodes);
+  f.chi2 = std::numeric_limits<double>::infinity();
+  for (int k = 0; k < nodes; ++k) {
+    Eigen::Vector4d l = Params(los);
+    if (nodes > 1) l(3) += common_vertical_step * ((k + 0.5) / nodes - 0.5);
+    const Eigen::Vector4d d = l - Params(positions);
+    chi2[k] = d.dot(c_lu.solve(d));
+    x[k] = cov * (info_p * Params(positions) + info_l * l);
+    if (std::isfinite(chi2[k])) f.chi2 = std::min(f.chi2, chi2[k]);
+  }
+  if (!std::isfinite(f.chi2) || f.chi2 > 18.47) {  // 99.9% of a 4-dof χ² (at the offset that agrees best)
     f.why = "the frame centres disagree with the positions beyond their uncertainties";
     return f;
   }
-  const Eigen::Matrix4d info_p = positions.covariance.inverse(), info_l = los.covariance.inverse();
-  const Eigen::Matrix4d cov = (info_p + info_l).inverse();
-  const Eigen::Vector4d x = cov * (info_p * Params(positions) + info_l * Params(los));
-  if (!x.allFinite() || !(x(0) > 0)) {
+  double wsum = 0;
+  Eigen::Vector4d mean = Eigen::Vector4d::Zero();
+  std::vector<double> weight(nodes);
+  for (int k = 0; k < nodes; ++k) {
+    weight[k] = std::isfinite(chi2[k]) ? std::exp(-0.5 * (chi2[k] - f.chi2)) : 0.0;
+    wsum += weight[k];
+    mean += weight[k] * x[k];
+  }
+  mean /= wsum;
+  Eigen::Matrix4d spread = Eigen::Matrix4d::Zero();
+  for (int k = 0; k < nodes; ++k) spread += weight[k] / wsum * (x[k] - mean) * (x[k] - mean).transpose();
+  if (!mean.allFinite() || !(mean(0) > 0)) {
     f.why = "the fused scale is not positive";
     return f;
   }
   f.used = true;
-  f.fused.scale = x(0);
-  f.fused.translation = x.tail<3>();
-  f.fused.covariance = cov;
+  f.fused.scale = mean(0);
+  f.fused.translation = mean.tail<3>();
+  f.fused.covariance = cov + spread;
   return f;
 }
 

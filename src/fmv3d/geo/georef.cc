@@ -23,6 +23,7 @@
 #include "fmv3d/io/frames_index.h"
 #include "fmv3d/io/klv_st0601_writer.h"
 #include "fmv3d/io/telemetry.h"
+#include "fmv3d/geo/accuracy.h"
 #include "fmv3d/geo/frame_centres.h"
 #include "fmv3d/geo/trajectory.h"
 #include "fmv3d/sfm/bundle_adjustment.h"
@@ -334,6 +335,7 @@ Georef ReadGeoref(const fs::path& ws) {
     g.utm.north = j.at("utm").at("north").get<bool>();
     if (g.utm.zone < 1 || g.utm.zone > 60 || !(g.sparse_to_enu.s > 0)) throw Error("bad values");
     g.consistent_with_telemetry = j.value("consistent_with_telemetry", true);
+    if (j.contains("expected_accuracy")) g.accuracy = GeorefAccuracy::FromJson(j["expected_accuracy"]);
     return g;
   } catch (const std::exception& e) {
     throw Error(p.string() + ": malformed georef (" + e.what() + ") — run `fmv3d georef` again");
@@ -641,13 +643,15 @@ nlohmann::json RunGeorefStage(const fs::path& ws, const GeorefOptions& o) {
 
   nlohmann::json attitude_json = {{"used", false}};
   std::vector<Eigen::Matrix3d> rel;  // telemetry model-to-ENU rotations, for the joint refinement when used
-  double attitude_sigma = 0;
+  std::vector<size_t> rel_pair;      // their pairs
+  double attitude_sigma = 0, attitude_n_eff = 0;
   if (roll_source == "camera positions") {
     for (size_t i = 0; i < pairs.size(); ++i) {
       if (!inliers[i]) continue;
       if (!pairs[i].attitude) continue;
       // camera-to-ENU · model-to-camera = model-to-ENU rotation
       rel.push_back(*pairs[i].attitude * pairs[i].rotation.toRotationMatrix());
+      rel_pair.push_back(i);
     }
     if (rel.size() >= 3) {
       // Chordal mean, then the scatter about it.
@@ -661,9 +665,19 @@ nlohmann::json RunGeorefStage(const fs::path& ws, const GeorefOptions& o) {
         r_att = svd.matrixU() * d * svd.matrixV().transpose();
       }
       double sq = 0;
-      for (const auto& r : rel) sq += LogRotation(r * r_att.transpose()).squaredNorm();
+      std::vector<Eigen::Vector3d> att_res(pairs.size(), Eigen::Vector3d::Zero());
+      std::vector<char> att_in(pairs.size(), 0);
+      for (size_t k = 0; k < rel.size(); ++k) {
+        att_res[rel_pair[k]] = LogRotation(rel[k] * r_att.transpose());
+        att_in[rel_pair[k]] = 1;
+        sq += att_res[rel_pair[k]].squaredNorm();
+      }
       const double sigma_att = std::max(1e-4, std::sqrt(sq / (3.0 * rel.size())));  // rad per axis
       attitude_sigma = sigma_att;
+      // Between keyframes the model's rotation is interpolated and misses the camera's jitter, an error shared
+      // by neighbouring packets: they count as fewer samples.
+      const double rho_att = ResidualAutocorrelation(pairs, att_res, att_in);
+      attitude_n_eff = std::max(1.0, rel.size() * (1 - rho_att) / (1 + rho_att));
       const Eigen::Matrix3d r_pos = sim.q.toRotationMatrix();
       const Eigen::Vector3d w_att = LogRotation(r_att * r_pos.transpose());  // world-frame correction
       Eigen::Vector3d mean = Eigen::Vector3d::Zero();
@@ -684,6 +698,8 @@ nlohmann::json RunGeorefStage(const fs::path& ws, const GeorefOptions& o) {
       const double chi2 = w_att.dot(cov_diff.inverse() * w_att);
       attitude_json = {{"used", false},
                        {"frames", rel.size()},
+                       {"residual_autocorrelation", rho_att},
+                       {"effective_samples", attitude_n_eff},
                        {"scatter_deg", sigma_att * 180 / M_PI},
                        {"disagreement_deg", w_att.norm() * 180 / M_PI},
                        {"chi2", chi2}};
@@ -718,6 +734,9 @@ nlohmann::json RunGeorefStage(const fs::path& ws, const GeorefOptions& o) {
   // fused into the scale and translation when it agrees with the GPS.
   nlohmann::json frame_centres_json = {{"used", false}, {"observations", 0}};
   std::optional<double> fused_translation_error;
+  std::optional<ScaleShift> fused_frame_centres;  // when used: for the accuracy, with their points and σ
+  std::vector<Eigen::Vector3d> frame_centre_points;
+  double frame_centre_sigma = 0;
   if (o.use_frame_centres) {
     // The geoid undulation from the packets that state both heights converts a frame centre's other datum.
     std::vector<double> undulations;
@@ -741,9 +760,11 @@ nlohmann::json RunGeorefStage(const fs::path& ws, const GeorefOptions& o) {
     // Only the keyframes' lines of sight: between keyframes the model's rotation is interpolated and misses the
     // gimbal's jitter, which the slant range turns into metres (0.4° at 700 m: 5 m, against 2 cm at keyframes).
     std::vector<LineOfSight> sights;
+    std::vector<double> heights;
     for (const Pair& p : keyframe_pairs) {
       const auto alt = frame_centre_alt(p);
       if (!p.frame_centre || !p.slant_range || !(*p.slant_range > 0) || !alt) continue;
+      heights.push_back(*alt);
       sights.push_back({p.centre, p.rotation.conjugate() * Eigen::Vector3d::UnitZ(), *p.slant_range,
                         frame.ToEnu({p.frame_centre->lat, p.frame_centre->lon, *alt}), 0});
     }
@@ -759,40 +780,62 @@ nlohmann::json RunGeorefStage(const fs::path& ws, const GeorefOptions& o) {
     if (sights.empty())
       frame_centres_json["why"] = "no packet states a frame centre with its elevation and a slant range";
     if (!sights.empty() && positions_under(R, &positions)) {
-      // The frame centre's elevation is encoded in 2 bytes over 19.9 km (ST 0601 tag 25): 0.30 m steps, an
-      // error that does not average when the ground is flat — a floor on the vertical (uniform: step/√12).
-      const Eigen::Vector3d systematic(0, 0, 19900.0 / 65535 / std::sqrt(12.0));
-      FrameCentreFusion fusion = FuseFrameCentres(R, positions, sights, o.min_inlier_threshold, systematic);
+      // The frame centre's elevation is encoded in 2 bytes over 19.9 km (ST 0601 tags 25 and 78): 0.30 m steps.
+      // Over flat ground every frame centre decodes to the same step and carries the same offset, uniform within
+      // it, which no number of packets averages: the fusion takes it as a posterior over that offset. Over relief
+      // the steps differ and their errors partly average: a Gaussian floor of step/√12 over √(distinct steps).
+      const double step = 19900.0 / 65535;
+      std::sort(heights.begin(), heights.end());
+      size_t steps = heights.empty() ? 0 : 1;
+      for (size_t i = 1; i < heights.size(); ++i) steps += heights[i] - heights[i - 1] > 0.5 * step;
+      const bool one_step = steps == 1;
+      const Eigen::Vector3d systematic(0, 0, one_step ? 0.0 : step / std::sqrt(12.0 * std::max<size_t>(1, steps)));
+      const double common_step = one_step ? step : 0.0;
+      FrameCentreFusion fusion = FuseFrameCentres(R, positions, sights, o.min_inlier_threshold, systematic, common_step);
       if (fusion.inliers >= 3 && fusion.sigma_m > 0) {
         // Refine the rotation on positions, lines of sight and attitudes together (frame centres off the track
-        // fix the roll a straight track leaves to the ground plane, and spread ones the whole rotation), then
-        // fuse scale and translation again: kept only if the frame centres then agree with the positions.
+        // fix the roll a straight track leaves to the ground plane, and spread ones the whole rotation), each
+        // weighed by its own noise (the frame centres': about a fit of their own, OwnScatter), then fuse scale
+        // and translation again: kept only if the frame centres then agree with the positions.
         JointMeasurements m;
         m.src = s_in, m.dst = d_in;
         m.position_sigma = sigma * std::sqrt(s_in.size() / n_eff_p);
+        m.attitudes = rel;
+        m.attitude_sigma_rad = attitude_n_eff > 0 ? attitude_sigma * std::sqrt(rel.size() / attitude_n_eff) : 1.0;
         for (size_t i = 0; i < sights.size(); ++i)
           if (fusion.inlier_mask[i]) m.sights.push_back(sights[i]);
-        m.sight_sigma = fusion.sigma_m * std::sqrt(fusion.inliers / fusion.effective_samples);
-        m.attitudes = rel;
-        m.attitude_sigma_rad = attitude_sigma;
+        const SightScatter own = OwnScatter(sim, m.sights, fusion.sigma_m);
+        m.sight_sigma = own.sigma_effective;
         const core::Sim3 joint = RefineSimilarity(sim, m);
         const Eigen::Matrix3d R2 = joint.q.toRotationMatrix();
         ScaleShift positions2;
         if (positions_under(R2, &positions2)) {
-          FrameCentreFusion again = FuseFrameCentres(R2, positions2, sights, o.min_inlier_threshold, systematic);
-          spdlog::debug("georef: joint refinement turned the rotation {:.3f}°; frame centres χ² {:.1f} → {:.1f}, σ {:.2f} → {:.2f} m",
-                       core::RotationAngle(joint.q, sim.q) * 180 / M_PI, fusion.chi2, again.chi2, fusion.sigma_m, again.sigma_m);
+          FrameCentreFusion again = FuseFrameCentres(R2, positions2, sights, o.min_inlier_threshold, systematic, common_step);
+          spdlog::debug("georef: frame centres' own σ {:.3f} m (effective {:.3f}, under the positions' rotation "
+                        "{:.3f}); joint refinement turned the rotation {:.3f}°; χ² {:.1f} → {:.1f}",
+                        own.sigma, own.sigma_effective,
+                        fusion.sigma_m * std::sqrt(fusion.inliers / fusion.effective_samples),
+                        core::RotationAngle(joint.q, sim.q) * 180 / M_PI, fusion.chi2, again.chi2);
           if (again.used) {
             sim.q = joint.q;
             fusion = again;
+            frame_centre_sigma = own.sigma_effective;
           }
         }
       }
       frame_centres_json = fusion.ToJson();
+      frame_centres_json["elevation_steps"] = steps;
+      frame_centres_json["elevation_offset"] =
+          one_step ? "one encoding step for all: a common offset, uniform within it" : "several steps: Gaussian floor";
       if (fusion.used) {
         sim.s = fusion.fused.scale;
         sim.t = fusion.fused.translation;
         fused_translation_error = frame_centres_json["expected_translation_error_m"].get<double>();
+        fused_frame_centres = fusion.fused;
+        for (size_t i = 0; i < sights.size(); ++i)
+          if (fusion.inlier_mask[i]) frame_centre_points.push_back(sights[i].frame_centre);
+        if (!(frame_centre_sigma > 0))
+          frame_centre_sigma = fusion.sigma_m * std::sqrt(fusion.inliers / fusion.effective_samples);
         spdlog::info("georef: {} frame centres at their slant range fused (σ {:.2f} m per axis, χ² {:.1f})",
                      fusion.inliers, fusion.sigma_m, fusion.chi2);
       } else {
@@ -860,6 +903,57 @@ nlohmann::json RunGeorefStage(const fs::path& ws, const GeorefOptions& o) {
   j["fit"] = track_json;
   j["fit"]["from"] = use_track ? "every telemetry packet vs the model trajectory at its time" : "keyframes";
   j["expected_translation_error_m"] = fused_translation_error.value_or(sigma * std::sqrt(3.0 / n_eff));
+  {
+    // Expected accuracy (geo/accuracy.h): rotation from every measurement weighed, translation and scale from
+    // the positions, or from their fusion with the frame centres (then at the frame centres' centroid).
+    std::vector<Eigen::Vector3d> dst_in;
+    for (size_t i = 0; i < dst.size(); ++i)
+      if (inliers[i]) dst_in.push_back(dst[i]);
+    const double sigma_eff = sigma * std::sqrt(static_cast<double>(fit_in) / n_eff);
+    GeorefAccuracy acc;
+    Eigen::Matrix3d info = RotationInformation(dst_in, sigma_eff);
+    acc.from.push_back("positions");
+    if (!rel.empty() && attitude_sigma > 0) {
+      info += Eigen::Matrix3d::Identity() * (attitude_n_eff / (attitude_sigma * attitude_sigma));
+      acc.from.push_back("attitudes");
+    }
+    Eigen::Vector3d centroid = Eigen::Vector3d::Zero();
+    for (const auto& p : dst_in) centroid += p;
+    centroid /= static_cast<double>(std::max<size_t>(1, dst_in.size()));
+    if (fused_frame_centres && !frame_centre_points.empty()) {
+      info += RotationInformation(frame_centre_points, frame_centre_sigma);
+      acc.from.push_back("frame centres");
+      acc.pivot = Eigen::Vector3d::Zero();
+      for (const auto& p : frame_centre_points) acc.pivot += p;
+      acc.pivot /= static_cast<double>(frame_centre_points.size());
+      Eigen::Matrix<double, 3, 4> J;
+      J.col(0) = (acc.pivot - sim.t) / sim.s;
+      J.rightCols<3>().setIdentity();
+      acc.position_cov = J * fused_frame_centres->covariance * J.transpose();
+      acc.scale_sigma_rel = std::sqrt(std::max(0.0, fused_frame_centres->covariance(0, 0))) / sim.s;
+    } else {
+      acc.pivot = centroid;
+      acc.position_cov = Eigen::Matrix3d::Identity() * (sigma * sigma / n_eff);
+      double spread = 0;
+      for (const auto& p : dst_in) spread += (p - centroid).squaredNorm();
+      acc.scale_sigma_rel = spread > 0 ? sigma_eff / std::sqrt(spread) : 0.0;
+    }
+    // A rotation no measurement fixes (the roll about a straight track, set by the ground plane) is not known.
+    const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eig(info);
+    const double five_deg = 5 * M_PI / 180;
+    acc.rotation_known = roll_source == "camera positions" || fused_frame_centres.has_value();
+    acc.rotation_known = acc.rotation_known && eig.eigenvalues().allFinite() &&
+                         eig.eigenvalues().minCoeff() > 1 / (five_deg * five_deg);
+    if (acc.rotation_known) acc.rotation_cov = info.inverse();
+    {
+      const Eigen::Vector3d sp = RotationInformation(dst_in, sigma_eff).inverse().diagonal().cwiseSqrt() * 180 / M_PI;
+      const Eigen::Vector3d sa = info.inverse().diagonal().cwiseSqrt() * 180 / M_PI;
+      spdlog::debug("georef accuracy: rotation σ (°) positions {:.3f} {:.3f} {:.3f}, attitudes {:.3f}, all {:.3f} {:.3f} {:.3f}",
+                    sp.x(), sp.y(), sp.z(), attitude_n_eff > 0 ? attitude_sigma / std::sqrt(attitude_n_eff) * 180 / M_PI : -1.0,
+                    sa.x(), sa.y(), sa.z());
+    }
+    j["expected_accuracy"] = acc.ToJson();
+  }
   // A model whose trajectory has the telemetry's shape fits nearly every packet (synthetic flights: 98%); when
   // a large part does not fit, the reconstruction's shape is wrong (too little parallax, a telephoto pair's
   // ambiguous pose) and every product placed by this similarity inherits it. Say so, loudly, in the file too.

@@ -34,6 +34,7 @@
 #include <optional>
 
 #include "fmv3d/core/pose.h"
+#include "fmv3d/geo/accuracy.h"
 #include "fmv3d/geo/geodesy.h"
 
 namespace fmv3d::geo {
@@ -68,6 +69,7 @@ struct Georef {
   core::Sim3 sparse_to_enu;
   UtmZone utm;
   bool consistent_with_telemetry = true;  // false: the model's trajectory disagrees with the telemetry
+  std::optional<GeorefAccuracy> accuracy;  // expected accuracy from the telemetry (older files: none)
 };
 // Reads WS/geo/georef.json; throws fmv3d::Error ("WS: no geo/georef.json — run `fmv3d georef` first").
 Georef ReadGeoref(const std::filesystem::path& workspace);
