@@ -784,12 +784,18 @@ nlohmann::json RunGeorefStage(const fs::path& ws, const GeorefOptions& o) {
       // Over flat ground every frame centre decodes to the same step and carries the same offset, uniform within
       // it, which no number of packets averages: the fusion takes it as a posterior over that offset. Over relief
       // the steps differ and their errors partly average: a Gaussian floor of step/√12 over √(distinct steps).
+      // Heights off that grid (another source, another datum) carry no such error.
       const double step = 19900.0 / 65535;
+      const bool on_grid = !heights.empty() && std::all_of(heights.begin(), heights.end(), [&](double h) {
+        const double k = (h + 900) / step;
+        return std::abs(k - std::round(k)) < 1e-4;
+      });
       std::sort(heights.begin(), heights.end());
       size_t steps = heights.empty() ? 0 : 1;
       for (size_t i = 1; i < heights.size(); ++i) steps += heights[i] - heights[i - 1] > 0.5 * step;
-      const bool one_step = steps == 1;
-      const Eigen::Vector3d systematic(0, 0, one_step ? 0.0 : step / std::sqrt(12.0 * std::max<size_t>(1, steps)));
+      const bool one_step = on_grid && steps == 1;
+      const Eigen::Vector3d systematic(
+          0, 0, on_grid && !one_step ? step / std::sqrt(12.0 * std::max<size_t>(1, steps)) : 0.0);
       const double common_step = one_step ? step : 0.0;
       FrameCentreFusion fusion = FuseFrameCentres(R, positions, sights, o.min_inlier_threshold, systematic, common_step);
       if (fusion.inliers >= 3 && fusion.sigma_m > 0) {
@@ -811,22 +817,35 @@ nlohmann::json RunGeorefStage(const fs::path& ws, const GeorefOptions& o) {
         ScaleShift positions2;
         if (positions_under(R2, &positions2)) {
           FrameCentreFusion again = FuseFrameCentres(R2, positions2, sights, o.min_inlier_threshold, systematic, common_step);
+          // The turn must also be one the positions and attitudes allow — a gross-error gate (χ², 3 dof, 99.99%):
+          // frame centres whose errors are smooth along the track fit a similarity of their own too well and would
+          // look precise. (Not 99.9%: the positions' rotation information ignores their errors' correlation and
+          // is optimistic; a synthetic orbit's correct turn of 0.61° scored 20.8.)
+          Eigen::Matrix3d info_pa = RotationInformation(d_in, m.position_sigma);
+          if (!rel.empty()) info_pa += Eigen::Matrix3d::Identity() / std::pow(m.attitude_sigma_rad, 2) * rel.size();
+          const Eigen::Vector3d turn = LogRotation(R2 * R.transpose());
+          const double turn_chi2 = turn.dot(info_pa * turn);
           spdlog::debug("georef: frame centres' own σ {:.3f} m (effective {:.3f}, under the positions' rotation "
-                        "{:.3f}); joint refinement turned the rotation {:.3f}°; χ² {:.1f} → {:.1f}",
+                        "{:.3f}); joint refinement turned the rotation {:.3f}° (χ² {:.1f}); frame centres χ² {:.1f} → {:.1f}",
                         own.sigma, own.sigma_effective,
                         fusion.sigma_m * std::sqrt(fusion.inliers / fusion.effective_samples),
-                        core::RotationAngle(joint.q, sim.q) * 180 / M_PI, fusion.chi2, again.chi2);
-          if (again.used) {
+                        turn.norm() * 180 / M_PI, turn_chi2, fusion.chi2, again.chi2);
+          frame_centres_json["rotation_turn_deg"] = turn.norm() * 180 / M_PI;
+          frame_centres_json["rotation_turn_chi2"] = turn_chi2;
+          frame_centres_json["rotation_turn_applied"] = again.used && turn_chi2 <= 21.11;
+          if (again.used && turn_chi2 <= 21.11) {
             sim.q = joint.q;
             fusion = again;
             frame_centre_sigma = own.sigma_effective;
           }
         }
       }
-      frame_centres_json = fusion.ToJson();
+      frame_centres_json.update(fusion.ToJson());
       frame_centres_json["elevation_steps"] = steps;
-      frame_centres_json["elevation_offset"] =
-          one_step ? "one encoding step for all: a common offset, uniform within it" : "several steps: Gaussian floor";
+      frame_centres_json["elevation_encoding"] =
+          !on_grid ? "not on the 2-byte ST 0601 grid: no quantisation error"
+                   : one_step ? "one 2-byte step for all: a common offset, uniform within it"
+                              : "several 2-byte steps: a Gaussian floor";
       if (fusion.used) {
         sim.s = fusion.fused.scale;
         sim.t = fusion.fused.translation;
