@@ -106,6 +106,9 @@ struct GeorefCase {
 // attitude_noise < 0: no attitude in the telemetry; heading_offset: a systematic heading error (degrees).
 // frame_centre_noise < 0: no frame centres; else each packet states the true look-at point (plus that noise per
 // axis and frame_centre_offset) with its slant range. ground_tilt_deg tilts the model's ground about the x axis.
+// The point camera k looks at (its frame centre): the origin, or spread about it as a jittery gimbal's.
+Eigen::Vector3d CaseLookAt(int k, double spread) { return spread * Eigen::Vector3d(std::cos(2.7 * k), std::sin(2.7 * k), 0); }
+
 void MakeGeorefCase(GeorefCase* g, int n, double noise, bool straight, int outlier, double attitude_noise = -1,
                     double heading_offset = 0, double radius = 200, double bend = 0, double frame_centre_noise = -1,
                     const Eigen::Vector3d& frame_centre_offset = Eigen::Vector3d::Zero(), double ground_tilt_deg = 0,
@@ -128,8 +131,7 @@ void MakeGeorefCase(GeorefCase* g, int n, double noise, bool straight, int outli
     if (straight) c = Eigen::Vector3d(-300 + 600.0 * k / (n - 1), -150, 120);
     else c = Eigen::Vector3d(radius * std::cos(2 * M_PI * k / n), radius * std::sin(2 * M_PI * k / n), 120 + 10 * std::sin(3.0 * k));
     g->true_centres.push_back(c);
-    // The point the camera looks at (the frame centre): the origin, or spread about it as a jittery gimbal's.
-    const Eigen::Vector3d look_at = look_at_spread * Eigen::Vector3d(std::cos(2.7 * k), std::sin(2.7 * k), 0);
+    const Eigen::Vector3d look_at = CaseLookAt(k, look_at_spread);
     core::Image img;
     img.id = k + 1;
     img.camera_id = 1;
@@ -237,18 +239,17 @@ TEST(Georef, ModelThatDisagreesWithTheFlightIsFlagged) {
 // observations (true projections of the ground points, 0.3 px noise) and ST 0601 attitudes (σ 0.5°) in the
 // telemetry: georef builds the model again from the telemetry's cameras and the observations, keeps it because it
 // fits the flight, and the cameras land within the telemetry's noise of the truth.
-TEST(Georef, ModelThatDisagreesIsBuiltAgainFromTheTelemetry) {
-  GeorefCase g;
-  const int n = 40;
-  MakeGeorefCase(&g, n, 3.0, false, -1, 0.5, 0, 200, 0);
-  core::Reconstruction rec = io::ReadColmapText(g.dir / "sparse");
+// Image observations for a case's model (true projections of its ground points, 0.3 px noise), then its last
+// 30% of cameras moved 60 m: a bent model, as a telephoto pass's image model is.
+void ObserveAndBend(GeorefCase* g, int n, double look_at_spread) {
+  core::Reconstruction rec = io::ReadColmapText(g->dir / "sparse");
   std::mt19937_64 rng(3);
   std::normal_distribution<double> N(0, 0.3);
-  const core::Sim3 model_to_true = g.true_to_model.Inverse();
+  const core::Sim3 model_to_true = g->true_to_model.Inverse();
   for (auto& [pid, pt] : rec.points) {
     const Eigen::Vector3d X = model_to_true.Apply(pt.xyz);
     for (auto& [id, img] : rec.images) {
-      const core::Pose truth = core::Pose::LookAt(g.true_centres[id - 1], {0, 0, 0});
+      const core::Pose truth = core::Pose::LookAt(g->true_centres[id - 1], CaseLookAt(id - 1, look_at_spread));
       const Eigen::Vector3d xc = truth.Transform(X);
       if (xc.z() <= 0) continue;
       const Eigen::Vector2d uv = rec.cameras.at(1).Project(xc) + Eigen::Vector2d(N(rng), N(rng));
@@ -260,11 +261,18 @@ TEST(Georef, ModelThatDisagreesIsBuiltAgainFromTheTelemetry) {
   }
   for (auto& [id, img] : rec.images) {
     if (10 * (id - 1) < 7 * n) continue;
-    const Eigen::Vector3d c = img.pose.Centre() + g.true_to_model.s * (g.true_to_model.q * Eigen::Vector3d(60, 0, 0));
+    const Eigen::Vector3d c = img.pose.Centre() + g->true_to_model.s * (g->true_to_model.q * Eigen::Vector3d(60, 0, 0));
     img.pose.t = -(img.pose.q * c);
   }
   rec.Validate();
-  io::WriteColmapText(rec, g.dir / "sparse");
+  io::WriteColmapText(rec, g->dir / "sparse");
+}
+
+TEST(Georef, ModelThatDisagreesIsBuiltAgainFromTheTelemetry) {
+  GeorefCase g;
+  const int n = 40;
+  MakeGeorefCase(&g, n, 3.0, false, -1, 0.5, 0, 200, 0);
+  ObserveAndBend(&g, n, 0);
   GeorefOptions o;
   o.origin = kOrigin;
   const auto j = RunGeorefStage(g.dir.path(), o);
@@ -280,6 +288,36 @@ TEST(Georef, ModelThatDisagreesIsBuiltAgainFromTheTelemetry) {
   EXPECT_TRUE(fs::exists(g.dir / "geo/sparse_image_only/images.txt"));
   // WS/sparse now holds the rebuilt model, and georef.json's similarity maps it into ENU.
   EXPECT_EQ(io::ReadColmapText(g.dir / "sparse").images.size(), static_cast<size_t>(n));
+}
+
+// The same bent model, with precise frame centres (1 cm) spread 17 m about the look-at point: they enter the
+// rebuilt model's bundle adjustment as priors on the point along each optical axis, weighed by their own scatter
+// (estimated again after each adjustment), and the cameras land far closer than the GPS alone puts them.
+TEST(Georef, FrameCentresArePriorsOfTheRebuiltModel) {
+  double rms[2];
+  for (int use = 0; use < 2; ++use) {
+    GeorefCase g;
+    const int n = 40;
+    MakeGeorefCase(&g, n, 3.0, false, -1, 0.5, 0, 200, 0, 0.01, Eigen::Vector3d::Zero(), 0, 17);
+    ObserveAndBend(&g, n, 17);
+    GeorefOptions o;
+    o.origin = kOrigin;
+    o.use_frame_centres = use == 1;
+    const auto j = RunGeorefStage(g.dir.path(), o);
+    const auto& t = j["telemetry_constrained"];
+    EXPECT_TRUE(t.value("applied", false)) << t.dump();
+    EXPECT_EQ(t.value("frame_centre_priors", 0), use ? n : 0) << t.dump();
+    rms[use] = CentreRms(g);
+    if (use) {
+      // The prior σ settled near the frame centres' own 1 cm (from metres under the GPS-placed model).
+      EXPECT_LT(t["frame_centre_prior_sigma_m"].back().get<double>(), 0.05) << t.dump();
+      EXPECT_TRUE(j["frame_centres"]["used"].get<bool>()) << j["frame_centres"].dump();
+    }
+  }
+  std::cout << "rebuilt model's cameras: GPS priors only " << rms[0] << " m, with frame-centre priors " << rms[1]
+            << " m\n";
+  EXPECT_LT(rms[1], 0.5);
+  EXPECT_LT(rms[1], 0.5 * rms[0]);
 }
 
 // The fusion weighs each source by its information: precise positions on a wide orbit are not pulled off by

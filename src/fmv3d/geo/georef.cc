@@ -409,9 +409,10 @@ std::optional<TelemetryView> ViewFromTelemetry(const Pair& p, const LocalFrame& 
 // ground plane under the frame centres, then bundle adjustments with the positions as priors (σ prior_sigma_m)
 // and the intrinsics held: first with a plain loss (the telemetry's pointing error is common to a frame's
 // points), then robust. Throws fmv3d::Error when too few keyframes carry an attitude or frame centre.
-core::Reconstruction TelemetryInitialisedModel(const io::FramesIndex& index, core::Reconstruction rec,
-                                               const std::vector<Pair>& keyframe_pairs, const LocalFrame& frame,
-                                               const GeorefOptions& o, nlohmann::json* info) {
+core::Reconstruction TelemetryInitialisedModel(
+    const io::FramesIndex& index, core::Reconstruction rec, const std::vector<Pair>& keyframe_pairs,
+    const std::map<std::string, std::pair<Eigen::Vector3d, double>>& frame_centres, const LocalFrame& frame,
+    const GeorefOptions& o, nlohmann::json* info) {
   std::map<uint32_t, Eigen::Vector3d> centres, axes;
   std::vector<double> ground;
   for (const auto& p : keyframe_pairs) {
@@ -512,8 +513,31 @@ core::Reconstruction TelemetryInitialisedModel(const io::FramesIndex& index, cor
   ba.loss_scale_px = 1.0;
   sfm::BundleAdjust(&rec, config, ba);
   dropped += DropBadObservations(&rec, 4.0);
-  const auto last = sfm::BundleAdjust(&rec, config, ba);
+  auto last = sfm::BundleAdjust(&rec, config, ba);
   if (!plain.success || !last.success) throw Error("georef: the bundle adjustment of the telemetry model failed");
+  // Frame centres at their slant range as priors (the point along each optical axis), weighed by their own
+  // scatter about the adjusted model, which they then tighten: estimated again after each adjustment until it
+  // settles (a variance-component estimate; a platform's own, metres-off frame centres end with little weight).
+  nlohmann::json sight_sigmas = nlohmann::json::array();
+  for (const auto& [id, img] : rec.images) {
+    const auto it = frame_centres.find(img.name);
+    if (it != frame_centres.end()) config.sight_priors[id] = it->second;
+  }
+  for (int round = 0; config.sight_priors.size() >= 3 && round < 5; ++round) {
+    std::vector<double> norms;
+    for (const auto& [id, fr] : config.sight_priors) {
+      const core::Pose& pose = rec.images.at(id).pose;
+      norms.push_back((pose.Centre() + fr.second * (pose.q.conjugate() * Eigen::Vector3d::UnitZ()) - fr.first).norm());
+    }
+    const double sigma_fc = std::max(0.005, Median(norms) / 1.538);  // per axis, from the 3D median (χ₃)
+    sight_sigmas.push_back(sigma_fc);
+    if (round > 0 && sigma_fc > 0.8 * config.sight_prior_sigma) break;  // settled
+    config.sight_prior_sigma = sigma_fc;
+    const auto r = sfm::BundleAdjust(&rec, config, ba);
+    if (!r.success) break;
+    last = r;
+  }
+  if (config.sight_priors.size() < 3) config.sight_priors.clear();
   sfm::UpdatePointErrors(&rec);
   double prior_sq = 0;
   for (const auto& [id, c] : centres) prior_sq += (rec.images.at(id).pose.Centre() - c).squaredNorm();
@@ -527,6 +551,8 @@ core::Reconstruction TelemetryInitialisedModel(const io::FramesIndex& index, cor
            {"reprojection_rms_px", last.final_rms_px},
            {"points", rec.points.size()},
            {"observations_dropped", dropped},
+           {"frame_centre_priors", config.sight_priors.size()},
+           {"frame_centre_prior_sigma_m", sight_sigmas},
            {"centre_rms_from_telemetry_m", std::sqrt(prior_sq / centres.size())}};
   spdlog::info("georef: telemetry-initialised model: {} keyframes, {} points, reprojection {:.2f} → {:.3f} px RMS, "
                "centres {:.2f} m RMS from the telemetry",
@@ -737,6 +763,7 @@ nlohmann::json RunGeorefStage(const fs::path& ws, const GeorefOptions& o) {
   std::optional<ScaleShift> fused_frame_centres;  // when used: for the accuracy, with their points and σ
   std::vector<Eigen::Vector3d> frame_centre_points;
   double frame_centre_sigma = 0;
+  std::map<std::string, std::pair<Eigen::Vector3d, double>> frame_centre_by_name;  // keyframes': ENU, slant range
   if (o.use_frame_centres) {
     // The geoid undulation from the packets that state both heights converts a frame centre's other datum.
     std::vector<double> undulations;
@@ -767,6 +794,7 @@ nlohmann::json RunGeorefStage(const fs::path& ws, const GeorefOptions& o) {
       heights.push_back(*alt);
       sights.push_back({p.centre, p.rotation.conjugate() * Eigen::Vector3d::UnitZ(), *p.slant_range,
                         frame.ToEnu({p.frame_centre->lat, p.frame_centre->lon, *alt}), 0});
+      frame_centre_by_name[p.name] = {sights.back().frame_centre, *p.slant_range};
     }
     const double rho_p = use_track ? ResidualAutocorrelation(pairs, res, inliers) : 0.0;
     const double n_eff_p = std::max(1.0, s_in.size() * (1 - rho_p) / (1 + rho_p));
@@ -979,15 +1007,19 @@ nlohmann::json RunGeorefStage(const fs::path& ws, const GeorefOptions& o) {
   const double fit_fraction = pairs.empty() ? 0.0 : static_cast<double>(fit_in) / pairs.size();
   j["consistent_with_telemetry"] = fit_fraction >= o.min_fit_fraction;
   j["fit_fraction"] = fit_fraction;
+  // Frame centres that disagree with the model placed by the positions say the model's shape is wrong where
+  // its trajectory alone cannot (a telephoto pass's image model bends its lines of sight, not its track).
+  const bool shape_off = fit_fraction < o.min_fit_fraction;
+  const bool sights_off = frame_centres_json.value("why", "").find("disagree") != std::string::npos;
   if (o.constrain == GeorefOptions::Constrain::kAlways ||
-      (o.constrain == GeorefOptions::Constrain::kAuto && fit_fraction < o.min_fit_fraction)) {
-    spdlog::info("georef: {:.0f}% of the telemetry fits the model's trajectory; building the model again from the "
+      (o.constrain == GeorefOptions::Constrain::kAuto && (shape_off || sights_off))) {
+    spdlog::info("georef: {:.0f}% of the telemetry fits the model's trajectory{}; building the model again from the "
                  "telemetry's cameras",
-                 100 * fit_fraction);
+                 100 * fit_fraction, sights_off ? " and its frame centres disagree" : "");
     nlohmann::json info;
     core::Reconstruction model;
     try {
-      model = TelemetryInitialisedModel(index, rec, keyframe_pairs, frame, o, &info);
+      model = TelemetryInitialisedModel(index, rec, keyframe_pairs, frame_centre_by_name, frame, o, &info);
     } catch (const Error& e) {
       spdlog::warn("{}; keeping the image-only model", e.what());
       info = {{"applied", false}, {"why", e.what()}};
@@ -1002,7 +1034,11 @@ nlohmann::json RunGeorefStage(const fs::path& ws, const GeorefOptions& o) {
       again.constrain = GeorefOptions::Constrain::kNever;
       again.origin = origin;
       nlohmann::json rebuilt = RunGeorefStage(ws, again);
-      if (o.constrain == GeorefOptions::Constrain::kAlways || rebuilt.at("fit_fraction").get<double>() > fit_fraction) {
+      // Kept when forced, or when it mends what was wrong: more of the track fits it, or (when only the frame
+      // centres disagreed) its frame centres now agree.
+      const bool mended = shape_off ? rebuilt.at("fit_fraction").get<double>() > fit_fraction
+                                    : rebuilt.at("frame_centres").value("used", false);
+      if (o.constrain == GeorefOptions::Constrain::kAlways || mended) {
         info["applied"] = true;
         info["fit_fraction_image_only"] = fit_fraction;
         info["image_only_model"] = keep.string();
@@ -1010,9 +1046,10 @@ nlohmann::json RunGeorefStage(const fs::path& ws, const GeorefOptions& o) {
         core::WriteJson(geo_dir / "georef.json", rebuilt);
         return rebuilt;
       }
-      spdlog::warn("georef: the telemetry-initialised model fits the flight no better ({:.0f}%); keeping the "
-                   "image-only model",
-                   100 * rebuilt.at("fit_fraction").get<double>());
+      spdlog::warn("georef: the telemetry-initialised model mends nothing ({:.0f}% of the track fits it, its frame "
+                   "centres {}); keeping the image-only model",
+                   100 * rebuilt.at("fit_fraction").get<double>(),
+                   rebuilt.at("frame_centres").value("used", false) ? "agree" : "do not agree either");
       for (const char* f : {"cameras.txt", "images.txt", "points3D.txt"})
         fs::copy_file(keep / f, ws / "sparse" / f, fs::copy_options::overwrite_existing);
       fs::remove_all(keep);

@@ -94,6 +94,24 @@ struct AxisPrior {
   double inv_sigma_;
 };
 
+// (C + r·Rᵀ·z − F) / σ: the point at range r along the optical axis of pose (q, t), against a frame centre F.
+struct SightPrior {
+  SightPrior(const Eigen::Vector3d& frame_centre, double range, double sigma)
+      : f_(frame_centre), range_(range), inv_sigma_(1 / sigma) {}
+  template <typename T>
+  bool operator()(const T* q, const T* t, T* residual) const {
+    const Eigen::Quaternion<T> rot(q[3], q[0], q[1], q[2]);
+    const Eigen::Matrix<T, 3, 1> c = -(rot.conjugate() * Eigen::Matrix<T, 3, 1>(t[0], t[1], t[2]));
+    const Eigen::Matrix<T, 3, 1> z = rot.conjugate() * Eigen::Matrix<T, 3, 1>(T(0), T(0), T(1));
+    for (int k = 0; k < 3; ++k) residual[k] = (c[k] + T(range_) * z[k] - T(f_[k])) * T(inv_sigma_);
+    return true;
+  }
+
+ private:
+  Eigen::Vector3d f_;
+  double range_, inv_sigma_;
+};
+
 struct PoseBlock {
   std::array<double, 4> q;  // Eigen order x y z w
   std::array<double, 3> t;
@@ -216,6 +234,21 @@ BundleAdjustmentSummary BundleAdjust(core::Reconstruction* rec, const BundleAdju
           new ceres::AutoDiffCostFunction<AxisPrior, 3, 4>(new AxisPrior(axis, config.axis_prior_sigma_rad)));
       problem.AddResidualBlock(prior_costs.back().get(), nullptr, it->second.q.data());
     }
+  }
+  std::unique_ptr<ceres::LossFunction> sight_loss;
+  if (!config.sight_priors.empty()) {
+    if (!(config.sight_prior_sigma > 0)) throw Error("bundle adjustment: sight_prior_sigma must be positive");
+    sight_loss = std::make_unique<ceres::HuberLoss>(3.0);
+    size_t sight_count = 0;
+    for (const auto& [id, fr] : config.sight_priors) {
+      const auto it = poses.find(id);
+      if (it == poses.end() || !variable.count(id) || config.constant_images.count(id)) continue;
+      prior_costs.emplace_back(new ceres::AutoDiffCostFunction<SightPrior, 3, 4, 3>(
+          new SightPrior(fr.first, fr.second, config.sight_prior_sigma)));
+      problem.AddResidualBlock(prior_costs.back().get(), sight_loss.get(), it->second.q.data(), it->second.t.data());
+      ++sight_count;
+    }
+    if (sight_count >= 3) centre_prior_count = std::max<size_t>(centre_prior_count, sight_count);
   }
   if (!any_constant && centre_prior_count < 3) {
     uint32_t g1 = config.gauge_image1, g2 = config.gauge_image2;

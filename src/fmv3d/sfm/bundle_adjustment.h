@@ -59,6 +59,11 @@ struct BundleAdjustmentConfig {
   // (Rᵀ·z − axis) / axis_prior_sigma_rad. They hold the rotation that collinear centre priors leave free.
   std::map<uint32_t, Eigen::Vector3d> axis_priors;
   double axis_prior_sigma_rad = 0.0175;
+  // Soft priors on where the optical axis meets the ground (a telemetry frame centre F at slant range r): residual
+  // (C + r·Rᵀ·z − F) / sight_prior_sigma per axis, Huber loss beyond 3σ. They tie both the centre and the
+  // pointing; like centre priors they anchor the gauge (three or more).
+  std::map<uint32_t, std::pair<Eigen::Vector3d, double>> sight_priors;
+  double sight_prior_sigma = 1.0;
 };
 
 struct BundleAdjustmentSummary {
