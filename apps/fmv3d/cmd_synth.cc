@@ -8,11 +8,13 @@
 #include <fmt/format.h>
 #include <spdlog/spdlog.h>
 
+#include <cmath>
 #include <iostream>
 #include <sstream>
 
 #include "command.h"
 #include "fmv3d/core/error.h"
+#include "fmv3d/geo/geodesy.h"
 #include "fmv3d/synth/synth.h"
 
 namespace fmv3d::app {
@@ -166,6 +168,12 @@ void Add(CLI::App& app) {
     if (klv_opt->count()) {
       const auto g = ParseList(*geo_origin);
       opts.klv_options.origin = {g[0], g[1], g[2]};
+      // Heights above mean sea level (tags 15, 25) differ from ellipsoidal ones (75, 78) by the geoid there.
+      if (std::abs(g[0]) <= 90 && std::abs(g[1]) <= 180) {
+        const auto n = geo::GeoidUndulation(g[0], g[1]);
+        if (!n) spdlog::warn("synth: PROJ's EGM96 grid (egm96_15.gtx) is missing; KLV heights MSL = ellipsoidal");
+        opts.klv_options.geoid_undulation = n.value_or(0.0);
+      }
       if (!format_opt->count()) opts.format = "ts";
     }
     opts.output = *output;

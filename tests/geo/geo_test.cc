@@ -71,6 +71,14 @@ TEST(Geodesy, ProjAgreesWithClosedFormEnu) {
   }
 }
 
+// EGM96 from PROJ's grid (proj-data, a dependency of libproj): known values at (0, 0) and at synth's origin.
+TEST(Geodesy, GeoidUndulationFromEgm96) {
+  const auto equator = GeoidUndulation(0, 0), virginia = GeoidUndulation(38.16, -77.35);
+  ASSERT_TRUE(equator && virginia) << "egm96_15.gtx missing (Debian proj-data)";
+  EXPECT_NEAR(*equator, 17.16, 0.05);
+  EXPECT_NEAR(*virginia, -33.87, 0.05);
+}
+
 TEST(Geodesy, UtmZoneAndCentralMeridian) {
   EXPECT_EQ(UtmZoneOf(38.16, -77.35).zone, 18);
   EXPECT_EQ(UtmZoneOf(38.16, -77.35).Epsg(), 32618);
@@ -497,6 +505,46 @@ TEST(Georef, SpreadFrameCentresFixTheRotation) {
   EXPECT_NEAR(acc[0]["tilt_deg"].get<double>(), std::sqrt(2.0) / std::sqrt(40.0), 0.08);
   EXPECT_LT(acc[1]["tilt_deg"].get<double>(), 0.02);
   EXPECT_EQ(acc[1]["from"].size(), 3u);
+}
+
+// A frame centre's height comes as two 2-byte codes, MSL (tag 25) and HAE (tag 78), each 0.30 m steps. synth's
+// ground at 60.000 m HAE is 4 mm under a step boundary: the HAE code alone says 59.852 (−0.148 m). With the MSL
+// code and the undulation (here −33.874, EGM96 there; estimated from the sensor's two heights) the truth lies in
+// the intersection of the two steps, [59.831, 60.004]: its middle is −0.083 m off, not −0.148.
+TEST(Georef, FrameCentreHeightsInBothDatumsNarrowTheStep) {
+  const double step = 19900.0 / 65535, n_geoid = -33.874;
+  const auto code = [&](double h) { return std::round((h + 900) / step) * step - 900; };
+  double vertical[2];
+  for (int both = 0; both < 2; ++both) {
+    GeorefCase g;
+    MakeGeorefCase(&g, 40, 3.0, false, -1, 1.0, 0, 200, 0, 0.0, Eigen::Vector3d::Zero(), 0, 17);
+    io::FramesIndex index = io::ReadFramesIndex(g.dir / "frames/frames.json");
+    for (auto& f : index.frames) {
+      auto& t = f.telemetry;
+      const double hae = t["frame_center_elevation"].get<double>();  // written true (HAE = MSL) by the case
+      t.erase("frame_center_elevation");
+      t["frame_center_hae"] = code(hae);
+      t["sensor_altitude_msl"] = t["sensor_altitude_hae"].get<double>() - n_geoid;
+      if (both) t["frame_center_elevation"] = code(hae - n_geoid);
+    }
+    io::WriteFramesIndex(index, g.dir / "frames/frames.json");
+    GeorefOptions o;
+    o.origin = kOrigin;
+    const auto j = RunGeorefStage(g.dir.path(), o);
+    ASSERT_TRUE(j["frame_centres"]["used"].get<bool>()) << j["frame_centres"].dump();
+    const core::Reconstruction enu = io::ReadColmapText(g.dir / "geo/sparse_enu");
+    double dz = 0;
+    for (const auto& [id, img] : enu.images) dz += img.pose.Centre().z() - g.true_centres[id - 1].z();
+    vertical[both] = dz / enu.images.size();
+    if (both) EXPECT_NEAR(j["frame_centres"]["elevation_interval_m"].get<double>(), 0.173, 0.01);
+  }
+  std::cout << "mean vertical error: HAE code only " << vertical[0] << " m, HAE and MSL codes " << vertical[1] << " m\n";
+  // Each stays inside its interval (the positions, σ 3 m over 40 packets, weigh where): HAE alone [−0.30, +0.004],
+  // both [−0.169, +0.004]; measured −0.195 and −0.096.
+  EXPECT_GT(vertical[0], -0.32);
+  EXPECT_GT(vertical[1], -0.19);
+  EXPECT_LT(vertical[1], 0.02);
+  EXPECT_LT(std::abs(vertical[1]), std::abs(vertical[0]) - 0.05);
 }
 
 // A straight track over ground that is not level: the level-ground roll is 4° off, and the frame centres

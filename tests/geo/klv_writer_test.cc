@@ -165,6 +165,7 @@ TEST(SynthKlv, TelemetryRoundTripsThroughTheVideoAndFramesStage) {
   o.format = "ts";
   o.fps = 10;
   o.klv = true;
+  o.klv_options.geoid_undulation = -33.87;  // EGM96 at the default origin: MSL heights are ellipsoidal + 33.87 m
   o.truth_points = 100;
   o.write_scene = false;
   o.render.supersample = 1;
@@ -194,6 +195,10 @@ TEST(SynthKlv, TelemetryRoundTripsThroughTheVideoAndFramesStage) {
     EXPECT_NEAR(*s.sensor_longitude, r.sensor_longitude, 0.5 * kLonStep + 1e-12) << k;
     EXPECT_NEAR(*s.sensor_altitude_msl, r.sensor_true_altitude, 0.5 * kAltStep) << k;
     EXPECT_NEAR(*s.horizontal_fov, 60.0, 0.5 * kFovStep) << k;
+    // Both datums, for the sensor and the frame centre (tags 15/75, 25/78), apart by the undulation.
+    ASSERT_TRUE(s.sensor_altitude_hae && s.frame_center_hae && s.frame_center_elevation) << k;
+    EXPECT_NEAR(*s.sensor_altitude_hae - *s.sensor_altitude_msl, -33.87, kAltStep) << k;
+    EXPECT_NEAR(*s.frame_center_hae - *s.frame_center_elevation, -33.87, kAltStep) << k;
   }
   // The noisy positions scatter around the truth by about the stated GPS noise (3 m per axis).
   double sq = 0;

@@ -27,6 +27,22 @@ UtmZone UtmZoneOf(double lat, double lon) {
   return {zone, lat >= 0};
 }
 
+std::optional<double> GeoidUndulation(double lat, double lon) {
+  PJ_CONTEXT* ctx = proj_context_create();
+  proj_log_level(ctx, PJ_LOG_NONE);
+  // vgridshift with multiplier +1 adds the grid value to z: from z = 0 it gives N.
+  PJ* p = proj_create(ctx, "+proj=pipeline +step +proj=unitconvert +xy_in=deg +xy_out=rad "
+                           "+step +proj=vgridshift +grids=egm96_15.gtx +multiplier=1");
+  std::optional<double> n;
+  if (p) {
+    const PJ_COORD out = proj_trans(p, PJ_FWD, proj_coord(lon, lat, 0, 0));
+    if (std::isfinite(out.xyz.z) && out.xyz.z != HUGE_VAL && std::abs(out.xyz.z) < 200) n = out.xyz.z;
+    proj_destroy(p);
+  }
+  proj_context_destroy(ctx);
+  return n;
+}
+
 struct LocalFrame::Impl {
   PJ_CONTEXT* ctx = nullptr;
   PJ* enu = nullptr;  // forward: (lon, lat, h) degrees → ENU metres

@@ -9,6 +9,7 @@
 
 #include <Eigen/Core>
 #include <memory>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -26,6 +27,10 @@ struct UtmZone {
 };
 // The standard zone of a longitude/latitude (with the Norway / Svalbard exceptions).
 UtmZone UtmZoneOf(double lat, double lon);
+
+// EGM96 geoid undulation N (metres: ellipsoidal height = height above mean sea level + N) at a WGS84 point, from
+// PROJ's egm96_15.gtx (Debian proj-data, a dependency of libproj); nullopt when the grid is not available.
+std::optional<double> GeoidUndulation(double lat, double lon);
 
 // ENU ↔ WGS84 ↔ UTM around one origin. Not thread-safe (one PROJ context per object): give each thread its own.
 class LocalFrame {

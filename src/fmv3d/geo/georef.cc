@@ -765,18 +765,45 @@ nlohmann::json RunGeorefStage(const fs::path& ws, const GeorefOptions& o) {
   double frame_centre_sigma = 0;
   std::map<std::string, std::pair<Eigen::Vector3d, double>> frame_centre_by_name;  // keyframes': ENU, slant range
   if (o.use_frame_centres) {
-    // The geoid undulation from the packets that state both heights converts a frame centre's other datum.
+    // The geoid undulation from the packets that state both heights converts a frame centre's other datum. A
+    // mean, not a median: both heights are 2-byte codes of one altitude, so their difference takes just two values
+    // around N (the median would pick one, up to half a step off); the GPS noise spreads the altitudes over many
+    // steps and the mean of the two values is N. (Trimmed to ±1 m of the median against outliers.)
     std::vector<double> undulations;
     for (const auto& p : pairs)
       if (p.hae && p.msl) undulations.push_back(*p.hae - *p.msl);
-    const std::optional<double> undulation =
-        undulations.empty() ? std::nullopt : std::optional<double>(Median(undulations));
-    const auto frame_centre_alt = [&](const Pair& p) -> std::optional<double> {
+    std::optional<double> undulation;
+    if (!undulations.empty()) {
+      const double med = Median(undulations);
+      double sum = 0;
+      size_t n = 0;
+      for (double u : undulations)
+        if (std::abs(u - med) <= 1.0) sum += u, ++n;
+      undulation = sum / static_cast<double>(n);
+    }
+    // A frame centre's height in the fit's datum, and the width of the interval it is known within: the
+    // frame centre's elevation is encoded in 2 bytes over 19.9 km (ST 0601 tags 25 MSL and 78 HAE): 0.30 m steps.
+    // When a packet states both, each is an interval of one step and the truth lies in both: their intersection,
+    // narrower wherever the undulation does not line the two grids up.
+    const double step = 19900.0 / 65535;
+    const auto on_grid = [&](double h) {
+      const double k = (h + 900) / step;
+      return std::abs(k - std::round(k)) < 1e-4;
+    };
+    struct Height {
+      double value, width;  // width 0: not a 2-byte code
+    };
+    const auto frame_centre_height = [&](const Pair& p) -> std::optional<Height> {
       const auto& same = use_hae ? p.frame_centre_hae : p.frame_centre_msl;
       const auto& other = use_hae ? p.frame_centre_msl : p.frame_centre_hae;
-      if (same) return same;
-      if (other && undulation) return *other + (use_hae ? *undulation : -*undulation);
-      return std::nullopt;
+      std::optional<Height> a, b;
+      if (same) a = Height{*same, on_grid(*same) ? step : 0.0};
+      if (other && undulation) b = Height{*other + (use_hae ? *undulation : -*undulation), on_grid(*other) ? step : 0.0};
+      if (a && b && a->width > 0 && b->width > 0) {
+        const double lo = std::max(a->value, b->value) - 0.5 * step, hi = std::min(a->value, b->value) + 0.5 * step;
+        if (hi > lo) return Height{0.5 * (lo + hi), hi - lo};
+      }
+      return a ? a : b;  // no overlap (an undulation off): the fit's own datum
     };
     const Eigen::Matrix3d R = sim.q.toRotationMatrix();
     std::vector<Eigen::Vector3d> s_in, d_in, res(pairs.size());
@@ -787,13 +814,13 @@ nlohmann::json RunGeorefStage(const fs::path& ws, const GeorefOptions& o) {
     // Only the keyframes' lines of sight: between keyframes the model's rotation is interpolated and misses the
     // gimbal's jitter, which the slant range turns into metres (0.4° at 700 m: 5 m, against 2 cm at keyframes).
     std::vector<LineOfSight> sights;
-    std::vector<double> heights;
+    std::vector<Height> heights;
     for (const Pair& p : keyframe_pairs) {
-      const auto alt = frame_centre_alt(p);
-      if (!p.frame_centre || !p.slant_range || !(*p.slant_range > 0) || !alt) continue;
-      heights.push_back(*alt);
+      const auto h = frame_centre_height(p);
+      if (!p.frame_centre || !p.slant_range || !(*p.slant_range > 0) || !h) continue;
+      heights.push_back(*h);
       sights.push_back({p.centre, p.rotation.conjugate() * Eigen::Vector3d::UnitZ(), *p.slant_range,
-                        frame.ToEnu({p.frame_centre->lat, p.frame_centre->lon, *alt}), 0});
+                        frame.ToEnu({p.frame_centre->lat, p.frame_centre->lon, h->value}), 0});
       frame_centre_by_name[p.name] = {sights.back().frame_centre, *p.slant_range};
     }
     const double rho_p = use_track ? ResidualAutocorrelation(pairs, res, inliers) : 0.0;
@@ -808,23 +835,24 @@ nlohmann::json RunGeorefStage(const fs::path& ws, const GeorefOptions& o) {
     if (sights.empty())
       frame_centres_json["why"] = "no packet states a frame centre with its elevation and a slant range";
     if (!sights.empty() && positions_under(R, &positions)) {
-      // The frame centre's elevation is encoded in 2 bytes over 19.9 km (ST 0601 tags 25 and 78): 0.30 m steps.
-      // Over flat ground every frame centre decodes to the same step and carries the same offset, uniform within
-      // it, which no number of packets averages: the fusion takes it as a posterior over that offset. Over relief
-      // the steps differ and their errors partly average: a Gaussian floor of step/√12 over √(distinct steps).
-      // Heights off that grid (another source, another datum) carry no such error.
-      const double step = 19900.0 / 65535;
-      const bool on_grid = !heights.empty() && std::all_of(heights.begin(), heights.end(), [&](double h) {
-        const double k = (h + 900) / step;
-        return std::abs(k - std::round(k)) < 1e-4;
+      // Over flat ground every frame centre decodes to the same step (or intersection) and carries the same
+      // offset, uniform within it, which no number of packets averages: the fusion takes it as a posterior over
+      // that offset. Over relief the steps differ and their errors partly average: a Gaussian floor of
+      // width/√12 over √(distinct heights). Heights that are not 2-byte codes carry no such error.
+      const bool on_grid = !heights.empty() && std::all_of(heights.begin(), heights.end(), [](const Height& h) {
+        return h.width > 0;
       });
-      std::sort(heights.begin(), heights.end());
+      std::sort(heights.begin(), heights.end(), [](const Height& a, const Height& b) { return a.value < b.value; });
       size_t steps = heights.empty() ? 0 : 1;
-      for (size_t i = 1; i < heights.size(); ++i) steps += heights[i] - heights[i - 1] > 0.5 * step;
+      double width = 0;
+      for (size_t i = 0; i < heights.size(); ++i) {
+        width = std::max(width, heights[i].width);
+        if (i > 0) steps += heights[i].value - heights[i - 1].value > 1e-3;
+      }
       const bool one_step = on_grid && steps == 1;
       const Eigen::Vector3d systematic(
-          0, 0, on_grid && !one_step ? step / std::sqrt(12.0 * std::max<size_t>(1, steps)) : 0.0);
-      const double common_step = one_step ? step : 0.0;
+          0, 0, on_grid && !one_step ? width / std::sqrt(12.0 * std::max<size_t>(1, steps)) : 0.0);
+      const double common_step = one_step ? width : 0.0;
       FrameCentreFusion fusion = FuseFrameCentres(R, positions, sights, o.min_inlier_threshold, systematic, common_step);
       if (fusion.inliers >= 3 && fusion.sigma_m > 0) {
         // Refine the rotation on positions, lines of sight and attitudes together (frame centres off the track
@@ -872,8 +900,10 @@ nlohmann::json RunGeorefStage(const fs::path& ws, const GeorefOptions& o) {
       frame_centres_json["elevation_steps"] = steps;
       frame_centres_json["elevation_encoding"] =
           !on_grid ? "not on the 2-byte ST 0601 grid: no quantisation error"
-                   : one_step ? "one 2-byte step for all: a common offset, uniform within it"
+                   : one_step ? "one 2-byte step (or MSL/HAE intersection) for all: a common offset, uniform within it"
                               : "several 2-byte steps: a Gaussian floor";
+      frame_centres_json["elevation_interval_m"] = width;
+      if (undulation) frame_centres_json["geoid_undulation_m"] = *undulation;
       if (fusion.used) {
         sim.s = fusion.fused.scale;
         sim.t = fusion.fused.translation;

@@ -150,6 +150,11 @@ std::vector<uint8_t> EncodeSt0601Packet(const St0601Record& r) {
             *r.frame_center_elevation);
     s.UintMap(kTagFrameCenterElevation, *r.frame_center_elevation, 2, -900, 19000);
   }
+  if (r.frame_center_hae) {
+    Require(*r.frame_center_hae >= -900 && *r.frame_center_hae <= 19000, "frame centre height above ellipsoid",
+            *r.frame_center_hae);
+    s.UintMap(kTagFrameCenterHae, *r.frame_center_hae, 2, -900, 19000);
+  }
   s.Uint(65, 17, 1);  // UAS Datalink LS version number: ST 0601.17
   if (r.sensor_ellipsoid_height) {
     Require(*r.sensor_ellipsoid_height >= -900 && *r.sensor_ellipsoid_height <= 19000, "sensor ellipsoid height",

@@ -36,6 +36,7 @@ struct St0601Record {
   std::optional<double> frame_center_latitude;   // tag 23
   std::optional<double> frame_center_longitude;  // tag 24
   std::optional<double> frame_center_elevation;  // tag 25, metres MSL
+  std::optional<double> frame_center_hae;        // tag 78, metres HAE
 };
 
 // The whole packet (key + length + set + checksum). Throws fmv3d::Error when a value is outside its tag's

@@ -274,6 +274,7 @@ SynthResult RunSynth(const SynthOptions& o) {
     const GeoPoint& g = o.klv_options.origin;
     j["geo_origin"] = {{"lat", g.lat}, {"lon", g.lon}, {"alt", g.alt}};
     j["geo_frame"] = "world x = east, y = north, z = up (metres) at geo_origin; alt = WGS84 ellipsoidal height";
+    j["geoid_undulation_m"] = o.klv_options.geoid_undulation;  // KLV heights MSL = ellipsoidal − this
   }
   j["options"] = o.ToJson();
   core::WriteJson(o.output / "truth.json", j);

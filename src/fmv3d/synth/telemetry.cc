@@ -77,6 +77,7 @@ void KlvTelemetryOptions::Check() const {
   if (!(gps_noise >= 0 && gps_noise <= 1000)) throw Error("synth: --gps-noise must be in [0, 1000] metres");
   if (!(attitude_noise >= 0 && attitude_noise <= 30)) throw Error("synth: --attitude-noise must be in [0, 30] degrees");
   if (!(fps > 0)) throw Error("synth: fps must be positive");
+  if (!(std::abs(geoid_undulation) < 200)) throw Error("synth: geoid undulation must be within ±200 m");
 }
 
 std::vector<io::klv::St0601Record> MakeKlvTelemetry(const std::vector<core::Pose>& poses, const core::Camera& camera,
@@ -106,7 +107,7 @@ std::vector<io::klv::St0601Record> MakeKlvTelemetry(const std::vector<core::Pose
     r.unix_time_us = o.start_unix_us + static_cast<uint64_t>(std::llround(1e6 * k / o.fps));
     r.sensor_latitude = g.lat;
     r.sensor_longitude = g.lon;
-    r.sensor_true_altitude = g.alt;
+    r.sensor_true_altitude = g.alt - o.geoid_undulation;
     r.sensor_ellipsoid_height = g.alt;
     r.platform_heading = a.platform_heading;
     r.platform_pitch = a.platform_pitch;
@@ -124,7 +125,8 @@ std::vector<io::klv::St0601Record> MakeKlvTelemetry(const std::vector<core::Pose
       r.slant_range = s;
       r.frame_center_latitude = fc.lat;
       r.frame_center_longitude = fc.lon;
-      r.frame_center_elevation = fc.alt;
+      r.frame_center_elevation = fc.alt - o.geoid_undulation;
+      r.frame_center_hae = fc.alt;
     }
     out.push_back(r);
   }

@@ -39,6 +39,9 @@ struct KlvTelemetryOptions {
   double fps = 10;
   uint64_t start_unix_us = 1717243200000000ull;  // 2024-06-01T12:00:00Z
   uint64_t seed = 1;
+  // EGM96 undulation N at the origin (m): the heights MSL (tags 15, 25) are the ellipsoidal ones (75, 78) − N.
+  // Set by the CLI from PROJ's grid (geo::GeoidUndulation); this module stays independent of PROJ.
+  double geoid_undulation = 0;
   void Check() const;
 };
 
