@@ -82,7 +82,9 @@ void Add(CLI::App& app) {
       "  truth.json                     characteristic_length (tallest building, m), bounds, seed, fps, options\n"
       "  depth/flight-NNNNNN.tiff       with --depth: float32 depth maps (camera z, metres; 0 = sky)\n"
       "With --klv, flight.ts carries one MISB ST 0601 packet per frame (noisy GPS / attitude of the truth\n"
-      "cameras) and truth.json states geo_origin: the world is the local East-North-Up frame of that point.\n"
+      "cameras; frame centre and slant range from the true pose; heights both MSL and ellipsoidal, apart by\n"
+      "the EGM96 undulation) and truth.json states geo_origin: the world is the local East-North-Up frame of\n"
+      "that point.\n"
       "A --scene is a fixed world; --seed varies only the flight's jitter and the sensor noise.");
   auto o = std::make_shared<synth::SynthOptions>();
   auto size = std::make_shared<std::string>("1280x720");
