@@ -524,7 +524,10 @@ TEST(Georef, FrameCentreHeightsInBothDatumsNarrowTheStep) {
       const double hae = t["frame_center_elevation"].get<double>();  // written true (HAE = MSL) by the case
       t.erase("frame_center_elevation");
       t["frame_center_hae"] = code(hae);
-      t["sensor_altitude_msl"] = t["sensor_altitude_hae"].get<double>() - n_geoid;
+      // The sensor's heights are 2-byte codes too (tags 75, 15): N is estimated from them, to ~2 cm here.
+      const double sensor = t["sensor_altitude_hae"].get<double>();
+      t["sensor_altitude_hae"] = code(sensor);
+      t["sensor_altitude_msl"] = code(sensor - n_geoid);
       if (both) t["frame_center_elevation"] = code(hae - n_geoid);
     }
     io::WriteFramesIndex(index, g.dir / "frames/frames.json");
@@ -536,7 +539,17 @@ TEST(Georef, FrameCentreHeightsInBothDatumsNarrowTheStep) {
     double dz = 0;
     for (const auto& [id, img] : enu.images) dz += img.pose.Centre().z() - g.true_centres[id - 1].z();
     vertical[both] = dz / enu.images.size();
-    if (both) EXPECT_NEAR(j["frame_centres"]["elevation_interval_m"].get<double>(), 0.173, 0.01);
+    if (both) {
+      const double sigma_n = j["frame_centres"]["geoid_undulation_sigma_m"].get<double>();
+      EXPECT_NEAR(j["frame_centres"]["geoid_undulation_m"].get<double>(), n_geoid, 3 * sigma_n + 1e-3);
+      EXPECT_GT(sigma_n, 0.005);
+      EXPECT_LT(sigma_n, 0.05);
+      // The offset's prior: uniform over 0.173 m (σ 0.050), its MSL edge blurred by N's σ; one step is σ 0.088.
+      EXPECT_GT(j["frame_centres"]["elevation_offset_prior_sd_m"].get<double>(), 0.045);
+      EXPECT_LT(j["frame_centres"]["elevation_offset_prior_sd_m"].get<double>(), 0.065);
+    } else {
+      EXPECT_NEAR(j["frame_centres"]["elevation_offset_prior_sd_m"].get<double>(), step / std::sqrt(12.0), 0.002);
+    }
   }
   std::cout << "mean vertical error: HAE code only " << vertical[0] << " m, HAE and MSL codes " << vertical[1] << " m\n";
   // Each stays inside its interval (the positions, σ 3 m over 40 packets, weigh where): HAE alone [−0.30, +0.004],

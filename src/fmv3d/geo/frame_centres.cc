@@ -141,7 +141,8 @@ SightScatter OwnScatter(const core::Sim3& start, const std::vector<LineOfSight>&
 
 FrameCentreFusion FuseFrameCentres(const Eigen::Matrix3d& R, const ScaleShift& positions,
                                    const std::vector<LineOfSight>& sights, double min_threshold,
-                                   const Eigen::Vector3d& systematic, double common_vertical_step) {
+                                   const Eigen::Vector3d& systematic,
+                                   const std::vector<std::pair<double, double>>& vertical_offset_prior) {
   FrameCentreFusion f;
   f.observations = sights.size();
   if (sights.size() < 3) {
@@ -207,10 +208,12 @@ FrameCentreFusion FuseFrameCentres(const Eigen::Matrix3d& R, const ScaleShift& p
   ScaleShift los = fit;
   los.covariance *= sigma * sigma * static_cast<double>(n_in) / f.effective_samples;
   los.covariance.bottomRightCorner<3, 3>() += systematic.cwiseAbs2().asDiagonal();
-  // The common height offset u of the frame centres, uniform over the step: a grid of u, each a Gaussian fusion
-  // of the positions with the frame centres shifted by u, weighted by how well the two then agree. One node
-  // (u = 0) when there is no such offset. The mixture's mean and covariance are the answer.
-  const int nodes = common_vertical_step > 0 ? 61 : 1;
+  // The common height offset u of the frame centres over its prior's nodes, each a Gaussian fusion of the
+  // positions with the frame centres shifted by u, weighted by its prior and by how well the two then agree. One
+  // node (u = 0) when there is no such offset. The mixture's mean and covariance are the answer.
+  const std::vector<std::pair<double, double>> prior =
+      vertical_offset_prior.empty() ? std::vector<std::pair<double, double>>{{0.0, 1.0}} : vertical_offset_prior;
+  const int nodes = static_cast<int>(prior.size());
   const Eigen::Matrix4d c = los.covariance + positions.covariance;
   const Eigen::FullPivLU<Eigen::Matrix4d> c_lu(c);
   const Eigen::Matrix4d info_p = positions.covariance.inverse(), info_l = los.covariance.inverse();
@@ -220,11 +223,11 @@ FrameCentreFusion FuseFrameCentres(const Eigen::Matrix3d& R, const ScaleShift& p
   f.chi2 = std::numeric_limits<double>::infinity();
   for (int k = 0; k < nodes; ++k) {
     Eigen::Vector4d l = Params(los);
-    if (nodes > 1) l(3) += common_vertical_step * ((k + 0.5) / nodes - 0.5);
+    l(3) += prior[k].first;
     const Eigen::Vector4d d = l - Params(positions);
     chi2[k] = d.dot(c_lu.solve(d));
     x[k] = cov * (info_p * Params(positions) + info_l * l);
-    if (std::isfinite(chi2[k])) f.chi2 = std::min(f.chi2, chi2[k]);
+    if (std::isfinite(chi2[k]) && prior[k].second > 0) f.chi2 = std::min(f.chi2, chi2[k]);
   }
   if (!std::isfinite(f.chi2) || f.chi2 > 18.47) {  // 99.9% of a 4-dof χ² (at the offset that agrees best)
     f.why = "the frame centres disagree with the positions beyond their uncertainties";
@@ -234,9 +237,13 @@ FrameCentreFusion FuseFrameCentres(const Eigen::Matrix3d& R, const ScaleShift& p
   Eigen::Vector4d mean = Eigen::Vector4d::Zero();
   std::vector<double> weight(nodes);
   for (int k = 0; k < nodes; ++k) {
-    weight[k] = std::isfinite(chi2[k]) ? std::exp(-0.5 * (chi2[k] - f.chi2)) : 0.0;
+    weight[k] = std::isfinite(chi2[k]) ? prior[k].second * std::exp(-0.5 * (chi2[k] - f.chi2)) : 0.0;
     wsum += weight[k];
     mean += weight[k] * x[k];
+  }
+  if (!(wsum > 0)) {
+    f.why = "the frame centres disagree with the positions beyond their uncertainties";
+    return f;
   }
   mean /= wsum;
   Eigen::Matrix4d spread = Eigen::Matrix4d::Zero();

@@ -14,6 +14,7 @@
 
 #include <Eigen/Core>
 #include <nlohmann/json.hpp>
+#include <utility>
 #include <vector>
 
 #include "fmv3d/core/pose.h"
@@ -56,14 +57,14 @@ bool FitScaleShift(const Eigen::Matrix3d& R, const std::vector<Eigen::Vector3d>&
 // positions: the positions' fit (s, t under R), with its covariance already scaled by σ² and the effective
 // sample count. min_threshold: floor of the inlier bound, metres. systematic: σ per ENU axis of an error common
 // to every frame centre (the fields' encoding resolution), added to the translation's covariance.
-// common_vertical_step: when > 0, every frame centre's height carries the same unknown offset, uniform over a
-// step this wide (all decode to one quantisation step: flat ground). The fusion is then a posterior over that
-// offset — the positions weigh where in the step the truth lies, and cannot pull it outside the step — instead
-// of a Gaussian floor, which lets precise-looking positions drag the height past the step's edge.
+// vertical_offset_prior: when not empty, every frame centre's height carries the same unknown offset u (all
+// decode to one 2-byte step: flat ground), with these (u, weight) nodes as its prior. The fusion is then a
+// posterior over u — the positions weigh where in the step the truth lies, and cannot pull it outside — instead of
+// a Gaussian floor, which lets precise-looking positions drag the height past the step's edge.
 FrameCentreFusion FuseFrameCentres(const Eigen::Matrix3d& R, const ScaleShift& positions,
                                    const std::vector<LineOfSight>& sights, double min_threshold,
                                    const Eigen::Vector3d& systematic = Eigen::Vector3d::Zero(),
-                                   double common_vertical_step = 0);
+                                   const std::vector<std::pair<double, double>>& vertical_offset_prior = {});
 
 // The similarity refined on every measurement at once (Ceres, from `start`): positions src → dst, lines of
 // sight (sensor position F − r·R·a, i.e. the frame centre F ≈ s·R·c + t + r·R·a, which also fixes the rotation

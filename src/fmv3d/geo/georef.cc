@@ -773,37 +773,69 @@ nlohmann::json RunGeorefStage(const fs::path& ws, const GeorefOptions& o) {
     for (const auto& p : pairs)
       if (p.hae && p.msl) undulations.push_back(*p.hae - *p.msl);
     std::optional<double> undulation;
+    double undulation_sigma = 0;  // of the mean
     if (!undulations.empty()) {
       const double med = Median(undulations);
-      double sum = 0;
+      double sum = 0, sq = 0;
       size_t n = 0;
       for (double u : undulations)
-        if (std::abs(u - med) <= 1.0) sum += u, ++n;
+        if (std::abs(u - med) <= 1.0) sum += u, sq += u * u, ++n;
       undulation = sum / static_cast<double>(n);
+      undulation_sigma = std::sqrt(std::max(0.0, sq / n - *undulation * *undulation) / static_cast<double>(n));
     }
-    // A frame centre's height in the fit's datum, and the width of the interval it is known within: the
-    // frame centre's elevation is encoded in 2 bytes over 19.9 km (ST 0601 tags 25 MSL and 78 HAE): 0.30 m steps.
-    // When a packet states both, each is an interval of one step and the truth lies in both: their intersection,
-    // narrower wherever the undulation does not line the two grids up.
+    // A frame centre's height in the fit's datum. Its elevation is encoded in 2 bytes over 19.9 km (ST 0601
+    // tags 25 MSL and 78 HAE): 0.30 m steps, so each code is an interval one step wide. When a packet states both,
+    // the truth lies in both: the other datum's code, moved by the undulation, narrows the interval wherever the
+    // two grids do not line up — its edges blurred by the undulation estimate's σ.
     const double step = 19900.0 / 65535;
     const auto on_grid = [&](double h) {
       const double k = (h + 900) / step;
       return std::abs(k - std::round(k)) < 1e-4;
     };
     struct Height {
-      double value, width;  // width 0: not a 2-byte code
+      double value = 0;
+      bool coded = false;             // a 2-byte code: the truth is within ±step/2 of value
+      std::optional<double> other;    // the other datum's code, moved into this one (when coded too)
+      bool operator==(const Height& h) const {
+        return std::abs(value - h.value) < 1e-6 && coded == h.coded && other.has_value() == h.other.has_value() &&
+               (!other || std::abs(*other - *h.other) < 1e-6);
+      }
     };
     const auto frame_centre_height = [&](const Pair& p) -> std::optional<Height> {
       const auto& same = use_hae ? p.frame_centre_hae : p.frame_centre_msl;
       const auto& other = use_hae ? p.frame_centre_msl : p.frame_centre_hae;
-      std::optional<Height> a, b;
-      if (same) a = Height{*same, on_grid(*same) ? step : 0.0};
-      if (other && undulation) b = Height{*other + (use_hae ? *undulation : -*undulation), on_grid(*other) ? step : 0.0};
-      if (a && b && a->width > 0 && b->width > 0) {
-        const double lo = std::max(a->value, b->value) - 0.5 * step, hi = std::min(a->value, b->value) + 0.5 * step;
-        if (hi > lo) return Height{0.5 * (lo + hi), hi - lo};
+      const std::optional<double> moved =
+          other && undulation ? std::optional<double>(*other + (use_hae ? *undulation : -*undulation)) : std::nullopt;
+      if (same) {
+        Height h{*same, on_grid(*same), std::nullopt};
+        if (h.coded && moved && on_grid(*other) && std::abs(*moved - *same) < step + 5 * undulation_sigma)
+          h.other = moved;
+        return h;
       }
-      return a ? a : b;  // no overlap (an undulation off): the fit's own datum
+      if (moved) return Height{*moved, on_grid(*other), std::nullopt};
+      return std::nullopt;
+    };
+    // Prior of the offset u (truth − value) common to frame centres that all decode alike: uniform over the step,
+    // times the other code's step (blurred by the undulation's σ) when there is one.
+    const auto offset_prior = [&](const Height& h) {
+      std::vector<std::pair<double, double>> nodes;
+      const int n = 61;
+      const double s_n = std::max(undulation_sigma, 1e-4);
+      for (int k = 0; k < n; ++k) {
+        const double u = step * ((k + 0.5) / n - 0.5);
+        double w = 1;
+        if (h.other) {
+          const double lo = *h.other - h.value - 0.5 * step, hi = *h.other - h.value + 0.5 * step;
+          w = 0.5 * (std::erf((hi - u) / (std::sqrt(2.0) * s_n)) - std::erf((lo - u) / (std::sqrt(2.0) * s_n)));
+        }
+        nodes.emplace_back(u, w);
+      }
+      return nodes;
+    };
+    const auto prior_sd = [](const std::vector<std::pair<double, double>>& nodes) {
+      double w = 0, m = 0, q = 0;
+      for (const auto& [u, p] : nodes) w += p, m += p * u, q += p * u * u;
+      return w > 0 ? std::sqrt(std::max(0.0, q / w - (m / w) * (m / w))) : 0.0;
     };
     const Eigen::Matrix3d R = sim.q.toRotationMatrix();
     std::vector<Eigen::Vector3d> s_in, d_in, res(pairs.size());
@@ -835,25 +867,30 @@ nlohmann::json RunGeorefStage(const fs::path& ws, const GeorefOptions& o) {
     if (sights.empty())
       frame_centres_json["why"] = "no packet states a frame centre with its elevation and a slant range";
     if (!sights.empty() && positions_under(R, &positions)) {
-      // Over flat ground every frame centre decodes to the same step (or intersection) and carries the same
-      // offset, uniform within it, which no number of packets averages: the fusion takes it as a posterior over
-      // that offset. Over relief the steps differ and their errors partly average: a Gaussian floor of
-      // width/√12 over √(distinct heights). Heights that are not 2-byte codes carry no such error.
-      const bool on_grid = !heights.empty() && std::all_of(heights.begin(), heights.end(), [](const Height& h) {
-        return h.width > 0;
+      // Over flat ground every frame centre decodes alike and carries the same offset, which no number of
+      // packets averages: the fusion takes it as a posterior over that offset (its prior above). Over relief the
+      // codes differ and their errors partly average: a Gaussian floor of the prior's σ over √(distinct codes).
+      // Heights that are not 2-byte codes carry no such error.
+      const bool coded = !heights.empty() && std::all_of(heights.begin(), heights.end(), [](const Height& h) {
+        return h.coded;
       });
-      std::sort(heights.begin(), heights.end(), [](const Height& a, const Height& b) { return a.value < b.value; });
       size_t steps = heights.empty() ? 0 : 1;
-      double width = 0;
-      for (size_t i = 0; i < heights.size(); ++i) {
-        width = std::max(width, heights[i].width);
-        if (i > 0) steps += heights[i].value - heights[i - 1].value > 1e-3;
+      for (size_t i = 1; i < heights.size(); ++i) {
+        bool seen = false;
+        for (size_t k = 0; k < i && !seen; ++k) seen = heights[k] == heights[i];
+        steps += seen ? 0 : 1;
       }
-      const bool one_step = on_grid && steps == 1;
-      const Eigen::Vector3d systematic(
-          0, 0, on_grid && !one_step ? width / std::sqrt(12.0 * std::max<size_t>(1, steps)) : 0.0);
-      const double common_step = one_step ? width : 0.0;
-      FrameCentreFusion fusion = FuseFrameCentres(R, positions, sights, o.min_inlier_threshold, systematic, common_step);
+      const bool one_step = coded && steps == 1;
+      const std::vector<std::pair<double, double>> vertical_prior =
+          one_step ? offset_prior(heights.front()) : std::vector<std::pair<double, double>>{};
+      double floor_sd = 0;
+      if (coded && !one_step) {
+        for (const auto& h : heights) floor_sd += prior_sd(offset_prior(h));
+        floor_sd /= static_cast<double>(heights.size()) * std::sqrt(static_cast<double>(steps));
+      }
+      const Eigen::Vector3d systematic(0, 0, floor_sd);
+      const double interval_sd = heights.empty() || !coded ? 0.0 : prior_sd(offset_prior(heights.front()));
+      FrameCentreFusion fusion = FuseFrameCentres(R, positions, sights, o.min_inlier_threshold, systematic, vertical_prior);
       if (fusion.inliers >= 3 && fusion.sigma_m > 0) {
         // Refine the rotation on positions, lines of sight and attitudes together (frame centres off the track
         // fix the roll a straight track leaves to the ground plane, and spread ones the whole rotation), each
@@ -872,7 +909,7 @@ nlohmann::json RunGeorefStage(const fs::path& ws, const GeorefOptions& o) {
         const Eigen::Matrix3d R2 = joint.q.toRotationMatrix();
         ScaleShift positions2;
         if (positions_under(R2, &positions2)) {
-          FrameCentreFusion again = FuseFrameCentres(R2, positions2, sights, o.min_inlier_threshold, systematic, common_step);
+          FrameCentreFusion again = FuseFrameCentres(R2, positions2, sights, o.min_inlier_threshold, systematic, vertical_prior);
           // The turn must also be one the positions and attitudes allow — a gross-error gate (χ², 3 dof, 99.99%):
           // frame centres whose errors are smooth along the track fit a similarity of their own too well and would
           // look precise. (Not 99.9%: the positions' rotation information ignores their errors' correlation and
@@ -899,11 +936,14 @@ nlohmann::json RunGeorefStage(const fs::path& ws, const GeorefOptions& o) {
       frame_centres_json.update(fusion.ToJson());
       frame_centres_json["elevation_steps"] = steps;
       frame_centres_json["elevation_encoding"] =
-          !on_grid ? "not on the 2-byte ST 0601 grid: no quantisation error"
-                   : one_step ? "one 2-byte step (or MSL/HAE intersection) for all: a common offset, uniform within it"
-                              : "several 2-byte steps: a Gaussian floor";
-      frame_centres_json["elevation_interval_m"] = width;
-      if (undulation) frame_centres_json["geoid_undulation_m"] = *undulation;
+          !coded ? "not on the 2-byte ST 0601 grid: no quantisation error"
+                 : std::string(one_step ? "one 2-byte code for all: a common offset" : "several 2-byte codes: a Gaussian floor") +
+                       (heights.front().other ? ", within the MSL and HAE codes' common interval" : ", within its step");
+      frame_centres_json["elevation_offset_prior_sd_m"] = interval_sd;
+      if (undulation) {
+        frame_centres_json["geoid_undulation_m"] = *undulation;
+        frame_centres_json["geoid_undulation_sigma_m"] = undulation_sigma;
+      }
       if (fusion.used) {
         sim.s = fusion.fused.scale;
         sim.t = fusion.fused.translation;
