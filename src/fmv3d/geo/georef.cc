@@ -1028,7 +1028,8 @@ nlohmann::json RunGeorefStage(const fs::path& ws, const GeorefOptions& o) {
       if (inliers[i]) dst_in.push_back(dst[i]);
     const double sigma_eff = sigma * std::sqrt(static_cast<double>(fit_in) / n_eff);
     GeorefAccuracy acc;
-    Eigen::Matrix3d info = RotationInformation(dst_in, sigma_eff);
+    const Eigen::Matrix3d info_positions = RotationInformation(dst_in, sigma_eff);
+    Eigen::Matrix3d info = info_positions;
     acc.from.push_back("positions");
     if (!rel.empty() && attitude_sigma > 0) {
       info += Eigen::Matrix3d::Identity() * (attitude_n_eff / (attitude_sigma * attitude_sigma));
@@ -1063,7 +1064,7 @@ nlohmann::json RunGeorefStage(const fs::path& ws, const GeorefOptions& o) {
                          eig.eigenvalues().minCoeff() > 1 / (five_deg * five_deg);
     if (acc.rotation_known) acc.rotation_cov = info.inverse();
     {
-      const Eigen::Vector3d sp = RotationInformation(dst_in, sigma_eff).inverse().diagonal().cwiseSqrt() * 180 / M_PI;
+      const Eigen::Vector3d sp = info_positions.inverse().diagonal().cwiseSqrt() * 180 / M_PI;
       const Eigen::Vector3d sa = info.inverse().diagonal().cwiseSqrt() * 180 / M_PI;
       spdlog::debug("georef accuracy: rotation σ (°) positions {:.3f} {:.3f} {:.3f}, attitudes {:.3f}, all {:.3f} {:.3f} {:.3f}",
                     sp.x(), sp.y(), sp.z(), attitude_n_eff > 0 ? attitude_sigma / std::sqrt(attitude_n_eff) * 180 / M_PI : -1.0,
