@@ -249,7 +249,7 @@ TEST(Georef, ModelThatDisagreesWithTheFlightIsFlagged) {
 // fits the flight, and the cameras land within the telemetry's noise of the truth.
 // Image observations for a case's model (true projections of its ground points, 0.3 px noise), then its last
 // 30% of cameras moved 60 m: a bent model, as a telephoto pass's image model is.
-void ObserveAndBend(GeorefCase* g, int n, double look_at_spread) {
+void ObserveAndBend(GeorefCase* g, int n, double look_at_spread, double bend_m = 60) {
   core::Reconstruction rec = io::ReadColmapText(g->dir / "sparse");
   std::mt19937_64 rng(3);
   std::normal_distribution<double> N(0, 0.3);
@@ -269,7 +269,7 @@ void ObserveAndBend(GeorefCase* g, int n, double look_at_spread) {
   }
   for (auto& [id, img] : rec.images) {
     if (10 * (id - 1) < 7 * n) continue;
-    const Eigen::Vector3d c = img.pose.Centre() + g->true_to_model.s * (g->true_to_model.q * Eigen::Vector3d(60, 0, 0));
+    const Eigen::Vector3d c = img.pose.Centre() + g->true_to_model.s * (g->true_to_model.q * Eigen::Vector3d(bend_m, 0, 0));
     img.pose.t = -(img.pose.q * c);
   }
   rec.Validate();
@@ -576,6 +576,54 @@ TEST(Georef, FrameCentresFixTheRollAboutAStraightTrack) {
   std::cout << "rotation error: level ground " << angle[0] << "°, frame centres " << angle[1] << "°\n";
   EXPECT_GT(angle[0], 2.0);
   EXPECT_LT(angle[1], 0.2) << "level ground: " << angle[0];
+}
+
+// A straight pass whose image model twists about the track (each camera rolled about it, 0 → 0.6° along it) while
+// every camera stays on the line: the positions fit it perfectly and the level ground hides the twist, but the
+// frame centres (1 cm, spread 17 m) see it. --constrain auto builds the model again with them as priors and
+// keeps it; the cameras' orientations come out right. With --constrain never the twist stays.
+double WorstOrientationErrorDeg(const GeorefCase& g) {
+  const core::Reconstruction enu = io::ReadColmapText(g.dir / "geo/sparse_enu");
+  double worst = 0;
+  for (const auto& [id, img] : enu.images) {
+    const core::Pose truth = core::Pose::LookAt(g.true_centres[id - 1], CaseLookAt(id - 1, 17));
+    worst = std::max(worst, core::RotationAngle(img.pose.q, truth.q) * 180 / M_PI);
+  }
+  return worst;
+}
+
+TEST(Georef, StraightTrackWithFrameCentresIsBuiltAgain) {
+  double worst[2];
+  for (int mode = 0; mode < 2; ++mode) {
+    GeorefCase g;
+    const int n = 30;
+    MakeGeorefCase(&g, n, 3.0, true, -1, -1, 0, 200, 0, 0.01, Eigen::Vector3d::Zero(), 0, 17);
+    ObserveAndBend(&g, n, 17, 0);
+    core::Reconstruction rec = io::ReadColmapText(g.dir / "sparse");
+    const Eigen::Vector3d track = g.true_to_model.q * Eigen::Vector3d::UnitX();
+    for (auto& [id, img] : rec.images) {
+      const double roll = 0.6 * M_PI / 180 * (id - 1) / (n - 1);
+      const Eigen::Vector3d c = img.pose.Centre();
+      img.pose.q = (img.pose.q * Eigen::Quaterniond(Eigen::AngleAxisd(roll, track))).normalized();
+      img.pose.t = -(img.pose.q * c);
+    }
+    io::WriteColmapText(rec, g.dir / "sparse");
+    GeorefOptions o;
+    o.origin = kOrigin;
+    o.constrain = mode == 0 ? GeorefOptions::Constrain::kNever : GeorefOptions::Constrain::kAuto;
+    const auto j = RunGeorefStage(g.dir.path(), o);
+    EXPECT_NE(j["rotation_about_track_from"].get<std::string>().find("ground"), std::string::npos);
+    if (mode == 1) {
+      const auto& t = j["telemetry_constrained"];
+      EXPECT_TRUE(t.value("applied", false)) << t.dump();
+      EXPECT_EQ(t.value("trigger", ""), "a nearly straight track with frame centres") << t.dump();
+      EXPECT_TRUE(j["frame_centres"]["used"].get<bool>()) << j["frame_centres"].dump();
+    }
+    worst[mode] = WorstOrientationErrorDeg(g);
+  }
+  std::cout << "worst camera orientation error: image model " << worst[0] << "°, rebuilt " << worst[1] << "°\n";
+  EXPECT_GT(worst[0], 0.2);
+  EXPECT_LT(worst[1], 0.1);
 }
 
 TEST(Georef, ClearErrors) {

@@ -1082,11 +1082,19 @@ nlohmann::json RunGeorefStage(const fs::path& ws, const GeorefOptions& o) {
   // its trajectory alone cannot (a telephoto pass's image model bends its lines of sight, not its track).
   const bool shape_off = fit_fraction < o.min_fit_fraction;
   const bool sights_off = frame_centres_json.value("why", "").find("disagree") != std::string::npos;
+  // A nearly straight track leaves the image model free to bend about the track (a shallow dome or a roll that
+  // grows along it) while every camera stays on the line; neither the positions nor one similarity can see that.
+  // Frame centres that agree can: as priors on each optical axis they fix the shape, so such a model is built
+  // again with them (a straight pass: DSM 0.97% → 0.27% of the building height).
+  const bool straight_with_sights = roll_source != "camera positions" && fused_frame_centres.has_value();
   if (o.constrain == GeorefOptions::Constrain::kAlways ||
-      (o.constrain == GeorefOptions::Constrain::kAuto && (shape_off || sights_off))) {
+      (o.constrain == GeorefOptions::Constrain::kAuto && (shape_off || sights_off || straight_with_sights))) {
     spdlog::info("georef: {:.0f}% of the telemetry fits the model's trajectory{}; building the model again from the "
                  "telemetry's cameras",
-                 100 * fit_fraction, sights_off ? " and its frame centres disagree" : "");
+                 100 * fit_fraction,
+                 sights_off             ? " and its frame centres disagree"
+                 : straight_with_sights ? " along a nearly straight track; its frame centres fix the shape about it"
+                                        : "");
     nlohmann::json info;
     core::Reconstruction model;
     try {
@@ -1095,6 +1103,10 @@ nlohmann::json RunGeorefStage(const fs::path& ws, const GeorefOptions& o) {
       spdlog::warn("{}; keeping the image-only model", e.what());
       info = {{"applied", false}, {"why", e.what()}};
     }
+    info["trigger"] = o.constrain == GeorefOptions::Constrain::kAlways ? "forced (--constrain always)"
+                      : shape_off                                        ? "the track does not fit the model"
+                      : sights_off ? "the frame centres disagree with the model"
+                                   : "a nearly straight track with frame centres";
     if (!model.images.empty()) {
       const fs::path keep = geo_dir / "sparse_image_only";
       core::EnsureDirectory(keep);
@@ -1106,9 +1118,11 @@ nlohmann::json RunGeorefStage(const fs::path& ws, const GeorefOptions& o) {
       again.origin = origin;
       nlohmann::json rebuilt = RunGeorefStage(ws, again);
       // Kept when forced, or when it mends what was wrong: more of the track fits it, or (when only the frame
-      // centres disagreed) its frame centres now agree.
+      // centres disagreed, or shaped a straight track's model) its frame centres agree with it and the track
+      // still fits.
       const bool mended = shape_off ? rebuilt.at("fit_fraction").get<double>() > fit_fraction
-                                    : rebuilt.at("frame_centres").value("used", false);
+                                    : rebuilt.at("frame_centres").value("used", false) &&
+                                          rebuilt.at("fit_fraction").get<double>() >= o.min_fit_fraction;
       if (o.constrain == GeorefOptions::Constrain::kAlways || mended) {
         info["applied"] = true;
         info["fit_fraction_image_only"] = fit_fraction;

@@ -54,6 +54,9 @@ struct GeorefOptions {
   // model's tracks started on the ground plane, then bundle-adjusted with the positions as priors (σ =
   // prior_sigma_m per axis) and the intrinsics held. Kept when it fits the telemetry better (kAlways: kept): WS/sparse is
   // replaced (the image-only model goes to WS/geo/sparse_image_only/), so the later stages use it.
+  // kAuto also rebuilds when the frame centres disagree with the image model, and on a nearly straight track whose
+  // frame centres agree (they fix the bend about the track that nothing else sees); kept when its frame centres
+  // agree and the track fits. georef.json's telemetry_constrained.trigger says which.
   enum class Constrain { kAuto, kAlways, kNever };
   Constrain constrain = Constrain::kAuto;
   double min_fit_fraction = 0.8;
