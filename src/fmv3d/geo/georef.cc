@@ -404,6 +404,24 @@ std::optional<TelemetryView> ViewFromTelemetry(const Pair& p, const LocalFrame& 
   return v;
 }
 
+// RMS reprojection error (pixels) of a model's observations, recomputed (a points3D.txt error may be absent).
+double ReprojectionRms(const core::Reconstruction& rec) {
+  double sq = 0;
+  size_t n = 0;
+  for (const auto& [id, img] : rec.images) {
+    const core::Camera& cam = rec.cameras.at(img.camera_id);
+    for (size_t k = 0; k < img.points2d.size(); ++k) {
+      const auto pit = rec.points.find(static_cast<uint64_t>(img.point3d_ids[k]));
+      if (img.point3d_ids[k] == core::kNoPoint3D || pit == rec.points.end()) continue;
+      const Eigen::Vector3d xc = img.pose.Transform(pit->second.xyz);
+      if (xc.z() <= 0) continue;
+      sq += (cam.Project(xc) - img.points2d[k]).squaredNorm();
+      ++n;
+    }
+  }
+  return n ? std::sqrt(sq / n) : 0.0;
+}
+
 // The telemetry-initialised model (see GeorefOptions::constrain): cameras at the telemetry positions and
 // attitudes (ENU of `frame`), the telemetry focal, the image model's tracks with every point started on the
 // ground plane under the frame centres, then bundle adjustments with the positions as priors (σ prior_sigma_m)
@@ -1120,9 +1138,16 @@ nlohmann::json RunGeorefStage(const fs::path& ws, const GeorefOptions& o) {
       // Kept when forced, or when it mends what was wrong: more of the track fits it, or (when only the frame
       // centres disagreed, or shaped a straight track's model) its frame centres agree with it and the track
       // still fits.
-      const bool mended = shape_off ? rebuilt.at("fit_fraction").get<double>() > fit_fraction
-                                    : rebuilt.at("frame_centres").value("used", false) &&
-                                          rebuilt.at("fit_fraction").get<double>() >= o.min_fit_fraction;
+      bool mended = shape_off ? rebuilt.at("fit_fraction").get<double>() > fit_fraction
+                              : rebuilt.at("frame_centres").value("used", false) &&
+                                    rebuilt.at("fit_fraction").get<double>() >= o.min_fit_fraction;
+      if (straight_with_sights && !shape_off && !sights_off) {
+        // That model was sound: the rebuild (telemetry focal, intrinsics held) must also explain its images about
+        // as well, or a coarse HFOV is being traded for the bend.
+        const double image_px = ReprojectionRms(rec);
+        info["reprojection_rms_px_image_only"] = image_px;
+        mended = mended && info.value("reprojection_rms_px", 1e9) <= 1.5 * image_px + 0.1;
+      }
       if (o.constrain == GeorefOptions::Constrain::kAlways || mended) {
         info["applied"] = true;
         info["fit_fraction_image_only"] = fit_fraction;
