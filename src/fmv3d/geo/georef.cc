@@ -1157,9 +1157,11 @@ nlohmann::json RunGeorefStage(const fs::path& ws, const GeorefOptions& o) {
         return rebuilt;
       }
       spdlog::warn("georef: the telemetry-initialised model mends nothing ({:.0f}% of the track fits it, its frame "
-                   "centres {}); keeping the image-only model",
+                   "centres {}, reprojection {:.2f} px RMS against the image model's {:.2f}); keeping the image-only "
+                   "model",
                    100 * rebuilt.at("fit_fraction").get<double>(),
-                   rebuilt.at("frame_centres").value("used", false) ? "agree" : "do not agree either");
+                   rebuilt.at("frame_centres").value("used", false) ? "agree" : "do not agree either",
+                   info.value("reprojection_rms_px", -1.0), ReprojectionRms(rec));
       for (const char* f : {"cameras.txt", "images.txt", "points3D.txt"})
         fs::copy_file(keep / f, ws / "sparse" / f, fs::copy_options::overwrite_existing);
       fs::remove_all(keep);
