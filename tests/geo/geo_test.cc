@@ -610,7 +610,8 @@ TEST(Georef, StraightTrackWithFrameCentresIsBuiltAgain) {
     if (mode == 2) {
       // The telemetry's HFOV is 5% off and the image model is sound: the rebuild, which holds the HFOV camera,
       // explains the images worse than the image model and is not kept.
-      for (auto& [id, img] : rec.images) img.pose = g.true_to_model.Apply(core::Pose::LookAt(g.true_centres[id - 1], CaseLookAt(id - 1, 17)));
+      for (auto& [id, img] : rec.images)
+        img.pose = g.true_to_model.Apply(core::Pose::LookAt(g.true_centres[id - 1], CaseLookAt(id - 1, 17)));
       io::FramesIndex index = io::ReadFramesIndex(g.dir / "frames/frames.json");
       index.cameras[0].prior_source = "telemetry-hfov";
       index.cameras[0].camera.f *= 1.05;

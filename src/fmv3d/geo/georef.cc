@@ -1107,12 +1107,13 @@ nlohmann::json RunGeorefStage(const fs::path& ws, const GeorefOptions& o) {
   const bool straight_with_sights = roll_source != "camera positions" && fused_frame_centres.has_value();
   if (o.constrain == GeorefOptions::Constrain::kAlways ||
       (o.constrain == GeorefOptions::Constrain::kAuto && (shape_off || sights_off || straight_with_sights))) {
-    spdlog::info("georef: {:.0f}% of the telemetry fits the model's trajectory{}; building the model again from the "
-                 "telemetry's cameras",
-                 100 * fit_fraction,
-                 sights_off             ? " and its frame centres disagree"
-                 : straight_with_sights ? " along a nearly straight track; its frame centres fix the shape about it"
-                                        : "");
+    const char* trigger = o.constrain == GeorefOptions::Constrain::kAlways ? "forced (--constrain always)"
+                          : shape_off  ? "the track does not fit the model"
+                          : sights_off ? "the frame centres disagree with the model"
+                                       : "a nearly straight track with frame centres";
+    spdlog::info("georef: {:.0f}% of the telemetry fits the model's trajectory ({}); building the model again from "
+                 "the telemetry's cameras",
+                 100 * fit_fraction, trigger);
     nlohmann::json info;
     core::Reconstruction model;
     try {
@@ -1121,10 +1122,7 @@ nlohmann::json RunGeorefStage(const fs::path& ws, const GeorefOptions& o) {
       spdlog::warn("{}; keeping the image-only model", e.what());
       info = {{"applied", false}, {"why", e.what()}};
     }
-    info["trigger"] = o.constrain == GeorefOptions::Constrain::kAlways ? "forced (--constrain always)"
-                      : shape_off                                        ? "the track does not fit the model"
-                      : sights_off ? "the frame centres disagree with the model"
-                                   : "a nearly straight track with frame centres";
+    info["trigger"] = trigger;
     if (!model.images.empty()) {
       const fs::path keep = geo_dir / "sparse_image_only";
       core::EnsureDirectory(keep);
@@ -1141,11 +1139,11 @@ nlohmann::json RunGeorefStage(const fs::path& ws, const GeorefOptions& o) {
       bool mended = shape_off ? rebuilt.at("fit_fraction").get<double>() > fit_fraction
                               : rebuilt.at("frame_centres").value("used", false) &&
                                     rebuilt.at("fit_fraction").get<double>() >= o.min_fit_fraction;
+      const double image_px = ReprojectionRms(rec);
+      info["reprojection_rms_px_image_only"] = image_px;
       if (straight_with_sights && !shape_off && !sights_off) {
         // That model was sound: the rebuild (telemetry focal, intrinsics held) must also explain its images about
         // as well, or a coarse HFOV is being traded for the bend.
-        const double image_px = ReprojectionRms(rec);
-        info["reprojection_rms_px_image_only"] = image_px;
         mended = mended && info.value("reprojection_rms_px", 1e9) <= 1.5 * image_px + 0.1;
       }
       if (o.constrain == GeorefOptions::Constrain::kAlways || mended) {
@@ -1161,7 +1159,7 @@ nlohmann::json RunGeorefStage(const fs::path& ws, const GeorefOptions& o) {
                    "model",
                    100 * rebuilt.at("fit_fraction").get<double>(),
                    rebuilt.at("frame_centres").value("used", false) ? "agree" : "do not agree either",
-                   info.value("reprojection_rms_px", -1.0), ReprojectionRms(rec));
+                   info.value("reprojection_rms_px", -1.0), image_px);
       for (const char* f : {"cameras.txt", "images.txt", "points3D.txt"})
         fs::copy_file(keep / f, ws / "sparse" / f, fs::copy_options::overwrite_existing);
       fs::remove_all(keep);
