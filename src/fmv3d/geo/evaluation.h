@@ -12,7 +12,9 @@
 //   points    distance of geo/sparse_enu/'s points to the true mesh (RMS, median)
 //   dsm       geo/dsm.tif against the true mesh rasterised on the same grid, on cells that are seen and whose
 //             true surface is flat around them (a height step inside a cell has no single true height):
-//             RMS, bias (mean), RMS after removing the bias, and RMS as % of the building height
+//             RMS, bias (mean), RMS after removing the bias, and RMS as % of the building height; over the
+//             modelled area (truth.json's bounds, as for "surface"), and as "whole_seen" over every compared cell
+//             (synth's far-ground backdrop included)
 #pragma once
 
 #include <filesystem>
