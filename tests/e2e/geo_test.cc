@@ -84,6 +84,10 @@ TEST(E2eGeo, KlvFlightGeoreferencedDsm) {
   EXPECT_LE(eval.at("cameras").at("centre_rms_m").get<double>(), 0.8);
   EXPECT_GT(eval.at("dsm").at("cells_compared").get<int>(), 1000);
   EXPECT_LE(eval.at("dsm").at("height_rms_m").get<double>(), 1.0);
+  // The headline DSM figure is over the modelled area (truth.json's bounds); the whole seen DSM adds synth's
+  // far-ground backdrop.
+  EXPECT_NE(eval.at("dsm").at("region").get<std::string>().find("bounds"), std::string::npos);
+  EXPECT_GE(eval.at("dsm").at("whole_seen").at("cells_compared").get<int>(), eval.at("dsm").at("cells_compared").get<int>());
   // The products open: a UTM GeoTIFF, a LAS 1.4 with the CRS.
   geo::GridSpec grid;
   geo::ReadHeightGeoTiff(dir / "ws/geo/dsm.tif", &grid);

@@ -229,7 +229,7 @@ FrameCentreFusion FuseFrameCentres(const Eigen::Matrix3d& R, const ScaleShift& p
     x[k] = cov * (info_p * Params(positions) + info_l * l);
     if (std::isfinite(chi2[k]) && prior[k].second > 0) f.chi2 = std::min(f.chi2, chi2[k]);
   }
-  if (!std::isfinite(f.chi2) || f.chi2 > 18.47) {  // 99.9% of a 4-dof χ² (at the offset that agrees best)
+  if (!std::isfinite(f.chi2) || f.chi2 > kFrameCentreAgreementChi2) {  // at the offset that agrees best
     f.why = "the frame centres disagree with the positions beyond their uncertainties";
     return f;
   }

@@ -21,6 +21,9 @@
 
 namespace fmv3d::geo {
 
+// The frame centres' fit agrees with the positions' when χ² ≤ this (4 dof, 99.9%).
+constexpr double kFrameCentreAgreementChi2 = 18.47;
+
 // One packet's (or keyframe's) line of sight: the model camera and the telemetry's frame centre and range.
 struct LineOfSight {
   Eigen::Vector3d model_centre;   // model camera centre (sparse coordinates)

@@ -56,7 +56,9 @@ struct GeorefOptions {
   // replaced (the image-only model goes to WS/geo/sparse_image_only/), so the later stages use it.
   // kAuto also rebuilds when the frame centres disagree with the image model, and on a nearly straight track whose
   // frame centres agree (they fix the bend about the track that nothing else sees); kept when its frame centres
-  // agree and the track fits (and, for a straight track, it reprojects within 1.5× + 0.1 px of the image model).
+  // agree and the track fits (and, for a straight track, it reprojects within 1.5× + 0.1 px of the image model);
+  // when they disagreed with the image model, also when the rebuild lowers their χ² against the positions by more
+  // than the agreement threshold (frame_centres.h), reprojects within that bound and fits the track.
   // georef.json's telemetry_constrained.trigger says which.
   enum class Constrain { kAuto, kAlways, kNever };
   Constrain constrain = Constrain::kAuto;
