@@ -1139,18 +1139,20 @@ nlohmann::json RunGeorefStage(const fs::path& ws, const GeorefOptions& o) {
       // A rebuild whose frame centres still disagree mends it too when it removes more of their disagreement
       // than the whole agreement band (χ² against the positions lower by more than kFrameCentreAgreementChi2)
       // and explains the images as well: a telephoto pass with 49 keyframes, image model χ² 3096 and surface
-      // 11.3 m, rebuilt χ² 39 and 1.2 m. What is left there is a slightly different scale of the positions and
-      // the frame centres (0.5%), which one similarity cannot serve.
+      // 11.3 m, rebuilt χ² 39 and 1.2 m. What is left there is the rebuild's own warp (0.5% short along the
+      // track for the positions, not for the frame centres), which one similarity cannot serve.
       const double image_px = ReprojectionRms(rec);
       info["reprojection_rms_px_image_only"] = image_px;
       const bool explains_images = info.value("reprojection_rms_px", 1e9) <= 1.5 * image_px + 0.1;
       const double chi2_image = frame_centres_json.value("chi2_vs_positions", 0.0);
-      const double chi2_rebuilt = rebuilt.at("frame_centres").value("chi2_vs_positions", 1e300);
+      const nlohmann::json& rebuilt_sights = rebuilt.at("frame_centres");
+      const bool has_chi2 = rebuilt_sights.contains("chi2_vs_positions");
+      const double chi2_rebuilt = has_chi2 ? rebuilt_sights["chi2_vs_positions"].get<double>() : 1e300;
       info["frame_centres_chi2_image_only"] = chi2_image;
-      info["frame_centres_chi2"] = rebuilt.at("frame_centres").value("chi2_vs_positions", -1.0);
+      if (has_chi2) info["frame_centres_chi2"] = chi2_rebuilt;
       const bool sights_closer = sights_off && chi2_rebuilt < chi2_image - kFrameCentreAgreementChi2 && explains_images;
       bool mended = shape_off ? rebuilt.at("fit_fraction").get<double>() > fit_fraction
-                              : (rebuilt.at("frame_centres").value("used", false) || sights_closer) &&
+                              : (rebuilt_sights.value("used", false) || sights_closer) &&
                                     rebuilt.at("fit_fraction").get<double>() >= o.min_fit_fraction;
       if (straight_with_sights && !shape_off && !sights_off) {
         // That model was sound: the rebuild (telemetry focal, intrinsics held) must also explain its images about
@@ -1169,8 +1171,8 @@ nlohmann::json RunGeorefStage(const fs::path& ws, const GeorefOptions& o) {
                    "centres {} (χ² {:.1f} against the image model's {:.1f}), reprojection {:.2f} px RMS against the "
                    "image model's {:.2f}); keeping the image-only model",
                    100 * rebuilt.at("fit_fraction").get<double>(),
-                   rebuilt.at("frame_centres").value("used", false) ? "agree" : "do not agree either",
-                   rebuilt.at("frame_centres").value("chi2_vs_positions", -1.0), chi2_image,
+                   rebuilt_sights.value("used", false) ? "agree" : "do not agree either",
+                   has_chi2 ? chi2_rebuilt : -1.0, chi2_image,
                    info.value("reprojection_rms_px", -1.0), image_px);
       for (const char* f : {"cameras.txt", "images.txt", "points3D.txt"})
         fs::copy_file(keep / f, ws / "sparse" / f, fs::copy_options::overwrite_existing);
