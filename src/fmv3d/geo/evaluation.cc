@@ -36,6 +36,14 @@ struct Stats {
   double CentredRms() const { return n ? std::sqrt(std::max(0.0, sq / n - Mean() * Mean())) : 0; }
 };
 
+// The modelled area: truth.json's "bounds" (world frame of the truth); empty when it states none.
+Eigen::AlignedBox3d ModelledRegion(const nlohmann::json& truth) {
+  if (!truth.contains("bounds")) return {};
+  const auto lo = truth["bounds"].at("min").get<std::vector<double>>(), hi = truth["bounds"].at("max").get<std::vector<double>>();
+  if (lo.size() != 3 || hi.size() != 3) return {};
+  return Eigen::AlignedBox3d(Eigen::Vector3d(lo[0], lo[1], lo[2]), Eigen::Vector3d(hi[0], hi[1], hi[2]));
+}
+
 // DSM height errors over a set of compared cells: e = DSM − truth, its part that is the reconstruction's own
 // (e_model) and georef's predicted height σ there.
 struct DsmTally {
@@ -117,12 +125,7 @@ template <typename ToWs>
 nlohmann::json SurfaceError(const core::Reconstruction& est, const core::Reconstruction& tru, const core::Sim3& s,
                             double fit_rms, const io::TexturedMesh& mesh, const nlohmann::json& truth,
                             const ToWs& to_ws, const std::optional<GeorefAccuracy>& accuracy) {
-  // Region: truth.json bounds (world frame of the truth), else the whole mesh.
-  Eigen::AlignedBox3d region;
-  if (truth.contains("bounds")) {
-    const auto lo = truth["bounds"].at("min").get<std::vector<double>>(), hi = truth["bounds"].at("max").get<std::vector<double>>();
-    if (lo.size() == 3 && hi.size() == 3) region = Eigen::AlignedBox3d(Eigen::Vector3d(lo[0], lo[1], lo[2]), Eigen::Vector3d(hi[0], hi[1], hi[2]));
-  }
+  const Eigen::AlignedBox3d region = ModelledRegion(truth);
   std::vector<Eigen::Vector3i> tris;
   for (const auto& f : mesh.faces) {
     const Eigen::Vector3d c = (mesh.vertices[f.v[0]] + mesh.vertices[f.v[1]] + mesh.vertices[f.v[2]]) / 3.0;
@@ -317,11 +320,10 @@ nlohmann::json EvaluateGeoAgainstSynth(const fs::path& ws, const fs::path& synth
     // facets, 0.3 m below the terrain at its vertices and flat between them, with blurred, hazy texture (it is
     // there so oblique views see land). Its seam with the tile is a step of synth's own making, and its land is
     // made not to be matched. The headline is the modelled area, as for the surface.
-    Eigen::AlignedBox2d modelled;
-    if (truth.contains("bounds")) {
-      const auto lo = truth["bounds"].at("min").get<std::vector<double>>(), hi = truth["bounds"].at("max").get<std::vector<double>>();
-      if (lo.size() == 3 && hi.size() == 3) modelled = Eigen::AlignedBox2d(Eigen::Vector2d(lo[0], lo[1]), Eigen::Vector2d(hi[0], hi[1]));
-    }
+    const Eigen::AlignedBox3d region = ModelledRegion(truth);
+    const Eigen::AlignedBox2d modelled = region.isEmpty()
+                                             ? Eigen::AlignedBox2d()
+                                             : Eigen::AlignedBox2d(region.min().head<2>(), region.max().head<2>());
     DsmTally in_area, all_cells;
     size_t seen = 0;
     // Signed error per compared cell, for dsm_error.png: blue below the truth, red above, full colour at 1% of
