@@ -1,4 +1,4 @@
-// Decode memory and speed: streams a long video through io::VideoReader (and the keyframe selector, as
+// Decode memory and speed: streams a long video through ingest::VideoReader (and the keyframe selector, as
 // `fmv3d frames` does) and reports the peak resident set size (VmHWM) — the issue's "10-minute 1080p video
 // stays under 1 GiB RSS".
 //
@@ -13,8 +13,8 @@
 #include <fstream>
 #include <string>
 
-#include "fmv3d/io/keyframes.h"
-#include "fmv3d/io/video_reader.h"
+#include "fmv3d/ingest/keyframes.h"
+#include "fmv3d/ingest/video_reader.h"
 
 namespace {
 
@@ -46,10 +46,10 @@ void Decode(benchmark::State& state, bool select_keyframes) {
   }
   int64_t frames = 0, keyframes = 0;
   for (auto _ : state) {
-    fmv3d::io::VideoReader reader(path);
-    fmv3d::io::KeyframeSelector selector(fmv3d::io::KeyframeOptions(), reader.info().fps);
-    fmv3d::io::VideoFrame frame;
-    std::vector<fmv3d::io::Keyframe> kept;
+    fmv3d::ingest::VideoReader reader(path);
+    fmv3d::ingest::KeyframeSelector selector(fmv3d::ingest::KeyframeOptions(), reader.info().fps);
+    fmv3d::ingest::VideoFrame frame;
+    std::vector<fmv3d::ingest::Keyframe> kept;
     while (reader.Read(&frame)) {
       ++frames;
       if (select_keyframes) {

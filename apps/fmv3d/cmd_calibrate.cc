@@ -11,7 +11,8 @@
 #include "fmv3d/calib/sensor_db.h"
 #include "fmv3d/core/files.h"
 #include "fmv3d/core/logging.h"
-#include "fmv3d/io/frames.h"
+#include "fmv3d/ingest/frames.h"
+#include "fmv3d/ingest/video_reader.h"
 #include "fmv3d/io/image_io.h"
 
 namespace fmv3d::app {
@@ -28,7 +29,7 @@ struct CalibArgs {
 
 void Run(const CalibArgs& a) {
   const calib::BoardSpec board = calib::BoardSpec::Parse(a.board, a.square);
-  const auto files = io::ExpandInputs(std::vector<fs::path>(a.images.begin(), a.images.end()));
+  const auto files = ingest::ExpandInputs(std::vector<fs::path>(a.images.begin(), a.images.end()));
   const fs::path out(a.output);
   const fs::path stem = out.parent_path() / out.stem();
   const fs::path corners_dir = stem.string() + "-corners";
@@ -38,7 +39,7 @@ void Run(const CalibArgs& a) {
   {
     core::Progress progress("detect", files.size());
     for (size_t i = 0; i < files.size(); ++i) {
-      const cv::Mat img = io::ReadImage(files[i]);
+      const cv::Mat img = ingest::ReadInputImage(files[i]);
       detections[i] = calib::DetectChessboard(img, board, files[i].filename().string());
       io::WriteImage(corners_dir / (files[i].stem().string() + ".png"), calib::DrawCorners(img, detections[i], board));
       progress.Add();

@@ -5,7 +5,7 @@
 
 #include "command.h"
 #include "fmv3d/calib/priors.h"
-#include "fmv3d/io/frames.h"
+#include "fmv3d/ingest/frames.h"
 
 namespace fmv3d::app {
 namespace {
@@ -14,7 +14,7 @@ struct FramesArgs {
   std::vector<std::string> inputs;
   std::string workspace;
   std::string camera_file, sensor;
-  io::IngestOptions options;
+  ingest::IngestOptions options;
 };
 
 void Add(CLI::App& app) {
@@ -41,7 +41,7 @@ void Add(CLI::App& app) {
     const calib::PriorChooser chooser(po, calib::SensorDatabase::LoadDefault());
     a->options.prior = chooser.AsFunction();
     std::vector<std::filesystem::path> inputs(a->inputs.begin(), a->inputs.end());
-    const io::FramesIndex index = io::IngestFrames(inputs, a->options);
+    const io::FramesIndex index = ingest::IngestFrames(inputs, a->options);
     std::printf("%zu frames, %zu cameras -> %s\n", index.frames.size(), index.cameras.size(),
                 (std::filesystem::path(a->workspace) / "frames" / "frames.json").c_str());
   });

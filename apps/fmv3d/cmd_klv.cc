@@ -7,7 +7,7 @@
 #include "command.h"
 #include "fmv3d/core/error.h"
 #include "fmv3d/core/files.h"
-#include "fmv3d/io/telemetry.h"
+#include "fmv3d/telemetry/telemetry.h"
 
 namespace fmv3d::app {
 namespace {
@@ -20,16 +20,16 @@ struct Options {
 
 void Run(const Options& o) {
   if (!std::filesystem::exists(o.input)) throw Error(o.input + ": no such file");
-  io::TelemetryStats stats;
-  const auto packets = io::ReadVideoKlv(o.input, &stats);
+  telemetry::TelemetryStats stats;
+  const auto packets = telemetry::ReadVideoKlv(o.input, &stats);
   nlohmann::json out = nlohmann::json::array();
   if (o.telemetry) {
-    std::vector<io::TelemetrySample> samples;
+    std::vector<telemetry::TelemetrySample> samples;
     for (const auto& p : packets)
-      if (auto s = io::SampleFromPacket(p)) samples.push_back(std::move(*s));
-    for (const auto& s : samples) out.push_back(io::ToJson(s));
+      if (auto s = telemetry::SampleFromPacket(p)) samples.push_back(std::move(*s));
+    for (const auto& s : samples) out.push_back(telemetry::ToJson(s));
   } else {
-    for (const auto& p : packets) out.push_back(io::klv::ToJson(p));
+    for (const auto& p : packets) out.push_back(telemetry::klv::ToJson(p));
   }
   // KLV strings may hold any valid UTF-8 (and NULs); replace-on-error keeps the writer total anyway.
   const std::string text = out.dump(2, ' ', false, nlohmann::json::error_handler_t::replace) + "\n";

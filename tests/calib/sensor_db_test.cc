@@ -152,7 +152,7 @@ TEST(Priors, OrderOfTrust) {
   WriteCameraJson(tmp / "camera.json", r);
   SensorDatabase db;
   db.Load(ShippedDatabasePath());
-  io::CameraGroup g;
+  ingest::CameraGroup g;
   g.width = 1368;
   g.height = 912;
   g.exif.make = "DJI";
@@ -163,7 +163,7 @@ TEST(Priors, OrderOfTrust) {
   EXPECT_NEAR(PriorChooser({tmp / "camera.json", ""}, db).Choose(g, &source).f, 950, 1e-9);
   EXPECT_EQ(source, "calibration:" + (tmp / "camera.json").string());
   // ... not for frames of another aspect ratio: falls through to the sensor database.
-  io::CameraGroup square = g;
+  ingest::CameraGroup square = g;
   square.width = square.height = 912;
   PriorChooser({tmp / "camera.json", ""}, db).Choose(square, &source);
   EXPECT_EQ(source, "sensor-db:DJI Phantom 4 Pro");
@@ -171,14 +171,14 @@ TEST(Priors, OrderOfTrust) {
   EXPECT_NEAR(PriorChooser({}, db).Choose(g, &source).f, 912, 1e-9);
   EXPECT_EQ(source, "sensor-db:DJI Phantom 4 Pro");
   // ... or forced with --sensor, for a video without EXIF
-  io::CameraGroup video;
+  ingest::CameraGroup video;
   video.width = 1368;
   video.height = 912;
   video.is_video = true;
   EXPECT_NEAR(PriorChooser({"", "DJI Phantom 4 Pro"}, db).Choose(video, &source).f, 912, 1e-9);
   EXPECT_THROW(PriorChooser({"", "No Such Camera"}, db), Error);
   // 3. EXIF alone: 35 mm equivalent
-  io::CameraGroup unknown = g;
+  ingest::CameraGroup unknown = g;
   unknown.exif.model = "Unknown-1";
   unknown.exif.focal_35mm = 28;
   EXPECT_NEAR(PriorChooser({}, db).Choose(unknown, &source).f, 28 * std::hypot(1368, 912) / std::hypot(36, 24), 1e-9);
@@ -254,10 +254,10 @@ TEST(Priors, ExifJpegMatchesSensorDatabaseThroughIngestion) {
   cv::imwrite((tmp / "dji.jpg").string(), img);
   test::AddExifToJpeg(tmp / "dji.jpg", test::MakeExif("DJI", "FC6310", 88, 10, 24));
   cv::imwrite((tmp / "plain.jpg").string(), img);
-  io::IngestOptions opt;
+  ingest::IngestOptions opt;
   opt.workspace = tmp / "ws";
   opt.prior = PriorChooser({}, SensorDatabase::LoadDefault()).AsFunction();
-  const io::FramesIndex index = io::IngestFrames({tmp / "dji.jpg", tmp / "plain.jpg"}, opt);
+  const io::FramesIndex index = ingest::IngestFrames({tmp / "dji.jpg", tmp / "plain.jpg"}, opt);
   ASSERT_EQ(index.cameras.size(), 2u);
   EXPECT_EQ(index.cameras[0].prior_source, "sensor-db:DJI Phantom 4 Pro");
   EXPECT_NEAR(index.cameras[0].camera.f, 912, 1e-9);

@@ -7,12 +7,12 @@
 #include <string>
 #include <vector>
 
-#include "fmv3d/io/dji_srt.h"
-#include "fmv3d/io/klv.h"
-#include "fmv3d/io/telemetry.h"
+#include "fmv3d/telemetry/dji_srt.h"
+#include "fmv3d/telemetry/klv.h"
+#include "fmv3d/telemetry/telemetry.h"
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
-  using namespace fmv3d::io;
+  using namespace fmv3d::telemetry;
   std::vector<klv::Packet> packets;
   klv::ParseStats stats;
   klv::ParseBuffer(klv::ByteSpan(data, size), &packets, &stats);

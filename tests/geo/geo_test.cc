@@ -23,7 +23,8 @@
 #include "fmv3d/geo/raster.h"
 #include "fmv3d/io/colmap_model.h"
 #include "fmv3d/io/frames_index.h"
-#include "fmv3d/io/klv_st0601_writer.h"
+#include "fmv3d/telemetry/attitude.h"
+#include "fmv3d/telemetry/klv_st0601_writer.h"
 #include "fmv3d/io/obj_io.h"
 #include "fmv3d/synth/telemetry.h"
 #include "test_util.h"
@@ -160,7 +161,7 @@ void MakeGeorefCase(GeorefCase* g, int n, double noise, bool straight, int outli
       // Split the true attitude for a nominal platform, then state a noisy (and offset) platform, as synth does:
       // the telemetry's camera attitude is off by about attitude_noise per axis (and by heading_offset).
       const Eigen::Matrix3d cam_to_enu = core::Pose::LookAt(c, look_at).R().transpose();
-      const auto a = io::klv::St0601FromCameraToEnu(cam_to_enu, 90, 0, 0);
+      const auto a = telemetry::St0601FromCameraToEnu(cam_to_enu, 90, 0, 0);
       f.telemetry["platform_heading"] = 90 + heading_offset + attitude_noise * Na(rng_att);
       f.telemetry["platform_pitch"] = attitude_noise * Na(rng_att);
       f.telemetry["platform_roll"] = attitude_noise * Na(rng_att);
@@ -442,13 +443,13 @@ TEST(Georef, FrameCentresFromThePlatformsOwnGpsDoNotHurt) {
         t["sensor_latitude"] = p.lat, t["sensor_longitude"] = p.lon, t["sensor_altitude_hae"] = p.alt;
         t["sensor_altitude_msl"] = p.alt;
       }
-      io::klv::St0601Attitude a;
+      telemetry::St0601Attitude a;
       a.platform_heading = t["platform_heading"], a.platform_pitch = t["platform_pitch"];
       a.platform_roll = t["platform_roll"];
       a.sensor_relative_azimuth = t["sensor_relative_azimuth"];
       a.sensor_relative_elevation = t["sensor_relative_elevation"];
       a.sensor_relative_roll = t["sensor_relative_roll"];
-      const Eigen::Vector3d d = io::klv::CameraToEnuFromSt0601(a).col(2);
+      const Eigen::Vector3d d = telemetry::CameraToEnuFromSt0601(a).col(2);
       const Eigen::Vector3d p = frame.ToEnu({t["sensor_latitude"], t["sensor_longitude"], t["sensor_altitude_hae"]});
       ASSERT_LT(d.z(), 0);
       const double range = -p.z() / d.z();

@@ -11,17 +11,18 @@
 
 #include "fmv3d/core/error.h"
 #include "fmv3d/io/frames_index.h"
-#include "fmv3d/io/klv.h"
-#include "fmv3d/io/klv_st0601.h"
-#include "fmv3d/io/klv_st0601_writer.h"
-#include "fmv3d/io/telemetry.h"
+#include "fmv3d/telemetry/klv.h"
+#include "fmv3d/telemetry/klv_st0601.h"
+#include "fmv3d/telemetry/attitude.h"
+#include "fmv3d/telemetry/klv_st0601_writer.h"
+#include "fmv3d/telemetry/telemetry.h"
 #include "fmv3d/synth/synth.h"
 #include "test_util.h"
 
 namespace fmv3d {
 namespace {
 
-using io::klv::St0601Record;
+using telemetry::klv::St0601Record;
 
 St0601Record SampleRecord() {
   St0601Record r;
@@ -52,16 +53,16 @@ constexpr double kAngle32Step = 360.0 / 4294967295.0, kPitchStep = 90.0 / 214748
 
 TEST(KlvWriter, PacketDecodesToTheValuesWritten) {
   const St0601Record r = SampleRecord();
-  const auto bytes = io::klv::EncodeSt0601Packet(r);
-  std::vector<io::klv::Packet> packets;
-  io::klv::ParseStats stats;
-  io::klv::ParseBuffer(io::klv::ByteSpan(bytes.data(), bytes.size()), &packets, &stats);
+  const auto bytes = telemetry::klv::EncodeSt0601Packet(r);
+  std::vector<telemetry::klv::Packet> packets;
+  telemetry::klv::ParseStats stats;
+  telemetry::klv::ParseBuffer(telemetry::klv::ByteSpan(bytes.data(), bytes.size()), &packets, &stats);
   ASSERT_EQ(packets.size(), 1u);
   EXPECT_EQ(stats.bad_checksum, 0u);
   EXPECT_EQ(stats.malformed, 0u);
   EXPECT_EQ(stats.bad_items, 0u);
-  ASSERT_EQ(packets[0].standard, io::klv::Standard::kSt0601);
-  const auto s = io::SampleFromPacket(packets[0]);
+  ASSERT_EQ(packets[0].standard, telemetry::klv::Standard::kSt0601);
+  const auto s = telemetry::SampleFromPacket(packets[0]);
   ASSERT_TRUE(s);
   EXPECT_EQ(*s->unix_time_us, r.unix_time_us);
   EXPECT_NEAR(*s->sensor_latitude, r.sensor_latitude, 0.5 * kLatStep + 1e-12);
@@ -84,34 +85,34 @@ TEST(KlvWriter, PacketDecodesToTheValuesWritten) {
   auto bad = bytes;
   bad[30] ^= 0x01;
   packets.clear();
-  io::klv::ParseStats bad_stats;
-  io::klv::ParseBuffer(io::klv::ByteSpan(bad.data(), bad.size()), &packets, &bad_stats);
+  telemetry::klv::ParseStats bad_stats;
+  telemetry::klv::ParseBuffer(telemetry::klv::ByteSpan(bad.data(), bad.size()), &packets, &bad_stats);
   EXPECT_TRUE(packets.empty());
   EXPECT_EQ(bad_stats.bad_checksum, 1u);
 }
 
 TEST(KlvWriter, BerAndMappingPrimitives) {
-  EXPECT_EQ(io::klv::EncodeBerLength(5), std::vector<uint8_t>({0x05}));
-  EXPECT_EQ(io::klv::EncodeBerLength(200), std::vector<uint8_t>({0x81, 0xC8}));
-  EXPECT_EQ(io::klv::EncodeBerLength(256), std::vector<uint8_t>({0x82, 0x01, 0x00}));
-  EXPECT_EQ(io::klv::EncodeBerOid(127), std::vector<uint8_t>({0x7F}));
-  EXPECT_EQ(io::klv::EncodeBerOid(129), std::vector<uint8_t>({0x81, 0x01}));
+  EXPECT_EQ(telemetry::klv::EncodeBerLength(5), std::vector<uint8_t>({0x05}));
+  EXPECT_EQ(telemetry::klv::EncodeBerLength(200), std::vector<uint8_t>({0x81, 0xC8}));
+  EXPECT_EQ(telemetry::klv::EncodeBerLength(256), std::vector<uint8_t>({0x82, 0x01, 0x00}));
+  EXPECT_EQ(telemetry::klv::EncodeBerOid(127), std::vector<uint8_t>({0x7F}));
+  EXPECT_EQ(telemetry::klv::EncodeBerOid(129), std::vector<uint8_t>({0x81, 0x01}));
   // Round trip through the decoder's mappings at the ends and in the middle of each range.
   for (double v : {-900.0, 0.0, 123.4, 19000.0})
-    EXPECT_NEAR(io::klv::MapUnsigned(io::klv::EncodeUnsignedMapped(v, 2, -900, 19000), 2, -900, 19000), v,
+    EXPECT_NEAR(telemetry::klv::MapUnsigned(telemetry::klv::EncodeUnsignedMapped(v, 2, -900, 19000), 2, -900, 19000), v,
                 0.5 * kAltStep);
   for (double v : {-90.0, -12.345678, 0.0, 90.0})
-    EXPECT_NEAR(*io::klv::MapSigned(io::klv::EncodeSignedMapped(v, 4, 90), 4, 90), v, 0.5 * kLatStep + 1e-12);
+    EXPECT_NEAR(*telemetry::klv::MapSigned(telemetry::klv::EncodeSignedMapped(v, 4, 90), 4, 90), v, 0.5 * kLatStep + 1e-12);
   // The reserved "error" code is never produced.
-  EXPECT_EQ(io::klv::EncodeSignedMapped(-90, 4, 90), -2147483647);
-  EXPECT_THROW(io::klv::EncodeSignedMapped(90.001, 4, 90), Error);
-  EXPECT_THROW(io::klv::EncodeUnsignedMapped(std::nan(""), 2, 0, 1), Error);
+  EXPECT_EQ(telemetry::klv::EncodeSignedMapped(-90, 4, 90), -2147483647);
+  EXPECT_THROW(telemetry::klv::EncodeSignedMapped(90.001, 4, 90), Error);
+  EXPECT_THROW(telemetry::klv::EncodeUnsignedMapped(std::nan(""), 2, 0, 1), Error);
   St0601Record r = SampleRecord();
   r.sensor_latitude = 91;
-  EXPECT_THROW(io::klv::EncodeSt0601Packet(r), Error);
+  EXPECT_THROW(telemetry::klv::EncodeSt0601Packet(r), Error);
   r = SampleRecord();
   r.sensor_true_altitude = 25000;
-  EXPECT_THROW(io::klv::EncodeSt0601Packet(r), Error);
+  EXPECT_THROW(telemetry::klv::EncodeSt0601Packet(r), Error);
 }
 
 TEST(KlvWriter, AttitudeSplitReproducesTheCameraRotation) {
@@ -121,18 +122,18 @@ TEST(KlvWriter, AttitudeSplitReproducesTheCameraRotation) {
     const Eigen::Matrix3d R =
         Eigen::Quaterniond(u(rng), u(rng), u(rng), u(rng)).normalized().toRotationMatrix();
     const double heading = 180 * u(rng) + 180, pitch = 20 * u(rng), roll = 30 * u(rng);
-    const auto a = io::klv::St0601FromCameraToEnu(R, heading, pitch, roll);
-    EXPECT_TRUE((io::klv::CameraToEnuFromSt0601(a) - R).norm() < 1e-9) << i;
+    const auto a = telemetry::St0601FromCameraToEnu(R, heading, pitch, roll);
+    EXPECT_TRUE((telemetry::CameraToEnuFromSt0601(a) - R).norm() < 1e-9) << i;
   }
   // A nadir camera on a platform flying north, image top forward: relative elevation -90°.
   Eigen::Matrix3d nadir;  // columns: camera x (east), y (south), z (down) in ENU
   nadir << 1, 0, 0, 0, -1, 0, 0, 0, -1;
-  const auto a = io::klv::St0601FromCameraToEnu(nadir, 0, 0, 0);
+  const auto a = telemetry::St0601FromCameraToEnu(nadir, 0, 0, 0);
   EXPECT_NEAR(a.sensor_relative_elevation, -90, 1e-6);
   // A camera looking level due east from a north-heading platform: azimuth 90°, elevation 0, roll 0.
   Eigen::Matrix3d east;  // x = south, y = down, z = east
   east << 0, 0, 1, -1, 0, 0, 0, -1, 0;
-  const auto b = io::klv::St0601FromCameraToEnu(east, 0, 0, 0);
+  const auto b = telemetry::St0601FromCameraToEnu(east, 0, 0, 0);
   EXPECT_NEAR(b.sensor_relative_azimuth, 90, 1e-9);
   EXPECT_NEAR(b.sensor_relative_elevation, 0, 1e-9);
   EXPECT_NEAR(std::fmod(b.sensor_relative_roll + 180, 360) - 180, 0, 1e-9);
@@ -182,8 +183,8 @@ TEST(SynthKlv, TelemetryRoundTripsThroughTheVideoAndFramesStage) {
   EXPECT_DOUBLE_EQ(truth.at("geo_origin").at("alt").get<double>(), o.klv_options.origin.alt);
 
   // The stream: one packet per frame, at the frame's time, decoding to what was written.
-  io::TelemetryStats stats;
-  const auto samples = io::ReadVideoTelemetry(dir / "flight.ts", &stats);
+  telemetry::TelemetryStats stats;
+  const auto samples = telemetry::ReadVideoTelemetry(dir / "flight.ts", &stats);
   EXPECT_EQ(stats.klv.bad_checksum, 0u);
   EXPECT_EQ(stats.klv.malformed, 0u);
   ASSERT_EQ(samples.size(), 12u);

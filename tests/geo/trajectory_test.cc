@@ -14,7 +14,7 @@
 #include "fmv3d/geo/trajectory.h"
 #include "fmv3d/io/colmap_model.h"
 #include "fmv3d/io/frames_index.h"
-#include "fmv3d/io/telemetry.h"
+#include "fmv3d/telemetry/telemetry.h"
 #include "test_util.h"
 
 namespace fmv3d::geo {
@@ -63,8 +63,8 @@ TEST(Trajectory, NeverBridgesAGap) {
 
 TEST(TelemetryTrack, RoundTripsThroughJson) {
   test::TempDir dir("track");
-  io::TelemetryTrack track{"flight.ts", {}};
-  io::TelemetrySample s;
+  telemetry::TelemetryTrack track{"flight.ts", {}};
+  telemetry::TelemetrySample s;
   s.time = 0.5;
   s.source = "ST0601";
   s.sensor_latitude = 38.16;
@@ -73,8 +73,8 @@ TEST(TelemetryTrack, RoundTripsThroughJson) {
   s.platform_heading = 271;
   s.unix_time_us = 1717243200500000ull;
   track.samples.push_back(s);
-  io::WriteTelemetryTracks({track}, dir / "telemetry.json");
-  const auto back = io::ReadTelemetryTracks(dir / "telemetry.json");
+  telemetry::WriteTelemetryTracks({track}, dir / "telemetry.json");
+  const auto back = telemetry::ReadTelemetryTracks(dir / "telemetry.json");
   ASSERT_EQ(back.size(), 1u);
   ASSERT_EQ(back[0].samples.size(), 1u);
   const auto& b = back[0].samples[0];
@@ -86,7 +86,7 @@ TEST(TelemetryTrack, RoundTripsThroughJson) {
   EXPECT_FALSE(b.sensor_altitude_msl);
   EXPECT_EQ(*b.unix_time_us, 1717243200500000ull);
   core::WriteJson(dir / "bad.json", {{"tracks", {{{"source", "x"}, {"samples", {{{"sensor_latitude", 1}}}}}}}});
-  EXPECT_THROW(io::ReadTelemetryTracks(dir / "bad.json"), Error);
+  EXPECT_THROW(telemetry::ReadTelemetryTracks(dir / "bad.json"), Error);
 }
 
 // A 30 fps video of 600 packets with GPS noise σ = 3 m, of which only every 12th frame is a registered keyframe:
@@ -105,12 +105,12 @@ TEST(Georef, EveryTelemetryPacketAgainstTheTrajectory) {
   rec.cameras[1].id = 1;
   io::FramesIndex index;
   index.cameras.push_back({rec.cameras[1], "guess", "flight.ts"});
-  io::TelemetryTrack track{"flight.ts", {}};
+  telemetry::TelemetryTrack track{"flight.ts", {}};
   std::mt19937_64 rng(11);
   std::normal_distribution<double> N(0, 1);
   auto sample = [&](double t) {
     const GeoPoint p = frame.ToGeodetic(Orbit(t) + 3.0 * Eigen::Vector3d(N(rng), N(rng), N(rng)));
-    io::TelemetrySample s;
+    telemetry::TelemetrySample s;
     s.time = t;
     s.source = "ST0601";
     s.sensor_latitude = p.lat, s.sensor_longitude = p.lon, s.sensor_altitude_hae = p.alt;
@@ -131,7 +131,7 @@ TEST(Georef, EveryTelemetryPacketAgainstTheTrajectory) {
     f.source = "flight.ts";
     f.frame_index = k;
     f.timestamp = t;
-    f.telemetry = io::ToJson(track.samples.back());
+    f.telemetry = telemetry::ToJson(track.samples.back());
     index.frames.push_back(f);
   }
   core::EnsureDirectory(dir / "frames");
@@ -149,7 +149,7 @@ TEST(Georef, EveryTelemetryPacketAgainstTheTrajectory) {
   EXPECT_EQ(kf["fit"]["from"], "keyframes");
   EXPECT_EQ(kf["fit"]["pairs"].get<int>(), 50);
   const double kf_bias = bias();
-  io::WriteTelemetryTracks({track}, dir / "frames/telemetry.json");
+  telemetry::WriteTelemetryTracks({track}, dir / "frames/telemetry.json");
   const auto tr = RunGeorefStage(dir.path(), o);
   EXPECT_TRUE(tr["fit"]["used"].get<bool>());
   EXPECT_EQ(tr["fit"]["pairs"].get<int>(), 589);  // packets inside the registered span (0 .. 19.6 s)

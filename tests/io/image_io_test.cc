@@ -7,20 +7,29 @@
 #include <vector>
 
 #include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
 
 #include "fmv3d/core/error.h"
 #include "test_util.h"
 #include "image_test_util.h"
-#include "video_test_util.h"
 
 namespace fmv3d::io {
 namespace {
 
 using test::TempDir;
 
+// Random colours at 1/8 resolution, upsampled: smooth enough for JPEG to keep it within a few grey levels.
+cv::Mat SmoothTexture(cv::Size size, uint64_t seed) {
+  cv::RNG rng(seed);
+  cv::Mat small(size.height / 8 + 2, size.width / 8 + 2, CV_8UC3), out;
+  rng.fill(small, cv::RNG::UNIFORM, 0, 256);
+  cv::resize(small, out, size, 0, 0, cv::INTER_CUBIC);
+  return out;
+}
+
 TEST(ImageIo, ReadsEveryAcceptedFormat) {
   TempDir tmp("fmv3d-img");
-  const cv::Mat img = test::ViewOf(test::RandomTexture(400, 300, 21), {255, 171}, 200, 150);
+  const cv::Mat img = SmoothTexture({255, 171}, 21);
   struct Case {
     std::string name;
     double tolerance;  // mean absolute difference
@@ -35,13 +44,6 @@ TEST(ImageIo, ReadsEveryAcceptedFormat) {
     EXPECT_LE(cv::mean(d)[0], c.tolerance) << c.name;
     EXPECT_TRUE(HasImageExtension(tmp / c.name));
   }
-  // GIF (palette): through FFmpeg, since OpenCV 4.6 has none.
-  test::EncodeVideo(tmp / "a.gif", 1, 10, [&](int) { return img; }, "gif");
-  const cv::Mat gif = ReadImage(tmp / "a.gif");
-  ASSERT_EQ(gif.size(), img.size());
-  cv::Mat d;
-  cv::absdiff(gif, img, d);
-  EXPECT_LT(cv::mean(d)[0], 40);  // 256-colour palette
   // Atomic write: the file appears complete under its name, no temporary left.
   WriteImage(tmp / "out.png", img);
   EXPECT_EQ(cv::norm(ReadImage(tmp / "out.png"), img, cv::NORM_INF), 0);
@@ -69,7 +71,7 @@ TEST(ImageIo, BadFilesThrowNamingTheFile) {
 
 TEST(ImageIo, ExifFromJpeg) {
   TempDir tmp("fmv3d-img");
-  const cv::Mat img = test::ViewOf(test::RandomTexture(200, 200, 22), {96, 64}, 100, 100);
+  const cv::Mat img = SmoothTexture({96, 64}, 22);
   cv::imwrite((tmp / "dji.jpg").string(), img);
   test::AddExifToJpeg(tmp / "dji.jpg", test::MakeExif("DJI", "FC6310", 88, 10, 24));
   const ExifInfo e = ReadExif(tmp / "dji.jpg");

@@ -32,7 +32,7 @@ PriorChooser::PriorChooser(const PriorOptions& options, SensorDatabase db) : opt
   }
 }
 
-core::Camera PriorChooser::Choose(const io::CameraGroup& g, std::string* source) const {
+core::Camera PriorChooser::Choose(const ingest::CameraGroup& g, std::string* source) const {
   core::Camera cam;
   if (calibration_) {
     if (ScaleCamera(*calibration_, g.width, g.height, &cam)) {
@@ -52,14 +52,14 @@ core::Camera PriorChooser::Choose(const io::CameraGroup& g, std::string* source)
     return cam;
   }
   *source = "guess";
-  return io::GuessPrior(g.width, g.height);
+  return ingest::GuessPrior(g.width, g.height);
 }
 
-io::IntrinsicsPriorFn PriorChooser::AsFunction() const {
+ingest::IntrinsicsPriorFn PriorChooser::AsFunction() const {
   auto self = std::make_shared<PriorChooser>(*this);
   // forced_ points into db_: re-resolve it in the copy.
   if (!options_.sensor_name.empty()) self->forced_ = self->db_.FindByName(options_.sensor_name);
-  return [self](const io::CameraGroup& g, std::string* source) { return self->Choose(g, source); };
+  return [self](const ingest::CameraGroup& g, std::string* source) { return self->Choose(g, source); };
 }
 
 }  // namespace fmv3d::calib

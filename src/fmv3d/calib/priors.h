@@ -11,7 +11,7 @@
 #include <string>
 
 #include "fmv3d/calib/sensor_db.h"
-#include "fmv3d/io/frames.h"
+#include "fmv3d/ingest/frames.h"
 
 namespace fmv3d::calib {
 
@@ -24,8 +24,8 @@ class PriorChooser {
  public:
   // Reads the calibration file and checks the sensor name now, so bad options fail before any decoding.
   PriorChooser(const PriorOptions& options, SensorDatabase db);
-  core::Camera Choose(const io::CameraGroup& group, std::string* prior_source) const;
-  io::IntrinsicsPriorFn AsFunction() const;
+  core::Camera Choose(const ingest::CameraGroup& group, std::string* prior_source) const;
+  ingest::IntrinsicsPriorFn AsFunction() const;
 
  private:
   PriorOptions options_;

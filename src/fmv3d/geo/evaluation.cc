@@ -20,7 +20,7 @@
 #include "fmv3d/io/colmap_model.h"
 #include "fmv3d/io/frames_index.h"
 #include "fmv3d/io/obj_io.h"
-#include "fmv3d/io/telemetry.h"
+#include "fmv3d/telemetry/telemetry.h"
 
 namespace fmv3d::geo {
 namespace fs = std::filesystem;
@@ -250,7 +250,7 @@ nlohmann::json EvaluateGeoAgainstSynth(const fs::path& ws, const fs::path& synth
     const double fps = truth["fps"].get<double>();
     Stats tx, ty, tz;
     Eigen::Vector3d mean = Eigen::Vector3d::Zero();
-    for (const auto& track : io::ReadTelemetryTracks(track_json))
+    for (const auto& track : telemetry::ReadTelemetryTracks(track_json))
       for (const auto& s : track.samples) {
         const double k = std::round(s.time * fps);
         if (std::abs(s.time * fps - k) > 0.01 || !s.sensor_latitude || !s.sensor_longitude) continue;

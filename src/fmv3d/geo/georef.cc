@@ -21,8 +21,8 @@
 #include "fmv3d/geometry/triangulation.h"
 #include "fmv3d/io/colmap_model.h"
 #include "fmv3d/io/frames_index.h"
-#include "fmv3d/io/klv_st0601_writer.h"
-#include "fmv3d/io/telemetry.h"
+#include "fmv3d/telemetry/attitude.h"
+#include "fmv3d/telemetry/telemetry.h"
 #include "fmv3d/geo/accuracy.h"
 #include "fmv3d/geo/frame_centres.h"
 #include "fmv3d/geo/trajectory.h"
@@ -176,21 +176,21 @@ Eigen::Vector3d LogRotation(const Eigen::Matrix3d& R) {
 }
 
 // Telemetry camera-to-ENU rotation of a sample with the full ST 0601 angle chain, else nullopt.
-std::optional<Eigen::Matrix3d> TelemetryAttitude(const io::TelemetrySample& t) {
+std::optional<Eigen::Matrix3d> TelemetryAttitude(const telemetry::TelemetrySample& t) {
   if (!t.platform_heading || !t.platform_pitch || !t.platform_roll || !t.sensor_relative_azimuth ||
       !t.sensor_relative_elevation || !t.sensor_relative_roll)
     return std::nullopt;
-  io::klv::St0601Attitude a;
+  telemetry::St0601Attitude a;
   a.platform_heading = *t.platform_heading;
   a.platform_pitch = *t.platform_pitch;
   a.platform_roll = *t.platform_roll;
   a.sensor_relative_azimuth = *t.sensor_relative_azimuth;
   a.sensor_relative_elevation = *t.sensor_relative_elevation;
   a.sensor_relative_roll = *t.sensor_relative_roll;
-  return io::klv::CameraToEnuFromSt0601(a);
+  return telemetry::CameraToEnuFromSt0601(a);
 }
 
-bool HasPosition(const io::TelemetrySample& s) {
+bool HasPosition(const telemetry::TelemetrySample& s) {
   return s.sensor_latitude && s.sensor_longitude && (s.sensor_altitude_hae || s.sensor_altitude_msl);
 }
 
@@ -211,7 +211,7 @@ struct Pair {
 };
 
 Pair MakePair(const std::string& name, const Eigen::Vector3d& centre, const Eigen::Quaterniond& rotation,
-              const io::TelemetrySample& s) {
+              const telemetry::TelemetrySample& s) {
   Pair p;
   p.name = name;
   p.centre = centre;
@@ -599,9 +599,9 @@ nlohmann::json RunGeorefStage(const fs::path& ws, const GeorefOptions& o) {
     if (!f.telemetry.is_object()) continue;
     nlohmann::json t = f.telemetry;
     if (!t.contains("time")) t["time"] = f.timestamp;
-    io::TelemetrySample s;
+    telemetry::TelemetrySample s;
     try {
-      s = io::TelemetryFromJson(t);
+      s = telemetry::TelemetryFromJson(t);
     } catch (const Error& e) {
       throw Error(frames_json.string() + ": frame " + f.name + ": " + e.what());
     }
@@ -619,7 +619,7 @@ nlohmann::json RunGeorefStage(const fs::path& ws, const GeorefOptions& o) {
   const fs::path tracks_path = ws / "frames" / "telemetry.json";
   if (o.use_track && fs::exists(tracks_path)) {
     size_t spanned = 0, samples = 0;
-    for (const auto& track : io::ReadTelemetryTracks(tracks_path)) {
+    for (const auto& track : telemetry::ReadTelemetryTracks(tracks_path)) {
       const auto it = knots_by_source.find(track.source);
       if (it == knots_by_source.end() || it->second.size() < 2) continue;
       const CameraTrajectory traj(it->second);

@@ -9,7 +9,6 @@
 
 #include "fmv3d/core/error.h"
 #include "fmv3d/core/files.h"
-#include "fmv3d/io/video_reader.h"
 
 namespace fmv3d::io {
 namespace {
@@ -109,13 +108,8 @@ bool HasVideoExtension(const std::filesystem::path& path) {
 cv::Mat ReadImage(const std::filesystem::path& path) {
   std::error_code ec;
   if (!std::filesystem::is_regular_file(path, ec)) throw Error(path.string() + ": no such image file");
-  if (LowerExt(path) == ".gif") {
-    // OpenCV 4.6 cannot read GIF; FFmpeg's gif demuxer gives the first frame.
-    VideoReader reader(path);
-    VideoFrame frame;
-    if (!reader.Read(&frame)) throw Error(path.string() + ": no decodable picture in the GIF");
-    return frame.image;
-  }
+  if (LowerExt(path) == ".gif")  // OpenCV 4.6 has no GIF decoder
+    throw Error(path.string() + ": GIF is decoded through FFmpeg by ingest::ReadInputImage (or `fmv3d frames`)");
   cv::Mat img;
   try {
     img = cv::imread(path.string(), cv::IMREAD_COLOR | cv::IMREAD_IGNORE_ORIENTATION);

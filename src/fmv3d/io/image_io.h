@@ -1,4 +1,5 @@
-// Still images: reading any of bmp/png/jpg/gif/tif (gif through FFmpeg, since OpenCV 4.6 has no GIF reader),
+// Still images: reading any of bmp/png/jpg/tif (gif is read by ingest::ReadInputImage through FFmpeg, since
+// OpenCV 4.6 has no GIF reader),
 // writing atomically, and the few EXIF fields the intrinsics prior needs (camera make/model, focal length).
 #pragma once
 
@@ -24,7 +25,8 @@ bool HasImageExtension(const std::filesystem::path& path);
 bool HasVideoExtension(const std::filesystem::path& path);
 
 // Reads an image as 8-bit BGR, ignoring the EXIF orientation (pixels stay as the sensor recorded them, so
-// the sensor geometry of the prior matches). Throws fmv3d::Error naming the file when it cannot be read.
+// the sensor geometry of the prior matches). Throws fmv3d::Error naming the file when it cannot be read
+// (and for GIF, which OpenCV cannot decode: see ingest::ReadInputImage).
 cv::Mat ReadImage(const std::filesystem::path& path);
 // Image size without decoding the pixels when the format allows it (falls back to ReadImage).
 cv::Size ReadImageSize(const std::filesystem::path& path);

@@ -51,15 +51,15 @@ std::vector<Stage> ReconstructStages(const ReconstructOptions& o) {
   stages.push_back({"frames",
                     [o] {
                       // Every input file (folders expanded) is an input of the frames stage.
-                      return io::ExpandInputs(o.inputs);
+                      return ingest::ExpandInputs(o.inputs);
                     },
                     ws.frames_json(),
                     [o, root] {
-                      io::IngestOptions io_opt = o.frames;
+                      ingest::IngestOptions io_opt = o.frames;
                       io_opt.workspace = root;
                       const calib::PriorChooser chooser(o.prior, calib::SensorDatabase::LoadDefault());
                       io_opt.prior = chooser.AsFunction();
-                      const io::FramesIndex index = io::IngestFrames(o.inputs, io_opt);
+                      const io::FramesIndex index = ingest::IngestFrames(o.inputs, io_opt);
                       return nlohmann::json{{"frames", index.frames.size()}, {"cameras", index.cameras.size()}};
                     }});
   stages.push_back({"features", [ws] { return std::vector<fs::path>{ws.frames_json()}; },

@@ -14,7 +14,7 @@
 #include "fmv3d/features/sift.h"
 #include "fmv3d/geo/dsm.h"
 #include "fmv3d/geo/georef.h"
-#include "fmv3d/io/frames.h"
+#include "fmv3d/ingest/frames.h"
 #include "fmv3d/mvs/dense_stage.h"
 #include "fmv3d/pipeline/stage_runner.h"
 #include "fmv3d/sfm/sparse_stage.h"
@@ -26,7 +26,7 @@ namespace fmv3d::pipeline {
 struct ReconstructOptions {
   std::vector<std::filesystem::path> inputs;
   std::filesystem::path workspace;
-  io::IngestOptions frames;           // .workspace and .prior are filled from the fields above / below
+  ingest::IngestOptions frames;           // .workspace and .prior are filled from the fields above / below
   calib::PriorOptions prior;
   features::SiftOptions sift;
   features::MatchStageOptions match;

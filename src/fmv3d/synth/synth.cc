@@ -12,7 +12,7 @@
 #include "fmv3d/core/logging.h"
 #include "fmv3d/io/colmap_model.h"
 #include "fmv3d/io/obj_io.h"
-#include "fmv3d/io/video_writer.h"
+#include "fmv3d/ingest/video_writer.h"
 #include "fmv3d/synth/noise.h"
 
 namespace fmv3d::synth {
@@ -138,15 +138,15 @@ SynthResult RunSynth(const SynthOptions& o) {
   const fs::path frames_dir = o.output / "frames", depth_dir = o.output / "depth";
   if (!o.IsVideo()) core::EnsureDirectory(frames_dir);
   if (o.write_depth) core::EnsureDirectory(depth_dir);
-  std::unique_ptr<io::VideoWriter> video;
+  std::unique_ptr<ingest::VideoWriter> video;
   const fs::path video_path = o.output / ("flight." + o.format);
   if (o.IsVideo()) {
-    io::VideoWriterOptions vo;
+    ingest::VideoWriterOptions vo;
     vo.fps = o.fps;
     vo.gop = std::max(1, static_cast<int>(std::lround(o.fps)));
     vo.klv_stream = o.klv;
     // Write to a temporary and rename at the end, so an interrupted run leaves no truncated video.
-    video = std::make_unique<io::VideoWriter>(o.output / ("flight.partial." + o.format), o.width, o.height, vo);
+    video = std::make_unique<ingest::VideoWriter>(o.output / ("flight.partial." + o.format), o.width, o.height, vo);
   }
 
   SynthResult result;
@@ -171,7 +171,7 @@ SynthResult RunSynth(const SynthOptions& o) {
     const render::RenderResult frame = renderer.Render(camera, poses[k], ro);
     if (video) {
       video->Write(frame.image);
-      if (o.klv) video->WriteKlv(io::klv::EncodeSt0601Packet(result.klv[k]), static_cast<int64_t>(k));
+      if (o.klv) video->WriteKlv(telemetry::klv::EncodeSt0601Packet(result.klv[k]), static_cast<int64_t>(k));
     } else {
       const fs::path path = frames_dir / FrameName(static_cast<int>(k), o.format);
       std::vector<int> params;

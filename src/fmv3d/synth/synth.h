@@ -73,7 +73,7 @@ struct SynthResult {
   core::Reconstruction truth;
   double characteristic_length = 0;
   int frames = 0;
-  std::vector<io::klv::St0601Record> klv;  // what the KLV stream carries (with klv), one per frame
+  std::vector<telemetry::klv::St0601Record> klv;  // what the KLV stream carries (with klv), one per frame
 };
 
 // Renders and writes everything (see the layout above). Throws fmv3d::Error on bad options or I/O errors.

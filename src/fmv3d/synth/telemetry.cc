@@ -6,6 +6,7 @@
 #include <random>
 
 #include "fmv3d/core/error.h"
+#include "fmv3d/telemetry/attitude.h"
 
 namespace fmv3d::synth {
 namespace {
@@ -80,11 +81,11 @@ void KlvTelemetryOptions::Check() const {
   if (!(std::abs(geoid_undulation) < 200)) throw Error("synth: geoid undulation must be within ±200 m");
 }
 
-std::vector<io::klv::St0601Record> MakeKlvTelemetry(const std::vector<core::Pose>& poses, const core::Camera& camera,
+std::vector<telemetry::klv::St0601Record> MakeKlvTelemetry(const std::vector<core::Pose>& poses, const core::Camera& camera,
                                                     double ground_z, const KlvTelemetryOptions& o) {
   o.Check();
   Normal normal(o.seed);
-  std::vector<io::klv::St0601Record> out;
+  std::vector<telemetry::klv::St0601Record> out;
   const size_t n = poses.size();
   for (size_t k = 0; k < n; ++k) {
     const Eigen::Vector3d c = poses[k].Centre();
@@ -95,7 +96,7 @@ std::vector<io::klv::St0601Record> MakeKlvTelemetry(const std::vector<core::Pose
     if (v.norm() < 1e-6) v = Eigen::Vector3d(cam_to_enu(0, 2), cam_to_enu(1, 2), 0);
     if (v.norm() < 1e-6) v = Eigen::Vector3d::UnitY();
     const double heading = std::atan2(v.x(), v.y()) / kDeg;  // clockwise from north
-    io::klv::St0601Attitude a = io::klv::St0601FromCameraToEnu(cam_to_enu, heading, 0, 0);
+    telemetry::St0601Attitude a = telemetry::St0601FromCameraToEnu(cam_to_enu, heading, 0, 0);
     // The stated platform attitude is noisy; the sensor angles stay as measured against the true platform.
     a.platform_heading += o.attitude_noise * normal();
     a.platform_pitch += o.attitude_noise * normal();
@@ -103,7 +104,7 @@ std::vector<io::klv::St0601Record> MakeKlvTelemetry(const std::vector<core::Pose
     const Eigen::Vector3d noisy = c + o.gps_noise * Eigen::Vector3d(normal(), normal(), normal());
     const GeoPoint g = EnuToGeodetic(noisy, o.origin);
 
-    io::klv::St0601Record r;
+    telemetry::klv::St0601Record r;
     r.unix_time_us = o.start_unix_us + static_cast<uint64_t>(std::llround(1e6 * k / o.fps));
     r.sensor_latitude = g.lat;
     r.sensor_longitude = g.lon;

@@ -17,7 +17,7 @@
 
 #include "fmv3d/core/camera.h"
 #include "fmv3d/core/pose.h"
-#include "fmv3d/io/klv_st0601_writer.h"
+#include "fmv3d/telemetry/klv_st0601_writer.h"
 
 namespace fmv3d::synth {
 
@@ -47,7 +47,7 @@ struct KlvTelemetryOptions {
 
 // One record per pose (the frame's time is k / fps). Frame centre: where the optical axis meets the plane
 // z = ground_z (omitted when it points above the horizon).
-std::vector<io::klv::St0601Record> MakeKlvTelemetry(const std::vector<core::Pose>& poses,
+std::vector<telemetry::klv::St0601Record> MakeKlvTelemetry(const std::vector<core::Pose>& poses,
                                                     const core::Camera& camera, double ground_z,
                                                     const KlvTelemetryOptions& options);
 

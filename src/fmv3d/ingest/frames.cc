@@ -1,0 +1,408 @@
+#include "fmv3d/ingest/frames.h"
+
+#include <spdlog/spdlog.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <exception>
+#include <map>
+#include <set>
+#include <tuple>
+
+#include <tbb/parallel_for.h>
+#include <tbb/task_group.h>
+
+#include "fmv3d/core/error.h"
+#include "fmv3d/core/files.h"
+#include "fmv3d/core/logging.h"
+#include "fmv3d/telemetry/dji_srt.h"
+#include "fmv3d/telemetry/telemetry.h"
+#include "fmv3d/ingest/video_reader.h"
+
+namespace fmv3d::ingest {
+namespace fs = std::filesystem;
+
+namespace {
+
+std::string LowerExt(const fs::path& p) {
+  std::string e = p.extension().string();
+  std::transform(e.begin(), e.end(), e.begin(), [](unsigned char c) { return std::tolower(c); });
+  return e;
+}
+
+// Removes the staging folder unless released (the stage failed half-way).
+struct StagingGuard {
+  fs::path dir;
+  bool released = false;
+  ~StagingGuard() {
+    if (!released) {
+      std::error_code ec;
+      fs::remove_all(dir, ec);
+    }
+  }
+};
+
+// Frame names must be unique inside frames/: a clash (same file name in two folders, same video stem) gets
+// the parent folder's name as a prefix, then a counter.
+class NameRegistry {
+ public:
+  std::string Unique(const fs::path& source, const std::string& stem) {
+    std::string s = stem;
+    if (used_.count(s)) {
+      const std::string parent = source.parent_path().filename().string();
+      if (!parent.empty()) s = parent + "-" + stem;
+      for (int k = 2; used_.count(s); ++k) s = stem + "-" + std::to_string(k);
+      spdlog::warn("{}: name '{}' is already taken by another input; using '{}'", source.string(), stem, s);
+    }
+    used_.insert(s);
+    return s;
+  }
+
+ private:
+  std::set<std::string> used_;
+};
+
+struct ImageCameraKey {
+  int w, h;
+  std::string make, model;
+  long focal_centi_mm;
+  bool operator<(const ImageCameraKey& o) const {
+    return std::tie(w, h, make, model, focal_centi_mm) < std::tie(o.w, o.h, o.make, o.model, o.focal_centi_mm);
+  }
+};
+
+}  // namespace
+
+core::Camera GuessPrior(int width, int height) {
+  return core::Camera::Pinhole(width, height, 1.2 * std::max(width, height));
+}
+
+void IngestOptions::Check() const {
+  if (workspace.empty()) throw Error("frames: no workspace folder given (-o WS)");
+  if (max_frames < 0) throw Error("frames: --max-frames must be >= 0");
+  keyframes.Check();
+}
+
+std::vector<fs::path> ExpandInputs(const std::vector<fs::path>& inputs) {
+  std::vector<fs::path> files;
+  for (const auto& in : inputs) {
+    std::error_code ec;
+    if (fs::is_directory(in, ec)) {
+      std::vector<fs::path> found;
+      for (const auto& e : fs::directory_iterator(in, ec)) {
+        if (!e.is_regular_file()) continue;
+        if (io::HasImageExtension(e.path()) || io::HasVideoExtension(e.path())) found.push_back(e.path());
+      }
+      if (ec) throw Error(in.string() + ": cannot list folder (" + ec.message() + ")");
+      if (found.empty()) throw Error(in.string() + ": folder holds no images or videos (sub-folders are not searched)");
+      std::sort(found.begin(), found.end());
+      files.insert(files.end(), found.begin(), found.end());
+    } else if (fs::exists(in, ec)) {
+      files.push_back(in);
+    } else {
+      throw Error(in.string() + ": no such file or folder");
+    }
+  }
+  if (files.empty()) throw Error("frames: no input given");
+  return files;
+}
+
+namespace {
+// With no better prior than the guess, the telemetry's horizontal field of view (KLV sensor HFOV) of the camera's
+// frames gives the focal: f = (w / 2) / tan(HFOV / 2) — the median over frames. The mapper then skips its focal
+// scan and refines this value. Zoom during the video changes the HFOV; one camera per video keeps one focal,
+// so that is only warned about.
+void FocalFromTelemetryHfov(const io::FramesIndex& index, uint32_t camera_id, core::Camera* cam, std::string* source) {
+  std::vector<double> hfov;
+  for (const auto& f : index.frames)
+    if (f.camera_id == camera_id && f.telemetry.is_object() && f.telemetry.contains("horizontal_fov") &&
+        f.telemetry["horizontal_fov"].is_number()) {
+      const double h = f.telemetry["horizontal_fov"].get<double>();
+      if (h > 0.01 && h < 170) hfov.push_back(h);
+    }
+  if (hfov.empty()) return;
+  std::sort(hfov.begin(), hfov.end());
+  const double median = hfov[hfov.size() / 2];
+  if (hfov.back() > 1.05 * hfov.front())
+    spdlog::warn("camera {}: the telemetry HFOV changes from {:.3f}° to {:.3f}° (zoom); the focal prior uses the "
+                 "median, {:.3f}°", camera_id, hfov.front(), hfov.back(), median);
+  cam->f = 0.5 * cam->width / std::tan(0.5 * median * M_PI / 180) / cam->aspect;  // the horizontal focal is f · aspect
+  *source = "telemetry-hfov";
+}
+
+// A video's own telemetry: KLV data streams (MISB ST 0601 / EG0104) or a DJI .SRT beside it. Telemetry is an
+// optional extra: a damaged stream costs a warning, never the frames.
+std::vector<telemetry::TelemetrySample> LoadTelemetry(const std::filesystem::path& video) {
+  std::vector<telemetry::TelemetrySample> samples;
+  try {
+    telemetry::TelemetryStats stats;
+    samples = telemetry::ReadVideoTelemetry(video, &stats);
+    if (stats.klv.bad_checksum + stats.klv.malformed > 0)
+      spdlog::warn("{}: {} malformed KLV packets skipped", video.string(),
+                   stats.klv.bad_checksum + stats.klv.malformed);
+    if (samples.empty()) {
+      if (auto srt = telemetry::FindDjiSrtBeside(video)) {
+        samples = telemetry::ReadDjiSrt(*srt);
+        spdlog::info("{}: {} telemetry samples from {}", video.string(), samples.size(), srt->string());
+      }
+    } else {
+      spdlog::info("{}: {} KLV telemetry samples", video.string(), samples.size());
+    }
+  } catch (const Error& e) {
+    spdlog::warn("{}: telemetry ignored ({})", video.string(), e.what());
+  }
+  return samples;
+}
+}  // namespace
+
+io::FramesIndex IngestFrames(const std::vector<fs::path>& inputs, const IngestOptions& options) {
+  options.Check();
+  const std::vector<fs::path> files = ExpandInputs(inputs);
+  const fs::path frames_dir = options.workspace / "frames";
+  core::EnsureDirectory(options.workspace);
+  StagingGuard staging{options.workspace / (".frames-staging-" + std::to_string(getpid()))};
+  {
+    std::error_code ec;
+    fs::remove_all(staging.dir, ec);
+  }
+  core::EnsureDirectory(staging.dir);
+
+  io::FramesIndex index;
+  std::vector<CameraGroup> groups;  // parallel to index.cameras
+  std::map<ImageCameraKey, uint32_t> image_cameras;
+  NameRegistry names;
+  std::vector<telemetry::TelemetryTrack> tracks;  // every video's whole telemetry → frames/telemetry.json
+
+  auto add_camera = [&](CameraGroup g) {
+    io::CameraPrior c;
+    c.camera = GuessPrior(g.width, g.height);
+    c.camera.id = static_cast<uint32_t>(index.cameras.size() + 1);
+    c.prior_source = "guess";
+    c.source = g.source;
+    index.cameras.push_back(c);
+    groups.push_back(std::move(g));
+    return index.cameras.back().camera.id;
+  };
+
+  // Still images are decoded in parallel first (size, EXIF, sharpness); only this metadata is kept.
+  struct ImageMeta {
+    int width = 0, height = 0;
+    io::ExifInfo exif;
+    double sharpness = 0;
+  };
+  std::vector<ImageMeta> meta(files.size());
+  {
+    std::vector<size_t> images;
+    for (size_t i = 0; i < files.size(); ++i)
+      if (io::HasImageExtension(files[i])) images.push_back(i);
+    std::vector<std::exception_ptr> errors(files.size());
+    if (!images.empty()) {
+      core::Progress progress("read images", images.size());
+      tbb::parallel_for(size_t(0), images.size(), [&](size_t k) {
+        const size_t i = images[k];
+        try {
+          const cv::Mat img = ReadInputImage(files[i]);
+          meta[i] = {img.cols, img.rows, io::ReadExif(files[i]), Sharpness(img)};
+        } catch (...) {
+          errors[i] = std::current_exception();
+        }
+        progress.Add();
+      });
+    }
+    for (const auto& e : errors)  // the first bad file in input order
+      if (e) std::rethrow_exception(e);
+  }
+
+  for (size_t file_i = 0; file_i < files.size(); ++file_i) {
+    const fs::path& file = files[file_i];
+    const bool is_image = io::HasImageExtension(file);
+    if (is_image) {
+      const ImageMeta& m = meta[file_i];
+      const io::ExifInfo& exif = m.exif;
+      const ImageCameraKey key{m.width, m.height, exif.make, exif.model, std::lround(exif.focal_mm * 100)};
+      auto it = image_cameras.find(key);
+      uint32_t cam_id;
+      if (it == image_cameras.end()) {
+        CameraGroup g;
+        g.width = m.width;
+        g.height = m.height;
+        g.source = file.parent_path().string();
+        g.exif = exif;
+        cam_id = add_camera(g);
+        image_cameras[key] = cam_id;
+      } else {
+        cam_id = it->second;
+      }
+      const bool convert = LowerExt(file) == ".gif";
+      const std::string stem = names.Unique(file, file.stem().string());
+      const std::string name = stem + (convert ? std::string(".png") : file.extension().string());
+      if (convert) {
+        io::WriteImage(staging.dir / name, ReadInputImage(file));
+      } else {
+        std::error_code ec;
+        fs::copy_file(file, staging.dir / name, fs::copy_options::overwrite_existing, ec);
+        if (ec) throw Error(file.string() + ": cannot copy into the workspace (" + ec.message() + ")");
+      }
+      io::FrameRecord r;
+      r.name = name;
+      r.camera_id = cam_id;
+      r.source = file.string();
+      r.sharpness = m.sharpness;
+      index.frames.push_back(r);
+      continue;
+    }
+
+    // A video (or an unknown extension, which FFmpeg gets to try).
+    std::unique_ptr<VideoReader> reader;
+    try {
+      reader = std::make_unique<VideoReader>(file);
+    } catch (const Error& e) {
+      if (io::HasVideoExtension(file)) throw;
+      throw Error(file.string() + ": unsupported or unreadable file (neither an image nor a video FFmpeg can read)");
+    }
+    const VideoInfo& info = reader->info();
+    CameraGroup g;
+    g.width = info.width;
+    g.height = info.height;
+    g.source = file.string();
+    g.is_video = true;
+    g.pixel_aspect = info.pixel_aspect;
+    const uint32_t cam_id = add_camera(g);
+    const std::string stem = names.Unique(file, file.stem().string());
+    KeyframeSelector selector(options.keyframes, info.fps);
+    spdlog::info("{}: {}x{} {} {:.2f} fps, ~{} frames; keyframe gap {}..{} frames", file.string(), info.width,
+                 info.height, info.codec, info.fps, info.frame_count_hint, selector.min_gap(), selector.max_gap());
+    if (info.interlaced)
+      spdlog::warn("{}: interlaced video; frames are used as decoded (no deinterlacing), fast motion will comb",
+                   file.string());
+    const std::vector<telemetry::TelemetrySample> samples = LoadTelemetry(file);
+    if (!samples.empty()) tracks.push_back({file.string(), samples});
+    core::Progress progress("decode " + stem, static_cast<size_t>(std::max<int64_t>(info.frame_count_hint, 0)));
+    std::vector<Keyframe> kept;
+    tbb::task_group writers;
+    int in_flight = 0;
+    auto flush = [&] {
+      for (const Keyframe& k : kept) {
+        char idx[32];
+        std::snprintf(idx, sizeof(idx), "%06lld", static_cast<long long>(k.index));
+        io::FrameRecord r;
+        r.name = stem + "-" + idx + ".png";
+        r.camera_id = cam_id;
+        r.source = file.string();
+        r.frame_index = k.index;
+        r.timestamp = k.timestamp;
+        r.sharpness = k.sharpness;
+        if (auto t = telemetry::InterpolateTelemetry(samples, k.timestamp)) r.telemetry = telemetry::ToJson(*t);
+        // PNG encoding costs more than decoding: it runs beside the decoder, at most 4 frames in flight.
+        if (++in_flight > 4) {
+          writers.wait();
+          in_flight = 1;
+        }
+        writers.run([path = staging.dir / r.name, image = k.image] { io::WriteImage(path, image); });
+        index.frames.push_back(r);
+      }
+      kept.clear();
+    };
+    VideoFrame frame;
+    size_t n_video_frames = 0;
+    const size_t first = index.frames.size();
+    while (reader->Read(&frame)) {
+      selector.Push(frame, &kept);
+      flush();
+      progress.Add();
+      ++n_video_frames;
+    }
+    selector.Finish(&kept);
+    flush();
+    writers.wait();  // rethrows a write error
+    progress.Finish();
+    if (reader->frames_read() == 0)
+      throw Error(file.string() + ": no decodable video frame" +
+                  (reader->warning().empty() ? std::string() : " (" + reader->warning() + ")"));
+    spdlog::info("{}: {} frames decoded, {} blurred, {} keyframes", file.string(), n_video_frames,
+                 selector.blurred_frames(), index.frames.size() - first);
+  }
+
+  // --max-frames: an even subsample of everything kept.
+  if (options.max_frames > 0 && static_cast<int>(index.frames.size()) > options.max_frames) {
+    const size_t n = index.frames.size(), m = static_cast<size_t>(options.max_frames);
+    std::vector<io::FrameRecord> chosen;
+    std::vector<bool> keep(n, false);
+    for (size_t i = 0; i < m; ++i) {
+      const size_t j = m == 1 ? 0 : static_cast<size_t>(std::llround(double(i) * (n - 1) / (m - 1)));
+      keep[j] = true;
+    }
+    for (size_t i = 0; i < n; ++i) {
+      if (keep[i]) {
+        chosen.push_back(index.frames[i]);
+      } else {
+        std::error_code ec;
+        fs::remove(staging.dir / index.frames[i].name, ec);
+      }
+    }
+    spdlog::info("--max-frames {}: kept {} of {} frames", options.max_frames, chosen.size(), n);
+    index.frames = std::move(chosen);
+  }
+
+  // Cameras no frame refers to any more are dropped and the ids renumbered 1..n.
+  {
+    std::vector<uint32_t> remap(index.cameras.size() + 1, 0);
+    for (const auto& f : index.frames) remap[f.camera_id] = 1;
+    std::vector<io::CameraPrior> cams;
+    std::vector<CameraGroup> grps;
+    for (size_t i = 0; i < index.cameras.size(); ++i) {
+      if (!remap[i + 1]) continue;
+      remap[i + 1] = static_cast<uint32_t>(cams.size() + 1);
+      cams.push_back(index.cameras[i]);
+      cams.back().camera.id = remap[i + 1];
+      grps.push_back(groups[i]);
+    }
+    for (auto& f : index.frames) f.camera_id = remap[f.camera_id];
+    index.cameras = std::move(cams);
+    groups = std::move(grps);
+  }
+
+  // Intrinsics priors.
+  for (size_t i = 0; i < index.cameras.size(); ++i) {
+    std::string source = "guess";
+    core::Camera cam = options.prior ? options.prior(groups[i], &source) : GuessPrior(groups[i].width, groups[i].height);
+    cam.id = index.cameras[i].camera.id;
+    if (cam.width != groups[i].width || cam.height != groups[i].height)
+      throw Error(groups[i].source + ": intrinsics prior has the wrong image size");
+    // Non-square pixels (e.g. DV/SD video, SAR 10:11): a pixel is pixel_aspect times wider than tall, so the
+    // horizontal focal in pixels is f / pixel_aspect. A calibration already measured it.
+    if (groups[i].pixel_aspect != 1.0 && source.rfind("calibration:", 0) != 0) cam.aspect /= groups[i].pixel_aspect;
+    if (source == "guess") FocalFromTelemetryHfov(index, static_cast<uint32_t>(i + 1), &cam, &source);
+    cam.Validate();
+    index.cameras[i].camera = cam;
+    index.cameras[i].prior_source = source;
+  }
+  for (const auto& c : index.cameras)
+    spdlog::info("camera {}: {}x{} f={:.1f} ({}) from {}", c.camera.id, c.camera.width, c.camera.height, c.camera.f,
+                 c.prior_source, c.source);
+
+  io::WriteFramesIndex(index, staging.dir / "frames.json");
+  if (!tracks.empty()) telemetry::WriteTelemetryTracks(tracks, staging.dir / "telemetry.json");
+
+  // Swap the complete staging folder in place of frames/.
+  std::error_code ec;
+  const fs::path old = options.workspace / (".frames-old-" + std::to_string(getpid()));
+  if (fs::exists(frames_dir, ec)) {
+    fs::rename(frames_dir, old, ec);
+    if (ec) throw Error(frames_dir.string() + ": cannot replace (" + ec.message() + ")");
+  }
+  fs::rename(staging.dir, frames_dir, ec);
+  if (ec) {
+    std::error_code ec2;
+    if (fs::exists(old, ec2)) fs::rename(old, frames_dir, ec2);
+    throw Error(frames_dir.string() + ": cannot write (" + ec.message() + ")");
+  }
+  staging.released = true;
+  fs::remove_all(old, ec);
+  spdlog::info("{}: {} frames, {} cameras", frames_dir.string(), index.frames.size(), index.cameras.size());
+  return index;
+}
+
+}  // namespace fmv3d::ingest
