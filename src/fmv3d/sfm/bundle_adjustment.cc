@@ -339,6 +339,31 @@ BundleAdjustmentSummary BundleAdjust(core::Reconstruction* rec, const BundleAdju
   out.num_residuals = static_cast<int>(residual_obs.size());
   out.num_iterations = static_cast<int>(summary.iterations.size());
   out.success = summary.IsSolutionUsable();
+  {
+    std::vector<double*> blocks;
+    problem.GetParameterBlocks(&blocks);
+    for (double* b : blocks)
+      if (!problem.IsParameterBlockConstant(b)) out.num_parameters += problem.ParameterBlockTangentSize(b);
+  }
+  if (out.success && options.compute_intrinsics_covariance) {
+    ceres::Covariance::Options co;
+    co.num_threads = sopts.num_threads;
+    co.apply_loss_function = true;
+    ceres::Covariance covariance(co);
+    std::vector<std::pair<const double*, const double*>> blocks;
+    for (auto& [cid, params] : intr)
+      if (!problem.IsParameterBlockConstant(params.data())) blocks.emplace_back(params.data(), params.data());
+    const double dof = std::max(1.0, 2.0 * residual_obs.size() - out.num_parameters);
+    const double sigma2 = out.final_rms_px * out.final_rms_px * residual_obs.size() / dof;  // SSE / dof
+    if (!blocks.empty() && covariance.Compute(blocks, &problem)) {
+      for (auto& [cid, params] : intr) {
+        if (problem.IsParameterBlockConstant(params.data())) continue;
+        Eigen::Matrix<double, core::kNumIntrinsics, core::kNumIntrinsics, Eigen::RowMajor> m;
+        if (covariance.GetCovarianceBlock(params.data(), params.data(), m.data()))
+          out.intrinsics_covariance[cid] = sigma2 * m;
+      }
+    }
+  }
   if (out.success) {
     for (auto& [id, b] : poses) {
       if (!variable.count(id) || config.constant_images.count(id)) continue;

@@ -39,6 +39,9 @@ struct BundleAdjustmentOptions {
   // 61-image 960x540 video model (424k residuals): dense 4.7 CPU-s vs sparse 6.2 for 6 iterations.
   int dense_schur_max_images = 200;
   int num_threads = 0;              // 0: core::NumThreads()
+  // After solving: the posterior covariance of each camera's free intrinsics (Ceres Covariance, sparse QR of the
+  // whole Jacobian), scaled by the residual variance σ² = SSE / (residuals − parameters).
+  bool compute_intrinsics_covariance = false;
   void Check() const;
 };
 
@@ -72,6 +75,10 @@ struct BundleAdjustmentSummary {
   int num_iterations = 0;
   double initial_rms_px = 0, final_rms_px = 0;  // of the raw (un-robustified) residuals
   double seconds = 0;
+  int num_parameters = 0;  // free parameters (tangent space)
+  // With compute_intrinsics_covariance: camera id → covariance in core::IntrinsicIndex order (rows and columns
+  // of held intrinsics are zero). Missing when Ceres found the problem rank-deficient.
+  std::map<uint32_t, Eigen::Matrix<double, core::kNumIntrinsics, core::kNumIntrinsics>> intrinsics_covariance;
 };
 
 // Adjusts rec in place. Points observed by a variable image are variable (with all their observations in the

@@ -3,7 +3,8 @@
 //  - centre RMSE after alignment, as a fraction of the true cameras' extent, where the extent is the LARGEST
 //    PAIRWISE DISTANCE between true camera centres (the set's diameter);
 //  - median over all image pairs of the angle of R_rel_est · R_rel_trueᵀ, with R_rel = R_j R_iᵀ (gauge-free);
-//  - relative focal error |f_est − f_true| / f_true per camera (matched through the first image using it).
+//  - relative focal error |f_est − f_true| / f_true per camera (matched through the first image using it), and
+//    the distance between the principal points in pixels.
 #pragma once
 
 #include <map>
@@ -26,6 +27,7 @@ struct SparseEvaluation {
   double median_rotation_error_deg = 0;
   double max_centre_error_fraction = 0;
   double focal_relative_error = 0;  // worst over matched cameras
+  double principal_point_error_px = 0;  // worst over matched cameras: distance between the principal points
   Eigen::Vector3d systematic_rotation_deg = Eigen::Vector3d::Zero();  // see ToJson
   core::Sim3 alignment;             // ours → truth
   nlohmann::json ToJson() const;

@@ -16,7 +16,11 @@
 #include "fmv3d/geometry/triangulation.h"
 #include "fmv3d/sfm/bundle_adjustment.h"
 #include "fmv3d/sfm/correspondence_graph.h"
+#include "fmv3d/sfm/dolly_zoom_scan.h"
 #include "fmv3d/sfm/focal_scan.h"
+#include "fmv3d/sfm/mapper_primitives.h"
+#include "fmv3d/sfm/self_calibration.h"
+#include "fmv3d/sfm/triangulator.h"
 
 namespace fmv3d::sfm {
 
@@ -59,20 +63,57 @@ struct PairCandidate {
   core::Pose pose2;  // pose of image 2 with image 1 at the origin, unit baseline
 };
 
+// Why an image of the pool is not (yet) in the model; turned into a sentence only for MapperResult::left_out.
+struct RegistrationFailure {
+  enum class Kind { kTooFewVisiblePoints, kAbsolutePose };
+  Kind kind = Kind::kTooFewVisiblePoints;
+  int count = 0;  // visible points, or absolute-pose inliers
+  int of = 0;     // the minimum needed, or the 2D–3D correspondences tried
+  std::string Describe() const {
+    if (kind == Kind::kTooFewVisiblePoints)
+      return "too few triangulated points visible (" + std::to_string(count) + " < " + std::to_string(of) + ")";
+    return "absolute pose failed: " + std::to_string(count) + " inliers of " + std::to_string(of) +
+           " 2D-3D correspondences";
+  }
+};
+
+// One step of the growth loop.
+enum class GrowthStep {
+  kRegistered,      // an image was registered (and triangulated, locally adjusted)
+  kNoCandidate,     // no image left that sees enough of the model or deserves another trial
+  kAllFailed,       // every candidate was tried and failed
+};
+
 class ModelBuilder {
  public:
   ModelBuilder(const MapperInput& input, const std::map<uint32_t, const MapperImage*>& images,
                const CorrespondenceGraph& graph, const MapperOptions& options, const std::set<uint32_t>& pool,
                Timings* timings)
-      : input_(input), images_(images), graph_(graph), opt_(options), pool_(pool), t_(timings) {
-    tri_min_angle_deg_ = opt_.tri_min_angle_deg;
-    filter_min_angle_deg_ = opt_.filter_min_angle_deg;
+      : input_(input),
+        images_(images),
+        graph_(graph),
+        opt_(options),
+        pool_(pool),
+        t_(timings),
+        triangulator_(graph, &rec_, {options.tri_max_error_px, options.tri_min_angle_deg},
+                      [this](uint32_t image_id, uint32_t kp, Eigen::Matrix<uint8_t, 3, 1>* rgb) {
+                        const MapperImage& mi = *images_.at(image_id);
+                        if (mi.colors.size() != mi.keypoints.size()) return false;
+                        *rgb = mi.colors[kp];
+                        return true;
+                      }) {
+    filter_.max_error_px = opt_.filter_max_error_px;
+    filter_.min_angle_deg = opt_.filter_min_angle_deg;
   }
 
   bool Initialize();
   void Grow();
   core::Reconstruction& rec() { return rec_; }
-  const std::map<uint32_t, std::string>& fail_reasons() const { return fail_reason_; }
+  std::map<uint32_t, std::string> fail_reasons() const {
+    std::map<uint32_t, std::string> out;
+    for (const auto& [id, f] : fail_reason_) out[id] = f.Describe();
+    return out;
+  }
   std::pair<uint32_t, uint32_t> init_pair() const { return {gauge1_, gauge2_}; }
   int num_global_ba() const { return num_global_ba_; }
   int num_relocalised() const { return num_relocalised_; }
@@ -83,29 +124,19 @@ class ModelBuilder {
   }
   void EvaluatePair(PairCandidate* c) const;
   void ChooseFocal(const std::vector<PairCandidate>& cands);
-  void TryFreeFocal();
   void DollyZoomFocalScan();
   bool TryInitialPair(const PairCandidate& c);
   void AddImage(uint32_t id, const core::Pose& pose);
-  void AddObservation(uint64_t pid, uint32_t image_id, uint32_t kp);
-  void DeletePoint(uint64_t pid);
-  bool TriangulateObservations(const std::vector<core::TrackElement>& obs);
-  void TriangulateKeypoint(uint32_t image_id, uint32_t kp);
-  int CompletePoint(uint64_t pid);
-  int MergePoint(uint64_t pid);
-  bool PointHasImage(uint64_t pid, uint32_t image_id) const;
-  int64_t PointOf(const core::TrackElement& el) const {
-    auto it = rec_.images.find(el.image_id);
-    return it == rec_.images.end() ? core::kNoPoint3D : it->second.point3d_ids[el.point2d_idx];
-  }
+  GrowthStep RegisterNextImage();
+  // Timed wrappers of the primitives (mapper_primitives.h, triangulator.h) with this model's thresholds.
   int TriangulateImage(uint32_t image_id);
   int Retriangulate();
   int FilterPoints(const std::set<uint64_t>* subset);
   int VisiblePoints(uint32_t image_id, double* score) const;
+  Correspondences2D3D Correspondences(uint32_t image_id) const {
+    return FindCorrespondences2D3D(rec_, graph_, image_id, images_.at(image_id)->keypoints);
+  }
   bool TryRegister(uint32_t image_id);
-  // 2D–3D correspondences of an image with the current model: keypoints, points, (keypoint, point id) pairs.
-  void Correspondences2d3d(uint32_t image_id, std::vector<Eigen::Vector2d>* p2, std::vector<Eigen::Vector3d>* p3,
-                           std::vector<std::pair<uint32_t, uint64_t>>* kps) const;
   int RelocaliseImages();
   void LocalBundleAdjust(uint32_t image_id);
   BundleAdjustmentSummary GlobalBundleAdjust(bool final_pass, bool principal_point = false);
@@ -121,31 +152,59 @@ class ModelBuilder {
     const size_t remaining = pool_.size() - n;
     return remaining >= (opt_.global_ba_growth_ratio - 1) * n;
   }
-  void TryPrincipalPoint();
+  // The final nested-model test of one intrinsic group (self_calibration.h); true when it was freed.
+  bool TrySelfCalibration(IntrinsicGroup group, double min_delta_chi2);
   BundleAdjustmentOptions BaOptions() const;
 
   const MapperInput& input_;
   const std::map<uint32_t, const MapperImage*>& images_;
   const CorrespondenceGraph& graph_;
-  uint64_t next_point_id_ = 1;
   double init_focal_scale_ = 1;
   // Focal held through growth: a trusted prior the user wants kept, or a telephoto scan's lower bound (then
-  // tested once at the end, see TryFreeFocal). Narrow field: distortion is unobservable and stays fixed.
+  // tested once at the end). Narrow field: distortion is unobservable and stays fixed.
   bool focal_fixed_ = false, focal_from_plateau_ = false, narrow_field_ = false, dolly_done_ = false;
-  // Angle thresholds of this model: the options', lowered for narrow-baseline (telephoto) models, see Initialize.
-  double tri_min_angle_deg_ = 0, filter_min_angle_deg_ = 0;  // set in the constructor body
   const MapperOptions& opt_;
   std::set<uint32_t> pool_;
   int num_relocalised_ = 0;
   Timings* t_;
   core::Reconstruction rec_;
+  // Angle thresholds of this model: the options', lowered for narrow-baseline (telephoto) models, see Initialize.
+  IncrementalTriangulator triangulator_;
+  PointFilterOptions filter_;
   uint32_t gauge1_ = 0, gauge2_ = 0;
-  std::map<uint32_t, std::string> fail_reason_;
+  std::map<uint32_t, RegistrationFailure> fail_reason_;
   std::map<uint32_t, int> trials_;
   std::map<uint32_t, int> visible_at_failure_;
   size_t images_at_last_global_ = 0;
   int num_global_ba_ = 0;
 };
+
+int ModelBuilder::TriangulateImage(uint32_t image_id) {
+  const auto start = Clock::now();
+  const int made = triangulator_.TriangulateImage(image_id);
+  t_->triangulation += Seconds(start);
+  return made;
+}
+
+int ModelBuilder::Retriangulate() {
+  const auto start = Clock::now();
+  const int changed = triangulator_.Retriangulate();
+  t_->triangulation += Seconds(start);
+  return changed;
+}
+
+int ModelBuilder::FilterPoints(const std::set<uint64_t>* subset) {
+  const auto start = Clock::now();
+  const int removed = sfm::FilterPoints(&rec_, subset, filter_);
+  t_->filtering += Seconds(start);
+  return removed;
+}
+
+int ModelBuilder::VisiblePoints(uint32_t image_id, double* score) const {
+  const MapperImage& mi = *images_.at(image_id);
+  const core::Camera& cam = input_.cameras.at(mi.camera_id).camera;
+  return CountVisiblePoints(rec_, graph_, image_id, mi.keypoints, cam.width, cam.height, score);
+}
 
 void ModelBuilder::ChooseFocal(const std::vector<PairCandidate>& cands) {
   if (cands.empty()) return;
@@ -275,20 +334,6 @@ void ModelBuilder::AddImage(uint32_t id, const core::Pose& pose) {
   rec_.images[id] = std::move(im);
 }
 
-void ModelBuilder::AddObservation(uint64_t pid, uint32_t image_id, uint32_t kp) {
-  auto& im = rec_.images.at(image_id);
-  if (im.point3d_ids[kp] != core::kNoPoint3D) return;
-  im.point3d_ids[kp] = static_cast<int64_t>(pid);
-  rec_.points.at(pid).track.push_back({image_id, kp});
-}
-
-void ModelBuilder::DeletePoint(uint64_t pid) {
-  auto it = rec_.points.find(pid);
-  if (it == rec_.points.end()) return;
-  for (const auto& el : it->second.track) rec_.images.at(el.image_id).point3d_ids[el.point2d_idx] = core::kNoPoint3D;
-  rec_.points.erase(it);
-}
-
 bool ModelBuilder::TryInitialPair(const PairCandidate& c) {
   rec_ = core::Reconstruction();
   const auto& pair = *c.pair;
@@ -302,7 +347,7 @@ bool ModelBuilder::TryInitialPair(const PairCandidate& c) {
     if (rec_.images.at(pair.image_id1).point3d_ids[m.idx1] != core::kNoPoint3D ||
         rec_.images.at(pair.image_id2).point3d_ids[m.idx2] != core::kNoPoint3D)
       continue;
-    made += TriangulateObservations({{pair.image_id1, m.idx1}, {pair.image_id2, m.idx2}}) ? 1 : 0;
+    made += triangulator_.CreatePoint({{pair.image_id1, m.idx1}, {pair.image_id2, m.idx2}}) != core::kNoPoint3D;
   }
   if (made < opt_.init_min_inliers / 2) return false;
   BundleAdjustmentConfig cfg;
@@ -348,14 +393,15 @@ bool ModelBuilder::Initialize() {
       tried.insert(c->pair);
       // Telephoto video sees the scene through a narrow cone: no pair reaches the usual angles. The model then
       // works with thresholds scaled to the baseline it has (points still need a measurable parallax).
-      tri_min_angle_deg_ = std::min(opt_.tri_min_angle_deg, std::max(0.05, c->median_angle_deg / 3));
-      filter_min_angle_deg_ = std::min(opt_.filter_min_angle_deg, tri_min_angle_deg_);
+      const double tri_min_angle_deg = std::min(opt_.tri_min_angle_deg, std::max(0.05, c->median_angle_deg / 3));
+      triangulator_.set_min_angle_deg(tri_min_angle_deg);
+      filter_.min_angle_deg = std::min(opt_.filter_min_angle_deg, tri_min_angle_deg);
       if (TryInitialPair(*c)) {
         spdlog::info("initial pair {} + {}: {} points, median angle {:.2f}°, H ratio {:.2f}, focal {:.1f}, "
                      "min angle {:.2f}°",
                      images_.at(c->pair->image_id1)->name, images_.at(c->pair->image_id2)->name,
                      rec_.points.size(), c->median_angle_deg, c->h_ratio, rec_.cameras.begin()->second.f,
-                     tri_min_angle_deg_);
+                     triangulator_.options().min_angle_deg);
         t_->init += Seconds(start);
         images_at_last_global_ = 2;
         return true;
@@ -365,249 +411,6 @@ bool ModelBuilder::Initialize() {
   rec_ = core::Reconstruction();
   t_->init += Seconds(start);
   return false;
-}
-
-bool ModelBuilder::PointHasImage(uint64_t pid, uint32_t image_id) const {
-  for (const auto& el : rec_.points.at(pid).track)
-    if (el.image_id == image_id) return true;
-  return false;
-}
-
-bool ModelBuilder::TriangulateObservations(const std::vector<core::TrackElement>& obs) {
-  const size_t n = obs.size();
-  if (n < 2) return false;
-  std::vector<core::Pose> poses(n);
-  std::vector<Eigen::Vector2d> xs(n), uvs(n);
-  std::vector<Eigen::Vector3d> centres(n);
-  std::vector<const core::Camera*> cams(n);
-  for (size_t i = 0; i < n; ++i) {
-    const auto& im = rec_.images.at(obs[i].image_id);
-    cams[i] = &rec_.cameras.at(im.camera_id);
-    poses[i] = im.pose;
-    uvs[i] = im.points2d[obs[i].point2d_idx];
-    xs[i] = Normalized(*cams[i], uvs[i]);
-    centres[i] = im.pose.Centre();
-  }
-  auto inliers_of = [&](const Eigen::Vector3d& X, std::vector<size_t>* in) {
-    in->clear();
-    for (size_t i = 0; i < n; ++i) {
-      const Eigen::Vector3d xc = poses[i].Transform(X);
-      if (xc.z() <= 0) continue;
-      if ((cams[i]->Project(xc) - uvs[i]).norm() <= opt_.tri_max_error_px) in->push_back(i);
-    }
-  };
-  // Small RANSAC over observation pairs: the correspondences can contain a wrong match.
-  std::vector<size_t> best_in;
-  const size_t m = std::min<size_t>(n, 10);
-  for (size_t i = 0; i < m && best_in.size() < n; ++i)
-    for (size_t j = i + 1; j < m; ++j) {
-      Eigen::Vector3d X;
-      if (!geometry::TriangulateDLT({poses[i], poses[j]}, {xs[i], xs[j]}, &X)) continue;
-      if (geometry::TriangulationAngle(centres[i], centres[j], X) < tri_min_angle_deg_ * kDeg) continue;
-      std::vector<size_t> in;
-      inliers_of(X, &in);
-      if (in.size() > best_in.size()) best_in = in;
-      if (best_in.size() == n) break;
-    }
-  if (best_in.size() < 2) return false;
-  std::vector<core::Pose> ps;
-  std::vector<Eigen::Vector2d> xx;
-  for (size_t i : best_in) {
-    ps.push_back(poses[i]);
-    xx.push_back(xs[i]);
-  }
-  Eigen::Vector3d X;
-  if (!geometry::TriangulateDLT(ps, xx, &X)) return false;
-  geometry::RefinePoint(ps, xx, &X);
-  std::vector<size_t> in;
-  inliers_of(X, &in);
-  if (in.size() < 2) return false;
-  std::vector<Eigen::Vector3d> cs;
-  for (size_t i : in) cs.push_back(centres[i]);
-  if (geometry::MaxTriangulationAngle(cs, X) < tri_min_angle_deg_ * kDeg) return false;
-  const uint64_t pid = next_point_id_++;
-  core::Point3D p;
-  p.id = pid;
-  p.xyz = X;
-  const MapperImage& first = *images_.at(obs[in[0]].image_id);
-  if (first.colors.size() == first.keypoints.size()) p.rgb = first.colors[obs[in[0]].point2d_idx];
-  rec_.points[pid] = p;
-  for (size_t i : in) AddObservation(pid, obs[i].image_id, obs[i].point2d_idx);
-  return true;
-}
-
-void ModelBuilder::TriangulateKeypoint(uint32_t image_id, uint32_t kp) {
-  const auto& corrs = graph_.Correspondences(image_id, kp);
-  if (corrs.empty()) return;
-  auto& im = rec_.images.at(image_id);
-  if (im.point3d_ids[kp] != core::kNoPoint3D) return;
-  // Continuation: join the best-fitting existing point among the correspondences.
-  int64_t best_pid = core::kNoPoint3D;
-  double best_err = opt_.tri_max_error_px;
-  for (const auto& c : corrs) {
-    const int64_t pid = PointOf(c);
-    if (pid == core::kNoPoint3D || pid == best_pid) continue;
-    const double e = ObservationError(rec_, image_id, kp, rec_.points.at(static_cast<uint64_t>(pid)).xyz);
-    if (e <= best_err && !PointHasImage(static_cast<uint64_t>(pid), image_id)) {
-      best_err = e;
-      best_pid = pid;
-    }
-  }
-  if (best_pid != core::kNoPoint3D) {
-    AddObservation(static_cast<uint64_t>(best_pid), image_id, kp);
-    return;
-  }
-  // Creation: this keypoint and its registered, untriangulated correspondences (one per image).
-  std::vector<core::TrackElement> obs = {{image_id, kp}};
-  std::set<uint32_t> seen = {image_id};
-  for (const auto& c : corrs)
-    if (rec_.images.count(c.image_id) && PointOf(c) == core::kNoPoint3D && seen.insert(c.image_id).second)
-      obs.push_back(c);
-  if (obs.size() >= 2) TriangulateObservations(obs);
-}
-
-int ModelBuilder::CompletePoint(uint64_t pid) {
-  int added = 0;
-  // Breadth-first over the correspondence graph: an added observation can bring further ones.
-  for (size_t k = 0; k < rec_.points.at(pid).track.size(); ++k) {
-    const core::TrackElement el = rec_.points.at(pid).track[k];
-    for (const auto& c : graph_.Correspondences(el.image_id, el.point2d_idx)) {
-      if (!rec_.images.count(c.image_id) || PointOf(c) != core::kNoPoint3D || PointHasImage(pid, c.image_id))
-        continue;
-      if (ObservationError(rec_, c.image_id, c.point2d_idx, rec_.points.at(pid).xyz) <= opt_.tri_max_error_px) {
-        AddObservation(pid, c.image_id, c.point2d_idx);
-        ++added;
-      }
-    }
-  }
-  return added;
-}
-
-int ModelBuilder::MergePoint(uint64_t pid) {
-  int merged = 0;
-  for (size_t k = 0; rec_.points.count(pid) && k < rec_.points.at(pid).track.size(); ++k) {
-    const core::TrackElement el = rec_.points.at(pid).track[k];
-    for (const auto& c : graph_.Correspondences(el.image_id, el.point2d_idx)) {
-      const int64_t other = PointOf(c);
-      if (other == core::kNoPoint3D || static_cast<uint64_t>(other) == pid) continue;
-      auto& P = rec_.points.at(pid);
-      auto& Q = rec_.points.at(static_cast<uint64_t>(other));
-      bool ok = true;
-      for (const auto& q : Q.track) ok = ok && !PointHasImage(pid, q.image_id);
-      if (!ok) continue;
-      // Candidate position: the better-supported point's; every observation of both must agree with it.
-      const Eigen::Vector3d X = P.track.size() >= Q.track.size() ? P.xyz : Q.xyz;
-      for (const auto& o : P.track) ok = ok && ObservationError(rec_, o.image_id, o.point2d_idx, X) <= opt_.tri_max_error_px;
-      for (const auto& o : Q.track) ok = ok && ObservationError(rec_, o.image_id, o.point2d_idx, X) <= opt_.tri_max_error_px;
-      if (!ok) continue;
-      const auto qtrack = Q.track;
-      DeletePoint(static_cast<uint64_t>(other));
-      rec_.points.at(pid).xyz = X;
-      for (const auto& o : qtrack) AddObservation(pid, o.image_id, o.point2d_idx);
-      ++merged;
-    }
-  }
-  return merged;
-}
-
-int ModelBuilder::TriangulateImage(uint32_t image_id) {
-  const auto start = Clock::now();
-  const size_t before = rec_.points.size();
-  const auto& im = rec_.images.at(image_id);
-  for (uint32_t kp = 0; kp < im.points2d.size(); ++kp) TriangulateKeypoint(image_id, kp);
-  std::set<uint64_t> pts;
-  for (int64_t pid : rec_.images.at(image_id).point3d_ids)
-    if (pid != core::kNoPoint3D) pts.insert(static_cast<uint64_t>(pid));
-  for (uint64_t pid : pts) {
-    if (!rec_.points.count(pid)) continue;
-    CompletePoint(pid);
-    MergePoint(pid);
-  }
-  t_->triangulation += Seconds(start);
-  return static_cast<int>(rec_.points.size()) - static_cast<int>(before);
-}
-
-int ModelBuilder::Retriangulate() {
-  const auto start = Clock::now();
-  const size_t before = rec_.points.size();
-  std::vector<uint32_t> ids;
-  for (const auto& [id, im] : rec_.images) ids.push_back(id);
-  for (uint32_t id : ids)
-    for (uint32_t kp = 0; kp < rec_.images.at(id).points2d.size(); ++kp) TriangulateKeypoint(id, kp);
-  std::vector<uint64_t> pids;
-  for (const auto& [pid, p] : rec_.points) pids.push_back(pid);
-  int changed = 0;
-  for (uint64_t pid : pids) {
-    if (!rec_.points.count(pid)) continue;
-    changed += CompletePoint(pid);
-    changed += MergePoint(pid);
-  }
-  t_->triangulation += Seconds(start);
-  return changed + static_cast<int>(rec_.points.size()) - static_cast<int>(before);
-}
-
-int ModelBuilder::FilterPoints(const std::set<uint64_t>* subset) {
-  const auto start = Clock::now();
-  std::vector<uint64_t> ids;
-  if (subset)
-    ids.assign(subset->begin(), subset->end());
-  else
-    for (const auto& [pid, p] : rec_.points) ids.push_back(pid);
-  int removed = 0;
-  for (uint64_t pid : ids) {
-    auto it = rec_.points.find(pid);
-    if (it == rec_.points.end()) continue;
-    auto& p = it->second;
-    std::vector<core::TrackElement> keep;
-    for (const auto& el : p.track) {
-      if (ObservationError(rec_, el.image_id, el.point2d_idx, p.xyz) <= opt_.filter_max_error_px)
-        keep.push_back(el);
-      else
-        rec_.images.at(el.image_id).point3d_ids[el.point2d_idx] = core::kNoPoint3D;
-    }
-    p.track = keep;
-    bool drop = p.track.size() < 2;
-    if (!drop) {
-      std::vector<Eigen::Vector3d> cs;
-      for (const auto& el : p.track) cs.push_back(rec_.images.at(el.image_id).pose.Centre());
-      drop = geometry::MaxTriangulationAngle(cs, p.xyz) < filter_min_angle_deg_ * kDeg;
-    }
-    if (drop) {
-      DeletePoint(pid);
-      ++removed;
-    }
-  }
-  t_->filtering += Seconds(start);
-  return removed;
-}
-
-int ModelBuilder::VisiblePoints(uint32_t image_id, double* score) const {
-  const MapperImage& mi = *images_.at(image_id);
-  const core::Camera& cam = input_.cameras.at(mi.camera_id).camera;
-  constexpr int kLevels = 3;
-  std::set<int> cells[kLevels];
-  int count = 0;
-  for (uint32_t kp = 0; kp < mi.keypoints.size(); ++kp) {
-    bool seen = false;
-    for (const auto& c : graph_.Correspondences(image_id, kp))
-      if (PointOf(c) != core::kNoPoint3D) {
-        seen = true;
-        break;
-      }
-    if (!seen) continue;
-    ++count;
-    for (int l = 0; l < kLevels; ++l) {
-      const int g = 2 << l;  // 2, 4, 8 cells per side
-      const int cx = std::clamp(static_cast<int>(mi.keypoints[kp].x() / std::max(1, cam.width) * g), 0, g - 1);
-      const int cy = std::clamp(static_cast<int>(mi.keypoints[kp].y() / std::max(1, cam.height) * g), 0, g - 1);
-      cells[l].insert(cy * g + cx);
-    }
-  }
-  if (score) {
-    *score = 0;
-    for (int l = 0; l < kLevels; ++l) *score += static_cast<double>(cells[l].size()) * (2 << l);
-  }
-  return count;
 }
 
 BundleAdjustmentOptions ModelBuilder::BaOptions() const {
@@ -624,47 +427,30 @@ BundleAdjustmentOptions ModelBuilder::BaOptions() const {
   return o;
 }
 
-void ModelBuilder::Correspondences2d3d(uint32_t image_id, std::vector<Eigen::Vector2d>* p2,
-                                       std::vector<Eigen::Vector3d>* p3,
-                                       std::vector<std::pair<uint32_t, uint64_t>>* kps) const {
-  const MapperImage& mi = *images_.at(image_id);
-  for (uint32_t kp = 0; kp < mi.keypoints.size(); ++kp) {
-    std::set<int64_t> pids;
-    for (const auto& c : graph_.Correspondences(image_id, kp)) {
-      const int64_t pid = PointOf(c);
-      if (pid == core::kNoPoint3D || !pids.insert(pid).second) continue;
-      p2->push_back(mi.keypoints[kp]);
-      p3->push_back(rec_.points.at(static_cast<uint64_t>(pid)).xyz);
-      kps->emplace_back(kp, static_cast<uint64_t>(pid));
-    }
-  }
-}
-
 bool ModelBuilder::TryRegister(uint32_t image_id) {
   const auto start = Clock::now();
   const MapperImage& mi = *images_.at(image_id);
-  std::vector<Eigen::Vector2d> p2;
-  std::vector<Eigen::Vector3d> p3;
-  std::vector<std::pair<uint32_t, uint64_t>> kps;  // (keypoint, point) per correspondence
-  Correspondences2d3d(image_id, &p2, &p3, &kps);
+  const Correspondences2D3D c = Correspondences(image_id);
   core::Camera cam = rec_.cameras.count(mi.camera_id) ? rec_.cameras.at(mi.camera_id)
                                                        : input_.cameras.at(mi.camera_id).camera;
   geometry::AbsolutePoseOptions po;
   po.max_error_px = opt_.abs_pose_max_error_px;
   po.min_inliers = opt_.abs_pose_min_inliers;
   po.min_inlier_ratio = opt_.abs_pose_min_inlier_ratio;
-  const auto r = geometry::EstimateAbsolutePose(p2, p3, cam, po);
+  const auto r = geometry::EstimateAbsolutePose(c.points2d, c.points3d, cam, po);
   t_->registration += Seconds(start);
   if (!r.success) {
-    fail_reason_[image_id] = "absolute pose failed: " + std::to_string(r.num_inliers) + " inliers of " +
-                             std::to_string(p2.size()) + " 2D-3D correspondences";
+    fail_reason_[image_id] = {RegistrationFailure::Kind::kAbsolutePose, r.num_inliers,
+                              static_cast<int>(c.points2d.size())};
     return false;
   }
   AddImage(image_id, r.pose);
-  for (size_t i = 0; i < kps.size(); ++i)
-    if (r.inlier_mask[i] && rec_.images.at(image_id).point3d_ids[kps[i].first] == core::kNoPoint3D &&
-        !PointHasImage(kps[i].second, image_id))
-      AddObservation(kps[i].second, image_id, kps[i].first);
+  for (size_t i = 0; i < c.keypoint_point.size(); ++i) {
+    const auto [kp, pid] = c.keypoint_point[i];
+    if (r.inlier_mask[i] && rec_.images.at(image_id).point3d_ids[kp] == core::kNoPoint3D &&
+        !PointHasImage(rec_, pid, image_id))
+      AddObservation(&rec_, pid, image_id, kp);
+  }
   fail_reason_.erase(image_id);
   return true;
 }
@@ -686,10 +472,9 @@ int ModelBuilder::RelocaliseImages() {
     if (id != gauge1_ && id != gauge2_) ids.push_back(id);
   for (uint32_t id : ids) {
     auto& im = rec_.images.at(id);
-    std::vector<Eigen::Vector2d> p2;
-    std::vector<Eigen::Vector3d> p3;
-    std::vector<std::pair<uint32_t, uint64_t>> kps;
-    Correspondences2d3d(id, &p2, &p3, &kps);
+    const Correspondences2D3D c = Correspondences(id);
+    const auto& p2 = c.points2d;
+    const auto& p3 = c.points3d;
     const core::Camera& cam = rec_.cameras.at(im.camera_id);
     int support = 0;  // correspondences the current pose explains
     for (size_t i = 0; i < p2.size(); ++i) {
@@ -712,21 +497,14 @@ int ModelBuilder::RelocaliseImages() {
     spdlog::info("sparse: {} re-registered: its pose explained {} of {} 2D-3D correspondences ({} observations), "
                  "one {:.3g} away ({:.2f}°) explains {}",
                  im.name, support, p2.size(), obs, dc, da / kDeg, r.num_inliers);
-    for (uint32_t kp = 0; kp < im.point3d_ids.size(); ++kp) {
-      const int64_t pid = im.point3d_ids[kp];
-      if (pid == core::kNoPoint3D) continue;
-      auto& track = rec_.points.at(static_cast<uint64_t>(pid)).track;
-      track.erase(std::remove_if(track.begin(), track.end(),
-                                 [&](const core::TrackElement& el) { return el.image_id == id; }),
-                  track.end());
-      im.point3d_ids[kp] = core::kNoPoint3D;
-      if (track.size() < 2) DeletePoint(static_cast<uint64_t>(pid));
-    }
+    DetachImage(&rec_, id);
     im.pose = r.pose;
-    for (size_t i = 0; i < kps.size(); ++i)
-      if (r.inlier_mask[i] && rec_.points.count(kps[i].second) && im.point3d_ids[kps[i].first] == core::kNoPoint3D &&
-          !PointHasImage(kps[i].second, id))
-        AddObservation(kps[i].second, id, kps[i].first);
+    for (size_t i = 0; i < c.keypoint_point.size(); ++i) {
+      const auto [kp, pid] = c.keypoint_point[i];
+      if (r.inlier_mask[i] && rec_.points.count(pid) && im.point3d_ids[kp] == core::kNoPoint3D &&
+          !PointHasImage(rec_, pid, id))
+        AddObservation(&rec_, pid, id, kp);
+    }
     TriangulateImage(id);
     ++moved;
   }
@@ -795,13 +573,12 @@ BundleAdjustmentSummary ModelBuilder::GlobalBundleAdjust(bool final_pass, bool p
   return s;
 }
 
-// The principal point is weakly constrained in many configurations (an orbit of cameras all looking at one
-// centre: a shift trades against a common tilt), and freeing it there only adds noise to every rotation.
-// Model selection: free it, and keep the result only when the squared error drops by far more than the two
-// extra parameters explain for pure noise (Δχ² with σ² estimated from the fixed-point fit).
-void ModelBuilder::TryPrincipalPoint() {
+// A telephoto scan's focal is the knee of a plateau (longer focals explain the two-view matches as well); the
+// principal point is weakly constrained in many configurations (an orbit of cameras all looking at one centre:
+// a shift trades against a common tilt), and freeing it there only adds noise to every rotation. Both are held
+// through growth and freed at the end only when the nested-model test says the data ask for it.
+bool ModelBuilder::TrySelfCalibration(IntrinsicGroup group, double min_delta_chi2) {
   BundleAdjustmentOptions o = BaOptions();
-  o.loss = BundleAdjustmentOptions::Loss::kTrivial;  // χ² needs plain squared errors (outliers are filtered)
   // Δχ² = dof · (ss0 − ss1) / ss0: a relative cost tolerance of 1e-6 moves it by about dof · 1e-6 (≈ 1 for a
   // large model), far below the threshold, so the test needs no tighter convergence than that.
   o.function_tolerance = std::max(opt_.final_ba_function_tolerance, 1e-6);
@@ -809,168 +586,90 @@ void ModelBuilder::TryPrincipalPoint() {
   BundleAdjustmentConfig cfg;
   cfg.gauge_image1 = gauge1_;
   cfg.gauge_image2 = gauge2_;
-  core::Reconstruction fixed = rec_;
-  o.refine_principal_point = false;
-  const auto s0 = BundleAdjust(&fixed, cfg, o);
-  core::Reconstruction freed = fixed;  // starts at the fixed optimum: a few steps only
-  o.refine_principal_point = true;
-  const auto s1 = BundleAdjust(&freed, cfg, o);
-  if (!s0.success || !s1.success) return;
-  const double n = s0.num_residuals;
-  const double ss0 = s0.final_rms_px * s0.final_rms_px * n, ss1 = s1.final_rms_px * s1.final_rms_px * n;
-  const double dof = std::max(1.0, 2 * n - 6.0 * rec_.images.size() - 3.0 * rec_.points.size());
-  const double chi2 = (ss0 - ss1) / std::max(ss0 / dof, 1e-12);
-  const auto& cam = freed.cameras.begin()->second;
-  const bool keep = chi2 > opt_.principal_point_min_chi2;
-  spdlog::info("principal point test: Δχ² = {:.1f} → {} (free fit: {:.2f}, {:.2f})", chi2,
-               keep ? "refined" : "kept fixed", cam.u0, cam.v0);
-  if (keep) {
-    rec_ = std::move(freed);
-    GlobalBundleAdjust(true, true);
-  }
+  NestedModelTestOptions to;
+  to.min_delta_chi2 = min_delta_chi2;
+  to.require_determined = false;
+  const NestedModelTestResult r = TestNestedModel(&rec_, cfg, o, group, to);
+  if (r.decision == NestedModelDecision::kFailed) return false;
+  const bool freed = r.freed_decision();
+  spdlog::info("{} test: Δχ² = {:.1f} → {} (free fit: f {:.1f}, pp {:.2f}, {:.2f}; held: f {:.1f}, pp {:.2f}, "
+               "{:.2f})",
+               ToString(group), r.delta_chi2, freed ? "refined" : "kept", r.freed.f, r.freed.u0, r.freed.v0,
+               r.held.f, r.held.u0, r.held.v0);
+  return freed;
 }
 
-// A telephoto scan's focal is the knee of a plateau: longer focals explain the two-view matches as well. With
-// the whole model the perspective effects add up, so free the focal once and keep the result only when the
-// squared error drops by far more than one extra parameter explains for pure noise (Δχ², as for the
-// principal point); otherwise the scan's value stays.
-void ModelBuilder::TryFreeFocal() {
-  BundleAdjustmentOptions o = BaOptions();
-  o.loss = BundleAdjustmentOptions::Loss::kTrivial;
-  o.function_tolerance = std::max(opt_.final_ba_function_tolerance, 1e-6);
-  o.max_iterations = opt_.final_ba_max_iterations;
-  BundleAdjustmentConfig cfg;
-  cfg.gauge_image1 = gauge1_;
-  cfg.gauge_image2 = gauge2_;
-  core::Reconstruction fixed = rec_;
-  o.refine_focal = false;
-  const auto s0 = BundleAdjust(&fixed, cfg, o);
-  core::Reconstruction freed = fixed;
-  o.refine_focal = true;
-  const auto s1 = BundleAdjust(&freed, cfg, o);
-  if (!s0.success || !s1.success) return;
-  const double n = s0.num_residuals;
-  const double ss0 = s0.final_rms_px * s0.final_rms_px * n, ss1 = s1.final_rms_px * s1.final_rms_px * n;
-  const double dof = std::max(1.0, 2 * n - 6.0 * rec_.images.size() - 3.0 * rec_.points.size());
-  const double chi2 = (ss0 - ss1) / std::max(ss0 / dof, 1e-12);
-  const double f0 = fixed.cameras.begin()->second.f, f1 = freed.cameras.begin()->second.f;
-  const bool keep = chi2 > opt_.focal_min_chi2 && f1 > 0;
-  spdlog::info("focal test: Δχ² = {:.1f} → {} (free fit: {:.1f} px, held: {:.1f} px)", chi2,
-               keep ? "refined" : "kept at the scan's value", f1, f0);
-  if (keep) {
-    focal_fixed_ = false;
-    rec_ = std::move(freed);
-    GlobalBundleAdjust(true);
-  }
-}
-
-// Multi-view focal scan for a telephoto model whose two-view scan only gave a lower bound. Lengthening the
-// focal by k while moving every camera back along its axis by (k − 1) times its median depth keeps the
-// projections almost unchanged (a dolly zoom), so each candidate starts near its own optimum and a short BA
-// with the focal held at the candidate measures how well that focal explains all views together — the
-// perspective effects too small to see in one pair add up over the model.
 void ModelBuilder::DollyZoomFocalScan() {
   dolly_done_ = true;
   const auto start = Clock::now();
   BundleAdjustmentConfig cfg;
   cfg.gauge_image1 = gauge1_;
   cfg.gauge_image2 = gauge2_;
-  BundleAdjustmentOptions o = BaOptions();
-  o.refine_focal = false;
-  o.refine_k1 = o.refine_k2 = false;  // distortion would absorb the perspective the scan measures
-  // Each candidate's rms is compared with the others': the budget the scan was tuned with (2x the former
-  // intermediate global BA limit of 10), independent of the intermediate BAs' own.
-  o.max_iterations = 20;
-  o.function_tolerance = 1e-6;
-  double best_rms = std::numeric_limits<double>::infinity(), best_k = 1, rms_at_lower_bound = 0, rms_next = 0;
-  core::Reconstruction best_rec;
-  std::string curve;
-  // Continuation: each candidate starts from the previous one's optimum (a step of √2), so the BA follows the
-  // valley even when the first model (built at the lower bound) is far from affine.
-  core::Reconstruction m = rec_;
-  const double step = std::sqrt(2.0);
-  for (double k = 1; k <= opt_.focal_dolly_max_factor * 1.0001; k *= step) {
-    const double dk = k == 1 ? 1 : step;
-    for (auto& [cid, cam] : m.cameras) cam.f *= dk;
-    for (auto& [iid, im] : m.images) {
-      std::vector<double> depths;
-      for (int64_t pid : im.point3d_ids)
-        if (pid != core::kNoPoint3D) depths.push_back(im.pose.Transform(m.points.at(static_cast<uint64_t>(pid)).xyz).z());
-      if (depths.empty()) continue;
-      std::nth_element(depths.begin(), depths.begin() + depths.size() / 2, depths.end());
-      im.pose.t.z() += (dk - 1) * depths[depths.size() / 2];
-    }
-    const auto sm = BundleAdjust(&m, cfg, o);
-    if (!sm.success) continue;
-    curve += fmt::format(" {:.0f}:{:.4f}", m.cameras.begin()->second.f, sm.final_rms_px);
-    if (k == 1) rms_at_lower_bound = sm.final_rms_px;
-    else if (rms_next == 0) rms_next = sm.final_rms_px;
-    if (sm.final_rms_px < best_rms) {
-      best_rms = sm.final_rms_px;
-      best_k = k;
-      best_rec = m;
-    }
-  }
+  DollyZoomScanOptions so;
+  so.max_factor = opt_.focal_dolly_max_factor;
+  DollyZoomScanResult r = ScanFocalDollyZoom(rec_, cfg, BaOptions(), so);
   t_->global_ba += Seconds(start);
   spdlog::info("focal dolly-zoom scan on {} images: x{:.2f} → {:.1f} px ({:.1f} s); rms px by focal:{}",
-               rec_.images.size(), best_k, best_rec.cameras.empty() ? 0.0 : best_rec.cameras.begin()->second.f,
-               Seconds(start), curve);
+               rec_.images.size(), r.best_factor, r.best.cameras.empty() ? 0.0 : r.best.cameras.begin()->second.f,
+               Seconds(start), r.curve);
   // The two-view scan's "lower bound" can be wrong for an ordinary lens (a 40-frame 960x540 orbit: bound 1452 px,
   // true 831). Then the error rises steeply from the bound on — no plateau — and holding the focal there builds
   // the whole model on it (0.08% centre error, distortion absorbing the rest). The data do determine the focal:
   // release it to bundle adjustment from here, as for any guess.
-  if (best_k == 1 && rms_at_lower_bound > 0 && rms_next > 1.2 * rms_at_lower_bound) {
+  if (r.best_factor == 1 && r.rms_at_start_px > 0 && r.rms_next_px > 1.2 * r.rms_at_start_px) {
     focal_fixed_ = focal_from_plateau_ = false;
     spdlog::info("focal: the error rises from the scan's lower bound on ({:.3f} → {:.3f} px): no plateau, the focal "
-                 "is refined from here", rms_at_lower_bound, rms_next);
+                 "is refined from here", r.rms_at_start_px, r.rms_next_px);
   }
-  if (best_k != 1 && !best_rec.images.empty()) {
-    rec_ = std::move(best_rec);
-    narrow_field_ = narrow_field_ || 0.5 * std::hypot(rec_.cameras.begin()->second.width,
-                                                      rec_.cameras.begin()->second.height) /
-                                             rec_.cameras.begin()->second.f < opt_.narrow_field_max_radius;
+  if (r.best_factor != 1 && !r.best.images.empty()) {
+    rec_ = std::move(r.best);
+    const auto& cam = rec_.cameras.begin()->second;
+    narrow_field_ = narrow_field_ || 0.5 * std::hypot(cam.width, cam.height) / cam.f < opt_.narrow_field_max_radius;
     FilterPoints(nullptr);
   }
 }
 
+// Loop policy, one image: the candidates that see enough of the model (and, if they failed before, clearly more
+// of it than then) are tried best-spread first; the first that registers is triangulated and locally adjusted.
+GrowthStep ModelBuilder::RegisterNextImage() {
+  std::vector<std::pair<double, uint32_t>> cands;
+  for (uint32_t id : pool_) {
+    if (rec_.images.count(id)) continue;
+    double score = 0;
+    const int vis = VisiblePoints(id, &score);
+    if (vis < opt_.min_visible_points) {
+      auto f = fail_reason_.find(id);
+      if (f == fail_reason_.end() || f->second.kind == RegistrationFailure::Kind::kTooFewVisiblePoints)
+        fail_reason_[id] = {RegistrationFailure::Kind::kTooFewVisiblePoints, vis, opt_.min_visible_points};
+      continue;
+    }
+    // A frame that failed is retried only after the model offers it clearly more points.
+    auto f = visible_at_failure_.find(id);
+    if (f != visible_at_failure_.end() &&
+        (vis < 1.25 * f->second + 5 || trials_[id] >= opt_.max_registration_trials))
+      continue;
+    cands.emplace_back(-score, id);
+  }
+  if (cands.empty()) return GrowthStep::kNoCandidate;
+  std::sort(cands.begin(), cands.end());
+  for (const auto& [neg, id] : cands) {
+    if (TryRegister(id)) {
+      const int made = TriangulateImage(id);
+      // A global adjustment due now covers the new image and its neighbours too: the local one would only
+      // be repeated by it (while the model is small, both used to run after every image).
+      if (!GlobalBundleAdjustDue()) LocalBundleAdjust(id);
+      spdlog::debug("registered {} ({} images, +{} points)", images_.at(id)->name, rec_.images.size(), made);
+      return GrowthStep::kRegistered;
+    }
+    ++trials_[id];
+    visible_at_failure_[id] = VisiblePoints(id, nullptr);
+  }
+  return GrowthStep::kAllFailed;
+}
+
 void ModelBuilder::Grow() {
   GlobalBundleAdjust(false);
-  for (;;) {
-    std::vector<std::pair<double, uint32_t>> cands;
-    for (uint32_t id : pool_) {
-      if (rec_.images.count(id)) continue;
-      double score = 0;
-      const int vis = VisiblePoints(id, &score);
-      if (vis < opt_.min_visible_points) {
-        if (!fail_reason_.count(id) || fail_reason_[id].rfind("too few", 0) == 0)
-          fail_reason_[id] = "too few triangulated points visible (" + std::to_string(vis) + " < " +
-                             std::to_string(opt_.min_visible_points) + ")";
-        continue;
-      }
-      // A frame that failed is retried only after the model offers it clearly more points.
-      auto f = visible_at_failure_.find(id);
-      if (f != visible_at_failure_.end() &&
-          (vis < 1.25 * f->second + 5 || trials_[id] >= opt_.max_registration_trials))
-        continue;
-      cands.emplace_back(-score, id);
-    }
-    if (cands.empty()) break;
-    std::sort(cands.begin(), cands.end());
-    bool registered = false;
-    for (const auto& [neg, id] : cands) {
-      if (TryRegister(id)) {
-        const int made = TriangulateImage(id);
-        // A global adjustment due now covers the new image and its neighbours too: the local one would only
-        // be repeated by it (while the model is small, both used to run after every image).
-        if (!GlobalBundleAdjustDue()) LocalBundleAdjust(id);
-        spdlog::debug("registered {} ({} images, +{} points)", images_.at(id)->name, rec_.images.size(), made);
-        registered = true;
-        break;
-      }
-      ++trials_[id];
-      visible_at_failure_[id] = VisiblePoints(id, nullptr);
-    }
-    if (!registered) break;
+  while (RegisterNextImage() == GrowthStep::kRegistered) {
     if (focal_from_plateau_ && !dolly_done_ && static_cast<int>(rec_.images.size()) >= opt_.focal_dolly_min_images) {
       DollyZoomFocalScan();
       GlobalBundleAdjust(false);
@@ -987,9 +686,13 @@ void ModelBuilder::Grow() {
   if (opt_.relocalise && (num_relocalised_ = RelocaliseImages()) > 0) GlobalBundleAdjust(false);
   Retriangulate();
   GlobalBundleAdjust(true);
-  if (focal_from_plateau_ && static_cast<int>(rec_.images.size()) >= opt_.refine_principal_point_min_images)
-    TryFreeFocal();
-  if (static_cast<int>(rec_.images.size()) >= opt_.refine_principal_point_min_images) TryPrincipalPoint();
+  const bool enough = static_cast<int>(rec_.images.size()) >= opt_.refine_principal_point_min_images;
+  if (enough && focal_from_plateau_ && TrySelfCalibration(IntrinsicGroup::kFocal, opt_.focal_min_chi2)) {
+    focal_fixed_ = false;
+    GlobalBundleAdjust(true);
+  }
+  if (enough && TrySelfCalibration(IntrinsicGroup::kPrincipalPoint, opt_.principal_point_min_chi2))
+    GlobalBundleAdjust(true, true);
   UpdatePointErrors(&rec_);
 }
 

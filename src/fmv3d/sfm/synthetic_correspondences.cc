@@ -142,4 +142,36 @@ SyntheticScene MakeSyntheticScene(const SyntheticSceneOptions& o) {
   return scene;
 }
 
+core::Reconstruction TrueModelWithObservations(const SyntheticSceneOptions& so) {
+  const auto scene = MakeSyntheticScene(so);
+  core::Reconstruction rec = scene.truth;
+  rec.points.clear();
+  for (auto& [id, im] : rec.images) {
+    const auto& mi = scene.input.images[id - 1];
+    im.points2d = mi.keypoints;
+    im.point3d_ids.assign(mi.keypoints.size(), core::kNoPoint3D);
+  }
+  // Recover which keypoint sees which point by projecting the truth (noise < 3 px, clutter far away).
+  for (const auto& [pid, p] : scene.truth.points) {
+    core::Point3D q = p;
+    for (auto& [id, im] : rec.images) {
+      const Eigen::Vector3d xc = im.pose.Transform(p.xyz);
+      if (xc.z() <= 0) continue;
+      const Eigen::Vector2d uv = rec.cameras.at(1).Project(xc);
+      for (uint32_t k = 0; k < im.points2d.size(); ++k)
+        if ((im.points2d[k] - uv).norm() < 4 * so.noise_px + 1e-9 && im.point3d_ids[k] == core::kNoPoint3D) {
+          im.point3d_ids[k] = static_cast<int64_t>(pid);
+          q.track.push_back({id, k});
+          break;
+        }
+    }
+    if (q.track.size() >= 2) {
+      rec.points[pid] = q;
+    } else {
+      for (const auto& el : q.track) rec.images[el.image_id].point3d_ids[el.point2d_idx] = core::kNoPoint3D;
+    }
+  }
+  return rec;
+}
+
 }  // namespace fmv3d::sfm

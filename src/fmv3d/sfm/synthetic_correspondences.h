@@ -38,4 +38,8 @@ struct SyntheticScene {
 
 SyntheticScene MakeSyntheticScene(const SyntheticSceneOptions& options);
 
+// The true model (cameras, poses, points) with the noisy keypoints of every point as its tracks, no outliers:
+// what a perfect mapper would build from MakeSyntheticScene(options), for tests of BA and self-calibration.
+core::Reconstruction TrueModelWithObservations(const SyntheticSceneOptions& options);
+
 }  // namespace fmv3d::sfm

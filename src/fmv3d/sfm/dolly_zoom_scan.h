@@ -1,0 +1,34 @@
+// Multi-view focal scan for a telephoto model whose two-view scan (focal_scan.h) only gave a lower bound.
+// Lengthening the focal by k while moving every camera back along its axis by (k − 1) times its median depth
+// keeps the projections almost unchanged (a dolly zoom), so each candidate starts near its own optimum and a
+// short BA with the focal held at the candidate measures how well that focal explains all views together — the
+// perspective effects too small to see in one pair add up over the model.
+#pragma once
+
+#include <string>
+
+#include "fmv3d/core/reconstruction.h"
+#include "fmv3d/sfm/bundle_adjustment.h"
+
+namespace fmv3d::sfm {
+
+struct DollyZoomScanOptions {
+  double max_factor = 64;  // candidates: the model's focal times 1, √2, 2, ... up to this
+  // Each candidate's rms is compared with the others': a fixed budget, independent of the mapper's BAs.
+  int max_iterations = 20;
+  double function_tolerance = 1e-6;
+};
+
+struct DollyZoomScanResult {
+  double best_factor = 1;          // 1: the starting focal explains the views best
+  core::Reconstruction best;       // the model at the best candidate (empty when no BA succeeded)
+  double rms_at_start_px = 0;      // rms at the starting focal ...
+  double rms_next_px = 0;          // ... and at the next candidate (0 when it failed)
+  std::string curve;               // "focal:rms" per candidate, for the log
+};
+
+// options: the BA of each candidate (its focal and distortion flags are overridden: both held).
+DollyZoomScanResult ScanFocalDollyZoom(const core::Reconstruction& rec, const BundleAdjustmentConfig& config,
+                                       BundleAdjustmentOptions options, const DollyZoomScanOptions& scan);
+
+}  // namespace fmv3d::sfm

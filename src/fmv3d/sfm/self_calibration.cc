@@ -1,0 +1,121 @@
+#include "fmv3d/sfm/self_calibration.h"
+
+#include <algorithm>
+#include <cmath>
+
+namespace fmv3d::sfm {
+
+const char* ToString(IntrinsicGroup group) {
+  switch (group) {
+    case IntrinsicGroup::kFocal: return "focal";
+    case IntrinsicGroup::kPrincipalPoint: return "principal_point";
+    case IntrinsicGroup::kAspect: return "aspect";
+    case IntrinsicGroup::kTangential: return "tangential";
+  }
+  return "?";
+}
+
+const char* ToString(NestedModelDecision decision) {
+  switch (decision) {
+    case NestedModelDecision::kFreed: return "freed";
+    case NestedModelDecision::kNotSignificant: return "held: not significant";
+    case NestedModelDecision::kUndetermined: return "held: not determined by the data";
+    case NestedModelDecision::kFailed: return "held: test failed";
+  }
+  return "?";
+}
+
+std::vector<core::IntrinsicIndex> Parameters(IntrinsicGroup group) {
+  switch (group) {
+    case IntrinsicGroup::kFocal: return {core::kF};
+    case IntrinsicGroup::kPrincipalPoint: return {core::kU0, core::kV0};
+    case IntrinsicGroup::kAspect: return {core::kAspect};
+    case IntrinsicGroup::kTangential: return {core::kP1, core::kP2};
+  }
+  return {};
+}
+
+void SetRefine(IntrinsicGroup group, bool refine, BundleAdjustmentOptions* o) {
+  switch (group) {
+    case IntrinsicGroup::kFocal: o->refine_focal = refine; break;
+    case IntrinsicGroup::kPrincipalPoint: o->refine_principal_point = refine; break;
+    case IntrinsicGroup::kAspect: o->refine_aspect = refine; break;
+    case IntrinsicGroup::kTangential: o->refine_tangential = refine; break;
+  }
+}
+
+double CornerDisplacementPerUnit(const core::Camera& c, core::IntrinsicIndex p) {
+  // A point at the image corner: normalised (x, y) = half the image over the focal.
+  const double x = 0.5 * c.width / c.fx(), y = 0.5 * c.height / c.fy(), r2 = x * x + y * y;
+  switch (p) {
+    case core::kF: return std::hypot(c.aspect * x, y);  // u = f·s·x + u0, v = f·y + v0
+    case core::kAspect: return c.f * x;
+    case core::kU0:
+    case core::kV0: return 1;
+    case core::kK1: return c.f * std::sqrt(r2) * r2;
+    case core::kK2: return c.f * std::sqrt(r2) * r2 * r2;
+    case core::kP1: return c.f * std::hypot(2 * x * y, r2 + 2 * y * y);
+    case core::kP2: return c.f * std::hypot(r2 + 2 * x * x, 2 * x * y);
+    default: return 0;
+  }
+}
+
+NestedModelTestResult TestNestedModel(core::Reconstruction* rec, const BundleAdjustmentConfig& config,
+                                      BundleAdjustmentOptions options, IntrinsicGroup group,
+                                      const NestedModelTestOptions& test_options) {
+  NestedModelTestResult r;
+  r.group = group;
+  r.parameters = Parameters(group);
+  r.num_parameters = static_cast<int>(r.parameters.size());
+  options.loss = BundleAdjustmentOptions::Loss::kTrivial;  // χ² needs plain squared errors (outliers are filtered)
+  core::Reconstruction held = *rec;
+  SetRefine(group, false, &options);
+  options.compute_intrinsics_covariance = false;
+  const auto s0 = BundleAdjust(&held, config, options);
+  if (!s0.success || held.cameras.empty()) return r;
+  core::Reconstruction freed = held;  // starts at the held optimum: a few steps only
+  SetRefine(group, true, &options);
+  options.compute_intrinsics_covariance = test_options.require_determined;
+  const auto s1 = BundleAdjust(&freed, config, options);
+  if (!s1.success) return r;
+  const double n = s0.num_residuals;
+  const double ss0 = s0.final_rms_px * s0.final_rms_px * n, ss1 = s1.final_rms_px * s1.final_rms_px * n;
+  r.num_observations = s0.num_residuals;
+  r.dof = std::max(1.0, 2 * n - 6.0 * rec->images.size() - 3.0 * rec->points.size());
+  r.delta_chi2 = (ss0 - ss1) / std::max(ss0 / r.dof, 1e-12);
+  r.threshold = test_options.min_delta_chi2 > 0 ? test_options.min_delta_chi2
+                                                : r.num_parameters * std::log(std::max(2.0, 2 * n));
+  r.rms_held_px = s0.final_rms_px;
+  r.rms_freed_px = s1.final_rms_px;
+  const uint32_t cid = held.cameras.begin()->first;
+  r.held = held.cameras.begin()->second;
+  r.freed = freed.cameras.begin()->second;
+  const auto held_params = r.held.Params(), freed_params = r.freed.Params();
+  for (auto p : r.parameters) {
+    r.held_values.push_back(held_params[p]);
+    r.freed_values.push_back(freed_params[p]);
+  }
+  if (!(r.freed.f > 0)) return r;
+  if (r.delta_chi2 <= r.threshold) {
+    r.decision = NestedModelDecision::kNotSignificant;
+    return r;
+  }
+  if (test_options.require_determined) {
+    auto cov = s1.intrinsics_covariance.find(cid);
+    if (cov == s1.intrinsics_covariance.end()) return r;  // rank-deficient: not determined either
+    for (auto p : r.parameters) {
+      const double sigma = std::sqrt(std::max(0.0, cov->second(p, p)));
+      r.sigmas.push_back(sigma);
+      r.max_sigma_px = std::max(r.max_sigma_px, sigma * CornerDisplacementPerUnit(r.freed, p));
+    }
+    if (r.max_sigma_px > r.rms_freed_px) {
+      r.decision = NestedModelDecision::kUndetermined;
+      return r;
+    }
+  }
+  r.decision = NestedModelDecision::kFreed;
+  *rec = std::move(freed);
+  return r;
+}
+
+}  // namespace fmv3d::sfm

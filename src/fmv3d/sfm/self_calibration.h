@@ -1,0 +1,72 @@
+// Self-calibration by nested-model tests: is an intrinsic parameter group (focal, principal point, aspect,
+// tangential distortion) worth freeing in the final bundle adjustment? The model with the group held (the null
+// model) is nested in the one with it free; both are fitted to the same observations with plain squared errors
+// (outliers are filtered by then). Two questions decide, each answered from the data:
+//
+//  1. Does freeing it explain the observations better than pure noise would? The drop of the squared error in
+//     units of the noise variance, Δχ² = (SSE₀ − SSE₁) / σ² with σ² = SSE₀ / dof, is compared with the Bayesian
+//     information criterion's price of k extra parameters, k · ln(n) for n residuals (free when BIC₁ < BIC₀).
+//     A fixed Δχ² threshold instead (min_delta_chi2 > 0) is available for callers that need one.
+//  2. Do the data determine it? The posterior covariance of the freed parameters (the BA's covariance, Ceres)
+//     gives each one's standard deviation σ_θ; its effect on the image — how far 1σ moves a point at the image
+//     corner — must stay below the observations' own noise (the rms reprojection error). A parameter the data
+//     leave uncertain by more than that (a principal point that trades against a common tilt of an orbit's
+//     cameras, a focal on a telephoto plateau) would only move the cameras by its uncertainty: it stays held.
+#pragma once
+
+#include <array>
+#include <string>
+#include <vector>
+
+#include "fmv3d/core/reconstruction.h"
+#include "fmv3d/sfm/bundle_adjustment.h"
+
+namespace fmv3d::sfm {
+
+enum class IntrinsicGroup { kFocal, kPrincipalPoint, kAspect, kTangential };
+
+const char* ToString(IntrinsicGroup group);
+// The parameters the group frees (per camera), in core::IntrinsicIndex.
+std::vector<core::IntrinsicIndex> Parameters(IntrinsicGroup group);
+// Sets the refine flag(s) of the group in options.
+void SetRefine(IntrinsicGroup group, bool refine, BundleAdjustmentOptions* options);
+// Pixels a unit change of the parameter moves the projection of a point at the image corner (the largest
+// effect in the image), for the camera given.
+double CornerDisplacementPerUnit(const core::Camera& camera, core::IntrinsicIndex parameter);
+
+struct NestedModelTestOptions {
+  double min_delta_chi2 = 0;           // > 0: free when Δχ² exceeds this (question 1 by a fixed threshold)
+  bool require_determined = true;      // question 2 (needs the covariance; skipped when false)
+};
+
+enum class NestedModelDecision {
+  kFreed,          // both questions answered yes
+  kNotSignificant, // Δχ² below the price of the extra parameters
+  kUndetermined,   // significant, but the data leave the parameters uncertain beyond the observation noise
+  kFailed,         // a fit failed or the covariance could not be computed (rank-deficient): held
+};
+const char* ToString(NestedModelDecision decision);
+
+struct NestedModelTestResult {
+  IntrinsicGroup group = IntrinsicGroup::kFocal;
+  NestedModelDecision decision = NestedModelDecision::kFailed;
+  int num_observations = 0;
+  int num_parameters = 0;       // extra parameters freed
+  double dof = 0;               // 2 · observations − pose and point parameters
+  double delta_chi2 = 0;
+  double threshold = 0;         // Δχ² needed: k · ln(2 · observations), or the fixed threshold
+  double rms_held_px = 0, rms_freed_px = 0;
+  std::vector<core::IntrinsicIndex> parameters;
+  std::vector<double> held_values, freed_values, sigmas;  // per parameter; sigmas empty without covariance
+  double max_sigma_px = 0;      // the largest 1σ corner displacement of a freed parameter
+  core::Camera held, freed;     // the first camera of each fit
+  bool freed_decision() const { return decision == NestedModelDecision::kFreed; }
+};
+
+// Fits the model with the group held (options as given, group forced off) and then freed from the held optimum,
+// with a plain squared loss. *rec becomes the freed fit on kFreed and is left unchanged otherwise. options: the intrinsics refined in both models, iteration budget and tolerance.
+NestedModelTestResult TestNestedModel(core::Reconstruction* rec, const BundleAdjustmentConfig& config,
+                                      BundleAdjustmentOptions options, IntrinsicGroup group,
+                                      const NestedModelTestOptions& test_options);
+
+}  // namespace fmv3d::sfm
