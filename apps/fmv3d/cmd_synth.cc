@@ -94,7 +94,7 @@ void Add(CLI::App& app) {
   auto altitude = std::make_shared<double>(0);
   auto radius = std::make_shared<double>(0);
   auto output = std::make_shared<std::string>();
-  cmd->add_option("--scene", o->scene, "Scene: building | town | terrain | board")
+  cmd->add_option("--scene", o->scene, "Scene: building | town | terrain | board | sand")
       ->check(CLI::IsMember(synth::SceneNames()))
       ->capture_default_str();
   cmd->add_option("--path", o->flight.path, "Flight path: orbit | grid | pass")
@@ -108,6 +108,9 @@ void Add(CLI::App& app) {
   auto* rad_opt = cmd->add_option("--radius", *radius,
                                   "Orbit radius / grid half-size / pass stand-off, metres (default per scene)")
                       ->check(CLI::PositiveNumber);
+  auto grid_overlap = std::make_shared<std::string>();
+  cmd->add_option("--overlap", *grid_overlap, "Grid: forward,side overlap in percent (e.g. 70,40; default: the "
+                                              "--radius layout, ~65% side)");
   cmd->add_option("--look-at", *look_at, "Look-at point X,Y,Z in metres (default: the scene's target)")
       ->check(kList3);
   cmd->add_option("--distortion", *distortion, "Lens distortion k1,k2,p1,p2 (default none)")->check(kList4);
@@ -162,6 +165,11 @@ void Add(CLI::App& app) {
     if (!distortion->empty()) {
       const auto d = ParseList(*distortion);
       std::copy(d.begin(), d.end(), opts.distortion.begin());
+    }
+    if (!grid_overlap->empty()) {
+      const auto v = ParseList(*grid_overlap);
+      if (v.size() != 2) throw Error("--overlap: expected FORWARD,SIDE in percent, e.g. 70,40");
+      opts.flight.grid_overlap = std::make_pair(v[0] / 100, v[1] / 100);
     }
     if (!look_at->empty()) {
       const auto p = ParseList(*look_at);

@@ -120,9 +120,15 @@ MatchStageStats RunMatchStage(const fs::path& workspace, const MatchStageOptions
   std::vector<const Descriptors*> descs(n);
   for (size_t i = 0; i < n; ++i) descs[i] = &features[i].descriptors;
   PairMode mode = PairMode::kAuto;
+  PairOptions pair_options = options.pairs;
   std::vector<Footprint> footprints;
-  if (options.pairs.mode == PairMode::kSpatial) footprints = FootprintsFromTelemetry(index);
-  const auto pairs = SelectPairs(descs, options.pairs, &mode, &stats.loop_closure_pairs, &footprints);
+  if (pair_options.mode == PairMode::kSpatial || pair_options.mode == PairMode::kAuto)
+    footprints = FootprintsFromTelemetry(index);
+  if (pair_options.mode == PairMode::kAuto && PreferSpatialPairs(index, footprints, pair_options)) {
+    pair_options.mode = PairMode::kSpatial;
+    spdlog::info("match: {} photos with GPS: pairs by overlapping ground footprints", n);
+  }
+  const auto pairs = SelectPairs(descs, pair_options, &mode, &stats.loop_closure_pairs, &footprints);
   stats.pairs_tried = pairs.size();
   stats.seconds_pairs = Since(t_pairs);
   spdlog::info("match: {} images, {} pairs ({}{})", n, pairs.size(), PairModeName(mode),

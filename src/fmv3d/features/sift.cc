@@ -28,6 +28,9 @@ void SiftOptions::Check() const {
     throw Error("features: --contrast-threshold must be in (0, 1)");
   if (!(edge_threshold > 1)) throw Error("features: --edge-threshold must be > 1");
   if (octave_layers < 1 || octave_layers > 8) throw Error("features: --octave-layers must be in [1, 8]");
+  if (min_features < 0) throw Error("features: minimum features must be >= 0");
+  if (!(min_coverage >= 0 && min_coverage <= 1)) throw Error("features: minimum coverage must be in [0, 1]");
+  if (!(min_contrast_threshold > 0)) throw Error("features: minimum contrast threshold must be > 0");
 }
 
 void QuantiseDescriptors(const cv::Mat& d, bool root_sift, Descriptors* out) {
@@ -51,7 +54,18 @@ void QuantiseDescriptors(const cv::Mat& d, bool root_sift, Descriptors* out) {
   }
 }
 
-FeatureSet ExtractSift(const cv::Mat& image, const SiftOptions& options) {
+double KeypointCoverage(const std::vector<Keypoint>& keypoints, int width, int height, int grid) {
+  if (width <= 0 || height <= 0 || grid <= 0) return 0;
+  std::vector<char> hit(static_cast<size_t>(grid) * grid, 0);
+  for (const auto& k : keypoints) {
+    const int cx = std::clamp(static_cast<int>(k.x * grid / width), 0, grid - 1);
+    const int cy = std::clamp(static_cast<int>(k.y * grid / height), 0, grid - 1);
+    hit[static_cast<size_t>(cy) * grid + cx] = 1;
+  }
+  return static_cast<double>(std::count(hit.begin(), hit.end(), 1)) / hit.size();
+}
+
+FeatureSet ExtractSift(const cv::Mat& image, const SiftOptions& options, double* contrast_threshold_used) {
   if (image.empty() || image.depth() != CV_8U) throw Error("features: empty or non-8-bit image");
   FeatureSet out;
   out.width = image.cols;
@@ -75,27 +89,40 @@ FeatureSet ExtractSift(const cv::Mat& image, const SiftOptions& options) {
   }
   const double sx = double(grey.cols) / image.cols, sy = double(grey.rows) / image.rows;
 
-  auto sift = cv::SIFT::create(options.max_features, options.octave_layers, options.contrast_threshold,
-                               options.edge_threshold, 1.6, CV_32F);
   std::vector<cv::KeyPoint> kps;
   cv::Mat desc;
-  if (!options.upright) {
-    sift->detectAndCompute(grey, cv::noArray(), kps, desc);
-  } else {
-    sift->detect(grey, kps);
-    // One keypoint per location/scale with orientation 0 (OpenCV's detector duplicates a keypoint for each
-    // dominant orientation).
-    std::map<std::tuple<float, float, float>, cv::KeyPoint> unique;
-    for (auto k : kps) {
-      k.angle = 0;
-      auto key = std::make_tuple(k.pt.x, k.pt.y, k.size);
-      auto it = unique.find(key);
-      if (it == unique.end() || it->second.response < k.response) unique[key] = k;
-    }
+  double threshold = options.contrast_threshold;
+  for (;;) {
+    auto sift = cv::SIFT::create(options.max_features, options.octave_layers, threshold, options.edge_threshold, 1.6,
+                                 CV_32F);
     kps.clear();
-    for (auto& [key, k] : unique) kps.push_back(k);
-    sift->compute(grey, kps, desc);
+    desc = cv::Mat();
+    if (!options.upright) {
+      sift->detectAndCompute(grey, cv::noArray(), kps, desc);
+    } else {
+      sift->detect(grey, kps);
+      // One keypoint per location/scale with orientation 0 (OpenCV's detector duplicates a keypoint for each
+      // dominant orientation).
+      std::map<std::tuple<float, float, float>, cv::KeyPoint> unique;
+      for (auto k : kps) {
+        k.angle = 0;
+        auto key = std::make_tuple(k.pt.x, k.pt.y, k.size);
+        auto it = unique.find(key);
+        if (it == unique.end() || it->second.response < k.response) unique[key] = k;
+      }
+      kps.clear();
+      for (auto& [key, k] : unique) kps.push_back(k);
+      sift->compute(grey, kps, desc);
+    }
+    if (options.min_features <= 0 || threshold * 0.5 < options.min_contrast_threshold) break;
+    std::vector<Keypoint> where(kps.size());
+    for (size_t i = 0; i < kps.size(); ++i) where[i] = {kps[i].pt.x, kps[i].pt.y, 0, 0};
+    if (static_cast<int>(kps.size()) >= options.min_features &&
+        KeypointCoverage(where, grey.cols, grey.rows) >= options.min_coverage)
+      break;
+    threshold *= 0.5;
   }
+  if (contrast_threshold_used) *contrast_threshold_used = threshold;
   // OpenCV's cap keeps ties at the threshold response: enforce it exactly (strongest first, stable).
   if (options.max_features > 0 && static_cast<int>(kps.size()) > options.max_features) {
     std::vector<int> order(kps.size());
@@ -153,7 +180,8 @@ FeaturesStageStats RunFeaturesStage(const fs::path& workspace, const SiftOptions
   core::EnsureDirectory(features_dir);
   const size_t n = index.frames.size();
   std::vector<size_t> counts(n, 0);
-  std::vector<int> skipped(n, 0);
+  std::vector<int> skipped(n, 0), adapted(n, 0);
+  std::vector<double> thresholds(n, options.contrast_threshold);
   std::vector<std::string> errors(n);
 
   // Parallelism is over images; OpenCV's own parallel_for inside SIFT would oversubscribe the cores.
@@ -173,7 +201,10 @@ FeaturesStageStats RunFeaturesStage(const fs::path& workspace, const SiftOptions
       } else {
         const cv::Mat image = cv::imread(image_path.string(), cv::IMREAD_COLOR);
         if (image.empty()) throw Error(image_path.string() + ": cannot read image");
-        auto features = ExtractSift(image, options);
+        double used = options.contrast_threshold;
+        auto features = ExtractSift(image, options, &used);
+        adapted[i] = used < options.contrast_threshold;
+        thresholds[i] = used;
         features.image_name = frame.name;
         counts[i] = features.keypoints.size();
         WriteFeatures(features, out_path);
@@ -198,13 +229,16 @@ FeaturesStageStats RunFeaturesStage(const fs::path& workspace, const SiftOptions
   nlohmann::json per_image = nlohmann::json::array();
   for (size_t i = 0; i < n; ++i) {
     num_skipped += skipped[i];
+    stats.adapted_images += adapted[i];
     per_image.push_back({{"name", index.frames[i].name}, {"keypoints", counts[i]}});
+    if (adapted[i]) per_image.back()["contrast_threshold"] = thresholds[i];
   }
   nlohmann::json summary = {{"images", n},
                             {"skipped_up_to_date", num_skipped},
                             {"total_keypoints", stats.total_keypoints},
                             {"min_keypoints", stats.min_keypoints},
                             {"max_keypoints", stats.max_keypoints},
+                            {"adapted_contrast_images", stats.adapted_images},
                             {"mean_keypoints", n ? double(stats.total_keypoints) / n : 0.0},
                             {"seconds", stats.seconds},
                             {"options",
@@ -213,11 +247,16 @@ FeaturesStageStats RunFeaturesStage(const fs::path& workspace, const SiftOptions
                               {"contrast_threshold", options.contrast_threshold},
                               {"edge_threshold", options.edge_threshold},
                               {"root_sift", options.root_sift},
-                              {"upright", options.upright}}},
+                              {"upright", options.upright},
+                              {"min_features", options.min_features},
+                              {"min_coverage", options.min_coverage},
+                              {"min_contrast_threshold", options.min_contrast_threshold}}},
                             {"per_image", per_image}};
   core::WriteJson(features_dir / "features.json", summary);
-  spdlog::info("features: {} images, {} keypoints (min {}, max {}), {:.1f} s", n, stats.total_keypoints,
-               stats.min_keypoints, stats.max_keypoints, stats.seconds);
+  spdlog::info("features: {} images, {} keypoints (min {}, max {}), {:.1f} s{}", n, stats.total_keypoints,
+               stats.min_keypoints, stats.max_keypoints, stats.seconds,
+               stats.adapted_images ? fmt::format("; contrast threshold lowered on {} weak images", stats.adapted_images)
+                                    : std::string());
   return stats;
 }
 

@@ -23,13 +23,23 @@ struct SiftOptions {
   int octave_layers = 3;
   bool root_sift = true;  // RootSIFT (L1-normalise, sqrt): better matching under Euclidean distance
   bool upright = false;   // one orientation (0) per keypoint: for nadir / no-roll imagery
+  // Weak images (sand, water, fields, snow): when fewer than min_features keypoints are found, or they cover
+  // less than min_coverage of a 16 x 16 grid over the image, the contrast threshold is halved and detection
+  // repeated, down to min_contrast_threshold. 0 disables the adaptation.
+  int min_features = 2000;
+  double min_coverage = 0.5;
+  double min_contrast_threshold = 0.0012;
   void Check() const;
 };
+
+// Share of the cells of a grid x grid partition of a width x height image that hold at least one keypoint.
+double KeypointCoverage(const std::vector<Keypoint>& keypoints, int width, int height, int grid = 16);
 
 // Extracts from an 8-bit image (grey or BGR as cv::imread gives). Keypoints in fmv3d pixels (centres at +0.5) of
 // the full-size image. Colours are sampled from the image (grey replicated). Deterministic. Single-threaded
 // in OpenCV when called from the stage (parallelism is over images).
-FeatureSet ExtractSift(const cv::Mat& image, const SiftOptions& options);
+// The contrast threshold finally used goes to `contrast_threshold_used` when given.
+FeatureSet ExtractSift(const cv::Mat& image, const SiftOptions& options, double* contrast_threshold_used = nullptr);
 
 // Quantises a float SIFT descriptor row (OpenCV scale, ~0..255) to uint8 as COLMAP does: L2 (or RootSIFT)
 // normalised, times 512, clamped.
@@ -37,6 +47,7 @@ void QuantiseDescriptors(const cv::Mat& descriptors_f32, bool root_sift, Descrip
 
 struct FeaturesStageStats {
   size_t images = 0, total_keypoints = 0, min_keypoints = 0, max_keypoints = 0;
+  size_t adapted_images = 0;  // images whose contrast threshold was lowered
   double seconds = 0;
 };
 

@@ -144,4 +144,14 @@ std::vector<ImagePair> SpatialPairs(const std::vector<Footprint>& fps, double ov
   return {s.begin(), s.end()};
 }
 
+bool PreferSpatialPairs(const io::FramesIndex& index, const std::vector<Footprint>& footprints,
+                        const PairOptions& options) {
+  const size_t n = index.frames.size();
+  if (n <= static_cast<size_t>(options.auto_exhaustive_max_images) || footprints.size() != n) return false;
+  std::set<std::string> sources;
+  for (const auto& f : index.frames)
+    if (f.source.empty() || !sources.insert(f.source).second) return false;
+  return std::all_of(footprints.begin(), footprints.end(), [](const Footprint& f) { return f.valid; });
+}
+
 }  // namespace fmv3d::features

@@ -33,4 +33,11 @@ std::vector<Footprint> FootprintsFromTelemetry(const io::FramesIndex& index);
 std::vector<ImagePair> SpatialPairs(const std::vector<Footprint>& footprints, double overlap_factor,
                                     int max_neighbours);
 
+// kAuto's choice for photo sets: true when every frame is its own still (each frame its own source file, as
+// for a folder of photos, not frames of a video), every frame has a valid footprint (GPS position and an
+// altitude), and there are more frames than exhaustive matching is chosen for. A survey's GPS then names the
+// overlapping pairs directly, across flight lines too, at a fraction of exhaustive matching's cost.
+bool PreferSpatialPairs(const io::FramesIndex& index, const std::vector<Footprint>& footprints,
+                        const PairOptions& options);
+
 }  // namespace fmv3d::features

@@ -2,7 +2,9 @@
 
 #include <spdlog/spdlog.h>
 
+#include <algorithm>
 #include <chrono>
+#include <set>
 #include <cmath>
 #include <fstream>
 
@@ -11,6 +13,7 @@
 #include "fmv3d/features/feature_io.h"
 #include "fmv3d/io/colmap_model.h"
 #include "fmv3d/io/frames_index.h"
+#include "fmv3d/sfm/relocalise.h"
 
 namespace fmv3d::sfm {
 
@@ -33,8 +36,67 @@ void WritePointsPly(const core::Reconstruction& rec, const fs::path& path) {
   });
 }
 
+// Images outside the largest model retried against it (relocalise.h); those that register leave the other
+// models, whose shrunken remains are dropped below the mapper's minimum model size.
+nlohmann::json RelocaliseLeftOut(const MapperInput& input, const std::vector<features::FeatureSet>& feature_sets,
+                                 const SparseStageOptions& stage, MapperResult* result) {
+  const auto& options = stage.relocalise;
+  if (!options.enabled || result->models.empty()) return {{"enabled", options.enabled}};
+  core::Reconstruction& model = result->models[0];
+  std::map<uint32_t, const features::FeatureSet*> feats;
+  std::vector<RelocaliseCandidate> candidates;
+  std::map<uint32_t, core::Camera> cameras;
+  for (const auto& [id, c] : input.cameras) cameras[id] = c.camera;
+  for (size_t i = 0; i < input.images.size(); ++i) {
+    const auto& im = input.images[i];
+    feats[im.id] = &feature_sets[i];
+    if (!model.images.count(im.id) && !im.keypoints.empty()) candidates.push_back({im.id, im.camera_id, im.name});
+  }
+  if (candidates.empty()) return {{"enabled", true}, {"candidates", 0}};
+  const RelocaliseStats st = RelocaliseImages(&model, candidates, feats, cameras, options.options);
+  for (uint32_t id : st.registered) result->left_out.erase(id);
+  for (const auto& [id, why] : st.still_failed)
+    if (result->left_out.count(id)) result->left_out[id] += "; relocalisation: " + why;
+  // Registered images leave the other models.
+  std::set<uint32_t> moved(st.registered.begin(), st.registered.end());
+  std::vector<core::Reconstruction> kept = {std::move(model)};
+  for (size_t m = 1; m < result->models.size(); ++m) {
+    core::Reconstruction& rec = result->models[m];
+    for (uint32_t id : moved) {
+      if (!rec.images.count(id)) continue;
+      for (int64_t pid : rec.images.at(id).point3d_ids) {
+        if (pid == core::kNoPoint3D) continue;
+        auto& track = rec.points.at(static_cast<uint64_t>(pid)).track;
+        track.erase(std::remove_if(track.begin(), track.end(), [id](const core::TrackElement& e) { return e.image_id == id; }),
+                    track.end());
+      }
+      rec.images.erase(id);
+    }
+    for (auto it = rec.points.begin(); it != rec.points.end();) {
+      if (it->second.track.size() < 2) {
+        for (const auto& el : it->second.track) rec.images.at(el.image_id).point3d_ids[el.point2d_idx] = core::kNoPoint3D;
+        it = rec.points.erase(it);
+      } else {
+        ++it;
+      }
+    }
+    if (static_cast<int>(rec.images.size()) >= stage.mapper.min_model_size) kept.push_back(std::move(rec));
+  }
+  result->models = std::move(kept);
+  spdlog::info("relocalise: {} of {} left-out images registered ({} observations, {} new points, {:.1f} s)",
+               st.registered.size(), candidates.size(), st.observations_added, st.points_added, st.seconds);
+  return {{"enabled", true},
+          {"candidates", candidates.size()},
+          {"registered", st.registered.size()},
+          {"observations_added", st.observations_added},
+          {"points_added", st.points_added},
+          {"rounds", st.rounds},
+          {"seconds", st.seconds}};
+}
+
 void SparseStageOptions::Check() const {
   mapper.Check();
+  relocalise.options.Check();
   if (focal_px < 0) throw Error("sparse: --focal must be > 0 pixels");
   if (hfov_deg < 0 || hfov_deg >= 180) throw Error("sparse: --hfov must be in (0, 180) degrees");
   if (focal_px > 0 && hfov_deg > 0) throw Error("sparse: give --focal or --hfov, not both");
@@ -79,6 +141,7 @@ nlohmann::json RunSparseStage(const fs::path& workspace, const SparseStageOption
     input.cameras[c.camera.id] = mc;
   }
   std::vector<size_t> num_kp;
+  std::vector<features::FeatureSet> feature_sets(index.frames.size());  // kept for relocalisation
   for (size_t i = 0; i < index.frames.size(); ++i) {
     const auto& fr = index.frames[i];
     MapperImage im;
@@ -87,7 +150,8 @@ nlohmann::json RunSparseStage(const fs::path& workspace, const SparseStageOption
     im.name = fr.name;
     const fs::path fp = features::FeaturePath(ws.features_dir(), fr.name);
     if (fs::exists(fp)) {
-      const features::FeatureSet fs_ = features::ReadFeatures(fp);
+      feature_sets[i] = features::ReadFeatures(fp);
+      const features::FeatureSet& fs_ = feature_sets[i];
       im.keypoints.reserve(fs_.keypoints.size());
       for (const auto& k : fs_.keypoints) im.keypoints.emplace_back(k.x, k.y);
       if (fs_.colors.size() == fs_.keypoints.size()) im.colors = fs_.colors;
@@ -100,7 +164,8 @@ nlohmann::json RunSparseStage(const fs::path& workspace, const SparseStageOption
   features::ValidateMatches(input.pairs, num_kp, matches_path.string());
   const double load_seconds = std::chrono::duration<double>(Clock::now() - start).count();
 
-  const MapperResult result = RunIncrementalMapper(input, options.mapper);
+  MapperResult result = RunIncrementalMapper(input, options.mapper);
+  const nlohmann::json relocalisation = RelocaliseLeftOut(input, feature_sets, options, &result);
 
   const auto write_start = Clock::now();
   core::EnsureDirectory(ws.sparse_dir());
@@ -136,6 +201,7 @@ nlohmann::json RunSparseStage(const fs::path& workspace, const SparseStageOption
   for (const auto& [id, why] : result.left_out) left.push_back({{"image", input.images[id - 1].name}, {"reason", why}});
   report["left_out"] = left;
   report["mapper"] = result.stats;
+  report["relocalisation"] = relocalisation;
   report["seconds"] = {{"load", load_seconds},
                        {"mapping", result.stats["seconds"]["total"]},
                        {"write", std::chrono::duration<double>(Clock::now() - write_start).count()},

@@ -1,6 +1,7 @@
 // The `fmv3d sparse WS` stage: frames.json + features/*.feat + matches/matches.bin → incremental SfM →
 //   WS/sparse/            the largest model as a COLMAP text model (+ sparse.ply, coloured points)
 //   WS/sparse/1, 2, ...   further disconnected models, largest first
+// Images the mapper left out of the largest model are then retried against it (relocalise.h).
 //   WS/report/sparse.json registered / total (with the reason for every image left out), points, mean track
 //                         length, mean reprojection error, cameras, time per stage.
 #pragma once
@@ -10,11 +11,17 @@
 
 #include "fmv3d/core/reconstruction.h"
 #include "fmv3d/sfm/incremental_mapper.h"
+#include "fmv3d/sfm/relocalise.h"
 
 namespace fmv3d::sfm {
 
 struct SparseStageOptions {
   MapperOptions mapper;
+  // After the mapper: images outside the largest model retried against it (relocalise.h).
+  struct {
+    bool enabled = true;
+    RelocaliseOptions options;
+  } relocalise;
   // Focal prior for every camera, overriding frames.json's (e.g. from a lens spec or the telemetry's horizontal
   // field of view): focal in pixels, or the horizontal FOV in degrees (f = w / 2 / tan(hfov / 2)). 0 = unset.
   // Such a prior counts as known (no scan); with mapper.fix_known_focal it also stays fixed in BA.

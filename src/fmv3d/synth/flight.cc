@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <random>
 
 #include "fmv3d/core/error.h"
@@ -31,6 +32,9 @@ void FlightOptions::Check() const {
   if (radius && !(*radius > 0)) throw Error("flight: radius must be positive");
   if (!(jitter_deg >= 0 && jitter_deg < 20)) throw Error("flight: jitter must be in [0, 20) degrees");
   if (!(position_jitter >= 0)) throw Error("flight: position jitter must be >= 0");
+  if (grid_overlap && !(grid_overlap->first >= 0 && grid_overlap->first <= 0.95 && grid_overlap->second >= 0 &&
+                        grid_overlap->second <= 0.95))
+    throw Error("flight: grid overlaps must be in [0, 95] percent");
 }
 
 FlightGeometry ResolveFlight(const Scene& scene, const core::Camera& camera, const FlightOptions& o) {
@@ -66,6 +70,33 @@ std::vector<core::Pose> MakeFlight(const Scene& scene, const core::Camera& camer
       const double a = 2 * M_PI * k / n - M_PI / 2;  // start south of the target, counter-clockwise
       centres[k] = {g.look_at.x() + g.radius * std::cos(a), g.look_at.y() + g.radius * std::sin(a), g.altitude};
       rotations[k] = core::Pose::LookAt(centres[k], g.look_at).R();
+    }
+  } else if (o.path == "grid" && o.grid_overlap) {
+    // Footprint on the ground at the look-at height: across track (image x) and along track (image y).
+    const double h = std::max(1.0, g.altitude - g.look_at.z());
+    const double step_across = (1 - o.grid_overlap->second) * h * camera.width / camera.fx();
+    const double step_along = (1 - o.grid_overlap->first) * h * camera.height / camera.fy();
+    int strips = 1;
+    double best = std::numeric_limits<double>::infinity();
+    for (int s = 1; s <= n; ++s) {
+      const int per_strip = (n + s - 1) / s;
+      const double aspect = std::abs(std::log(((s - 1) * step_across + step_across) /
+                                              ((per_strip - 1) * step_along + step_along)));
+      if (aspect < best) best = aspect, strips = s;
+    }
+    int k = 0;
+    for (int s = 0; s < strips; ++s) {
+      const int count = n / strips + (s < n % strips ? 1 : 0);
+      const double x = g.look_at.x() + (s - 0.5 * (strips - 1)) * step_across;
+      const bool north = s % 2 == 0;
+      for (int i = 0; i < count; ++i, ++k) {
+        const double y = g.look_at.y() + (north ? 1 : -1) * (i - 0.5 * (count - 1)) * step_along;
+        centres[k] = {x, y, g.altitude};
+        const Eigen::Vector3d zc(0, 0, -1), yc(0, north ? -1 : 1, 0);
+        Eigen::Matrix3d Rwc;
+        Rwc << yc.cross(zc), yc, zc;
+        rotations[k] = Rwc.transpose();
+      }
     }
   } else if (o.path == "grid") {
     // Nadir footprint at this height above the look-at point decides the strip spacing (65% side overlap).

@@ -1,7 +1,10 @@
 // Flight paths for synthetic vision: camera poses (world-to-camera) for each frame.
 //   orbit  a circle of `radius` around the look-at point at `altitude` (world z), looking at it.
 //   grid   a lawn-mower pattern of nadir views at `altitude`: parallel strips ~65% side overlap,
-//          alternating direction, camera x across track.
+//          alternating direction, camera x across track. With `grid_overlap` (forward, side fractions of the
+//          footprint on the ground at the look-at height), the frames are laid out at exactly those overlaps
+//          in as many strips as make the covered area closest to square, centred on the look-at point
+//          (`radius` is then unused).
 //   pass   a straight oblique pass at `altitude` beside the target, looking at it at ~45° depression.
 // Each frame gets gimbal-like attitude jitter (smooth wander plus a little shake) and position jitter,
 // drawn from `seed` only, so the same seed gives the same flight.
@@ -11,6 +14,7 @@
 #include <cstdint>
 #include <optional>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "fmv3d/core/camera.h"
@@ -25,6 +29,7 @@ struct FlightOptions {
   std::optional<double> altitude;            // metres (world z); default per scene
   std::optional<double> radius;              // orbit radius / grid half-size / pass stand-off, metres
   std::optional<Eigen::Vector3d> look_at;    // default: the scene's target
+  std::optional<std::pair<double, double>> grid_overlap;  // grid: (forward, side), each in [0, 0.95]
   double jitter_deg = 0.4;                   // attitude jitter (1 sigma), degrees
   double position_jitter = 0.3;              // metres (1 sigma) at >= 100 m from the target, less when closer
   uint64_t seed = 1;

@@ -207,7 +207,7 @@ void SceneOptions::Check() const {
 }
 
 const std::vector<std::string>& SceneNames() {
-  static const std::vector<std::string> names = {"building", "town", "terrain", "board"};
+  static const std::vector<std::string> names = {"building", "town", "terrain", "board", "sand"};
   return names;
 }
 
@@ -304,8 +304,17 @@ Scene MakeScene(const std::string& name, const SceneOptions& o) {
     };
     scene.target = {0, 0, scene.ground_height(0, 0)};
     scene.interest_radius = 140;
+  } else if (name == "sand") {
+    extent = 700, step = 2, ground_tpm = 6;
+    scene.ground_height = [](double x, double y) {
+      const double dunes = 14.0 * Fbm(x / 160, y / 160, 41, 5);
+      const double crest = 0.5 + 0.5 * std::sin((0.6 * x - 0.8 * y) / 45.0 + 3.0 * Fbm(x / 300, y / 300, 42, 3));
+      return dunes + 6.0 * crest * crest - 10.0;
+    };
+    scene.target = {0, 0, scene.ground_height(0, 0)};
+    scene.interest_radius = 120;
   } else {
-    throw Error("unknown scene '" + name + "' (expected building, town, terrain or board)");
+    throw Error("unknown scene '" + name + "' (expected building, town, terrain, board or sand)");
   }
   scene.ground_extent = Eigen::AlignedBox2d(Eigen::Vector2d(-extent / 2, -extent / 2), Eigen::Vector2d(extent / 2, extent / 2));
   struct Apron { double x, y, c, s, hw, hd; };  // building footprints grown by 4 m: paved
@@ -324,7 +333,8 @@ Scene MakeScene(const std::string& name, const SceneOptions& o) {
   };
   const int tex = TextureSize(extent, ground_tpm, o.detail);
   scene.mesh = MakeTerrain(scene.ground_extent, step, scene.ground_height,
-                           GroundTexture(tex, scene.ground_extent, 7, scene.ground_height, paved));
+                           name == "sand" ? LowTextureGround(tex, scene.ground_extent, 7)
+                                          : GroundTexture(tex, scene.ground_extent, 7, scene.ground_height, paved));
   double tallest = 0;
   for (const auto& s : scene.buildings) {
     scene.mesh.Append(MakeBuilding(s, facade_tpm));

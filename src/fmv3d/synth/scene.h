@@ -6,6 +6,8 @@
 //             shipped as data/scenes/building.obj (textures are generated at run time).
 //   town      several buildings (flat and pitched roofs, 8–42 m tall) on hilly terrain.
 //   terrain   a height field with hills and a ridge, no buildings.
+//   sand      low-texture dunes (relief ~25 m) of sand with dry grass and ponds, faint contrast: the hard case
+//             for feature detection in nadir surveys.
 //   board     a flat 9×6-inner-corner chessboard (squares of `board_square` metres) lying on z = 0, for
 //             calibration tests.
 // characteristic_length is the tallest building's height above its ground (for `terrain`: the relief,

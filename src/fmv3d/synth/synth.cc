@@ -21,7 +21,7 @@ namespace fs = std::filesystem;
 void SynthOptions::Check() const {
   bool known = false;
   for (const auto& n : SceneNames()) known |= n == scene;
-  if (!known) throw Error("synth: unknown scene '" + scene + "' (expected building, town, terrain or board)");
+  if (!known) throw Error("synth: unknown scene '" + scene + "' (expected building, town, terrain, board or sand)");
   flight.Check();
   render.Check();
   if (width <= 0 || height <= 0 || width > 16384 || height > 16384)
@@ -53,6 +53,7 @@ nlohmann::json SynthOptions::ToJson() const {
   if (focal) j["focal"] = *focal;
   if (flight.altitude) j["altitude"] = *flight.altitude;
   if (flight.radius) j["radius"] = *flight.radius;
+  if (flight.grid_overlap) j["grid_overlap"] = {flight.grid_overlap->first, flight.grid_overlap->second};
   if (flight.look_at) j["look_at"] = {flight.look_at->x(), flight.look_at->y(), flight.look_at->z()};
   j["jitter_deg"] = flight.jitter_deg;
   j["position_jitter"] = flight.position_jitter;

@@ -161,6 +161,37 @@ cv::Mat GroundTexture(int n, const Eigen::AlignedBox2d& extent, uint64_t seed,
   return out;
 }
 
+cv::Mat LowTextureGround(int n, const Eigen::AlignedBox2d& extent, uint64_t seed) {
+  const double mpt = extent.sizes().x() / n;  // metres per texel
+  auto px = [&](double metres) { return metres / mpt; };
+  const cv::Mat tone = FractalField(n, n, px(80), 0.6, seed + 1);   // broad, slow colour change
+  const cv::Mat cover = FractalField(n, n, px(120), 0.55, seed + 2);  // sand / grass / water regions
+  const cv::Mat tuft = FractalField(n, n, px(1.2), 0.7, seed + 3);   // grass tufts
+  const cv::Mat grain = FractalField(n, n, px(0.6), 0.8, seed + 4);  // sand grain down to the texel
+  const cv::Mat warp = FractalField(n, n, px(40), 0.5, seed + 5);    // bends the ripples
+  cv::Mat out(n, n, CV_8UC3);
+  tbb::parallel_for(0, n, [&](int row) {
+    const double y = extent.max().y() - (row + 0.5) * mpt;
+    cv::Vec3b* dst = out.ptr<cv::Vec3b>(row);
+    for (int col = 0; col < n; ++col) {
+      const double x = extent.min().x() + (col + 0.5) * mpt;
+      const float t = tone.at<float>(row, col), cv_ = cover.at<float>(row, col);
+      const float tf = tuft.at<float>(row, col), g = grain.at<float>(row, col);
+      // Wind ripples: ~1.5 m wavelength across the wind (from the north-west), bent by the warp field.
+      const double s = (0.8 * x + 0.6 * y + 25.0 * warp.at<float>(row, col)) / 1.5;
+      const float ripple = 0.5f + 0.5f * static_cast<float>(std::sin(2 * M_PI * s));
+      const Vec3 sand = Mix(Vec3(150, 182, 200), Vec3(158, 190, 207), t) * (0.975f + 0.03f * ripple + 0.03f * g);
+      const Vec3 grass = Mix(Vec3(92, 150, 138), Vec3(98, 158, 146), t) * (0.95f + 0.08f * tf);
+      const Vec3 water = Mix(Vec3(110, 100, 80), Vec3(114, 104, 84), t);
+      Vec3 c = Mix(sand, grass, Smooth(0.5f, 0.62f, cv_));
+      c = Mix(c, water, Smooth(0.2f, 0.22f, 0.42f - cv_));  // ponds where the cover field is lowest
+      c += Vec3::Constant(3.0f * White(seed + 6, uint64_t(row) * n + col));
+      dst[col] = ToPixel(c);
+    }
+  });
+  return out;
+}
+
 cv::Mat FacadeTexture(const FacadeSpec& s) {
   double perimeter = 0;
   for (double l : s.wall_lengths) perimeter += l;

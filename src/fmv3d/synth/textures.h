@@ -18,6 +18,11 @@ cv::Mat GroundTexture(int size_px, const Eigen::AlignedBox2d& extent, uint64_t s
                       const std::function<double(double, double)>& height,
                       const std::function<bool(double, double)>& paved);
 
+// Low-contrast ground as nadir surveys meet it over sand, dry grass and water: wind ripples and faint grain on
+// sand, soft tufts on grass, almost uniform water (ponds where `wetness` of the place is high). Contrast is a
+// few digital numbers, so a detector with a fixed contrast threshold finds few, clustered keypoints.
+cv::Mat LowTextureGround(int size_px, const Eigen::AlignedBox2d& extent, uint64_t seed);
+
 // Façade strip: the building's walls unrolled side by side (u = distance along the perimeter), from the
 // bottom of the walls (v = 0) to `total_height` (v = 1). Windows are drawn on each wall between
 // `ground_offset` (the wall's base above its bottom edge) and `eave_height` (relative to the base).
