@@ -5,7 +5,7 @@
 #include "command.h"
 #include "fmv3d/core/files.h"
 #include "fmv3d/io/colmap_model.h"
-#include "fmv3d/pipeline/workspace.h"
+#include "fmv3d/core/workspace.h"
 #include "fmv3d/sfm/evaluation.h"
 
 namespace fmv3d::app {
@@ -22,7 +22,7 @@ void Add(CLI::App& app) {
       ->required();
   cmd->add_option("--model", a->model, "Model folder to evaluate (default WS/sparse)");
   cmd->callback([a] {
-    const pipeline::Workspace ws(a->ws);
+    const core::Workspace ws(a->ws);
     const std::filesystem::path model = a->model.empty() ? ws.sparse_dir() : std::filesystem::path(a->model);
     ws.Require(model / "images.txt", "sparse");
     const auto est = io::ReadColmapText(model);

@@ -9,7 +9,7 @@
 #include "fmv3d/io/obj_io.h"
 #include "fmv3d/io/point_cloud.h"
 #include "fmv3d/mvs/evaluation.h"
-#include "fmv3d/pipeline/workspace.h"
+#include "fmv3d/core/workspace.h"
 
 namespace fmv3d::app {
 namespace {
@@ -32,7 +32,7 @@ void Add(CLI::App& app) {
                 "Completeness over all seen surface, including synth's backdrop beyond truth.json bounds");
   cmd->callback([a] {
     namespace fs = std::filesystem;
-    const pipeline::Workspace ws(a->ws);
+    const core::Workspace ws(a->ws);
     const fs::path cloud_path = a->cloud.empty() ? ws.dense_dir() / "fused.ply" : fs::path(a->cloud);
     ws.Require(ws.sparse_dir() / "images.txt", "sparse");
     if (!fs::exists(cloud_path)) throw Error(cloud_path.string() + ": not found — run `fmv3d dense` first");

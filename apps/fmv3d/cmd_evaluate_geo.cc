@@ -4,6 +4,7 @@
 
 #include "command.h"
 #include "fmv3d/core/files.h"
+#include "fmv3d/core/workspace.h"
 #include "fmv3d/geo/evaluation.h"
 
 namespace fmv3d::app {
@@ -17,8 +18,8 @@ void Add(CLI::App& app) {
   cmd->add_option("--truth", *truth, "Output folder of `fmv3d synth --klv`")->required();
   cmd->callback([ws, truth] {
     const auto j = geo::EvaluateGeoAgainstSynth(*ws, *truth);
-    core::EnsureDirectory(std::filesystem::path(*ws) / "report");
-    core::WriteJson(std::filesystem::path(*ws) / "report" / "geo_eval.json", j);
+    core::EnsureDirectory(core::Workspace(*ws).report_dir());
+    core::WriteJson(core::Workspace(*ws).report_dir() / "geo_eval.json", j);
     std::cout << j.dump(2) << "\n";
   });
 }

@@ -10,7 +10,7 @@
 #include "fmv3d/core/files.h"
 #include "fmv3d/io/colmap_model.h"
 #include "fmv3d/pipeline/demo.h"
-#include "fmv3d/pipeline/workspace.h"
+#include "fmv3d/core/workspace.h"
 #include "fmv3d/render/renderer.h"
 #include "fmv3d/sfm/evaluation.h"
 
@@ -28,7 +28,7 @@ void Add(CLI::App& app) {
   cmd->add_option("--truth", a->truth, "Output folder of `fmv3d synth` (truth/, scene.obj, truth.json)")->required();
   cmd->callback([a] {
     namespace fs = std::filesystem;
-    const pipeline::Workspace ws(a->ws);
+    const core::Workspace ws(a->ws);
     ws.Require(ws.sparse_dir() / "images.txt", "sparse");
     ws.Require(ws.mesh_dir() / "textured.obj", "texture");
     const fs::path truth_dir(a->truth);

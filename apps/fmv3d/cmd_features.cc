@@ -3,7 +3,7 @@
 
 #include "command.h"
 #include "fmv3d/features/sift.h"
-#include "fmv3d/pipeline/workspace.h"
+#include "fmv3d/core/workspace.h"
 
 namespace fmv3d::app {
 namespace {
@@ -30,7 +30,7 @@ void Add(CLI::App& app) {
   cmd->add_flag("--upright", a->opt.upright, "One orientation per keypoint (no in-plane rotation expected)");
   cmd->add_flag("--force", a->force, "Re-extract even when a .feat file is newer than its image");
   cmd->callback([a] {
-    const pipeline::Workspace ws(a->ws);
+    const core::Workspace ws(a->ws);
     ws.Require(ws.frames_json(), "frames");
     a->opt.root_sift = !a->no_root_sift;
     features::RunFeaturesStage(ws.root(), a->opt, a->force);

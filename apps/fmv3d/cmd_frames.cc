@@ -5,6 +5,7 @@
 
 #include "command.h"
 #include "fmv3d/calib/priors.h"
+#include "fmv3d/core/workspace.h"
 #include "fmv3d/ingest/frames.h"
 
 namespace fmv3d::app {
@@ -43,7 +44,7 @@ void Add(CLI::App& app) {
     std::vector<std::filesystem::path> inputs(a->inputs.begin(), a->inputs.end());
     const io::FramesIndex index = ingest::IngestFrames(inputs, a->options);
     std::printf("%zu frames, %zu cameras -> %s\n", index.frames.size(), index.cameras.size(),
-                (std::filesystem::path(a->workspace) / "frames" / "frames.json").c_str());
+                core::Workspace(a->workspace).frames_json().c_str());
   });
 }
 

@@ -4,7 +4,7 @@
 #include "command.h"
 #include "fmv3d/core/error.h"
 #include "fmv3d/features/match_stage.h"
-#include "fmv3d/pipeline/workspace.h"
+#include "fmv3d/core/workspace.h"
 
 namespace fmv3d::app {
 namespace {
@@ -46,7 +46,7 @@ void Add(CLI::App& app) {
       ->capture_default_str();
   cmd->add_option("--seed", a->seed, "Random seed (results are deterministic for a seed)")->capture_default_str();
   cmd->callback([a] {
-    const pipeline::Workspace ws(a->ws);
+    const core::Workspace ws(a->ws);
     ws.Require(ws.frames_json(), "frames");
     ws.Require(ws.features_dir(), "features");
     auto& o = a->opt;

@@ -168,23 +168,5 @@ TEST(ScaledIcp, ReportsNoOverlapAndBadOptions) {
   EXPECT_THROW(ParseRobustLoss("tukey"), Error);
 }
 
-TEST(WeightedUmeyama, ExactOnNoiselessPairs) {
-  std::mt19937_64 rng(3);
-  const core::Sim3 truth = RandomSim3(rng);
-  std::vector<Eigen::Vector3d> a, b;
-  std::normal_distribution<double> g(0, 1);
-  for (int i = 0; i < 20; ++i) {
-    a.push_back({g(rng), g(rng), g(rng)});
-    b.push_back(truth.Apply(a.back()));
-  }
-  core::Sim3 est;
-  ASSERT_TRUE(WeightedUmeyama(a, b, {}, true, &est));
-  EXPECT_NEAR(est.s, truth.s, 1e-12 * truth.s);
-  EXPECT_LT(core::RotationAngle(est.q, truth.q), 1e-12);
-  EXPECT_LT((est.t - truth.t).norm(), 1e-9);
-  std::vector<Eigen::Vector3d> line = {{0, 0, 0}, {1, 1, 1}, {2, 2, 2}};
-  EXPECT_FALSE(WeightedUmeyama(line, line, {}, true, &est));
-}
-
 }  // namespace
 }  // namespace fmv3d::align

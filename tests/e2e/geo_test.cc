@@ -60,6 +60,11 @@ TEST(E2eGeo, KlvFlightGeoreferencedDsm) {
   std::cout << georef.at("fit").dump(2) << "\n" << georef.at("frame_centres").dump(2) << "\n" << eval.dump(2)
             << "\npositions only: surface RMS " << positions_only << " m (keyframes only " << keyframes_only << " m)\n";
   EXPECT_EQ(georef.at("utm").at("epsg").get<int>(), 32618);
+  // Synth's frame centres are exact: the model's ground lies on the telemetry's lines of sight.
+  EXPECT_TRUE(georef.at("trusted").get<bool>()) << georef.at("line_of_sight").dump();
+  EXPECT_EQ(georef.at("line_of_sight").at("verdict"), "agrees");
+  EXPECT_LT(georef.at("line_of_sight").at("median_angle_deg").get<double>(), 0.2);
+  EXPECT_TRUE(core::ReadJson(dir / "ws/geo/dsm.json").at("trusted").get<bool>());
   const int registered = eval.at("cameras").at("matched").get<int>();
   EXPECT_GE(registered, 20);
   EXPECT_EQ(georef.at("inliers").get<int>(), registered);
@@ -96,6 +101,34 @@ TEST(E2eGeo, KlvFlightGeoreferencedDsm) {
   EXPECT_GT(las.num_points, 500u);
   EXPECT_NE(las.wkt.find("UTM zone 18N"), std::string::npos);
   EXPECT_TRUE(std::filesystem::exists(dir / "ws/geo/ortho.tif"));
+}
+
+// The real KLV clip (a telephoto pass, EG0104 telemetry, 3.5 km slant range): the georeferenced model must lie on
+// the telemetry's own lines of sight within the accuracy it states, or say plainly in georef.json and dsm.json
+// that it cannot be trusted, and why.
+TEST(E2eGeo, RealKlvClipAgreesWithItsLinesOfSightOrSaysSo) {
+  FMV3D_REQUIRE_SHARED_DATA("fmv/kwiver/videos/aphill_klv_10s.ts");
+  TempDir dir("fmv3d-e2e-aphill");
+  const std::string ws = (dir / "ws").string();
+  Cli("-q reconstruct " + (SharedData() / "fmv/kwiver/videos/aphill_klv_10s.ts").string() + " -o " + ws +
+      " --until georef --no-report");
+  ASSERT_TRUE(std::filesystem::exists(dir / "ws/geo/georef.json"));
+  Cli("-q dsm " + ws);
+  const auto georef = core::ReadJson(dir / "ws/geo/georef.json");
+  const auto dsm = core::ReadJson(dir / "ws/geo/dsm.json");
+  const auto& sight = georef.at("line_of_sight");
+  std::cout << sight.dump(2) << "\n";
+  ASSERT_NE(sight.at("verdict"), "not checked") << sight.dump();
+  const bool agrees = sight.at("verdict") == "agrees";
+  EXPECT_EQ(agrees, sight.at("median_chi").get<double>() <= 3.0);
+  if (georef.at("trusted").get<bool>()) {
+    EXPECT_TRUE(agrees);
+  } else {
+    EXPECT_FALSE(georef.at("untrusted_reason").get<std::string>().empty());
+    EXPECT_FALSE(dsm.at("trusted").get<bool>());
+    EXPECT_EQ(dsm.at("untrusted_reason"), georef.at("untrusted_reason"));
+  }
+  EXPECT_EQ(dsm.at("trusted"), georef.at("trusted"));
 }
 
 }  // namespace

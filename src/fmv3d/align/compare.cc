@@ -11,6 +11,7 @@
 #include "fmv3d/core/error.h"
 #include "fmv3d/core/files.h"
 #include "fmv3d/core/logging.h"
+#include "fmv3d/core/stats.h"
 #include "fmv3d/geometry/mesh_distance.h"
 #include "fmv3d/io/colmap_model.h"
 #include "fmv3d/io/obj_io.h"
@@ -19,13 +20,6 @@
 
 namespace fmv3d::align {
 namespace {
-
-double Percentile(std::vector<double>& v, double q) {
-  if (v.empty()) return 0;
-  const size_t k = std::min(v.size() - 1, static_cast<size_t>(std::floor(q * (v.size() - 1) + 0.5)));
-  std::nth_element(v.begin(), v.begin() + k, v.end());
-  return v[k];
-}
 
 ErrorStats Stats(const std::vector<double>& values) {
   ErrorStats s;
@@ -41,9 +35,9 @@ ErrorStats Stats(const std::vector<double>& values) {
   s.std = std::sqrt(std::max(0.0, sum2 / n - s.mean * s.mean));
   std::vector<double> a(values.size());
   for (size_t i = 0; i < values.size(); ++i) a[i] = std::abs(values[i]);
-  s.p50 = Percentile(a, 0.5);
-  s.p90 = Percentile(a, 0.9);
-  s.p99 = Percentile(a, 0.99);
+  s.p50 = core::Quantile(a, 0.5);
+  s.p90 = core::Quantile(a, 0.9);
+  s.p99 = core::Quantile(a, 0.99);
   return s;
 }
 

@@ -1,4 +1,4 @@
-// CAD comparison (issue 6, `fmv3d compare`): how far a reconstruction is from the design model.
+// CAD comparison (`fmv3d compare`): how far a reconstruction is from the design model.
 //
 //   1. Align the reconstruction (point cloud, or a mesh's vertices) to the CAD frame: coarse by a given
 //      similarity (e.g. sfm::EvaluateSparse(sparse, truth).alignment, or a georeference), else by global

@@ -10,19 +10,14 @@
 #include <cmath>
 
 #include "fmv3d/core/error.h"
+#include "fmv3d/core/stats.h"
 #include "fmv3d/core/threading.h"
+#include "fmv3d/geometry/similarity.h"
 
 namespace fmv3d::align {
 namespace {
 
 double Intensity(const io::Rgb8& c) { return (double(c[0]) + double(c[1]) + double(c[2])) / (3.0 * 255.0); }
-
-double Median(std::vector<double> v) {
-  if (v.empty()) return 0;
-  auto mid = v.begin() + v.size() / 2;
-  std::nth_element(v.begin(), mid, v.end());
-  return *mid;
-}
 
 // The similarity update is parameterised about the centroid c of the matched source points, so that rotation
 // and scale barely couple with translation: X'' = c + e^σ·R(ω)·(X' − c) + τ, x = (ω[3], τ[3], σ).
@@ -104,46 +99,6 @@ core::Sim3 ComposeSim3(const core::Sim3& a, const core::Sim3& b) {
   return c;
 }
 
-bool WeightedUmeyama(const std::vector<Eigen::Vector3d>& src, const std::vector<Eigen::Vector3d>& dst,
-                     const std::vector<double>& weights, bool estimate_scale, core::Sim3* sim) {
-  const size_t n = src.size();
-  if (n < 3 || dst.size() != n || (!weights.empty() && weights.size() != n)) return false;
-  double wsum = 0;
-  Eigen::Vector3d ms = Eigen::Vector3d::Zero(), md = Eigen::Vector3d::Zero();
-  for (size_t i = 0; i < n; ++i) {
-    const double w = weights.empty() ? 1.0 : weights[i];
-    wsum += w;
-    ms += w * src[i];
-    md += w * dst[i];
-  }
-  if (!(wsum > 0)) return false;
-  ms /= wsum;
-  md /= wsum;
-  Eigen::Matrix3d cov = Eigen::Matrix3d::Zero();
-  double var_s = 0;
-  for (size_t i = 0; i < n; ++i) {
-    const double w = weights.empty() ? 1.0 : weights[i];
-    const Eigen::Vector3d a = src[i] - ms, b = dst[i] - md;
-    cov += w * b * a.transpose();
-    var_s += w * a.squaredNorm();
-  }
-  cov /= wsum;
-  var_s /= wsum;
-  if (!(var_s > 0)) return false;
-  Eigen::JacobiSVD<Eigen::Matrix3d> svd(cov, Eigen::ComputeFullU | Eigen::ComputeFullV);
-  const Eigen::Vector3d sv = svd.singularValues();
-  if (!(sv[1] > 1e-12 * std::max(sv[0], 1e-300))) return false;  // collinear
-  Eigen::Matrix3d S = Eigen::Matrix3d::Identity();
-  if (svd.matrixU().determinant() * svd.matrixV().determinant() < 0) S(2, 2) = -1;
-  const Eigen::Matrix3d R = svd.matrixU() * S * svd.matrixV().transpose();
-  const double s = estimate_scale ? (sv.asDiagonal() * S).trace() / var_s : 1.0;
-  if (!(s > 0) || !std::isfinite(s)) return false;
-  sim->s = s;
-  sim->q = Eigen::Quaterniond(R).normalized();
-  sim->t = md - s * (R * ms);
-  return true;
-}
-
 IcpTarget::IcpTarget(const io::OrientedPointCloud& cloud, int normal_neighbours, bool with_colour)
     : points_(cloud.positions), index_(cloud.positions) {
   if (points_.size() < 3) throw Error("ICP target: need at least 3 points, got " + std::to_string(points_.size()));
@@ -204,7 +159,7 @@ core::Sim3 PointToPointEstimation::Update(const IcpSource& source, const IcpTarg
     w.push_back(c.weight);
   }
   core::Sim3 sim;
-  if (!WeightedUmeyama(a, b, w, estimate_scale, &sim)) return core::Sim3();
+  if (!geometry::EstimateSimilarity(a, b, w, estimate_scale, &sim)) return core::Sim3();
   return sim;
 }
 
@@ -238,7 +193,7 @@ core::Sim3 PointToPlaneEstimation::Update(const IcpSource& source, const IcpTarg
   if (loss_ != RobustLoss::kNone && scale <= 0) {
     std::vector<double> r(corr.size());
     for (size_t i = 0; i < corr.size(); ++i) r[i] = std::abs(Residual(source, target, corr[i])) / unit;
-    scale = std::max(2.5 * 1.4826 * Median(r), 1e-6);
+    scale = std::max(2.5 * core::RobustSigma(r), 1e-6);
   }
 
   double x[7] = {0, 0, 0, 0, 0, 0, 0};
@@ -314,7 +269,7 @@ Matching FindCorrespondences(const IcpSource& src, const IcpTarget& target, cons
       m.max_distance = std::numeric_limits<double>::infinity();
     } else {
       std::vector<double> d(dist);
-      m.max_distance = std::max(3.0 * 1.4826 * Median(std::move(d)), 3.0 * target.spacing());
+      m.max_distance = std::max(3.0 * core::RobustSigma(d), 3.0 * target.spacing());
     }
   }
   const bool use_normals = !src.normals.empty();

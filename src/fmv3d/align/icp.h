@@ -158,9 +158,4 @@ IcpResult ScaledIcp(const io::OrientedPointCloud& source, const IcpTarget& targe
 // a ∘ b: X ↦ a(b(X)).
 core::Sim3 ComposeSim3(const core::Sim3& a, const core::Sim3& b);
 
-// Weighted least-squares similarity (or rigid transform when !estimate_scale) dst ≈ s·R·src + t (Umeyama 1991).
-// Returns false for fewer than 3 pairs or a degenerate (collinear) configuration.
-bool WeightedUmeyama(const std::vector<Eigen::Vector3d>& src, const std::vector<Eigen::Vector3d>& dst,
-                     const std::vector<double>& weights, bool estimate_scale, core::Sim3* sim);
-
 }  // namespace fmv3d::align

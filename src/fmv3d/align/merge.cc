@@ -13,6 +13,8 @@
 #include "fmv3d/align/sim3_json.h"
 #include "fmv3d/core/error.h"
 #include "fmv3d/core/files.h"
+#include "fmv3d/core/workspace.h"
+#include "fmv3d/geometry/similarity.h"
 #include "fmv3d/io/colmap_model.h"
 #include "fmv3d/io/frames_index.h"
 #include "fmv3d/sfm/bundle_adjustment.h"
@@ -276,7 +278,7 @@ JointAdjustmentResult JointBundleAdjust(MergedModel* merged, const MultiTrackAli
       dst.push_back(rec.images.at(id).pose.Centre());
     }
     core::Sim3 motion;
-    if (src.size() < 3 || !WeightedUmeyama(src, dst, std::vector<double>(src.size(), 1.0), true, &motion)) continue;
+    if (src.size() < 3 || !geometry::EstimateSimilarity(src, dst, {}, true, &motion)) continue;
     res.track_motion[k] = motion;
     const auto [begin, end] = merged->dense_ranges[k];
     const Eigen::Quaternionf q = motion.q.cast<float>();
@@ -335,25 +337,27 @@ nlohmann::json RunAlignStage(const std::vector<fs::path>& workspaces, const fs::
   const size_t overlap_dropped = merge_options.keep_finer_in_overlap ? KeepFinerInOverlap(&merged) : 0;
 
   // Everything is computed: write.
-  core::EnsureDirectory(output / "sparse");
-  io::WriteColmapText(merged.sparse, output / "sparse");
-  sfm::WritePointsPly(merged.sparse, output / "sparse" / "sparse.ply");
+  const core::Workspace out(output);
+  core::EnsureDirectory(out.sparse_dir());
+  io::WriteColmapText(merged.sparse, out.sparse_dir());
+  sfm::WritePointsPly(merged.sparse, out.sparse_dir() / "sparse.ply");
 
   // Frames and their index.
   io::FramesIndex index;
   size_t frames_linked = 0, frames_missing = 0;
   for (size_t k : MergeOrder(tracks.size(), alignment.reference)) {
-    const fs::path frames = tracks[k].workspace / "frames";
+    const core::Workspace in_ws(tracks[k].workspace);
+    const fs::path frames = in_ws.frames_dir();
     for (const auto& [old_name, new_name] : merged.image_names[k]) {
       if (fs::exists(frames / old_name)) {
-        LinkOrCopy(frames / old_name, output / "frames" / new_name);
+        LinkOrCopy(frames / old_name, out.frames_dir() / new_name);
         ++frames_linked;
       } else {
         ++frames_missing;
       }
     }
-    if (!fs::exists(frames / "frames.json")) continue;
-    const io::FramesIndex in = io::ReadFramesIndex(frames / "frames.json");
+    if (!fs::exists(in_ws.frames_json())) continue;
+    const io::FramesIndex in = io::ReadFramesIndex(in_ws.frames_json());
     for (const auto& cam : in.cameras) {
       const auto it = merged.camera_ids[k].find(cam.camera.id);
       if (it == merged.camera_ids[k].end()) continue;
@@ -371,7 +375,7 @@ nlohmann::json RunAlignStage(const std::vector<fs::path>& workspaces, const fs::
       index.frames.push_back(r);
     }
   }
-  if (!index.frames.empty()) io::WriteFramesIndex(index, output / "frames" / "frames.json");
+  if (!index.frames.empty()) io::WriteFramesIndex(index, out.frames_json());
   if (frames_missing) spdlog::warn("align: {} frame images not found in the input workspaces", frames_missing);
   nlohmann::json dense_json = {{"method", "none"}};
   if (!merged.dense.empty()) {
@@ -400,8 +404,8 @@ nlohmann::json RunAlignStage(const std::vector<fs::path>& workspaces, const fs::
                                                                : "frame images of the tracks are missing";
     }
     if (dense_json.at("method") == "union") {
-      core::EnsureDirectory(output / "dense");
-      io::WritePointCloudPly(merged.dense, output / "dense" / "fused.ply");
+      core::EnsureDirectory(out.dense_dir());
+      io::WritePointCloudPly(merged.dense, out.dense_dir() / "fused.ply");
       dense_json["points"] = merged.dense.size();
     }
   }
@@ -437,8 +441,8 @@ nlohmann::json RunAlignStage(const std::vector<fs::path>& workspaces, const fs::
       "residual_rms_*: fine step 'correspondences' — RMS of the inlier 3D-3D distances with the RANSAC model "
       "(before) and the robust refit (after); 'icp-dense' — ICP point-to-plane RMS at the start and end. "
       "Units of the reference model.";
-  core::EnsureDirectory(output / "report");
-  core::WriteJson(output / "report" / "align.json", report);
+  core::EnsureDirectory(out.report_dir());
+  core::WriteJson(out.report_dir() / "align.json", report);
   return report;
 }
 

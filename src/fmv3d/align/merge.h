@@ -80,7 +80,7 @@ size_t KeepFinerInOverlap(MergedModel* merged, double radius_spacings = 2.0);
 struct MergeOptions {
   bool joint_bundle_adjustment = true;
   // Re-run the dense stage on the merged workspace (needs every track's dense cloud); false: union of the
-  // tracks' clouds. Measured on two 200° arcs (bench/RESULTS.md, session 7): the union's median error lies
+  // tracks' clouds. Measured on two 200° arcs (bench/RESULTS.md): the union's median error lies
   // between the two tracks' (it mixes the worse track in where both see the surface); the recomputed cloud is
   // at least as accurate as the better track, median and p90, and as complete as the union.
   bool recompute_dense = true;

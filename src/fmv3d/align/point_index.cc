@@ -5,6 +5,8 @@
 #include <Eigen/Eigenvalues>
 #include <algorithm>
 
+#include "fmv3d/core/stats.h"
+
 namespace fmv3d::align {
 
 namespace {
@@ -132,9 +134,7 @@ double MedianSpacing(const std::vector<Eigen::Vector3d>& points, const PointInde
     index.Knn(points[i], 2, &nn, &d2);
     if (d2.size() == 2) d.push_back(std::sqrt(d2[1]));
   }
-  if (d.empty()) return 0;
-  std::nth_element(d.begin(), d.begin() + d.size() / 2, d.end());
-  return d[d.size() / 2];
+  return core::Median(std::move(d));
 }
 
 double RmsRadius(const std::vector<Eigen::Vector3d>& points, Eigen::Vector3d* centroid) {

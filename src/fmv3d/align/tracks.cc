@@ -13,6 +13,8 @@
 #include "fmv3d/core/error.h"
 #include "fmv3d/core/files.h"
 #include "fmv3d/core/logging.h"
+#include "fmv3d/core/stats.h"
+#include "fmv3d/core/workspace.h"
 #include "fmv3d/features/feature_io.h"
 #include "fmv3d/features/pairs.h"
 #include "fmv3d/geometry/similarity.h"
@@ -34,7 +36,7 @@ struct ImageFeatures {
 
 std::vector<ImageFeatures> LoadFeatures(const Track& t) {
   std::vector<ImageFeatures> out;
-  const fs::path dir = t.workspace / "features";
+  const fs::path dir = core::Workspace(t.workspace).features_dir();
   for (const auto& [id, image] : t.sparse.images) {
     const fs::path path = features::FeaturePath(dir, image.name);
     if (!fs::exists(path))
@@ -59,12 +61,6 @@ std::vector<ImageFeatures> LoadFeatures(const Track& t) {
     out.push_back(std::move(f));
   }
   return out;
-}
-
-double Median(std::vector<double> v) {
-  if (v.empty()) return 0;
-  std::nth_element(v.begin(), v.begin() + v.size() / 2, v.end());
-  return v[v.size() / 2];
 }
 
 std::vector<Eigen::Vector3d> Positions(const core::Reconstruction& r) {
@@ -193,7 +189,7 @@ PairAlignment AlignPair(const std::vector<Track>& tracks, size_t ri, size_t mi, 
   }
   spdlog::info("align {} ← {}: {} image pairs verified of {}, {} 3D–3D correspondences", ref.name, mov.name,
                res.image_pairs_verified, res.image_pairs_tried, res.correspondences);
-  if (static_cast<int>(src.size()) < o.min_inliers) throw Error(NoOverlap(ref, mov));
+  if (static_cast<int>(src.size()) < o.min_inliers) throw NoOverlapError(NoOverlap(ref, mov));
   geometry::SimilarityRansacOptions ro;
   ro.max_error = o.ransac_max_error * ref.radius;
   ro.max_iterations = 5000;
@@ -201,7 +197,7 @@ PairAlignment AlignPair(const std::vector<Track>& tracks, size_t ri, size_t mi, 
   core::Sim3 sim;
   std::vector<char> mask;
   const int inliers = geometry::EstimateSimilarityRansac(src, dst, ro, &sim, &mask);
-  if (inliers < o.min_inliers) throw Error(NoOverlap(ref, mov) + " (" + std::to_string(inliers) +
+  if (inliers < o.min_inliers) throw NoOverlapError(NoOverlap(ref, mov) + " (" + std::to_string(inliers) +
                                            " consistent 3D correspondences, " + std::to_string(o.min_inliers) +
                                            " needed)");
 
@@ -213,7 +209,7 @@ PairAlignment AlignPair(const std::vector<Track>& tracks, size_t ri, size_t mi, 
       r[i] = (sim.Apply(src[i]) - dst[i]).norm();
       if (mask[i]) rin.push_back(r[i]);
     }
-    const double sigma = std::max(1.4826 * Median(rin), 1e-12 * ref.radius);
+    const double sigma = std::max(core::RobustSigma(rin), 1e-12 * ref.radius);
     std::vector<Eigen::Vector3d> a, b;
     std::vector<double> w;
     for (size_t i = 0; i < src.size(); ++i) {
@@ -224,7 +220,7 @@ PairAlignment AlignPair(const std::vector<Track>& tracks, size_t ri, size_t mi, 
       w.push_back(r[i] <= 1.5 * sigma ? 1.0 : 1.5 * sigma / r[i]);
     }
     core::Sim3 refit;
-    if (static_cast<int>(a.size()) < o.min_inliers || !WeightedUmeyama(a, b, w, true, &refit)) break;
+    if (static_cast<int>(a.size()) < o.min_inliers || !geometry::EstimateSimilarity(a, b, w, true, &refit)) break;
     sim = refit;
   }
   auto inlier_rms = [&](const core::Sim3& s) {
@@ -273,7 +269,8 @@ Track LoadTrack(const fs::path& workspace) {
   t.workspace = workspace;
   t.name = fs::path(workspace).lexically_normal().filename().string();
   if (t.name.empty() || t.name == ".") t.name = fs::absolute(workspace).lexically_normal().parent_path().filename().string();
-  const fs::path sparse = workspace / "sparse";
+  const core::Workspace ws(workspace);
+  const fs::path sparse = ws.sparse_dir();
   if (!fs::exists(sparse / "images.txt"))
     throw Error(workspace.string() + ": no sparse/images.txt — run `fmv3d sparse` first");
   t.sparse = io::ReadColmapText(sparse);
@@ -281,9 +278,9 @@ Track LoadTrack(const fs::path& workspace) {
     throw Error(workspace.string() + ": the sparse model is too small to align (" +
                 std::to_string(t.sparse.images.size()) + " images, " + std::to_string(t.sparse.points.size()) +
                 " points)");
-  const fs::path fused = workspace / "dense" / "fused.ply";
+  const fs::path fused = ws.dense_dir() / "fused.ply";
   if (fs::exists(fused)) t.dense = io::ReadPointCloudPly(fused);
-  const fs::path dense_report = workspace / "report" / "dense.json";
+  const fs::path dense_report = ws.report_dir() / "dense.json";
   if (fs::exists(dense_report)) t.dense_report = core::ReadJson(dense_report);
   t.radius = RmsRadius(Positions(t.sparse));
   return t;
@@ -341,11 +338,9 @@ MultiTrackAlignment AlignTracks(const std::vector<Track>& tracks, const TrackAli
       const bool j_ref = j == out.reference;
       try {
         out.pairs.push_back(j_ref ? AlignPair(tracks, j, i, options, cache) : AlignPair(tracks, i, j, options, cache));
-      } catch (const Error& e) {
-        const std::string msg = e.what();
-        if (msg.rfind("no overlap found", 0) != 0) throw;
-        spdlog::warn("align: {}", msg);
-        last_error = msg;
+      } catch (const NoOverlapError& e) {
+        spdlog::warn("align: {}", e.what());
+        last_error = e.what();
       }
     }
   // Maximum spanning tree from the reference (Prim), weight = inlier count.
@@ -357,9 +352,9 @@ MultiTrackAlignment AlignTracks(const std::vector<Track>& tracks, const TrackAli
     for (const auto& p : out.pairs)
       if (in_tree[p.reference] != in_tree[p.moving] && (!best || p.inliers > best->inliers)) best = &p;
     if (!best) {
-      if (n == 2) throw Error(last_error.empty() ? NoOverlap(tracks[0], tracks[1]) : last_error);
+      if (n == 2) throw NoOverlapError(last_error.empty() ? NoOverlap(tracks[0], tracks[1]) : last_error);
       for (size_t k = 0; k < n; ++k)
-        if (!in_tree[k]) throw Error("no overlap found between " + tracks[k].name + " and any other track");
+        if (!in_tree[k]) throw NoOverlapError("no overlap found between " + tracks[k].name + " and any other track");
     }
     // Edge b→a (b's frame into a's): T_b = T_a ∘ sim, or through the inverse when the tree grows the other way.
     if (in_tree[best->reference]) {

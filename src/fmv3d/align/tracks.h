@@ -1,4 +1,4 @@
-// Mission-track alignment (issue 7): independent reconstructions of one target — other flights, days,
+// Mission-track alignment: independent reconstructions of one target — other flights, days,
 // cameras — each in its own arbitrary frame and scale, brought into one frame without GPS.
 //
 // Coarse, per pair of tracks (reference ← moving):
@@ -23,6 +23,7 @@
 #include <vector>
 
 #include "fmv3d/align/icp.h"
+#include "fmv3d/core/error.h"
 #include "fmv3d/core/pose.h"
 #include "fmv3d/core/reconstruction.h"
 #include "fmv3d/features/matcher.h"
@@ -71,7 +72,14 @@ struct PairAlignment {
   nlohmann::json ToJson(const std::vector<Track>& tracks) const;
 };
 
-// Throws fmv3d::Error("no overlap found between A and B") when the tracks share too little.
+// The tracks share too little to be aligned: "no overlap found between A and B" (a user-facing fmv3d::Error, and a
+// type that AlignTracks tells apart from other failures).
+class NoOverlapError : public Error {
+ public:
+  using Error::Error;
+};
+
+// Throws NoOverlapError when the tracks share too little.
 PairAlignment AlignTrackPair(const std::vector<Track>& tracks, size_t reference, size_t moving,
                              const TrackAlignOptions& options);
 

@@ -10,6 +10,7 @@
 #include "fmv3d/core/error.h"
 #include "fmv3d/core/files.h"
 #include "fmv3d/core/logging.h"
+#include "fmv3d/core/workspace.h"
 #include "fmv3d/features/feature_io.h"
 #include "fmv3d/features/spatial_pairs.h"
 #include "fmv3d/io/frames_index.h"
@@ -70,12 +71,12 @@ class DescriptorCache {
 
 }  // namespace
 
-MatchStageStats RunMatchStage(const fs::path& workspace, const MatchStageOptions& options) {
+MatchStageStats RunMatchStage(const core::Workspace& ws, const MatchStageOptions& options) {
   options.Check();
   const auto t_start = Clock::now();
   MatchStageStats stats;
-  const fs::path frames_json = workspace / "frames" / "frames.json";
-  const fs::path features_dir = workspace / "features", matches_dir = workspace / "matches";
+  const fs::path frames_json = ws.frames_json();
+  const fs::path features_dir = ws.features_dir(), matches_dir = ws.matches_dir();
   const auto index = io::ReadFramesIndex(frames_json);
   const size_t n = index.frames.size();
   stats.images = n;
@@ -87,7 +88,7 @@ MatchStageStats RunMatchStage(const fs::path& workspace, const MatchStageOptions
     try {
       const fs::path p = FeaturePath(features_dir, index.frames[i].name);
       if (!fs::exists(p))
-        throw Error(p.string() + " is missing; run `fmv3d features " + workspace.string() + "` first");
+        throw Error(p.string() + " is missing; run `fmv3d features " + ws.name() + "` first");
       features[i] = ReadFeatures(p);
       if (features[i].image_name != index.frames[i].name)
         throw Error(p.string() + ": holds features of '" + features[i].image_name + "', not '" +

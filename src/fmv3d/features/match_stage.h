@@ -11,6 +11,7 @@
 
 #include <filesystem>
 
+#include "fmv3d/core/workspace.h"
 #include "fmv3d/features/matcher.h"
 #include "fmv3d/features/pairs.h"
 #include "fmv3d/geometry/two_view.h"
@@ -35,6 +36,6 @@ struct MatchStageStats {
   double cpu_seconds_match = 0, cpu_seconds_verify = 0;  // summed over threads
 };
 
-MatchStageStats RunMatchStage(const std::filesystem::path& workspace, const MatchStageOptions& options);
+MatchStageStats RunMatchStage(const core::Workspace& workspace, const MatchStageOptions& options);
 
 }  // namespace fmv3d::features

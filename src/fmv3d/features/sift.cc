@@ -15,6 +15,7 @@
 #include "fmv3d/core/error.h"
 #include "fmv3d/core/files.h"
 #include "fmv3d/core/logging.h"
+#include "fmv3d/core/workspace.h"
 #include "fmv3d/features/feature_io.h"
 #include "fmv3d/io/frames_index.h"
 
@@ -172,11 +173,11 @@ FeatureSet ExtractSift(const cv::Mat& image, const SiftOptions& options, double*
   return out;
 }
 
-FeaturesStageStats RunFeaturesStage(const fs::path& workspace, const SiftOptions& options, bool force) {
+FeaturesStageStats RunFeaturesStage(const core::Workspace& ws, const SiftOptions& options, bool force) {
   options.Check();
   const auto start = std::chrono::steady_clock::now();
-  const fs::path frames_dir = workspace / "frames", features_dir = workspace / "features";
-  const auto index = io::ReadFramesIndex(frames_dir / "frames.json");
+  const fs::path frames_dir = ws.frames_dir(), features_dir = ws.features_dir();
+  const auto index = io::ReadFramesIndex(ws.frames_json());
   core::EnsureDirectory(features_dir);
   const size_t n = index.frames.size();
   std::vector<size_t> counts(n, 0);

@@ -11,6 +11,7 @@
 #include <string>
 #include <vector>
 
+#include "fmv3d/core/workspace.h"
 #include "fmv3d/features/types.h"
 
 namespace fmv3d::features {
@@ -54,7 +55,7 @@ struct FeaturesStageStats {
 // The `fmv3d features` stage: reads WS/frames/frames.json, writes WS/features/<stem>.feat for every frame
 // (parallel over images), and WS/features/features.json (counts, timing). Skips frames whose .feat is newer
 // than the image unless `force`. Throws fmv3d::Error for a missing workspace or an unreadable image.
-FeaturesStageStats RunFeaturesStage(const std::filesystem::path& workspace, const SiftOptions& options,
+FeaturesStageStats RunFeaturesStage(const core::Workspace& workspace, const SiftOptions& options,
                                     bool force = false);
 
 }  // namespace fmv3d::features

@@ -14,6 +14,8 @@
 #include "fmv3d/core/files.h"
 #include "fmv3d/core/logging.h"
 #include "fmv3d/core/reconstruction.h"
+#include "fmv3d/core/stats.h"
+#include "fmv3d/core/workspace.h"
 #include "fmv3d/geo/las.h"
 #include "fmv3d/io/colmap_model.h"
 #include "fmv3d/io/obj_io.h"
@@ -36,15 +38,15 @@ void ToUtm(const Georef& g, std::vector<Eigen::Vector3d>* pts) {
 }
 
 // Points of the densest cloud available (dense, else sparse), in the sparse frame.
-io::OrientedPointCloud LoadPoints(const fs::path& ws, std::string* source) {
-  const fs::path dense = ws / "dense" / "fused.ply";
+io::OrientedPointCloud LoadPoints(const core::Workspace& ws, std::string* source) {
+  const fs::path dense = ws.dense_dir() / "fused.ply";
   if (fs::exists(dense)) {
     *source = dense.string();
     return io::ReadPointCloudPly(dense);
   }
-  const fs::path sparse = ws / "sparse";
+  const fs::path sparse = ws.sparse_dir();
   if (!fs::exists(sparse / "points3D.txt"))
-    throw Error(ws.string() + ": no surface to map (mesh/poisson.ply, dense/fused.ply or sparse/) — run the "
+    throw Error(ws.name() + ": no surface to map (mesh/poisson.ply, dense/fused.ply or sparse/) — run the "
                 "reconstruction first");
   *source = sparse.string();
   const core::Reconstruction rec = io::ReadColmapText(sparse);
@@ -58,9 +60,9 @@ io::OrientedPointCloud LoadPoints(const fs::path& ws, std::string* source) {
 
 }  // namespace
 
-UtmSurface LoadUtmSurface(const fs::path& ws, const Georef& g) {
+UtmSurface LoadUtmSurface(const core::Workspace& ws, const Georef& g) {
   UtmSurface s;
-  const fs::path poisson = ws / "mesh" / "poisson.ply";
+  const fs::path poisson = ws.mesh_dir() / "poisson.ply";
   if (fs::exists(poisson)) {
     open3d::geometry::TriangleMesh mesh;
     if (!open3d::io::ReadTriangleMesh(poisson.string(), mesh) || mesh.triangles_.empty())
@@ -96,10 +98,7 @@ double ChooseGsd(const UtmSurface& s) {
         const double l = (s.vertices[t[k]] - s.vertices[t[(k + 1) % 3]]).head<2>().norm();
         if (l > 0) len.push_back(l);
       }
-    if (!len.empty()) {
-      std::nth_element(len.begin(), len.begin() + len.size() / 2, len.end());
-      return std::max(0.01, len[len.size() / 2]);
-    }
+    if (!len.empty()) return std::max(0.01, core::Median(std::move(len)));
   }
   // Mean spacing over the occupied area: count the cells occupied at a first-guess size, then refine once.
   Eigen::Vector2d lo = s.vertices.front().head<2>(), hi = lo;
@@ -160,7 +159,7 @@ cv::Mat RasteriseDsm(const UtmSurface& s, const GridSpec& grid) {
   return h;
 }
 
-nlohmann::json RunDsmStage(const fs::path& ws, const DsmOptions& o) {
+nlohmann::json RunDsmStage(const core::Workspace& ws, const DsmOptions& o) {
   o.Check();
   const Georef g = ReadGeoref(ws);
   const UtmSurface s = LoadUtmSurface(ws, g);
@@ -188,7 +187,7 @@ nlohmann::json RunDsmStage(const fs::path& ws, const DsmOptions& o) {
                s.triangles.empty() ? "points" : fmt::format("vertices, {} triangles", s.triangles.size()), grid.width,
                grid.height, gsd);
   const cv::Mat h = RasteriseDsm(s, grid);
-  const fs::path dir = ws / "geo";
+  const fs::path dir = ws.geo_dir();
   core::EnsureDirectory(dir);
   WriteHeightGeoTiff(dir / "dsm.tif", grid, h);
   const cv::Mat shade = Hillshade(h, gsd);
@@ -217,6 +216,11 @@ nlohmann::json RunDsmStage(const fs::path& ws, const DsmOptions& o) {
   if (!g.consistent_with_telemetry)
     spdlog::warn("dsm: the georeference disagrees with the telemetry (see geo/georef.json): heights and "
                  "positions of this DSM are not reliable");
+  j["trusted"] = g.trusted;
+  if (!g.trusted) {
+    j["untrusted_reason"] = g.untrusted_reason;
+    spdlog::warn("dsm: NOT TRUSTED — the georeference disagrees with the telemetry: {}", g.untrusted_reason);
+  }
   j["height_range_m"] = {hmin, hmax};
   const LocalFrame frame(g.origin, g.utm);
   // The absolute height error the georeference alone predicts over these cells (geo/accuracy.h): translation,
@@ -260,17 +264,17 @@ nlohmann::json RunDsmStage(const fs::path& ws, const DsmOptions& o) {
   return j;
 }
 
-nlohmann::json RunOrthoStage(const fs::path& ws) {
+nlohmann::json RunOrthoStage(const core::Workspace& ws) {
   const Georef g = ReadGeoref(ws);
-  const fs::path dsm = ws / "geo" / "dsm.tif";
-  if (!fs::exists(dsm)) throw Error(ws.string() + ": no geo/dsm.tif — run `fmv3d dsm` first (the orthophoto uses its grid)");
+  const fs::path dsm = ws.geo_dir() / "dsm.tif";
+  if (!fs::exists(dsm)) throw Error(ws.name() + ": no geo/dsm.tif — run `fmv3d dsm` first (the orthophoto uses its grid)");
   GridSpec grid;
   ReadHeightGeoTiff(dsm, &grid);
   cv::Mat bgr(grid.height, grid.width, CV_8UC3, cv::Scalar(0, 0, 0));
   cv::Mat valid(grid.height, grid.width, CV_8U, cv::Scalar(0));
   cv::Mat top(grid.height, grid.width, CV_32F, cv::Scalar(-std::numeric_limits<float>::infinity()));
   nlohmann::json j;
-  const fs::path obj = ws / "mesh" / "textured.obj";
+  const fs::path obj = ws.mesh_dir() / "textured.obj";
   if (fs::exists(obj)) {
     io::TexturedMesh mesh = io::ReadObj(obj, true);
     for (auto& v : mesh.vertices) v = g.sparse_to_enu.Apply(v);
@@ -329,8 +333,13 @@ nlohmann::json RunOrthoStage(const fs::path& ws) {
     j["points"] = cloud.size();
     spdlog::warn("ortho: no mesh/textured.obj; using the coloured points of {}", source);
   }
-  WriteRgbaGeoTiff(ws / "geo" / "ortho.tif", grid, bgr, valid);
+  WriteRgbaGeoTiff(ws.geo_dir() / "ortho.tif", grid, bgr, valid);
   j["valid_cells"] = cv::countNonZero(valid);
+  j["trusted"] = g.trusted;
+  if (!g.trusted) {
+    j["untrusted_reason"] = g.untrusted_reason;
+    spdlog::warn("ortho: NOT TRUSTED — the georeference disagrees with the telemetry: {}", g.untrusted_reason);
+  }
   j["width"] = grid.width;
   j["height"] = grid.height;
   j["gsd_m"] = grid.gsd;

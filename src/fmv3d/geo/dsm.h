@@ -23,6 +23,7 @@
 #include <optional>
 #include <vector>
 
+#include "fmv3d/core/workspace.h"
 #include "fmv3d/geo/georef.h"
 #include "fmv3d/geo/raster.h"
 #include "fmv3d/io/point_cloud.h"
@@ -45,7 +46,7 @@ struct UtmSurface {
 };
 
 // Loads the first available surface (see above) and maps it to UTM. Throws fmv3d::Error when none exists.
-UtmSurface LoadUtmSurface(const std::filesystem::path& workspace, const Georef& georef);
+UtmSurface LoadUtmSurface(const core::Workspace& workspace, const Georef& georef);
 
 // Height per cell; NaN where nothing lands. A mesh gives the highest surface: triangles cover the cells whose
 // centres they contain, and their vertices mark their own cells (so thin or steep triangles still count).
@@ -54,7 +55,7 @@ cv::Mat RasteriseDsm(const UtmSurface& surface, const GridSpec& grid);
 // See the header comment.
 double ChooseGsd(const UtmSurface& surface);
 
-nlohmann::json RunDsmStage(const std::filesystem::path& workspace, const DsmOptions& options = {});
-nlohmann::json RunOrthoStage(const std::filesystem::path& workspace);
+nlohmann::json RunDsmStage(const core::Workspace& workspace, const DsmOptions& options = {});
+nlohmann::json RunOrthoStage(const core::Workspace& workspace);
 
 }  // namespace fmv3d::geo

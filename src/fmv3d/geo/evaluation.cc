@@ -13,6 +13,7 @@
 #include "fmv3d/core/error.h"
 #include "fmv3d/core/files.h"
 #include "fmv3d/core/reconstruction.h"
+#include "fmv3d/core/workspace.h"
 #include "fmv3d/geo/dsm.h"
 #include "fmv3d/geo/georef.h"
 #include "fmv3d/geometry/mesh_distance.h"
@@ -181,7 +182,7 @@ nlohmann::json SurfaceError(const core::Reconstruction& est, const core::Reconst
 
 }  // namespace
 
-nlohmann::json EvaluateGeoAgainstSynth(const fs::path& ws, const fs::path& synth) {
+nlohmann::json EvaluateGeoAgainstSynth(const core::Workspace& ws, const fs::path& synth) {
   const nlohmann::json truth = core::ReadJson(synth / "truth.json");
   if (!truth.contains("geo_origin"))
     throw Error((synth / "truth.json").string() + ": no geo_origin (render the flight with `fmv3d synth --klv`)");
@@ -195,7 +196,7 @@ nlohmann::json EvaluateGeoAgainstSynth(const fs::path& ws, const fs::path& synth
   nlohmann::json j;
   j["building_height_m"] = building;
   // Cameras.
-  const core::Reconstruction est = io::ReadColmapText(ws / "geo" / "sparse_enu");
+  const core::Reconstruction est = io::ReadColmapText(ws.sparse_enu_dir());
   const core::Reconstruction tru = io::ReadColmapText(synth / "truth");
   Stats c3, ch, cv_;
   Eigen::Vector3d bias = Eigen::Vector3d::Zero();
@@ -208,7 +209,7 @@ nlohmann::json EvaluateGeoAgainstSynth(const fs::path& ws, const fs::path& synth
     cv_.Add(d.z());
     bias += d;
   }
-  if (c3.n == 0) throw Error(ws.string() + ": no camera of geo/sparse_enu matches the truth by name");
+  if (c3.n == 0) throw Error(ws.name() + ": no camera of geo/sparse_enu matches the truth by name");
   bias /= static_cast<double>(c3.n);
   j["cameras"] = {{"matched", c3.n},
                   {"centre_rms_m", c3.Rms()},
@@ -218,7 +219,7 @@ nlohmann::json EvaluateGeoAgainstSynth(const fs::path& ws, const fs::path& synth
                   {"bias_m", bias.norm()}};
   // The floor set by the telemetry itself: the mean of (telemetry − true) camera positions, which a
   // position-only georeference cannot see past (its translation error tends to exactly this).
-  const fs::path frames_json = ws / "frames" / "frames.json";
+  const fs::path frames_json = ws.frames_json();
   if (fs::exists(frames_json)) {
     const io::FramesIndex index = io::ReadFramesIndex(frames_json);
     Stats tx, ty, tz;
@@ -245,7 +246,7 @@ nlohmann::json EvaluateGeoAgainstSynth(const fs::path& ws, const fs::path& synth
   }
   // The same floor for a georeference fitted on every packet (frames/telemetry.json): the mean error of all
   // packets, each against the true camera of its frame (synth writes one packet per frame, at its time).
-  const fs::path track_json = ws / "frames" / "telemetry.json";
+  const fs::path track_json = ws.telemetry_json();
   if (fs::exists(track_json) && truth.contains("fps")) {
     const double fps = truth["fps"].get<double>();
     Stats tx, ty, tz;
@@ -290,7 +291,7 @@ nlohmann::json EvaluateGeoAgainstSynth(const fs::path& ws, const fs::path& synth
   j["points"] = {{"count", pd.n}, {"rms_m", pd.Rms()}, {"median_m", all.empty() ? 0.0 : all[all.size() / 2]},
                  {"signed_mean_m", ps.Mean()}, {"signed_mean_of", "points within 5% of H of the true mesh; + outside"}};
   // DSM.
-  const fs::path dsm_path = ws / "geo" / "dsm.tif";
+  const fs::path dsm_path = ws.geo_dir() / "dsm.tif";
   if (fs::exists(dsm_path)) {
     GridSpec grid;
     const cv::Mat h = ReadHeightGeoTiff(dsm_path, &grid);
@@ -352,9 +353,9 @@ nlohmann::json EvaluateGeoAgainstSynth(const fs::path& ws, const fs::path& synth
         const auto lift = [](double a) { return static_cast<uchar>(255 * (1 - std::abs(a))); };
         err_png.at<cv::Vec3b>(r, c) = t < 0 ? cv::Vec3b(255, lift(t), lift(t)) : cv::Vec3b(lift(t), lift(t), 255);
       }
-    core::EnsureDirectory(ws / "report");
-    core::WriteAtomically(ws / "report" / "dsm_error.png", [&](const fs::path& tmp) {
-      if (!cv::imwrite(tmp.string() + ".png", err_png)) throw Error((ws / "report" / "dsm_error.png").string() + ": cannot write");
+    core::EnsureDirectory(ws.report_dir());
+    core::WriteAtomically(ws.report_dir() / "dsm_error.png", [&](const fs::path& tmp) {
+      if (!cv::imwrite(tmp.string() + ".png", err_png)) throw Error((ws.report_dir() / "dsm_error.png").string() + ": cannot write");
       fs::rename(tmp.string() + ".png", tmp);
     });
     j["dsm"] = in_area.ToJson(building);

@@ -20,8 +20,10 @@
 #include <filesystem>
 #include <nlohmann/json.hpp>
 
+#include "fmv3d/core/workspace.h"
+
 namespace fmv3d::geo {
 
-nlohmann::json EvaluateGeoAgainstSynth(const std::filesystem::path& workspace, const std::filesystem::path& synth_dir);
+nlohmann::json EvaluateGeoAgainstSynth(const core::Workspace& workspace, const std::filesystem::path& synth_dir);
 
 }  // namespace fmv3d::geo

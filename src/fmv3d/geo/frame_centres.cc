@@ -10,28 +10,9 @@
 #include <cmath>
 #include <limits>
 
-namespace fmv3d::geo {
+#include "fmv3d/core/stats.h"
 
-bool FitScaleShift(const Eigen::Matrix3d& R, const std::vector<Eigen::Vector3d>& src,
-                   const std::vector<Eigen::Vector3d>& dst, const std::vector<double>& weights, ScaleShift* out) {
-  Eigen::Matrix4d A = Eigen::Matrix4d::Zero();
-  Eigen::Vector4d b = Eigen::Vector4d::Zero();
-  for (size_t i = 0; i < src.size(); ++i) {
-    Eigen::Matrix<double, 3, 4> J;
-    J.col(0) = R * src[i];
-    J.rightCols<3>().setIdentity();
-    A += weights[i] * J.transpose() * J;
-    b += weights[i] * J.transpose() * dst[i];
-  }
-  const Eigen::FullPivLU<Eigen::Matrix4d> lu(A);
-  if (lu.rank() < 4) return false;
-  const Eigen::Vector4d x = lu.solve(b);
-  if (!x.allFinite() || !(x(0) > 0)) return false;
-  out->scale = x(0);
-  out->translation = x.tail<3>();
-  out->covariance = lu.inverse();
-  return true;
-}
+namespace fmv3d::geo {
 
 namespace {
 
@@ -41,11 +22,6 @@ Eigen::Vector4d Params(const ScaleShift& s) {
   return x;
 }
 
-double MedianOf(std::vector<double> v) {
-  if (v.empty()) return 0;
-  std::nth_element(v.begin(), v.begin() + v.size() / 2, v.end());
-  return v[v.size() / 2];
-}
 
 // Residual of one point: exp(ls)·rot(ω)·u + t + range·rot(ω)·v − target, over σ. u, v already rotated by the
 // starting rotation; a position is the case v = 0.
@@ -146,7 +122,7 @@ FrameCentreFusion FuseFrameCentres(const Eigen::Matrix3d& R, const ScaleShift& p
   FrameCentreFusion f;
   f.observations = sights.size();
   if (sights.size() < 3) {
-    f.why = "fewer than 3 packets state a frame centre and a slant range";
+    f.outcome = FrameCentreFusion::Outcome::kTooFew;
     return f;
   }
   // The sensor position each line of sight implies: F − r·(R·a).
@@ -164,8 +140,8 @@ FrameCentreFusion FuseFrameCentres(const Eigen::Matrix3d& R, const ScaleShift& p
     std::vector<Eigen::Vector3d> s_in, d_in;
     for (size_t i = 0; i < n; ++i)
       if (in[i]) s_in.push_back(src[i]), d_in.push_back(dst[i]);
-    if (s_in.size() < 3 || !FitScaleShift(R, s_in, d_in, std::vector<double>(s_in.size(), 1.0), &fit)) {
-      f.why = "the lines of sight do not determine a scale and translation";
+    if (s_in.size() < 3 || !geometry::EstimateScaleShift(R, s_in, d_in, std::vector<double>(s_in.size(), 1.0), &fit)) {
+      f.outcome = FrameCentreFusion::Outcome::kUndetermined;
       return f;
     }
     std::vector<double> res(n), res_in;
@@ -174,7 +150,7 @@ FrameCentreFusion FuseFrameCentres(const Eigen::Matrix3d& R, const ScaleShift& p
       if (in[i]) res_in.push_back(res[i]);
     }
     if (round == 0) {
-      sigma = (1 + 5.0 / std::max<double>(1, res_in.size() - 3.0)) * MedianOf(res_in) / 1.538;
+      sigma = (1 + 5.0 / std::max<double>(1, res_in.size() - 3.0)) * core::Median(res_in) / 1.538;
     } else {
       double sq = 0;
       for (double r : res_in) sq += r * r;
@@ -201,7 +177,7 @@ FrameCentreFusion FuseFrameCentres(const Eigen::Matrix3d& R, const ScaleShift& p
   f.autocorrelation = den > 0 ? std::clamp(num / den, 0.0, 0.999) : 0.0;
   f.effective_samples = std::max(1.0, n_in * (1 - f.autocorrelation) / (1 + f.autocorrelation));
   if (n_in < 3) {
-    f.why = "fewer than 3 lines of sight agree with each other";
+    f.outcome = FrameCentreFusion::Outcome::kInconsistent;
     return f;
   }
   // Covariance of the line-of-sight fit: σ² per axis, discounted to the effective samples.
@@ -230,7 +206,7 @@ FrameCentreFusion FuseFrameCentres(const Eigen::Matrix3d& R, const ScaleShift& p
     if (std::isfinite(chi2[k]) && prior[k].second > 0) f.chi2 = std::min(f.chi2, chi2[k]);
   }
   if (!std::isfinite(f.chi2) || f.chi2 > kFrameCentreAgreementChi2) {  // at the offset that agrees best
-    f.why = "the frame centres disagree with the positions beyond their uncertainties";
+    f.outcome = FrameCentreFusion::Outcome::kDisagree;
     return f;
   }
   double wsum = 0;
@@ -242,21 +218,34 @@ FrameCentreFusion FuseFrameCentres(const Eigen::Matrix3d& R, const ScaleShift& p
     mean += weight[k] * x[k];
   }
   if (!(wsum > 0)) {
-    f.why = "the frame centres disagree with the positions beyond their uncertainties";
+    f.outcome = FrameCentreFusion::Outcome::kDisagree;
     return f;
   }
   mean /= wsum;
   Eigen::Matrix4d spread = Eigen::Matrix4d::Zero();
   for (int k = 0; k < nodes; ++k) spread += weight[k] / wsum * (x[k] - mean) * (x[k] - mean).transpose();
   if (!mean.allFinite() || !(mean(0) > 0)) {
-    f.why = "the fused scale is not positive";
+    f.outcome = FrameCentreFusion::Outcome::kNonPositiveScale;
     return f;
   }
   f.used = true;
+  f.outcome = FrameCentreFusion::Outcome::kUsed;
   f.fused.scale = mean(0);
   f.fused.translation = mean.tail<3>();
   f.fused.covariance = cov + spread;
   return f;
+}
+
+std::string FrameCentreFusion::Why() const {
+  switch (outcome) {
+    case Outcome::kUsed: return "";
+    case Outcome::kTooFew: return "fewer than 3 packets state a frame centre and a slant range";
+    case Outcome::kUndetermined: return "the lines of sight do not determine a scale and translation";
+    case Outcome::kInconsistent: return "fewer than 3 lines of sight agree with each other";
+    case Outcome::kDisagree: return "the frame centres disagree with the positions beyond their uncertainties";
+    case Outcome::kNonPositiveScale: return "the fused scale is not positive";
+  }
+  return "";
 }
 
 nlohmann::json FrameCentreFusion::ToJson() const {
@@ -267,7 +256,7 @@ nlohmann::json FrameCentreFusion::ToJson() const {
                       {"residual_autocorrelation", autocorrelation},
                       {"effective_samples", effective_samples},
                       {"chi2_vs_positions", chi2}};
-  if (!used) j["why"] = why;
+  if (!used) j["why"] = Why();
   if (used)
     j["expected_translation_error_m"] = std::sqrt(std::max(0.0, fused.covariance.bottomRightCorner<3, 3>().trace()));
   return j;

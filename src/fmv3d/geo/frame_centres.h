@@ -18,6 +18,7 @@
 #include <vector>
 
 #include "fmv3d/core/pose.h"
+#include "fmv3d/geometry/similarity.h"
 
 namespace fmv3d::geo {
 
@@ -33,29 +34,28 @@ struct LineOfSight {
   int track = -1;                 // consecutive entries of one track are correlated in time
 };
 
-// Scale and translation of a similarity whose rotation is held, with their 4×4 covariance (s, tx, ty, tz).
-struct ScaleShift {
-  double scale = 1;
-  Eigen::Vector3d translation = Eigen::Vector3d::Zero();
-  Eigen::Matrix4d covariance = Eigen::Matrix4d::Zero();
-};
+using geometry::ScaleShift;
 
 struct FrameCentreFusion {
+  enum class Outcome {
+    kUsed,
+    kTooFew,            // fewer than 3 lines of sight
+    kUndetermined,      // they do not determine a scale and translation
+    kInconsistent,      // fewer than 3 agree with each other
+    kDisagree,          // with the positions, beyond their uncertainties
+    kNonPositiveScale,  // the fusion's scale
+  };
   bool used = false;
-  std::string why;                // when not used
+  Outcome outcome = Outcome::kTooFew;
   size_t observations = 0, inliers = 0;
   std::vector<char> inlier_mask;  // per line of sight
   double sigma_m = 0;             // per axis, of the line-of-sight centres about their own fit
   double autocorrelation = 0, effective_samples = 0;
   double chi2 = 0;                // disagreement with the positions' fit
   ScaleShift fused;               // when used
+  std::string Why() const;  // why not used, for people
   nlohmann::json ToJson() const;
 };
-
-// Weighted least squares of (s, t) in dst ≈ s·R·src + t with R held; weights are 1/σ² per point.
-// Requires ≥ 2 points with distinct src; returns false otherwise.
-bool FitScaleShift(const Eigen::Matrix3d& R, const std::vector<Eigen::Vector3d>& src,
-                   const std::vector<Eigen::Vector3d>& dst, const std::vector<double>& weights, ScaleShift* out);
 
 // positions: the positions' fit (s, t under R), with its covariance already scaled by σ² and the effective
 // sample count. min_threshold: floor of the inlier bound, metres. systematic: σ per ENU axis of an error common

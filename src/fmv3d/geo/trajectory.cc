@@ -4,6 +4,7 @@
 #include <cmath>
 
 #include "fmv3d/core/error.h"
+#include "fmv3d/core/stats.h"
 
 namespace fmv3d::geo {
 
@@ -22,8 +23,7 @@ CameraTrajectory::CameraTrajectory(std::vector<TrajectoryKnot> knots, double max
   } else {
     std::vector<double> d;
     for (size_t i = 1; i < knots_.size(); ++i) d.push_back(knots_[i].time - knots_[i - 1].time);
-    std::nth_element(d.begin(), d.begin() + d.size() / 2, d.end());
-    max_gap_ = 2.5 * d[d.size() / 2];
+    max_gap_ = 2.5 * core::Median(std::move(d));
   }
 }
 

@@ -10,6 +10,7 @@
 #include <opencv2/core/eigen.hpp>
 
 #include "fmv3d/core/error.h"
+#include "fmv3d/core/stats.h"
 
 namespace fmv3d::geometry {
 namespace {
@@ -433,8 +434,7 @@ TwoViewResult VerifyTwoView(const Points2& x1, const Points2& x2, const core::Ca
         res.has_pose = true;
         res.R = R;
         res.t = t;
-        std::nth_element(angles.begin(), angles.begin() + angles.size() / 2, angles.end());
-        res.median_triangulation_angle_deg = angles[angles.size() / 2] * 180.0 / M_PI;
+        res.median_triangulation_angle_deg = core::Median(std::move(angles)) * 180.0 / M_PI;
       }
     }
   }

@@ -7,6 +7,7 @@
 #include <opencv2/video/tracking.hpp>
 
 #include "fmv3d/core/error.h"
+#include "fmv3d/core/stats.h"
 
 namespace fmv3d::ingest {
 namespace {
@@ -28,12 +29,7 @@ cv::Mat Downscale(const cv::Mat& grey, int max_side) {
   return out;
 }
 
-double Median(std::vector<double> v) {
-  if (v.empty()) return 0;
-  const size_t m = v.size() / 2;
-  std::nth_element(v.begin(), v.begin() + m, v.end());
-  return v[m];
-}
+using core::Median;
 
 // KLT: frame-to-frame motion at the working scale (<= 480 px) is a few pixels, so a 15 px window on a
 // 3-level pyramid is ample and costs half of OpenCV's default 21 px window.

@@ -12,6 +12,7 @@
 #include "fmv3d/align/compare.h"
 #include "fmv3d/core/error.h"
 #include "fmv3d/core/files.h"
+#include "fmv3d/core/workspace.h"
 #include "fmv3d/io/colmap_model.h"
 #include "fmv3d/io/obj_io.h"
 #include "fmv3d/pipeline/reconstruct.h"
@@ -133,7 +134,7 @@ nlohmann::json RunDemo(const DemoOptions& o) {
 
   // Accuracy: cameras against the exact truth (similarity by frame name), surfaces against the CAD model.
   const core::Reconstruction truth = io::ReadColmapText(o.output / "truth");
-  const core::Reconstruction model = io::ReadColmapText(r.workspace / "sparse");
+  const core::Reconstruction model = io::ReadColmapText(core::Workspace(r.workspace).sparse_dir());
   const sfm::SparseEvaluation ev = sfm::EvaluateSparse(model, truth);
   nlohmann::json demo;
   demo["building_height_m"] = height;
@@ -163,16 +164,16 @@ nlohmann::json RunDemo(const DemoOptions& o) {
   if (cad.faces.empty()) throw Error((o.output / "scene.obj").string() + ": no building faces");
   io::WriteObj(cad, o.output / "cad.obj");
   align::CompareOptions c;
-  c.reconstruction = r.workspace / "mesh" / "poisson.ply";
+  c.reconstruction = core::Workspace(r.workspace).mesh_dir() / "poisson.ply";
   c.cad = o.output / "cad.obj";
   c.length = height;
   c.transform = ev.alignment;
   c.cameras = o.output / "truth";
-  c.output_dir = r.workspace / "report" / "compare";
+  c.output_dir = core::Workspace(r.workspace).report_dir() / "compare";
   const align::CompareResult cmp = align::CompareToCad(c);
   demo["mesh_vs_cad"] = cmp.ToJson();
   // The textured model from a viewpoint the reconstruction never saw, against the true frame there.
-  const HeldOutResult held = RenderHeldOut(o.output, r.workspace / "mesh" / "textured.obj", cmp.transform,
+  const HeldOutResult held = RenderHeldOut(o.output, core::Workspace(r.workspace).mesh_dir() / "textured.obj", cmp.transform,
                                            synth::SynthOptions().render, o.output / "heldout");
   demo["held_out_view"] = {{"between_frames", held.between},
                            {"psnr_db", held.psnr_db},
@@ -226,8 +227,8 @@ nlohmann::json RunDemo(const DemoOptions& o) {
   std::printf("    %-12s %8.1f %8.1f\n    %-12s %8.1f %8.1f\n", "evaluation", eval_wall, eval_cpu, "total",
               total_wall + eval_wall, total_cpu + eval_cpu);
   std::printf("\n  report:  %s\n  compare: %s\n  model:   %s\n  table:   %s\n",
-              (r.workspace / "report" / "report.html").c_str(), (c.output_dir / "compare.html").c_str(),
-              (r.workspace / "mesh" / "model.glb").c_str(), (o.output / "demo.json").c_str());
+              (core::Workspace(r.workspace).report_dir() / "report.html").c_str(), (c.output_dir / "compare.html").c_str(),
+              (core::Workspace(r.workspace).mesh_dir() / "model.glb").c_str(), (o.output / "demo.json").c_str());
   return demo;
 }
 

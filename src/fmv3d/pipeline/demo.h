@@ -40,7 +40,7 @@ struct DemoOptions {
   void Check() const;
 };
 
-// The held-out view (issue 6 (c)): the viewpoint halfway between the two middle frames of `synth_dir`'s
+// The held-out view: the viewpoint halfway between the two middle frames of `synth_dir`'s
 // flight (not a frame of the video), the true frame rendered there from scene.obj as `fmv3d synth` renders
 // frames, and the textured model (OBJ, mapped into the world by model_to_world) rendered unshaded from it.
 struct HeldOutResult {

@@ -6,17 +6,12 @@
 #include <opencv2/imgproc.hpp>
 
 #include "fmv3d/core/error.h"
+#include "fmv3d/core/stats.h"
 #include "fmv3d/render/renderer.h"
 
 namespace fmv3d::pipeline {
 
-namespace {
-double Median(std::vector<double> v) {
-  if (v.empty()) return 0;
-  std::nth_element(v.begin(), v.begin() + v.size() / 2, v.end());
-  return v[v.size() / 2];
-}
-}  // namespace
+using core::Median;
 
 View SceneView(const core::Reconstruction& rec, const std::vector<Eigen::Vector3d>& points, int width,
                int height) {

@@ -9,7 +9,7 @@
 #include "fmv3d/features/feature_io.h"
 #include "fmv3d/io/frames_index.h"
 #include "fmv3d/pipeline/report.h"
-#include "fmv3d/pipeline/workspace.h"
+#include "fmv3d/core/workspace.h"
 
 namespace fmv3d::pipeline {
 
@@ -32,7 +32,7 @@ void ReconstructOptions::Check() const {
 void ReconstructOptions::ApplyFastPreset() {
   fast = true;
   // 5000 features and 5 sequential neighbours: matching 33 -> 13 s and sparse 54 -> 39 s on the 60 s clip, for
-  // cameras 0.0060% -> 0.0082% of the extent (bench/RESULTS.md, session 6).
+  // cameras 0.0060% -> 0.0082% of the extent (bench/RESULTS.md).
   sift.max_features = 5000;
   match.pairs.overlap = 5;
   dense.max_size = 480;
@@ -45,7 +45,7 @@ void ReconstructOptions::ApplyFastPreset() {
 }
 
 std::vector<Stage> ReconstructStages(const ReconstructOptions& o) {
-  const Workspace ws(o.workspace);
+  const core::Workspace ws(o.workspace);
   const fs::path root = ws.root();
   std::vector<Stage> stages;
   stages.push_back({"frames",
@@ -91,7 +91,7 @@ std::vector<Stage> ReconstructStages(const ReconstructOptions& o) {
         spdlog::info("{}: no telemetry in frames.json (KLV, SRT or GPS), no georeferenced products", stage);
         return nlohmann::json{{"skipped", "no telemetry"}};
       }
-      if (std::string(stage) != "georef" && !fs::exists(ws.geo_dir() / "georef.json")) {
+      if (std::string(stage) != "georef" && !fs::exists(ws.georef_json())) {
         spdlog::info("{}: no georeference (see the georef stage's warning), skipped", stage);
         return nlohmann::json{{"skipped", "no georeference"}};
       }
@@ -101,7 +101,7 @@ std::vector<Stage> ReconstructStages(const ReconstructOptions& o) {
   // georef runs before dense: when the image-only model disagrees with the flight it replaces WS/sparse with the
   // telemetry-initialised model (geo/georef.h), which the dense cloud, mesh and DSM must then be built on.
   stages.push_back({"georef", [ws] { return std::vector<fs::path>{ws.sparse_dir() / "images.txt"}; },
-                    ws.geo_dir() / "georef.json",
+                    ws.georef_json(),
                     with_telemetry("georef", [o, root] {
                       // Unusable telemetry must not cost the user the model: the georeferenced products are
                       // skipped instead (dsm and ortho then say so).
@@ -122,7 +122,7 @@ std::vector<Stage> ReconstructStages(const ReconstructOptions& o) {
                     [o, root] { return surface::RunTextureStage(root, o.texture); }});
   stages.push_back({"dsm",
                     [ws] {
-                      return std::vector<fs::path>{ws.geo_dir() / "georef.json", ws.mesh_dir() / "poisson.ply"};
+                      return std::vector<fs::path>{ws.georef_json(), ws.mesh_dir() / "poisson.ply"};
                     },
                     ws.geo_dir() / "dsm.json", with_telemetry("dsm", [o, root] { return geo::RunDsmStage(root, o.dsm); })});
   stages.push_back({"ortho",
@@ -135,7 +135,7 @@ std::vector<Stage> ReconstructStages(const ReconstructOptions& o) {
 
 nlohmann::json RunReconstruct(const ReconstructOptions& o, std::vector<StageResult>* stage_results) {
   o.Check();
-  const Workspace ws(o.workspace);
+  const core::Workspace ws(o.workspace);
   core::EnsureDirectory(ws.root());
   core::EnsureDirectory(ws.report_dir());
   nlohmann::json project;

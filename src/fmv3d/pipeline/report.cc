@@ -14,7 +14,7 @@
 #include "fmv3d/io/obj_io.h"
 #include "fmv3d/io/point_cloud.h"
 #include "fmv3d/pipeline/preview.h"
-#include "fmv3d/pipeline/workspace.h"
+#include "fmv3d/core/workspace.h"
 #include "fmv3d/surface/colored_mesh.h"
 
 namespace fmv3d::pipeline {
@@ -65,7 +65,7 @@ std::string Num(const nlohmann::json& j, int precision = 3) {
 }  // namespace
 
 void RecordTimings(const fs::path& root, const nlohmann::json& timings) {
-  const Workspace ws(root);
+  const core::Workspace ws(root);
   core::EnsureDirectory(ws.report_dir());
   nlohmann::json all = ReadIfPresent(ws.report_dir() / "timings.json");
   if (!all.is_object()) all = nlohmann::json::object();
@@ -75,7 +75,7 @@ void RecordTimings(const fs::path& root, const nlohmann::json& timings) {
 }
 
 nlohmann::json WriteReport(const fs::path& root) {
-  const Workspace ws(root);
+  const core::Workspace ws(root);
   core::EnsureDirectory(ws.report_dir());
   nlohmann::json all_timings = ReadIfPresent(ws.report_dir() / "timings.json");
   if (!all_timings.is_object()) all_timings = nlohmann::json::object();

@@ -7,7 +7,7 @@
 #include <chrono>
 
 #include "fmv3d/core/error.h"
-#include "fmv3d/pipeline/workspace.h"
+#include "fmv3d/core/workspace.h"
 
 namespace fmv3d::pipeline {
 
@@ -38,7 +38,7 @@ std::vector<StageResult> RunStages(const std::vector<Stage>& stages, const Runne
     StageResult r;
     r.name = stage.name;
     const bool forced = from >= 0 && i >= from;
-    if (!forced && Workspace::UpToDate({stage.marker}, stage.inputs())) {
+    if (!forced && core::Workspace::UpToDate({stage.marker}, stage.inputs())) {
       spdlog::info("[{}/{}] {}: up to date, skipped", i + 1, stages.size(), stage.name);
       r.skipped = true;
       results.push_back(r);

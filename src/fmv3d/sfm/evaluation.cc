@@ -5,6 +5,7 @@
 #include <filesystem>
 
 #include "fmv3d/core/error.h"
+#include "fmv3d/core/stats.h"
 #include "fmv3d/geometry/similarity.h"
 #include "fmv3d/io/colmap_model.h"
 #include "fmv3d/io/ground_truth.h"
@@ -42,9 +43,7 @@ double MedianRelativeRotationErrorDeg(const std::vector<core::Pose>& estimate,
       const Eigen::Quaterniond rt = truth[j].q * truth[i].q.conjugate();
       errs.push_back(core::RotationAngle(re, rt) * 180.0 / M_PI);
     }
-  if (errs.empty()) return 0;
-  std::nth_element(errs.begin(), errs.begin() + errs.size() / 2, errs.end());
-  return errs[errs.size() / 2];
+  return core::Median(std::move(errs));
 }
 
 SparseEvaluation EvaluateSparse(const core::Reconstruction& estimate, const core::Reconstruction& truth) {

@@ -1,4 +1,4 @@
-// Accuracy of a reconstruction against ground truth, as issue 4 measures it (and as ANCHORS.md reports COLMAP):
+// Accuracy of a reconstruction against ground truth, measured the way ANCHORS.md reports COLMAP:
 //  - similarity (Umeyama) alignment of our camera centres to the true ones, images matched by name;
 //  - centre RMSE after alignment, as a fraction of the true cameras' extent, where the extent is the LARGEST
 //    PAIRWISE DISTANCE between true camera centres (the set's diameter);

@@ -10,6 +10,7 @@
 
 #include "fmv3d/core/error.h"
 #include "fmv3d/core/files.h"
+#include "fmv3d/core/workspace.h"
 #include "fmv3d/features/feature_io.h"
 #include "fmv3d/io/colmap_model.h"
 #include "fmv3d/io/frames_index.h"
@@ -102,23 +103,13 @@ void SparseStageOptions::Check() const {
   if (focal_px > 0 && hfov_deg > 0) throw Error("sparse: give --focal or --hfov, not both");
 }
 
-nlohmann::json RunSparseStage(const fs::path& workspace, const SparseStageOptions& options) {
+nlohmann::json RunSparseStage(const core::Workspace& ws, const SparseStageOptions& options) {
   options.Check();
   using Clock = std::chrono::steady_clock;
   const auto start = Clock::now();
-  // Plain paths (WS layout of DESIGN.md): sfm/ sits below pipeline/ and must not depend on it.
-  struct {
-    fs::path root;
-    fs::path frames_json() const { return root / "frames" / "frames.json"; }
-    fs::path features_dir() const { return root / "features"; }
-    fs::path matches_dir() const { return root / "matches"; }
-    fs::path sparse_dir() const { return root / "sparse"; }
-    fs::path report_dir() const { return root / "report"; }
-  } ws{workspace};
   auto require = [&](const fs::path& p, const char* cmd) {
     if (!fs::exists(p))
-      throw Error(workspace.string() + ": no " + fs::relative(p, workspace).string() + " — run `fmv3d " + cmd +
-                  "` first");
+      throw Error(ws.name() + ": no " + fs::relative(p, ws.root()).string() + " — run `fmv3d " + cmd + "` first");
   };
   require(ws.frames_json(), "frames");
   require(ws.features_dir(), "features");
@@ -208,7 +199,7 @@ nlohmann::json RunSparseStage(const fs::path& workspace, const SparseStageOption
                        {"total", std::chrono::duration<double>(Clock::now() - start).count()}};
   core::WriteJson(ws.report_dir() / "sparse.json", report);
   if (!best)
-    throw Error(workspace.string() + ": no model could be reconstructed (see report/sparse.json for the reasons)");
+    throw Error(ws.name() + ": no model could be reconstructed (see report/sparse.json for the reasons)");
   spdlog::info("sparse: {} / {} images registered, {} points, mean track {:.2f}, reprojection {:.3f} px",
                best->images.size(), input.images.size(), best->points.size(), best->MeanTrackLength(),
                best->MeanReprojectionError());

@@ -10,6 +10,7 @@
 #include <nlohmann/json.hpp>
 
 #include "fmv3d/core/reconstruction.h"
+#include "fmv3d/core/workspace.h"
 #include "fmv3d/sfm/incremental_mapper.h"
 #include "fmv3d/sfm/relocalise.h"
 
@@ -32,7 +33,7 @@ struct SparseStageOptions {
 // Returns the summary that is also written to WS/report/sparse.json. Throws fmv3d::Error naming the missing
 // or malformed input file; when nothing can be reconstructed it still writes the report (with reasons), and
 // then throws so the CLI exits non-zero.
-nlohmann::json RunSparseStage(const std::filesystem::path& workspace, const SparseStageOptions& options);
+nlohmann::json RunSparseStage(const core::Workspace& workspace, const SparseStageOptions& options);
 
 // Binary little-endian PLY of the model's points: x y z (float), red green blue (uchar).
 void WritePointsPly(const core::Reconstruction& rec, const std::filesystem::path& path);

@@ -1,8 +1,8 @@
-#include "fmv3d/pipeline/workspace.h"
+#include "fmv3d/core/workspace.h"
 
 #include "fmv3d/core/error.h"
 
-namespace fmv3d::pipeline {
+namespace fmv3d::core {
 
 void Workspace::Require(const std::filesystem::path& input, const char* producing_command) const {
   if (!std::filesystem::exists(input))
@@ -28,4 +28,4 @@ bool Workspace::UpToDate(const std::vector<std::filesystem::path>& outputs,
   return true;
 }
 
-}  // namespace fmv3d::pipeline
+}  // namespace fmv3d::core
