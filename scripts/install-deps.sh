@@ -10,6 +10,7 @@ PACKAGES=(
   libavformat-dev libavcodec-dev libavutil-dev libswscale-dev
   libtinygltf-dev
   ffmpeg
+  chromium
 )
 # Optional yardstick for bench/ only (COLMAP 3.8, CPU); never needed to build or test.
 if [[ "${FMV3D_WITH_COLMAP:-0}" == "1" ]]; then PACKAGES+=(colmap); fi
