@@ -2,7 +2,7 @@
 // by a uniform, and points sized in world units (the tile's point spacing) so a dense cloud reads as a surface.
 import * as THREE from 'three';
 
-export enum PointMode { Color = 0, Normal = 1, Views = 2, Height = 3 }
+export enum PointMode { Color = 0, Normal = 1, Views = 2, Height = 3, Confidence = 4 }
 
 export interface PointUniforms {
   mode: { value: number };
@@ -10,6 +10,7 @@ export interface PointUniforms {
   sizeScale: { value: number };   // user's multiplier on the spacing
   minPx: { value: number };
   viewsMax: { value: number };
+  confidenceMax: { value: number };
   heightRange: { value: THREE.Vector2 };
   up: { value: THREE.Vector3 };
 }
@@ -17,16 +18,17 @@ export interface PointUniforms {
 export function createPointUniforms(): PointUniforms {
   return {
     mode: { value: PointMode.Color }, projScale: { value: 500 }, sizeScale: { value: 1.4 }, minPx: { value: 1.5 },
-    viewsMax: { value: 2 }, heightRange: { value: new THREE.Vector2(0, 1) }, up: { value: new THREE.Vector3(0, 0, 1) },
+    viewsMax: { value: 2 }, confidenceMax: { value: 1 }, heightRange: { value: new THREE.Vector2(0, 1) }, up: { value: new THREE.Vector3(0, 0, 1) },
   };
 }
 
 const vertex = /* glsl */ `
-  uniform float mode, projScale, sizeScale, minPx, spacing, viewsMax, fixedPx, hasColor;
+  uniform float mode, projScale, sizeScale, minPx, spacing, viewsMax, confidenceMax, fixedPx, hasColor;
   uniform vec2 heightRange;
   uniform vec3 up;
   attribute vec3 color;
   attribute float views;
+  attribute float confidence;
   varying vec3 vColor;
   vec3 ramp(float t) {
     t = clamp(t, 0.0, 1.0);
@@ -41,7 +43,8 @@ const vertex = /* glsl */ `
     if (mode < 0.5) vColor = hasColor > 0.5 ? color : vec3(0.8);
     else if (mode < 1.5) vColor = normalize(mat3(modelMatrix) * normal + 1e-6) * 0.5 + 0.5;
     else if (mode < 2.5) vColor = ramp((views - 2.0) / max(viewsMax - 2.0, 1.0));
-    else vColor = ramp((dot(world.xyz, up) - heightRange.x) / max(heightRange.y - heightRange.x, 1e-6));
+    else if (mode < 3.5) vColor = ramp((dot(world.xyz, up) - heightRange.x) / max(heightRange.y - heightRange.x, 1e-6));
+    else vColor = ramp(1.0 - confidence / max(confidenceMax, 1e-6));
   }`;
 
 const fragment = /* glsl */ `

@@ -127,7 +127,7 @@ export class TilesetLayer {
       const isMesh = n.url !== null && !/\.pnts($|\?)/.test(n.url) && !/\.json($|\?)/.test(n.url);
       const shown = isMesh ? this.showMeshes : this.showPoints;
       const ready = n.url === null || n.state === 'loaded' || n.state === 'failed';
-      if (n.url !== null && n.state === 'none') want.push(n);
+      if (n.url !== null && n.state === 'none' && shown) want.push(n);
       const refineIt = n.children.length > 0 && n.priority > this.opts.maxScreenSpaceError && budgetLeft > 0;
       if (n.state === 'loaded' && shown) {
         const replacedByLoadedChildren = refineIt && n.refine === 'REPLACE' &&
@@ -213,6 +213,7 @@ export class TilesetLayer {
       if (t.colors) g.setAttribute('color', new THREE.BufferAttribute(t.colors, 3, true));
       if (t.normals) g.setAttribute('normal', new THREE.BufferAttribute(t.normals, 3, true));
       if (t.views) g.setAttribute('views', new THREE.BufferAttribute(t.views, 1));
+      if (t.confidence) g.setAttribute('confidence', new THREE.BufferAttribute(t.confidence, 1));
       g.computeBoundingSphere();
       const spacing = estimateSpacing(n, t.count);
       const pts = new THREE.Points(g, createPointMaterial(this.uniforms, spacing, !!t.colors));
@@ -222,6 +223,7 @@ export class TilesetLayer {
       n.points = t.count;
       this.hasPoints = true;
       if (t.views) for (const v of t.views) if (v > this.uniforms.viewsMax.value) this.uniforms.viewsMax.value = v;
+      if (t.confidence) for (const v of t.confidence) if (v > this.uniforms.confidenceMax.value) this.uniforms.confidenceMax.value = v;
       obj = pts;
     } else {
       const glb = new TextDecoder().decode(new Uint8Array(buf, 0, 4)) === 'b3dm' ? b3dmGlb(buf) : buf;
@@ -263,6 +265,12 @@ export class TilesetLayer {
       for (let i = 0; i < a.count; i += step) { v.fromBufferAttribute(a, i).applyMatrix4(p.matrix); out.push(v.x, v.y, v.z); }
     }
     return Float32Array.from(out);
+  }
+
+  /** Whether any tile holds a mesh (.glb / .b3dm) rather than points. */
+  hasMeshContent(): boolean {
+    const walk = (n: TileNode): boolean => (n.url !== null && /\.(glb|b3dm)($|\?)/.test(n.url)) || n.children.some(walk);
+    return this.root ? walk(this.root) : false;
   }
 
   drawnObjects(): THREE.Object3D[] { return this.drawn.map((n) => n.object!).filter((o) => o && o.visible); }

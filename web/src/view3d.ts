@@ -101,9 +101,12 @@ class View3d {
       this.tiles = new TilesetLayer(files.tileset, (p) => fileURL(this.ws, p), this.uniforms,
         { pointBudget: 3_000_000, maxScreenSpaceError: 6, concurrency: 6 });
       this.tiles.onChange = () => { this.needsRender = true; };
+      this.tiles.showMeshes = this.checked('#show-mesh');
+      this.tiles.showPoints = this.checked('#show-dense');
       try { await this.tiles.load(); this.scene.add(this.tiles.group); } catch (e) { console.warn(e); this.tiles = null; }
     }
-    if (files?.mesh_glb && !(this.tiles?.hasMeshes)) {
+    // The mesh streams from the tileset when it has mesh tiles, else it is the workspace's one GLB.
+    if (files?.mesh_glb && !this.tiles?.hasMeshContent()) {
       try {
         const gltf = await new GLTFLoader().loadAsync(fileURL(this.ws, files.mesh_glb));
         const g = new THREE.Group();
@@ -111,7 +114,7 @@ class View3d {
         g.add(gltf.scene);
         gltf.scene.traverse((o) => { const m = o as THREE.Mesh; if (m.isMesh) this.meshTriangles += (m.geometry.index?.count ?? m.geometry.getAttribute('position').count) / 3; });
         this.mesh = g;
-        this.mesh.visible = (this.side.querySelector('#show-mesh') as HTMLInputElement)?.checked ?? false;
+        this.mesh.visible = this.checked('#show-mesh');
         this.scene.add(g);
       } catch (e) { console.warn('mesh', e); }
     }
@@ -119,6 +122,8 @@ class View3d {
     this.ready = true;
     this.needsRender = true;
   }
+
+  private checked(sel: string): boolean { return (this.side.querySelector(sel) as HTMLInputElement | null)?.checked ?? false; }
 
   private estimateUp(): THREE.Vector3 {
     if (this.georeferenced || this.cameras.length === 0) return new THREE.Vector3(0, 0, 1);
@@ -240,7 +245,8 @@ class View3d {
     };
     const mode = h('select', { id: 'point-mode' },
       h('option', { value: String(PointMode.Color) }, 'colour'), h('option', { value: String(PointMode.Normal) }, 'normal'),
-      h('option', { value: String(PointMode.Views) }, 'number of views'), h('option', { value: String(PointMode.Height) }, 'height'));
+      h('option', { value: String(PointMode.Views) }, 'number of views'), h('option', { value: String(PointMode.Confidence) }, 'confidence'),
+      h('option', { value: String(PointMode.Height) }, 'height'));
     mode.addEventListener('change', () => { this.uniforms.mode.value = Number(mode.value); this.updateLegend(); this.needsRender = true; });
     const size = h('input', { type: 'range', min: '0.3', max: '4', step: '0.1', value: String(this.uniforms.sizeScale.value) });
     size.addEventListener('input', () => { this.uniforms.sizeScale.value = Number(size.value); this.needsRender = true; });
@@ -260,7 +266,6 @@ class View3d {
       h('div', { class: 'row' }, ...measureBtns, h('button', { class: 'small', onclick: () => this.setMeasure('off') }, 'clear')),
       h('div', { id: 'measure-out', class: 'measure-out' }),
       h('div', { id: 'frame-panel', class: 'frame-panel' }, h('p', { class: 'muted' }, 'Click a camera to see its frame.')));
-    if (this.tiles) this.tiles.showMeshes = false;
   }
 
   private setMeasure(m: MeasureMode): void {
