@@ -23,9 +23,12 @@ async function render(ws: string, root: HTMLElement): Promise<void> {
     root.replaceChildren(h('p', { class: 'muted' }, `${ws} has no report yet (${e instanceof Error ? e.message : e}).`));
     return;
   }
+  const info = await api.workspace(ws).catch(() => null);
   const [cams, sparse, georef] = await Promise.all([
     api.cameras(ws).catch(() => []), api.sparse(ws).catch(() => null),
-    fetch(fileURL(ws, 'geo/georef.json')).then((r) => (r.ok ? r.json() as Promise<J> : null)).catch(() => null),
+    info?.georeferenced
+      ? fetch(fileURL(ws, 'geo/georef.json')).then((r) => (r.ok ? r.json() as Promise<J> : null)).catch(() => null)
+      : Promise.resolve(null),
   ]);
   const sections: HTMLElement[] = [];
   const figs: HTMLElement[] = [];

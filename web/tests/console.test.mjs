@@ -109,7 +109,8 @@ try {
     await page.goto(base + '#/jobs');
     await waitFor(page, () => document.querySelector('tr[data-ws="demo"]'), null, 15000, 'the demo workspace in the table');
     await page.fill('#new-job input[name=workspace]', 'fromthepage');
-    await page.fill('#new-job textarea[name=paths]', 'inputs/flight.ts');
+    // The video goes up through the page's upload field (the server keeps it under the workspace's uploads/).
+    await page.setInputFiles('#new-job input[type=file]', path.join(inputs, 'flight.ts'));
     await page.check('#new-job input[name=fast]');
     await page.selectOption('#new-job select[name=until]', 'sparse');
     await page.click('#start-job');
