@@ -9,6 +9,7 @@ PACKAGES=(
   libcli11-dev libspdlog-dev nlohmann-json3-dev libgtest-dev libgmock-dev libbenchmark-dev libtbb-dev
   libavformat-dev libavcodec-dev libavutil-dev libswscale-dev
   libtinygltf-dev
+  libcpp-httplib-dev
   ffmpeg
 )
 # Optional yardstick for bench/ only (COLMAP 3.8, CPU); never needed to build or test.
