@@ -13,8 +13,7 @@ namespace fmv3d::core {
 void SetupLogging(int verbosity);
 
 // Thread-safe progress for a loop of `total` steps. On a terminal it redraws one bar with an ETA on stderr;
-// otherwise (CI, pipes, logs) it writes a plain log line every 10%. Silent when logging is quiet. When a
-// progress log is open (progress_log.h) it also appends a "progress" event at most every 0.5 s and at the end.
+// otherwise (CI, pipes, logs) it writes a plain log line every 10%. Silent when logging is quiet.
 class Progress {
  public:
   Progress(std::string label, size_t total);
@@ -32,7 +31,6 @@ class Progress {
   std::mutex mutex_;
   std::chrono::steady_clock::time_point start_;
   std::chrono::steady_clock::time_point last_draw_;
-  std::chrono::steady_clock::time_point last_event_;  // last line written to the progress log
   int last_decile_ = -1;
   bool tty_ = false;
   bool finished_ = false;

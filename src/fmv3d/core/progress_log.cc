@@ -3,6 +3,7 @@
 #include <atomic>
 #include <chrono>
 #include <cstdio>
+#include <map>
 #include <mutex>
 
 #include "fmv3d/core/error.h"
@@ -40,6 +41,20 @@ void AppendProgressEvent(nlohmann::json event) {
   if (!g_file) return;
   std::fputs(line.c_str(), g_file);
   std::fflush(g_file);
+}
+
+void AppendProgressUpdate(const std::string& label, size_t done, size_t total, double eta_s, bool final) {
+  if (!g_open.load()) return;
+  static std::mutex mutex;
+  static std::map<std::string, std::chrono::steady_clock::time_point> last;
+  {
+    const auto now = std::chrono::steady_clock::now();
+    std::lock_guard<std::mutex> lock(mutex);
+    auto it = last.find(label);
+    if (!final && it != last.end() && std::chrono::duration<double>(now - it->second).count() < 0.5) return;
+    last[label] = now;
+  }
+  AppendProgressEvent({{"event", "progress"}, {"label", label}, {"done", done}, {"total", total}, {"eta_s", eta_s}});
 }
 
 }  // namespace fmv3d::core

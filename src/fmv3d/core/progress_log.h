@@ -7,7 +7,9 @@
 //   {"event": "progress", "label": LABEL, "done": d, "total": n, "eta_s": s}   at most every 0.5 s, and at the end
 #pragma once
 
+#include <cstddef>
 #include <filesystem>
+#include <string>
 
 #include <nlohmann/json.hpp>
 
@@ -19,5 +21,7 @@ void CloseProgressLog();
 bool ProgressLogOpen();
 // Appends one event line (thread-safe); a no-op when no log is open.
 void AppendProgressEvent(nlohmann::json event);
+// A "progress" event for core::Progress `label`, written at most every 0.5 s per label, and always when `final`.
+void AppendProgressUpdate(const std::string& label, size_t done, size_t total, double eta_s, bool final);
 
 }  // namespace fmv3d::core
