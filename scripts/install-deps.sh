@@ -9,6 +9,7 @@ PACKAGES=(
   libcli11-dev libspdlog-dev nlohmann-json3-dev libgtest-dev libgmock-dev libbenchmark-dev libtbb-dev
   libavformat-dev libavcodec-dev libavutil-dev libswscale-dev
   libtinygltf-dev
+  libcpp-httplib-dev
   ffmpeg
   chromium
 )
