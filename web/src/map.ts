@@ -172,7 +172,7 @@ async function dsmRange(url: string): Promise<[number, number]> {
   const vals: number[] = [];
   for (let i = 0; i < band.length; i++) {
     const v = band[i];
-    if (isFinite(v) && (nodata === null || v !== nodata) && v > -1e30) vals.push(v);
+    if (isFinite(v) && (nodata === null || v !== nodata) && v > -100000) vals.push(v);
   }
   if (vals.length === 0) throw new Error('empty DSM');
   vals.sort((a, b) => a - b);
@@ -193,7 +193,7 @@ function hillshadeStyle([lo, hi]: [number, number]) {
   const r = ['*', 255, shade, ['case', ['<', t, 0.5], ['*', 2, t], 1]];
   const g = ['*', 255, shade, ['case', ['<', t, 0.5], 0.8, ['*', 0.8, ['-', 2, ['*', 2, t]]]]];
   const b = ['*', 255, shade, 0.35];
-  const valid = ['all', ['>', ['band', 2], 0], ['>', ['band', 1], -1e30]];
+  const valid = ['all', ['>', ['band', 2], 0], ['>', ['band', 1], -100000]];
   return { color: ['case', valid, ['color', r, g, b, 1], ['color', 0, 0, 0, 0]] } as never;
 }
 

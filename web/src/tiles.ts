@@ -40,6 +40,8 @@ export interface TilesetOptions {
 export class TilesetLayer {
   readonly group = new THREE.Group();
   root: TileNode | null = null;
+  /** The tileset's root transform (model frame → ECEF for a georeferenced workspace), or null. */
+  rootTransform: THREE.Matrix4 | null = null;
   hasPoints = false;
   hasMeshes = false;
   showPoints = true;
@@ -61,11 +63,10 @@ export class TilesetLayer {
     const res = await fetch(this.urlFor(this.baseUrl));
     if (!res.ok) throw new Error(`${this.baseUrl}: HTTP ${res.status}`);
     const json = await res.json() as { root: RawTile };
-    const rootT = json.root.transform ? new THREE.Matrix4().fromArray(json.root.transform) : new THREE.Matrix4();
+    this.rootTransform = json.root.transform ? new THREE.Matrix4().fromArray(json.root.transform) : null;
     // Everything below the root is drawn in the root's own frame.
     const raw = { ...json.root, transform: undefined };
     this.root = this.build(raw, new THREE.Matrix4(), dirname(this.baseUrl), 0, null);
-    void rootT;
   }
 
   private build(t: RawTile, parentM: THREE.Matrix4, dir: string, depth: number, parent: TileNode | null): TileNode {
@@ -265,6 +266,19 @@ export class TilesetLayer {
       for (let i = 0; i < a.count; i += step) { v.fromBufferAttribute(a, i).applyMatrix4(p.matrix); out.push(v.x, v.y, v.z); }
     }
     return Float32Array.from(out);
+  }
+
+  /** The local vertical in the model frame, from the root transform to ECEF (the ellipsoid normal there). */
+  upFromTransform(): THREE.Vector3 | null {
+    if (!this.rootTransform) return null;
+    const p = new THREE.Vector3().setFromMatrixPosition(this.rootTransform);
+    if (p.length() < 1e6) return null; // not an Earth-centred frame
+    // Geodetic normal of WGS84 at p: (x/a², y/a², z/b²) normalised.
+    const a2 = 6378137 ** 2, b2 = 6356752.314245 ** 2;
+    const n = new THREE.Vector3(p.x / a2, p.y / a2, p.z / b2).normalize();
+    const lin = new THREE.Matrix3().setFromMatrix4(this.rootTransform).invert();
+    const up = n.applyMatrix3(lin);
+    return up.lengthSq() > 0 ? up.normalize() : null;
   }
 
   /** Whether any tile holds a mesh (.glb / .b3dm) rather than points. */

@@ -14,7 +14,7 @@ import { Measurer, type MeasureMode } from './measure';
 export interface ViewStats {
   workspace: string | null; drawnPoints: number; sparsePoints: number; densePoints: number; cameras: number;
   meshTriangles: number; tilesDrawn: number; tilesLoaded: number; loadedPoints: number; loadedBytes: number;
-  pending: number; firstPictureMs: number | null; ready: boolean; canvas: { width: number; height: number };
+  pending: number; firstPictureMs: number | null; firstPictureSinceLoadMs: number | null; ready: boolean; canvas: { width: number; height: number };
 }
 declare global {
   interface Window { fmv3d?: { stats: () => ViewStats; fitView: () => void; idle: () => Promise<void> }; }
@@ -45,7 +45,9 @@ class View3d {
   private disposed = false;
   private userMoved = false;
   private fittedOnDense = false;
-  private firstPictureMs: number | null = null;
+  private firstPictureMs: number | null = null;          // since the view was opened
+  private firstPictureSinceLoadMs: number | null = null; // since the page's navigation started
+  private mountedAt = performance.now();
   private drawnPoints = 0;
   private ready = false;
   private canvasBox: HTMLElement;
@@ -53,7 +55,6 @@ class View3d {
   private side: HTMLElement;
   private measurer: Measurer;
   private resizeObs: ResizeObserver;
-  private georeferenced = false;
 
   constructor(private el: HTMLElement, private ws: string) {
     this.renderer = new THREE.WebGLRenderer({ antialias: false, preserveDrawingBuffer: true, powerPreference: 'high-performance' });
@@ -88,23 +89,22 @@ class View3d {
   private async load(): Promise<void> {
     let info: Workspace;
     try { info = await api.workspace(this.ws); } catch (e) { this.info.textContent = `workspace ${this.ws}: ${e}`; this.ready = true; return; }
-    this.georeferenced = info.georeferenced;
+    const files = info.files;
     const tasks: Promise<unknown>[] = [];
     tasks.push(api.cameras(this.ws).then((c) => this.addCameras(c)).catch(() => undefined));
     tasks.push(api.sparse(this.ws).then((s) => this.addSparse(s.positions, s.colors)).catch(() => undefined));
+    if (files?.tileset) {
+      const tiles = new TilesetLayer(files.tileset, (p) => fileURL(this.ws, p), this.uniforms,
+        { pointBudget: 3_000_000, maxScreenSpaceError: 6, concurrency: 6 });
+      tiles.onChange = () => { this.needsRender = true; };
+      tiles.showMeshes = this.checked('#show-mesh');
+      tiles.showPoints = this.checked('#show-dense');
+      tasks.push(tiles.load().then(() => { this.tiles = tiles; this.scene.add(tiles.group); }).catch((e) => console.warn(e)));
+    }
     await Promise.all(tasks);
-    this.up = this.estimateUp();
+    this.up = this.tiles?.upFromTransform() ?? this.estimateUp();
     this.uniforms.up.value.copy(this.up);
     if (!this.userMoved) this.fitView();
-    const files = info.files;
-    if (files?.tileset) {
-      this.tiles = new TilesetLayer(files.tileset, (p) => fileURL(this.ws, p), this.uniforms,
-        { pointBudget: 3_000_000, maxScreenSpaceError: 6, concurrency: 6 });
-      this.tiles.onChange = () => { this.needsRender = true; };
-      this.tiles.showMeshes = this.checked('#show-mesh');
-      this.tiles.showPoints = this.checked('#show-dense');
-      try { await this.tiles.load(); this.scene.add(this.tiles.group); } catch (e) { console.warn(e); this.tiles = null; }
-    }
     // The mesh streams from the tileset when it has mesh tiles, else it is the workspace's one GLB.
     if (files?.mesh_glb && !this.tiles?.hasMeshContent()) {
       try {
@@ -125,8 +125,9 @@ class View3d {
 
   private checked(sel: string): boolean { return (this.side.querySelector(sel) as HTMLInputElement | null)?.checked ?? false; }
 
+  /** Without a georeference: the sky is where the cameras look from (the model frame is SfM's own). */
   private estimateUp(): THREE.Vector3 {
-    if (this.georeferenced || this.cameras.length === 0) return new THREE.Vector3(0, 0, 1);
+    if (this.cameras.length === 0) return new THREE.Vector3(0, 0, 1);
     // Cameras look at the scene: the sky is opposite to their mean viewing direction (and along their mean "up").
     const look = new THREE.Vector3(), camUp = new THREE.Vector3();
     for (const c of this.cameras) {
@@ -322,7 +323,10 @@ class View3d {
     const ts = this.tiles?.stats();
     const sparseN = this.sparse?.visible ? this.sparse.geometry.getAttribute('position').count : 0;
     this.drawnPoints = sparseN + (ts?.drawnPoints ?? 0);
-    if (this.firstPictureMs === null && (ts ? ts.drawnPoints > 0 : this.drawnPoints > 0)) this.firstPictureMs = performance.now();
+    if (this.firstPictureMs === null && (ts ? ts.drawnPoints > 0 : this.drawnPoints > 0)) {
+      this.firstPictureMs = performance.now() - this.mountedAt;
+      this.firstPictureSinceLoadMs = performance.now();
+    }
     this.info.textContent = `${fmtNumber(this.drawnPoints)} points drawn` +
       (ts ? ` · ${ts.drawnTiles} tiles (${ts.loadedTiles} loaded${ts.pending ? `, ${ts.pending} pending` : ''})` : '') +
       (this.cameras.length ? ` · ${this.cameras.length} cameras` : '') +
@@ -337,6 +341,7 @@ class View3d {
       densePoints: ts?.drawnPoints ?? 0, cameras: this.cameras.length, meshTriangles: this.meshTriangles,
       tilesDrawn: ts?.drawnTiles ?? 0, tilesLoaded: ts?.loadedTiles ?? 0, loadedPoints: ts?.loadedPoints ?? 0,
       loadedBytes: ts?.loadedBytes ?? 0, pending: ts?.pending ?? 0, firstPictureMs: this.firstPictureMs,
+      firstPictureSinceLoadMs: this.firstPictureSinceLoadMs,
       ready: this.ready && !(this.tiles?.busy() ?? false), canvas: { width: c.width, height: c.height },
     };
   }

@@ -31,7 +31,8 @@ let chromium;
 try { ({ chromium } = await import('playwright-core')); } catch { skip('playwright-core is not installed (cd web && npm ci)'); }
 
 fs.mkdirSync(outDir, { recursive: true });
-const root = fs.mkdtempSync(path.join(os.tmpdir(), 'fmv3d-console-'));
+// --work DIR reuses a work folder left by --keep (its workspace is not made again).
+const root = opt('--work') ? path.resolve(opt('--work')) : fs.mkdtempSync(path.join(os.tmpdir(), 'fmv3d-console-'));
 const results = [];
 let server = null, context = null;
 const log = (...a) => console.log(...a);
@@ -68,11 +69,14 @@ try {
   // A small synthetic flight with KLV telemetry, reconstructed and tiled: the workspace the pages show.
   log(`work folder ${root}`);
   const inputs = path.join(root, 'inputs');
+  const ws = path.join(root, 'demo');
+  if (!fs.existsSync(path.join(ws, 'tiles', 'tileset.json'))) {
   run(['-q', 'synth', '--scene', 'building', '--path', 'orbit', '--frames', '90', '--fps', '15', '--size', '480x270',
     '--klv', '--seed', '5', '-o', inputs]);
-  const ws = path.join(root, 'demo');
   run(['-q', 'reconstruct', path.join(inputs, 'flight.ts'), '-o', ws, '--fast']);
   if (!fs.existsSync(path.join(ws, 'tiles', 'tileset.json'))) run(['-q', 'tiles', ws]);
+  }
+  fs.rmSync(path.join(root, 'fromthepage'), { recursive: true, force: true });
 
   const port = await freePort();
   server = spawn(fmv3d, ['serve', root, '--port', String(port), '--host', '127.0.0.1', '--assets', webDir],
@@ -223,7 +227,7 @@ try {
 } finally {
   await context?.close().catch(() => undefined);
   if (server && server.exitCode === null) server.kill('SIGTERM');
-  if (!keep) fs.rmSync(root, { recursive: true, force: true });
+  if (!keep && !opt('--work')) fs.rmSync(root, { recursive: true, force: true });
 }
 const passed = results.filter(([, ok]) => ok).length, failed = results.length - passed;
 log(`artefacts in ${outDir}`);

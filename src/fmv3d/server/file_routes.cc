@@ -32,6 +32,15 @@ std::string NoAssetsPage(const Context& ctx) {
   page.replace(page.find("%s"), 2, escaped);
   return page;
 }
+// httplib 0.11 sends a range's requested length even when it runs past the end of the file (the body then falls
+// short of Content-Length); RFC 9110 says such a range ends at the last byte. COG readers ask for whole blocks.
+void ClampRanges(const httplib::Request& req, const fs::path& path) {
+  std::error_code ec;
+  const auto size = static_cast<ssize_t>(fs::file_size(path, ec));
+  if (ec || size <= 0) return;
+  for (auto& r : const_cast<httplib::Request&>(req).ranges)
+    if (r.second >= size) r.second = size - 1;
+}
 }  // namespace
 
 void RegisterFileRoutes(httplib::Server& http, Context& ctx) {
@@ -41,6 +50,7 @@ void RegisterFileRoutes(httplib::Server& http, Context& ctx) {
       std::string why;
       const auto path = ResolveInside(dir, std::string(req.matches[2]), &why);
       if (!path) throw RequestError(why == "path leaves its root" ? 403 : 400, "refused: " + why, "path");
+      ClampRanges(req, *path);
       SendFile(res, *path);
     });
   });
@@ -58,6 +68,7 @@ void RegisterFileRoutes(httplib::Server& http, Context& ctx) {
       std::string why;
       const auto path = ResolveInside(ctx.asset_root, index ? std::string("index.html") : req.path.substr(1), &why);
       if (!path) throw RequestError(why == "path leaves its root" ? 403 : 400, "refused: " + why, "path");
+      ClampRanges(req, *path);
       SendFile(res, *path);
     });
   });
