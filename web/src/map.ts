@@ -11,6 +11,7 @@ import VectorSource from 'ol/source/Vector';
 import Feature from 'ol/Feature';
 import { LineString, Polygon, Point } from 'ol/geom';
 import Draw from 'ol/interaction/Draw';
+import DoubleClickZoom from 'ol/interaction/DoubleClickZoom';
 import { Style, Stroke, Fill, Circle as CircleStyle } from 'ol/style';
 import { ScaleLine, defaults as defaultControls } from 'ol/control';
 import { transform, get as getProjection } from 'ol/proj';
@@ -138,7 +139,10 @@ export function mountMap(el: HTMLElement, ws: string | null): () => void {
 
     const drawBtn = h('button', { id: 'draw-profile' }, 'Draw profile line');
     let draw: Draw | null = null;
+    // The line's two clicks must not zoom the map as a double click would.
+    const dblZoom = map.getInteractions().getArray().find((i) => i instanceof DoubleClickZoom);
     drawBtn.addEventListener('click', () => {
+      dblZoom?.setActive(false);
       if (draw) { map!.removeInteraction(draw); draw = null; drawBtn.classList.remove('active'); return; }
       profSrc.clear();
       draw = new Draw({ source: profSrc, type: 'LineString', maxPoints: 2 });
@@ -147,6 +151,7 @@ export function mountMap(el: HTMLElement, ws: string | null): () => void {
         const line = ev.feature.getGeometry() as LineString;
         const [a, b] = [line.getFirstCoordinate(), line.getLastCoordinate()];
         map!.removeInteraction(draw!); draw = null; drawBtn.classList.remove('active');
+        setTimeout(() => dblZoom?.setActive(true), 600);
         await showProfile(ws, transform(a, viewProj, 'EPSG:4326'), transform(b, viewProj, 'EPSG:4326'), profileBox);
       });
       map!.addInteraction(draw);

@@ -63,8 +63,11 @@ export function histogram(values: number[], opts: ChartOpts & { bins?: number } 
   const svg = s('svg', { viewBox: `0 0 ${width} ${height}`, class: 'chart', width, height });
   const v = values.filter(isFinite);
   if (v.length === 0) return svg;
-  const lo = Math.min(0, ...v), hi = Math.max(...v) > lo ? Math.max(...v) : lo + 1;
-  const bins = opts.bins ?? Math.min(30, Math.max(5, Math.ceil(Math.sqrt(v.length))));
+  // From 0 when the values start near it, else over their own range (a tight cluster gets its own bins).
+  const vmin = Math.min(...v), vmax = Math.max(...v);
+  const lo = vmin > 0 && vmin > 0.5 * vmax ? vmin - 0.05 * (vmax - vmin) : Math.min(0, vmin);
+  const hi = vmax > lo ? vmax : lo + 1;
+  const bins = opts.bins ?? Math.min(30, Math.max(8, Math.ceil(Math.sqrt(v.length))));
   const counts = new Array(bins).fill(0);
   for (const x of v) counts[Math.min(bins - 1, Math.floor(((x - lo) / (hi - lo)) * bins))]++;
   const { X, Y } = axes(svg, lo, hi, 0, Math.max(...counts), { l: 46, r: 10, t: 10, b: 36, w: width, h: height }, opts);

@@ -1,7 +1,7 @@
 // Report page: the workspace's report.json as a page: headline figures, time per stage, camera and point
 // reprojection errors, the dense / mesh / texture / CAD-comparison figures, the georeference's accuracy and the
 // report's pictures.
-import { api, fileURL } from './api';
+import { api, fileURL, STAGES } from './api';
 import { h, fmtNumber } from './dom';
 import { barChart, histogram, lineChart } from './plots';
 
@@ -50,14 +50,17 @@ async function render(ws: string, root: HTMLElement): Promise<void> {
   ];
   if (georef) {
     const rms = findNumber(georef, /rms|rmse/i);
-    if (rms) cards.push([`georef ${rms.key}`, rms.value, 'm']);
+    if (rms) cards.push([`georeference: ${rms.key.replace(/[._]/g, ' ')}`, rms.value, 'm']);
   }
   sections.push(h('section', { class: 'cards' }, ...cards.filter(([, v]) => v !== undefined && v !== null).map(([k, v, unit]) =>
     h('div', { class: 'card figure-card' }, h('div', { class: 'big' }, typeof v === 'number' ? fmtNumber(v, 3) : String(v), unit ? h('small', {}, ' ' + unit) : null), h('div', { class: 'muted' }, k)))));
 
   // Time per stage.
   const timings = isObj(report.timings_seconds) ? report.timings_seconds : {};
-  const items = Object.entries(timings).filter(([, v]) => num(v) !== null).map(([label, v]) => ({ label, value: v as number }));
+  // In pipeline order; anything else the report timed after.
+  const order = (k: string) => { const i = (STAGES as readonly string[]).indexOf(k); return i < 0 ? STAGES.length : i; };
+  const items = Object.entries(timings).filter(([, v]) => num(v) !== null).map(([label, v]) => ({ label, value: v as number }))
+    .sort((a, b) => order(a.label) - order(b.label) || a.label.localeCompare(b.label));
   if (items.length) {
     const total = items.reduce((s, i) => s + i.value, 0);
     fig('Time per stage', barChart(items, { unit: ' s', xLabel: 'seconds' }), `${fmtNumber(total, 1)} s in all`);

@@ -44,6 +44,8 @@ export class TilesetLayer {
   rootTransform: THREE.Matrix4 | null = null;
   hasPoints = false;
   hasMeshes = false;
+  hasViews = false;
+  hasConfidence = false;
   showPoints = true;
   showMeshes = true;
   private loaded = new Set<TileNode>();
@@ -213,8 +215,8 @@ export class TilesetLayer {
       g.setAttribute('position', new THREE.BufferAttribute(t.positions, 3));
       if (t.colors) g.setAttribute('color', new THREE.BufferAttribute(t.colors, 3, true));
       if (t.normals) g.setAttribute('normal', new THREE.BufferAttribute(t.normals, 3, true));
-      if (t.views) g.setAttribute('views', new THREE.BufferAttribute(t.views, 1));
-      if (t.confidence) g.setAttribute('confidence', new THREE.BufferAttribute(t.confidence, 1));
+      if (t.views) { g.setAttribute('views', new THREE.BufferAttribute(t.views, 1)); this.hasViews = true; }
+      if (t.confidence) { g.setAttribute('confidence', new THREE.BufferAttribute(t.confidence, 1)); this.hasConfidence = true; }
       g.computeBoundingSphere();
       const spacing = estimateSpacing(n, t.count);
       const pts = new THREE.Points(g, createPointMaterial(this.uniforms, spacing, !!t.colors));
@@ -234,7 +236,7 @@ export class TilesetLayer {
       const yUpToZUp = new THREE.Matrix4().makeRotationX(Math.PI / 2);
       obj.matrixAutoUpdate = false;
       obj.matrix.copy(n.matrix).multiply(yUpToZUp);
-      obj.add(gltf.scene);
+      obj.add(unlit(gltf.scene));
       this.hasMeshes = true;
     }
     n.bytes = buf.byteLength;
@@ -289,6 +291,23 @@ export class TilesetLayer {
 
   drawnObjects(): THREE.Object3D[] { return this.drawn.map((n) => n.object!).filter((o) => o && o.visible); }
   busy(): boolean { return this.inflight > 0 || this.queue.length > 0; }
+}
+
+/** A photogrammetric mesh carries its light in its texture: draw it unlit, as photographed. */
+export function unlit(root: THREE.Object3D): THREE.Object3D {
+  root.traverse((o) => {
+    const m = o as THREE.Mesh;
+    if (!m.isMesh) return;
+    const mats = Array.isArray(m.material) ? m.material : [m.material];
+    const repl = mats.map((old) => {
+      const src = old as THREE.MeshStandardMaterial;
+      const mat = new THREE.MeshBasicMaterial({ map: src.map ?? null, color: src.map ? 0xffffff : (src.color ?? 0xcccccc), side: THREE.DoubleSide });
+      old.dispose();
+      return mat;
+    });
+    m.material = Array.isArray(m.material) ? repl : repl[0];
+  });
+  return root;
 }
 
 /** Mean distance between a tile's neighbouring points, from its bounding volume and count (points on a surface). */

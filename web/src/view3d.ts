@@ -6,7 +6,7 @@ import { OrbitControls } from 'three/examples/jsm/controls/OrbitControls.js';
 import { GLTFLoader } from 'three/examples/jsm/loaders/GLTFLoader.js';
 import { api, fileURL, type Camera, type Workspace } from './api';
 import { h, fmtNumber, ramp, rampCss } from './dom';
-import { TilesetLayer } from './tiles';
+import { TilesetLayer, unlit } from './tiles';
 import { createPointMaterial, createPointUniforms, PointMode } from './points';
 import { fitCamera, robustFrame } from './fit';
 import { Measurer, type MeasureMode } from './measure';
@@ -111,7 +111,7 @@ class View3d {
         const gltf = await new GLTFLoader().loadAsync(fileURL(this.ws, files.mesh_glb));
         const g = new THREE.Group();
         g.rotation.x = Math.PI / 2; // glTF y-up → our z-up model frame
-        g.add(gltf.scene);
+        g.add(unlit(gltf.scene));
         gltf.scene.traverse((o) => { const m = o as THREE.Mesh; if (m.isMesh) this.meshTriangles += (m.geometry.index?.count ?? m.geometry.getAttribute('position').count) / 3; });
         this.mesh = g;
         this.mesh.visible = this.checked('#show-mesh');
@@ -284,7 +284,12 @@ class View3d {
     const parts: Node[] = [];
     if (this.cameras.length) parts.push(bar('0', `${fmtNumber(emax, 2)} px`, 'camera reprojection RMS'));
     const m = this.uniforms.mode.value;
-    if (m === PointMode.Views) parts.push(bar('2', String(Math.round(this.uniforms.viewsMax.value)), 'views per point'));
+    const noAttr = (what: string) => parts.push(h('p', { class: 'muted' }, `The point tiles carry no ${what}.`));
+    if (m === PointMode.Views) {
+      if (this.uniforms.viewsMax.value > 2) parts.push(bar('2', String(Math.round(this.uniforms.viewsMax.value)), 'views per point'));
+      else noAttr('per-point number of views (batch table "views")');
+    }
+    if (m === PointMode.Confidence && this.uniforms.confidenceMax.value <= 1 && !this.tiles?.hasConfidence) noAttr('per-point confidence (batch table "confidence")');
     if (m === PointMode.Height) {
       const r = this.uniforms.heightRange.value;
       parts.push(bar(fmtNumber(r.x, 1), fmtNumber(r.y, 1), 'height (m)'));
