@@ -32,6 +32,16 @@ test-asan: deps $(ASAN_BUILD)/build.ninja
 	ASAN_OPTIONS=detect_leaks=0:abort_on_error=1 UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1 \
 	  ctest --test-dir $(ASAN_BUILD) --output-on-failure -j $(JOBS) -LE e2e
 
+# The console's front end (web/): npm ci only when node_modules is missing or older than the lock file.
+.PHONY: web
+build: web
+web: web/node_modules/.package-lock.json
+	cd web && npm run build --silent -- --outDir $(abspath $(BUILD))/web --logLevel warn
+
+web/node_modules/.package-lock.json: web/package-lock.json
+	cd web && npm ci --no-audit --no-fund --loglevel=error
+	@touch $@
+
 bench: build
 	@echo "benchmarks: $(BUILD)/bench/ (see bench/README.md)"
 

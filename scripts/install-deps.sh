@@ -9,7 +9,9 @@ PACKAGES=(
   libcli11-dev libspdlog-dev nlohmann-json3-dev libgtest-dev libgmock-dev libbenchmark-dev libtbb-dev
   libavformat-dev libavcodec-dev libavutil-dev libswscale-dev
   libtinygltf-dev
+  libcpp-httplib-dev
   ffmpeg
+  chromium
 )
 # Optional yardstick for bench/ only (COLMAP 3.8, CPU); never needed to build or test.
 if [[ "${FMV3D_WITH_COLMAP:-0}" == "1" ]]; then PACKAGES+=(colmap); fi

@@ -1,5 +1,7 @@
 // `fmv3d demo`: render a synthetic flight around the CAD building, reconstruct it, measure it against the
 // truth (pipeline/demo.h). The README's first command.
+#include <cstdio>
+#include <filesystem>
 #include <memory>
 
 #include "command.h"
@@ -20,6 +22,10 @@ void Add(CLI::App& app) {
   cmd->callback([o, out] {
     o->output = *out;
     pipeline::RunDemo(*o);
+    // The console opens the demo's workspace (OUTPUT/ws): WS_ROOT is the output folder.
+    const std::filesystem::path exe = std::filesystem::read_symlink("/proc/self/exe");
+    std::printf("\n  open it in the console:\n    %s serve %s\n", exe.c_str(),
+                std::filesystem::absolute(o->output).lexically_normal().c_str());
   });
 }
 

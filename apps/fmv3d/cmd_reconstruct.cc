@@ -4,6 +4,7 @@
 
 #include "command.h"
 #include "fmv3d/core/error.h"
+#include "fmv3d/core/progress_log.h"
 #include "fmv3d/pipeline/reconstruct.h"
 
 namespace fmv3d::app {
@@ -14,7 +15,7 @@ void Add(CLI::App& app) {
       "reconstruct", "Run every stage (frames → features → match → sparse → dense → mesh → texture) in WS");
   struct Args {
     std::vector<std::string> inputs;
-    std::string ws, camera_file, sensor, pairs = "auto";
+    std::string ws, camera_file, sensor, pairs = "auto", progress_json;
     pipeline::ReconstructOptions opt;
     bool no_report = false, fast = false;
   };
@@ -33,6 +34,8 @@ void Add(CLI::App& app) {
                 "texture for a covering subset of the frames, Poisson one level coarser (a 60 s 960x540 clip: "
                 "~8x faster end to end; bench/RESULTS.md has its accuracy)");
   cmd->add_flag("--no-report", a->no_report, "Skip report/report.html and its pictures");
+  cmd->add_option("--progress-json", a->progress_json,
+                  "Append progress and stage events to FILE as JSON lines (core/progress_log.h; read by `fmv3d serve`)");
   cmd->callback([a] {
     auto& o = a->opt;
     for (const auto& in : a->inputs) o.inputs.emplace_back(in);
@@ -42,6 +45,7 @@ void Add(CLI::App& app) {
     o.match.pairs.mode = features::ParsePairMode(a->pairs);
     o.report = !a->no_report;
     if (a->fast) o.ApplyFastPreset();
+    if (!a->progress_json.empty()) core::OpenProgressLog(a->progress_json);
     const auto report = pipeline::RunReconstruct(o);
     std::printf("reconstruction in %s\n", a->ws.c_str());
     if (o.report) std::printf("  report: %s/report/report.html\n", a->ws.c_str());

@@ -6,6 +6,8 @@
 
 #include <cstdio>
 
+#include "fmv3d/core/progress_log.h"
+
 namespace fmv3d::core {
 
 void SetupLogging(int verbosity) {
@@ -40,6 +42,8 @@ void Progress::Draw(size_t done, bool final) {
   const auto now = std::chrono::steady_clock::now();
   const double elapsed = std::chrono::duration<double>(now - start_).count();
   const double frac = total_ ? static_cast<double>(done) / total_ : 1.0;
+  // The progress log (progress_log.h) gets its own throttled line.
+  AppendProgressUpdate(label_, done, total_, frac > 0 ? elapsed * (1 - frac) / frac : 0.0, final);
   if (tty_) {
     if (!final && std::chrono::duration<double>(now - last_draw_).count() < 0.1) return;
     last_draw_ = now;

@@ -59,28 +59,34 @@ struct DatasetCloser {
   }
 };
 
-GDALDataset* CreateGeoTiff(const fs::path& path, const GridSpec& g, int bands, GDALDataType type,
-                           bool alpha) {
+// The raster is assembled in memory (GDAL's MEM driver) and then copied out by the COG driver, which only
+// writes by copy: tiled, DEFLATE-compressed, with overviews, laid out as a Cloud-Optimised GeoTIFF (gdalinfo
+// reports LAYOUT=COG) that map clients read by HTTP range requests.
+GDALDataset* CreateMemRaster(const fs::path& path, const GridSpec& g, int bands, GDALDataType type) {
   GDALAllRegister();
-  GDALDriver* drv = GetGDALDriverManager()->GetDriverByName("GTiff");
-  if (!drv) throw Error("GDAL: no GTiff driver");
+  GDALDriver* drv = GetGDALDriverManager()->GetDriverByName("MEM");
+  if (!drv) throw Error("GDAL: no MEM driver");
   if (g.width <= 0 || g.height <= 0) throw Error(path.string() + ": empty raster");
-  char** opts = nullptr;
-  opts = CSLSetNameValue(opts, "COMPRESS", "DEFLATE");
-  opts = CSLSetNameValue(opts, "TILED", "YES");
-  if (bands >= 3) opts = CSLSetNameValue(opts, "PHOTOMETRIC", "RGB");
-  if (alpha) opts = CSLSetNameValue(opts, "ALPHA", "YES");
-  if (static_cast<double>(g.width) * g.height * bands * (type == GDT_Float32 ? 4 : 1) > 3.5e9)
-    opts = CSLSetNameValue(opts, "BIGTIFF", "YES");
-  GDALDataset* ds = drv->Create(path.c_str(), g.width, g.height, bands, type, opts);
-  CSLDestroy(opts);
-  if (!ds) throw Error(path.string() + ": GDAL cannot create the GeoTIFF: " + CPLGetLastErrorMsg());
+  GDALDataset* ds = drv->Create("", g.width, g.height, bands, type, nullptr);
+  if (!ds) throw Error(path.string() + ": GDAL cannot allocate the raster: " + CPLGetLastErrorMsg());
   double gt[6] = {g.min_e, g.gsd, 0, g.max_n, 0, -g.gsd};
   ds->SetGeoTransform(gt);
   OGRSpatialReference srs;
   srs.importFromEPSG(g.zone.Epsg());
   ds->SetSpatialRef(&srs);
   return ds;
+}
+
+void WriteCog(GDALDataset* mem, const fs::path& path) {
+  GDALDriver* drv = GetGDALDriverManager()->GetDriverByName("COG");
+  if (!drv) throw Error("GDAL: no COG driver (GDAL 3.1 or later is needed)");
+  char** opts = nullptr;
+  opts = CSLSetNameValue(opts, "COMPRESS", "DEFLATE");
+  opts = CSLSetNameValue(opts, "BIGTIFF", "IF_SAFER");
+  GDALDataset* out = drv->CreateCopy(path.c_str(), mem, FALSE, opts, nullptr, nullptr);
+  CSLDestroy(opts);
+  if (!out) throw Error(path.string() + ": GDAL cannot write the COG: " + CPLGetLastErrorMsg());
+  GDALClose(out);
 }
 
 }  // namespace
@@ -92,7 +98,7 @@ void WriteHeightGeoTiff(const fs::path& path, const GridSpec& g, const cv::Mat& 
     if (!std::isfinite(v)) v = kNoData;
   });
   core::WriteAtomically(path, [&](const fs::path& tmp) {
-    GDALDataset* ds = CreateGeoTiff(tmp, g, 1, GDT_Float32, false);
+    GDALDataset* ds = CreateMemRaster(tmp, g, 1, GDT_Float32);
     DatasetCloser closer{ds};
     GDALRasterBand* band = ds->GetRasterBand(1);
     band->SetNoDataValue(kNoData);
@@ -100,6 +106,7 @@ void WriteHeightGeoTiff(const fs::path& path, const GridSpec& g, const cv::Mat& 
     if (band->RasterIO(GF_Write, 0, 0, g.width, g.height, out.ptr<float>(), g.width, g.height, GDT_Float32, 0,
                        static_cast<int>(out.step[0])) != CE_None)
       throw Error(path.string() + ": GDAL write failed: " + CPLGetLastErrorMsg());
+    WriteCog(ds, tmp);
   });
 }
 
@@ -113,7 +120,7 @@ void WriteRgbaGeoTiff(const fs::path& path, const GridSpec& g, const cv::Mat& bg
   alpha.setTo(255, valid);
   const cv::Mat planes[4] = {ch[2], ch[1], ch[0], alpha};  // R, G, B, A
   core::WriteAtomically(path, [&](const fs::path& tmp) {
-    GDALDataset* ds = CreateGeoTiff(tmp, g, 4, GDT_Byte, true);
+    GDALDataset* ds = CreateMemRaster(tmp, g, 4, GDT_Byte);
     DatasetCloser closer{ds};
     for (int b = 0; b < 4; ++b) {
       const cv::Mat p = planes[b].isContinuous() ? planes[b] : planes[b].clone();
@@ -123,6 +130,7 @@ void WriteRgbaGeoTiff(const fs::path& path, const GridSpec& g, const cv::Mat& bg
                          g.height, GDT_Byte, 0, 0) != CE_None)
         throw Error(path.string() + ": GDAL write failed: " + CPLGetLastErrorMsg());
     }
+    WriteCog(ds, tmp);
   });
 }
 

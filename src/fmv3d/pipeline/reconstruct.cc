@@ -6,10 +6,12 @@
 
 #include "fmv3d/core/error.h"
 #include "fmv3d/core/files.h"
+#include "fmv3d/core/progress_log.h"
 #include "fmv3d/features/feature_io.h"
 #include "fmv3d/io/frames_index.h"
 #include "fmv3d/pipeline/report.h"
 #include "fmv3d/core/workspace.h"
+#include "fmv3d/pipeline/tiles_stage.h"
 
 namespace fmv3d::pipeline {
 
@@ -120,6 +122,12 @@ std::vector<Stage> ReconstructStages(const ReconstructOptions& o) {
   stages.push_back({"texture", [ws] { return std::vector<fs::path>{ws.mesh_dir() / "poisson.ply"}; },
                     ws.report_dir() / "texture.json",
                     [o, root] { return surface::RunTextureStage(root, o.texture); }});
+  // 3D Tiles of the dense cloud and the textured mesh, for the console (tiles_stage.h).
+  stages.push_back({"tiles",
+                    [ws] {
+                      return std::vector<fs::path>{ws.dense_dir() / "fused.ply", ws.report_dir() / "texture.json"};
+                    },
+                    ws.root() / "tiles" / "tileset.json", [root] { return RunTilesStage(root, TilesOptions{}); }});
   stages.push_back({"dsm",
                     [ws] {
                       return std::vector<fs::path>{ws.georef_json(), ws.mesh_dir() / "poisson.ply"};
@@ -155,7 +163,11 @@ nlohmann::json RunReconstruct(const ReconstructOptions& o, std::vector<StageResu
   for (const auto& r : results) timings[r.name] = r.skipped ? nlohmann::json("skipped") : nlohmann::json(r.seconds);
   RecordTimings(ws.root(), timings);
   if (stage_results) *stage_results = results;
-  return o.report ? WriteReport(ws.root()) : nlohmann::json();
+  if (!o.report) return nlohmann::json();
+  core::AppendProgressEvent({{"event", "stage"}, {"stage", "report"}, {"state", "start"}});
+  nlohmann::json report = WriteReport(ws.root());
+  core::AppendProgressEvent({{"event", "stage"}, {"stage", "report"}, {"state", "done"}});
+  return report;
 }
 
 }  // namespace fmv3d::pipeline

@@ -7,6 +7,7 @@
 #include <chrono>
 
 #include "fmv3d/core/error.h"
+#include "fmv3d/core/progress_log.h"
 #include "fmv3d/core/workspace.h"
 
 namespace fmv3d::pipeline {
@@ -32,6 +33,14 @@ std::vector<StageResult> RunStages(const std::vector<Stage>& stages, const Runne
   const int from = IndexOf(stages, options.from, "--from");
   const int until = IndexOf(stages, options.until, "--until");
   std::vector<StageResult> results;
+  nlohmann::json names = nlohmann::json::array();
+  for (const auto& s : stages) names.push_back(s.name);
+  core::AppendProgressEvent({{"event", "stages"}, {"stages", names}});
+  const int count = static_cast<int>(stages.size());
+  auto event = [count](const std::string& name, const char* state, int index, double seconds) {
+    core::AppendProgressEvent(
+        {{"event", "stage"}, {"stage", name}, {"state", state}, {"index", index}, {"count", count}, {"seconds", seconds}});
+  };
   for (int i = 0; i < static_cast<int>(stages.size()); ++i) {
     if (until >= 0 && i > until) break;
     const Stage& stage = stages[i];
@@ -41,20 +50,24 @@ std::vector<StageResult> RunStages(const std::vector<Stage>& stages, const Runne
     if (!forced && core::Workspace::UpToDate({stage.marker}, stage.inputs())) {
       spdlog::info("[{}/{}] {}: up to date, skipped", i + 1, stages.size(), stage.name);
       r.skipped = true;
+      event(stage.name, "skipped", i, 0);
       results.push_back(r);
       continue;
     }
     spdlog::info("[{}/{}] {} ...", i + 1, stages.size(), stage.name);
     const auto t0 = std::chrono::steady_clock::now();
     const double cpu0 = ProcessCpuSeconds();
+    event(stage.name, "start", i, 0);
     try {
       r.summary = stage.run();
-    } catch (const Error& e) {
+    } catch (const std::exception& e) {
+      event(stage.name, "failed", i, std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
       spdlog::error("stage '{}' failed", stage.name);
       throw;
     }
     r.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     r.cpu_seconds = ProcessCpuSeconds() - cpu0;
+    event(stage.name, "done", i, r.seconds);
     spdlog::info("[{}/{}] {} done in {:.1f} s ({:.1f} CPU-s)", i + 1, stages.size(), stage.name, r.seconds,
                  r.cpu_seconds);
     results.push_back(r);

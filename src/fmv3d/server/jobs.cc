@@ -1,0 +1,284 @@
+#include "fmv3d/server/jobs.h"
+
+#include <signal.h>
+
+#include <chrono>
+#include <fstream>
+
+#include "fmv3d/core/error.h"
+#include "fmv3d/core/files.h"
+#include "fmv3d/server/process.h"
+
+namespace fmv3d::server {
+
+namespace fs = std::filesystem;
+
+namespace {
+double Now() {
+  return std::chrono::duration<double>(std::chrono::system_clock::now().time_since_epoch()).count();
+}
+bool Finished(JobState s) { return s == JobState::kDone || s == JobState::kFailed || s == JobState::kStopped; }
+
+// Reads what was appended to `path` since `*offset`, splits it into complete lines (the rest waits in *partial).
+std::vector<std::string> ReadNewLines(const fs::path& path, uint64_t* offset, std::string* partial) {
+  std::vector<std::string> lines;
+  std::ifstream in(path, std::ios::binary);
+  if (!in) return lines;
+  in.seekg(0, std::ios::end);
+  const uint64_t size = static_cast<uint64_t>(in.tellg());
+  if (size <= *offset) return lines;
+  const uint64_t n = std::min<uint64_t>(size - *offset, 4 << 20);  // at most 4 MB per poll
+  std::string chunk(n, '\0');
+  in.seekg(static_cast<std::streamoff>(*offset));
+  in.read(chunk.data(), static_cast<std::streamsize>(n));
+  *offset += static_cast<uint64_t>(in.gcount());
+  chunk.resize(static_cast<size_t>(in.gcount()));
+  *partial += chunk;
+  size_t start = 0;
+  for (size_t nl; (nl = partial->find('\n', start)) != std::string::npos; start = nl + 1) {
+    std::string line = partial->substr(start, nl - start);
+    // A terminal progress bar redraws with '\r': keep the last state of the line.
+    const size_t cr = line.find_last_of('\r', line.size() >= 1 ? line.size() - 1 : 0);
+    if (cr != std::string::npos && cr + 1 < line.size()) line = line.substr(cr + 1);
+    while (!line.empty() && line.back() == '\r') line.pop_back();
+    lines.push_back(std::move(line));
+  }
+  partial->erase(0, start);
+  if (partial->size() > (1 << 20)) partial->clear();  // a runaway line without newline
+  return lines;
+}
+}  // namespace
+
+const char* JobStateName(JobState s) {
+  switch (s) {
+    case JobState::kQueued: return "queued";
+    case JobState::kRunning: return "running";
+    case JobState::kDone: return "done";
+    case JobState::kFailed: return "failed";
+    case JobState::kStopped: return "stopped";
+  }
+  return "queued";
+}
+
+std::vector<std::string> ReconstructArgv(const fs::path& executable, const std::vector<fs::path>& inputs,
+                                         const fs::path& ws, const JobRequest& r, const fs::path& progress_json) {
+  std::vector<std::string> argv = {executable.string(), "reconstruct"};
+  for (const auto& in : inputs) argv.push_back(in.string());
+  argv.insert(argv.end(), {"-o", ws.string()});
+  if (!r.from.empty() && r.from != "report") argv.insert(argv.end(), {"--from", r.from});
+  if (!r.until.empty() && r.until != "report") argv.insert(argv.end(), {"--until", r.until});
+  if (r.fast) argv.push_back("--fast");
+  argv.insert(argv.end(), {"--progress-json", progress_json.string()});
+  return argv;
+}
+
+JobManager::JobManager(JobManagerOptions options, EventHub* hub) : options_(std::move(options)), hub_(hub) {
+  monitor_ = std::thread([this] { MonitorLoop(); });
+}
+
+JobManager::~JobManager() {
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    for (auto& j : jobs_)
+      if (j->state == JobState::kRunning) {
+        ::kill(j->pid, SIGTERM);
+        if (j->stop_requested == 0) j->stop_requested = Now();
+      }
+  }
+  // The monitor escalates to SIGKILL and reaps; wait for every child to be gone.
+  for (int i = 0; i < 1000; ++i) {
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      bool any = false;
+      for (auto& j : jobs_) any = any || j->state == JobState::kRunning;
+      if (!any) break;
+    }
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  }
+  quit_ = true;
+  if (monitor_.joinable()) monitor_.join();
+}
+
+nlohmann::json JobManager::Start(const std::string& workspace, const fs::path& ws_dir,
+                                 const std::vector<fs::path>& inputs, const JobRequest& request) {
+  std::lock_guard<std::mutex> lock(mutex_);
+  for (const auto& j : jobs_)
+    if (j->workspace == workspace && !Finished(j->state))
+      throw RequestError(409, "workspace '" + workspace + "' already runs job " + j->id);
+  auto job = std::make_unique<Job>();
+  job->id = std::to_string(next_id_++);
+  job->workspace = workspace;
+  const fs::path dir = ws_dir / "jobs";
+  try {
+    core::EnsureDirectory(dir);
+  } catch (const Error& e) {
+    throw RequestError(500, e.what());
+  }
+  job->log_path = dir / (job->id + "-" + std::to_string(static_cast<long long>(Now())) + ".log");
+  job->progress_path = fs::path(job->log_path).replace_extension(".progress.jsonl");
+  for (const auto& name : StageNames()) job->stages.push_back({name});
+  const auto argv = ReconstructArgv(options_.executable, inputs, ws_dir, request, job->progress_path);
+  try {
+    job->pid = SpawnProcess(argv, job->log_path);
+  } catch (const Error& e) {
+    throw RequestError(500, e.what());
+  }
+  job->state = JobState::kRunning;
+  job->started = Now();
+  std::string cmd;
+  for (const auto& a : argv) cmd += (cmd.empty() ? "" : " ") + a;
+  job->log.push_back("$ " + cmd);
+  nlohmann::json j = ToJson(*job, false);
+  jobs_.push_back(std::move(job));
+  hub_->Publish("job", j);
+  return j;
+}
+
+nlohmann::json JobManager::List() const {
+  std::lock_guard<std::mutex> lock(mutex_);
+  nlohmann::json out = nlohmann::json::array();
+  for (const auto& j : jobs_) out.push_back(ToJson(*j, false));
+  return out;
+}
+
+std::optional<nlohmann::json> JobManager::Get(const std::string& id, bool with_log) const {
+  std::lock_guard<std::mutex> lock(mutex_);
+  for (const auto& j : jobs_)
+    if (j->id == id) return ToJson(*j, with_log);
+  return std::nullopt;
+}
+
+std::optional<nlohmann::json> JobManager::Stop(const std::string& id) {
+  std::lock_guard<std::mutex> lock(mutex_);
+  for (auto& j : jobs_)
+    if (j->id == id) {
+      if (j->state == JobState::kRunning && j->stop_requested == 0) {
+        j->stop_requested = Now();
+        ::kill(j->pid, SIGTERM);
+      }
+      return ToJson(*j, false);
+    }
+  return std::nullopt;
+}
+
+nlohmann::json JobManager::LatestFor(const std::string& workspace) const {
+  std::lock_guard<std::mutex> lock(mutex_);
+  for (auto it = jobs_.rbegin(); it != jobs_.rend(); ++it)
+    if ((*it)->workspace == workspace) return ToJson(**it, false);
+  return nullptr;
+}
+
+std::map<std::string, std::string> JobManager::StageOverrides(const std::string& workspace) const {
+  std::lock_guard<std::mutex> lock(mutex_);
+  std::map<std::string, std::string> out;
+  for (auto it = jobs_.rbegin(); it != jobs_.rend(); ++it)
+    if ((*it)->workspace == workspace) {
+      for (const auto& s : (*it)->stages)
+        if (s.state == "running" || s.state == "failed") out[s.name] = s.state;
+      break;
+    }
+  return out;
+}
+
+nlohmann::json JobManager::ToJson(const Job& job, bool with_log) const {
+  nlohmann::json stages = nlohmann::json::array();
+  for (const auto& s : job.stages)
+    stages.push_back({{"name", s.name}, {"state", s.state}, {"done", s.done}, {"total", s.total}, {"eta_s", s.eta_s}});
+  nlohmann::json j = {{"id", job.id},
+                      {"workspace", job.workspace},
+                      {"state", JobStateName(job.state)},
+                      {"stage", job.stage.empty() ? nlohmann::json() : nlohmann::json(job.stage)},
+                      {"stages", stages},
+                      {"started", job.started},
+                      {"finished", job.finished > 0 ? nlohmann::json(job.finished) : nlohmann::json()},
+                      {"exit_code", job.exit_code ? nlohmann::json(*job.exit_code) : nlohmann::json()}};
+  if (with_log) j["log"] = nlohmann::json(std::vector<std::string>(job.log.begin(), job.log.end()));
+  return j;
+}
+
+JobManager::StageProgress* JobManager::FindStage(Job& job, const std::string& name) {
+  for (auto& s : job.stages)
+    if (s.name == name) return &s;
+  job.stages.push_back({name});
+  return &job.stages.back();
+}
+
+void JobManager::HandleLogLine(Job& job, const std::string& line) {
+  job.log.push_back(line);
+  while (job.log.size() > options_.log_lines) job.log.pop_front();
+  hub_->Publish("log", {{"job", job.id}, {"line", line}});
+}
+
+void JobManager::HandleProgressLine(Job& job, const std::string& line) {
+  const nlohmann::json e = nlohmann::json::parse(line, nullptr, false);
+  if (e.is_discarded() || !e.is_object() || !e.contains("event") || !e["event"].is_string()) return;
+  const std::string type = e["event"].get<std::string>();
+  if (type == "stages" && e.contains("stages") && e["stages"].is_array()) {
+    std::vector<StageProgress> stages;
+    for (const auto& n : e["stages"])
+      if (n.is_string()) stages.push_back({n.get<std::string>()});
+    stages.push_back({"report"});
+    job.stages = std::move(stages);
+    hub_->Publish("job", ToJson(job, false));
+  } else if (type == "stage" && e.contains("stage") && e["stage"].is_string() && e.contains("state") &&
+             e["state"].is_string()) {
+    const std::string name = e["stage"].get<std::string>(), state = e["state"].get<std::string>();
+    StageProgress* s = FindStage(job, name);
+    s->state = state == "start" ? "running" : state;
+    if (state == "start") job.stage = name;
+    if (state == "done" || state == "skipped") {
+      s->eta_s = 0;
+      if (s->total > 0) s->done = s->total;
+    }
+    hub_->Publish("job", ToJson(job, false));
+  } else if (type == "progress" && !job.stage.empty()) {
+    StageProgress* s = FindStage(job, job.stage);
+    s->done = e.value("done", 0.0);
+    s->total = e.value("total", 0.0);
+    s->eta_s = e.value("eta_s", 0.0);
+    hub_->Publish("progress", {{"job", job.id},
+                               {"stage", job.stage},
+                               {"label", e.value("label", std::string())},
+                               {"done", s->done},
+                               {"total", s->total},
+                               {"eta_s", s->eta_s}});
+  }
+}
+
+void JobManager::Poll(Job& job) {
+  for (const auto& line : ReadNewLines(job.progress_path, &job.progress_offset, &job.progress_partial))
+    HandleProgressLine(job, line);
+  for (const auto& line : ReadNewLines(job.log_path, &job.log_offset, &job.log_partial)) HandleLogLine(job, line);
+  const auto code = PollExit(job.pid);
+  if (!code) {
+    if (job.stop_requested > 0 && !job.killed && Now() - job.stop_requested > options_.stop_grace_s) {
+      ::kill(job.pid, SIGKILL);
+      job.killed = true;
+    }
+    return;
+  }
+  // Read what the child wrote in its last moments, then close the job.
+  for (const auto& line : ReadNewLines(job.progress_path, &job.progress_offset, &job.progress_partial))
+    HandleProgressLine(job, line);
+  for (const auto& line : ReadNewLines(job.log_path, &job.log_offset, &job.log_partial)) HandleLogLine(job, line);
+  if (!job.log_partial.empty()) HandleLogLine(job, job.log_partial), job.log_partial.clear();
+  job.exit_code = *code;
+  job.finished = Now();
+  job.state = job.stop_requested > 0 ? JobState::kStopped : *code == 0 ? JobState::kDone : JobState::kFailed;
+  for (auto& s : job.stages)
+    if (s.state == "running") s.state = job.state == JobState::kStopped ? "stopped" : "failed";
+  hub_->Publish("job", ToJson(job, false));
+}
+
+void JobManager::MonitorLoop() {
+  while (!quit_) {
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      for (auto& j : jobs_)
+        if (j->state == JobState::kRunning) Poll(*j);
+    }
+    std::this_thread::sleep_for(std::chrono::milliseconds(200));
+  }
+}
+
+}  // namespace fmv3d::server

@@ -1,0 +1,38 @@
+// What the console shows of a workspace folder (docs/console-api.md, GET /api/workspaces): each stage's state
+// from the stage runner's markers (pipeline/reconstruct.cc's stage list, plus report/report.json), frame and
+// camera counts, and the product files present. Reads files only; the running job's overlay is added by the caller.
+#pragma once
+
+#include <filesystem>
+#include <string>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+namespace fmv3d::server {
+
+enum class StageState { kPending, kDone, kStale, kRunning, kFailed };
+const char* StageStateName(StageState s);
+
+struct StageStatus {
+  std::string name;
+  StageState state = StageState::kPending;
+};
+
+// True when `dir` is a workspace: it holds project.json or frames/frames.json.
+bool IsWorkspace(const std::filesystem::path& dir);
+// The workspace folder names under `ws_root` (valid names only), sorted.
+std::vector<std::string> ListWorkspaces(const std::filesystem::path& ws_root);
+
+// done: the marker exists and is newer than every existing input; stale: older than one; pending: absent.
+std::vector<StageStatus> StageStates(const std::filesystem::path& ws);
+
+// {"name", "stages": [{"name", "state"}], "georeferenced", "frames", "registered"} (no "job").
+nlohmann::json DescribeWorkspace(const std::filesystem::path& ws);
+// {"sparse_ply", "fused_ply", "mesh_glb", "tileset", "ortho", "dsm", "hillshade", "report_html"}: paths relative to
+// the workspace, null when absent.
+nlohmann::json WorkspaceFiles(const std::filesystem::path& ws);
+// The inputs recorded in WS/project.json (absolute paths), empty when none.
+std::vector<std::string> ProjectInputs(const std::filesystem::path& ws);
+
+}  // namespace fmv3d::server
