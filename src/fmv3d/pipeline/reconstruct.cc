@@ -137,6 +137,10 @@ nlohmann::json RunReconstruct(const ReconstructOptions& o, std::vector<StageResu
   o.Check();
   const Workspace ws(o.workspace);
   core::EnsureDirectory(ws.root());
+  // One process per workspace; what a killed run was writing is discarded (its stage runs again).
+  const core::FileLock lock(ws.lock_file(), ws.root().string());
+  if (const size_t n = core::RemoveStaleTemporaries(ws.root()))
+    spdlog::info("{}: removed {} unfinished file(s) of an interrupted run", ws.root().string(), n);
   core::EnsureDirectory(ws.report_dir());
   nlohmann::json project;
   project["fmv3d_version"] = FMV3D_VERSION;
