@@ -18,32 +18,11 @@ namespace fs = std::filesystem;
 // exception the temporary is removed and it rethrows; a write, sync or rename failure (disk full, file size
 // limit, permissions) throws fmv3d::Error naming `path` and the system's reason.
 void WriteAtomically(const fs::path& path, const std::function<void(const fs::path& tmp)>& write);
-// True for a name WriteAtomically uses for its temporaries.
-bool IsAtomicTemporary(const fs::path& path);
-// Removes the temporaries a killed process left under `dir` (recursively); call it only while holding the
-// folder's lock (no other writer is alive). Returns how many were removed.
-size_t RemoveStaleTemporaries(const fs::path& dir);
 void WriteTextFile(const fs::path& path, const std::string& text);
 std::string ReadTextFile(const fs::path& path);
 void WriteJson(const fs::path& path, const nlohmann::json& j);
 nlohmann::json ReadJson(const fs::path& path);
 // Creates the directory (and parents); throws fmv3d::Error naming it on failure.
 void EnsureDirectory(const fs::path& dir);
-
-// An exclusive advisory lock (flock) on a file, held while the object lives. The kernel releases it when the
-// process ends in any way (SIGKILL included), so a killed run never leaves it stuck. The file keeps the holder's
-// pid, for the message a second process gets.
-class FileLock {
- public:
-  // Throws fmv3d::Error "<what>: in use by another fmv3d process (pid N) ..." when another process holds it, or
-  // naming the file and the reason when it cannot be created.
-  FileLock(const fs::path& lock_file, const std::string& what);
-  ~FileLock();
-  FileLock(const FileLock&) = delete;
-  FileLock& operator=(const FileLock&) = delete;
-
- private:
-  int fd_ = -1;
-};
 
 }  // namespace fmv3d::core

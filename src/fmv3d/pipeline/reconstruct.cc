@@ -5,6 +5,7 @@
 #include <algorithm>
 
 #include "fmv3d/core/error.h"
+#include "fmv3d/core/file_lock.h"
 #include "fmv3d/core/files.h"
 #include "fmv3d/features/feature_io.h"
 #include "fmv3d/io/frames_index.h"
@@ -154,7 +155,9 @@ nlohmann::json RunReconstruct(const ReconstructOptions& o, std::vector<StageResu
                         {"until", o.runner.until}};
   core::WriteJson(ws.project_json(), project);
 
-  const auto results = RunStages(ReconstructStages(o), o.runner);
+  RunnerOptions runner = o.runner;
+  runner.state_dir = ws.state_dir();
+  const auto results = RunStages(ReconstructStages(o), runner);
   nlohmann::json timings = nlohmann::json::object();
   for (const auto& r : results) timings[r.name] = r.skipped ? nlohmann::json("skipped") : nlohmann::json(r.seconds);
   RecordTimings(ws.root(), timings);

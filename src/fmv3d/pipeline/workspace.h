@@ -23,6 +23,8 @@ class Workspace {
   std::filesystem::path report_dir() const { return root_ / "report"; }
   // Held (flock) by the process that runs stages on this workspace; see core::FileLock.
   std::filesystem::path lock_file() const { return root_ / ".lock"; }
+  // The stage runner's flags (which stage was running when a run was killed).
+  std::filesystem::path state_dir() const { return root_ / ".stages"; }
 
   // Throws fmv3d::Error ("WS: no frames/frames.json — run `fmv3d frames` first") when a stage's input is absent.
   void Require(const std::filesystem::path& input, const char* producing_command) const;
