@@ -1,10 +1,13 @@
 # The README's two commands: `make demo` and `make test`. Both install missing Debian packages first.
 BUILD      ?= build
 ASAN_BUILD ?= build-asan
+FUZZ_BUILD ?= build-fuzz
+TSAN_BUILD ?= build-tsan
+FUZZ_SECONDS ?= 300
 JOBS       ?= $(shell nproc)
 DEMO_DIR   ?= demo-out
 
-.PHONY: all deps build demo test test-asan bench clean
+.PHONY: all deps build demo test test-asan test-tsan fuzz bench clean
 
 all: build
 
@@ -42,8 +45,30 @@ web/node_modules/.package-lock.json: web/package-lock.json
 	cd web && npm ci --no-audit --no-fund --loglevel=error
 	@touch $@
 
+# The tests of the multithreaded stages (PatchMatch and fusion, matching, bundle adjustment) under ThreadSanitizer.
+$(TSAN_BUILD)/build.ninja: | deps
+	cmake -S . -B $(TSAN_BUILD) -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo -DCMAKE_CXX_FLAGS_RELWITHDEBINFO="-O1 -g1" \
+	  -DFMV3D_TSAN=ON
+
+test-tsan: deps $(TSAN_BUILD)/build.ninja
+	cmake --build $(TSAN_BUILD) -j $(JOBS) --target test_mvs test_features test_sfm
+	for t in mvs features sfm; do \
+	  TSAN_OPTIONS=halt_on_error=1:second_deadlock_stack=1 $(TSAN_BUILD)/tests/test_$$t || exit 1; done
+
+# Every tests/fuzz/*_fuzz.cc as a libFuzzer binary (clang, ASan + UBSan), each run FUZZ_SECONDS on a seed corpus
+# made in $(FUZZ_BUILD) from ../shared/data and a small flight our own writers produce; prints executions and
+# coverage per target. Crashing inputs go to tests/fuzz/regressions/<target>/ once fixed (replayed by `make test`).
+$(FUZZ_BUILD)/build.ninja: | deps
+	@FMV3D_WITH_FUZZ=1 scripts/install-deps.sh
+	CC=clang CXX=clang++ cmake -S . -B $(FUZZ_BUILD) -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo \
+	  -DCMAKE_CXX_FLAGS_RELWITHDEBINFO="-O1 -g" -DFMV3D_FUZZ=ON -DFMV3D_BUILD_TESTS=OFF -DFMV3D_BUILD_BENCH=OFF
+
+fuzz: build $(FUZZ_BUILD)/build.ninja
+	cmake --build $(FUZZ_BUILD) -j $(JOBS) --target fuzz_targets
+	tests/fuzz/run.sh $(FUZZ_BUILD) $(BUILD)/fmv3d $(FUZZ_SECONDS)
+
 bench: build
 	@echo "benchmarks: $(BUILD)/bench/ (see bench/README.md)"
 
 clean:
-	rm -rf $(BUILD) $(ASAN_BUILD)
+	rm -rf $(BUILD) $(ASAN_BUILD) $(FUZZ_BUILD) $(TSAN_BUILD)

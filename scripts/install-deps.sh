@@ -15,6 +15,8 @@ PACKAGES=(
 )
 # Optional yardstick for bench/ only (COLMAP 3.8, CPU); never needed to build or test.
 if [[ "${FMV3D_WITH_COLMAP:-0}" == "1" ]]; then PACKAGES+=(colmap); fi
+# `make fuzz` only: clang with libFuzzer and the sanitizer runtimes.
+if [[ "${FMV3D_WITH_FUZZ:-0}" == "1" ]]; then PACKAGES+=(clang libclang-rt-14-dev); fi
 
 missing=()
 for p in "${PACKAGES[@]}"; do

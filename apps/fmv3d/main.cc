@@ -3,6 +3,7 @@
 #include <spdlog/spdlog.h>
 
 #include <algorithm>
+#include <csignal>
 #include <iostream>
 
 #include "command.h"
@@ -26,6 +27,9 @@ const GlobalOptions& Globals() { return g_globals; }
 
 int main(int argc, char** argv) {
   using namespace fmv3d;
+  // A file-size limit (RLIMIT_FSIZE) then fails the write with EFBIG, which the writers report, instead of
+  // killing the process without a word.
+  std::signal(SIGXFSZ, SIG_IGN);
   CLI::App app{"fmv3d: 3D terrain and target models from UAV full-motion video and photos", "fmv3d"};
   app.set_version_flag("--version", std::string("fmv3d ") + FMV3D_VERSION);
   app.require_subcommand(0, 1);

@@ -1,7 +1,10 @@
 #include "fmv3d/core/files.h"
 
+#include <fcntl.h>
 #include <unistd.h>
 
+#include <cerrno>
+#include <cstring>
 #include <fstream>
 #include <sstream>
 
@@ -9,15 +12,43 @@
 
 namespace fmv3d::core {
 
+namespace {
+
+// fsync of a file or folder; returns errno (0 on success).
+int Sync(const fs::path& p, bool directory) {
+  const int fd = open(p.c_str(), (directory ? O_RDONLY | O_DIRECTORY : O_RDONLY) | O_CLOEXEC);
+  if (fd < 0) return errno;
+  const int rc = fsync(fd) == 0 ? 0 : errno;
+  close(fd);
+  return rc;
+}
+
+}  // namespace
+
 void WriteAtomically(const fs::path& path, const std::function<void(const fs::path& tmp)>& write) {
   if (path.has_parent_path()) EnsureDirectory(path.parent_path());
   const fs::path tmp = path.parent_path() / ("." + path.stem().string() + ".tmp" + std::to_string(getpid()) +
                                              path.extension().string());
   try {
+    errno = 0;
     write(tmp);
+    if (const int e = Sync(tmp, false))
+      throw Error(path.string() + ": cannot write (" + std::strerror(e) + ")");
     std::error_code ec;
     fs::rename(tmp, path, ec);
     if (ec) throw Error(path.string() + ": cannot write (" + ec.message() + ")");
+    // The rename itself is durable once the folder is synced; a failure here loses nothing already renamed.
+    Sync(path.has_parent_path() ? path.parent_path() : fs::path("."), true);
+  } catch (const Error& e) {
+    // A writer's generic "write failed" gains the system's reason (ENOSPC, EFBIG, EACCES) when there is one.
+    const int err = errno;
+    std::error_code ec;
+    fs::remove(tmp, ec);
+    if (err == ENOSPC || err == EFBIG || err == EDQUOT || err == EACCES || err == EROFS || err == EIO) {
+      const std::string reason = std::strerror(err);
+      if (std::string(e.what()).find(reason) == std::string::npos) throw Error(std::string(e.what()) + " (" + reason + ")");
+    }
+    throw;
   } catch (...) {
     std::error_code ec;
     fs::remove(tmp, ec);

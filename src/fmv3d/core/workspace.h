@@ -32,6 +32,10 @@ class Workspace {
   std::filesystem::path sparse_image_only_dir() const { return geo_dir() / "sparse_image_only"; }
   std::filesystem::path manual_dir() const { return root_ / "manual"; }
   std::filesystem::path report_dir() const { return root_ / "report"; }
+  // Held (flock) by the process that runs stages on this workspace; see core::FileLock.
+  std::filesystem::path lock_file() const { return root_ / ".lock"; }
+  // The stage runner's flags (which stage was running when a run was killed).
+  std::filesystem::path state_dir() const { return root_ / ".stages"; }
 
   // Throws fmv3d::Error ("WS: frames/frames.json is missing; run `fmv3d frames` first") when a stage's input is
   // absent.

@@ -1,6 +1,7 @@
 #include "fmv3d/io/point_cloud.h"
 
 #include <algorithm>
+#include <cmath>
 #include <cstring>
 #include <fstream>
 #include <sstream>
@@ -204,6 +205,19 @@ OrientedPointCloud ReadPointCloudPly(const fs::path& path) {
     }
   }
   if (format < 0) throw Error(file + ": PLY header has no format line");
+  // Counts must fit the bytes that follow the header (an ascii value takes at least 2 bytes, a binary one its
+  // size), so a corrupt count is an error rather than a huge allocation.
+  const std::streamoff data_start = in.tellg();
+  in.seekg(0, std::ios::end);
+  const auto data_bytes = static_cast<unsigned long long>(std::max<std::streamoff>(0, in.tellg() - data_start));
+  in.seekg(data_start);
+  unsigned long long needed = 0;
+  for (const Element& e : elements) {
+    unsigned long long record = 0;
+    for (const Property& p : e.props) record += format == 0 ? 2 : SizeOf(p.is_list ? p.count_type : p.type);
+    needed += e.count * std::max<unsigned long long>(record, 1);
+    if (needed > data_bytes) throw Error(file + ": PLY element '" + e.name + "' count does not fit the file");
+  }
 
   OrientedPointCloud cloud;
   ValueReader reader(in, format, file);
@@ -239,7 +253,9 @@ OrientedPointCloud ReadPointCloudPly(const fs::path& path) {
         const bool keep = is_vertex && static_cast<int>(k) == ivis;
         for (int j = 0; j < static_cast<int>(n); ++j) {
           const double v = reader.Read(p.type);
-          if (keep) cloud.visibility[i].push_back(static_cast<uint32_t>(v));
+          if (!keep) continue;
+          if (!(v >= 0 && v <= 4294967295.0)) throw Error(file + ": bad PLY visibility index");
+          cloud.visibility[i].push_back(static_cast<uint32_t>(v));
         }
       }
       if (!is_vertex) continue;
@@ -250,6 +266,7 @@ OrientedPointCloud ReadPointCloudPly(const fs::path& path) {
         // Float colours in [0, 1] are scaled to 8 bits.
         const bool unit = e.props[ir].type == Type::kF32 || e.props[ir].type == Type::kF64;
         auto c8 = [&](double v) {
+          if (std::isnan(v)) return uint8_t{0};
           return static_cast<uint8_t>(std::clamp(unit ? v * 255.0 + 0.5 : v, 0.0, 255.0));
         };
         cloud.colors[i] = {c8(values[ir]), c8(values[ig]), c8(values[ib])};

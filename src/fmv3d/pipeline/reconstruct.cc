@@ -5,6 +5,7 @@
 #include <algorithm>
 
 #include "fmv3d/core/error.h"
+#include "fmv3d/core/file_lock.h"
 #include "fmv3d/core/files.h"
 #include "fmv3d/core/progress_log.h"
 #include "fmv3d/features/feature_io.h"
@@ -145,6 +146,10 @@ nlohmann::json RunReconstruct(const ReconstructOptions& o, std::vector<StageResu
   o.Check();
   const core::Workspace ws(o.workspace);
   core::EnsureDirectory(ws.root());
+  // One process per workspace; what a killed run was writing is discarded (its stage runs again).
+  const core::FileLock lock(ws.lock_file(), ws.root().string());
+  if (const size_t n = core::RemoveStaleTemporaries(ws.root()))
+    spdlog::info("{}: removed {} unfinished file(s) of an interrupted run", ws.root().string(), n);
   core::EnsureDirectory(ws.report_dir());
   nlohmann::json project;
   project["fmv3d_version"] = FMV3D_VERSION;
@@ -158,7 +163,9 @@ nlohmann::json RunReconstruct(const ReconstructOptions& o, std::vector<StageResu
                         {"until", o.runner.until}};
   core::WriteJson(ws.project_json(), project);
 
-  const auto results = RunStages(ReconstructStages(o), o.runner);
+  RunnerOptions runner = o.runner;
+  runner.state_dir = ws.state_dir();
+  const auto results = RunStages(ReconstructStages(o), runner);
   nlohmann::json timings = nlohmann::json::object();
   for (const auto& r : results) timings[r.name] = r.skipped ? nlohmann::json("skipped") : nlohmann::json(r.seconds);
   RecordTimings(ws.root(), timings);

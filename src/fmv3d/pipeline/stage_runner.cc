@@ -7,10 +7,13 @@
 #include <chrono>
 
 #include "fmv3d/core/error.h"
+#include "fmv3d/core/files.h"
 #include "fmv3d/core/progress_log.h"
 #include "fmv3d/core/workspace.h"
 
 namespace fmv3d::pipeline {
+
+namespace fs = std::filesystem;
 
 namespace {
 int IndexOf(const std::vector<Stage>& stages, const std::string& name, const char* option) {
@@ -47,7 +50,11 @@ std::vector<StageResult> RunStages(const std::vector<Stage>& stages, const Runne
     StageResult r;
     r.name = stage.name;
     const bool forced = from >= 0 && i >= from;
-    if (!forced && core::Workspace::UpToDate({stage.marker}, stage.inputs())) {
+    const fs::path running = options.state_dir.empty() ? fs::path() : options.state_dir / (stage.name + ".running");
+    const bool interrupted = !running.empty() && fs::exists(running);
+    if (interrupted) spdlog::info("[{}/{}] {}: interrupted in an earlier run, running again", i + 1, stages.size(),
+                                  stage.name);
+    if (!forced && !interrupted && core::Workspace::UpToDate({stage.marker}, stage.inputs())) {
       spdlog::info("[{}/{}] {}: up to date, skipped", i + 1, stages.size(), stage.name);
       r.skipped = true;
       event(stage.name, "skipped", i, 0);
@@ -58,12 +65,18 @@ std::vector<StageResult> RunStages(const std::vector<Stage>& stages, const Runne
     const auto t0 = std::chrono::steady_clock::now();
     const double cpu0 = ProcessCpuSeconds();
     event(stage.name, "start", i, 0);
+    if (!running.empty()) core::WriteTextFile(running, "");
     try {
       r.summary = stage.run();
     } catch (const std::exception& e) {
       event(stage.name, "failed", i, std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
       spdlog::error("stage '{}' failed", stage.name);
       throw;
+    }
+    if (!running.empty()) {
+      std::error_code ec;
+      fs::remove(running, ec);
+      if (ec) throw Error(running.string() + ": cannot remove (" + ec.message() + ")");
     }
     r.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     r.cpu_seconds = ProcessCpuSeconds() - cpu0;

@@ -2,6 +2,9 @@
 // marks it complete (written last, atomically, by the stage itself). A stage whose marker exists and is newer
 // than all its inputs is skipped, so an interrupted run resumes at the first unfinished stage and a changed
 // input re-runs everything downstream of it (the later markers become older than the new outputs).
+// With a state folder, a stage is also flagged as running (STATE/<name>.running) from its start until it returns:
+// a stage killed half-way is re-run on resume even when its marker was already written (a stage may write more
+// files after its marker), so a resumed run never builds on a half-finished stage.
 #pragma once
 
 #include <filesystem>
@@ -31,6 +34,7 @@ struct StageResult {
 struct RunnerOptions {
   std::string from;   // force re-running from this stage on (empty: resume by timestamps)
   std::string until;  // stop after this stage (empty: all)
+  std::filesystem::path state_dir;  // where the running flags live (empty: none, timestamps only)
 };
 
 // CPU seconds (user + system, all threads) this process has used so far.

@@ -1,0 +1,288 @@
+// Crash-safe workspaces, end to end on a small synthetic flight with KLV telemetry (every stage runs, terrain
+// products included), in folders whose names have spaces and non-ASCII letters:
+//  - `fmv3d reconstruct` killed with SIGKILL 20 times, twice inside each stage at a random moment of it, and
+//    resumed each time: the final workspace holds the same files with the same bytes as an uninterrupted run
+//    (only report/timings.json, which records wall-clock seconds, differs).
+//  - a second process on a workspace in use refuses with a clear message; once the first is killed, the lock is
+//    free again.
+//  - a file-size limit (RLIMIT_FSIZE, what a full disk looks like to the writer) stops the run with a clear error;
+//    nothing finished earlier is lost, and the run resumes to the same result once the limit is lifted.
+//  - inputs: a read-only input video works; a workspace that cannot be created and a missing input are clear
+//    errors; an input video replaced after a run makes the next run start again from the frames stage.
+#include <gtest/gtest.h>
+
+#include <fcntl.h>
+#include <poll.h>
+#include <signal.h>
+#include <sys/resource.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <chrono>
+#include <fstream>
+#include <map>
+#include <random>
+#include <regex>
+#include <set>
+#include <thread>
+
+#include "fmv3d/core/files.h"
+#include "test_util.h"
+
+namespace fmv3d::test {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+// fmv3d run as a child process whose stderr (the log) is read line by line.
+class Child {
+ public:
+  explicit Child(const std::vector<std::string>& args, rlim_t file_size_limit = RLIM_INFINITY) {
+    int fds[2];
+    if (pipe(fds) != 0) throw std::runtime_error("pipe");
+    pid_ = fork();
+    if (pid_ == 0) {
+      dup2(fds[1], 2);
+      const int null = open("/dev/null", O_WRONLY);
+      dup2(null, 1);
+      close(fds[0]);
+      close(fds[1]);
+      if (file_size_limit != RLIM_INFINITY) {
+        const rlimit lim{file_size_limit, file_size_limit};
+        setrlimit(RLIMIT_FSIZE, &lim);
+      }
+      std::vector<char*> argv{const_cast<char*>(FMV3D_CLI)};
+      for (const auto& a : args) argv.push_back(const_cast<char*>(a.c_str()));
+      argv.push_back(nullptr);
+      execv(FMV3D_CLI, argv.data());
+      _exit(127);
+    }
+    close(fds[1]);
+    fd_ = fds[0];
+  }
+  ~Child() {
+    if (pid_ > 0 && !reaped_) {
+      kill(pid_, SIGKILL);
+      Wait();
+    }
+    if (fd_ >= 0) close(fd_);
+  }
+  // Reads until a complete line matching `re` arrives (true) or the process closes its stderr (false).
+  bool WaitForLine(const std::regex& re) {
+    while (true) {
+      const size_t nl = buffer_.find('\n');
+      if (nl != std::string::npos) {
+        const std::string line = buffer_.substr(0, nl);
+        buffer_.erase(0, nl + 1);
+        log_ += line + "\n";
+        if (std::regex_search(line, re)) return true;
+        continue;
+      }
+      char chunk[4096];
+      const ssize_t n = read(fd_, chunk, sizeof chunk);
+      if (n <= 0) return false;
+      buffer_.append(chunk, static_cast<size_t>(n));
+    }
+  }
+  void Kill() { kill(pid_, SIGKILL); }
+  // Exit status (-signal when killed by one); drains the log first.
+  int Wait() {
+    while (WaitForLine(std::regex("$^"))) {
+    }
+    log_ += buffer_;
+    buffer_.clear();
+    int status = 0;
+    waitpid(pid_, &status, 0);
+    reaped_ = true;
+    return WIFEXITED(status) ? WEXITSTATUS(status) : -WTERMSIG(status);
+  }
+  const std::string& log() const { return log_; }
+
+ private:
+  pid_t pid_ = -1;
+  int fd_ = -1;
+  bool reaped_ = false;
+  std::string buffer_, log_;
+};
+
+// Every regular file under `root` (relative path → bytes).
+std::map<std::string, std::string> Snapshot(const fs::path& root) {
+  std::map<std::string, std::string> out;
+  for (const auto& e : fs::recursive_directory_iterator(root))
+    if (e.is_regular_file()) out[fs::relative(e.path(), root).string()] = core::ReadTextFile(e.path());
+  return out;
+}
+
+// Files whose content is meant to differ between two runs of the same inputs: wall-clock timings only.
+bool RecordsTime(const std::string& rel) { return rel == "report/timings.json"; }
+
+// Lists what differs between two workspaces (empty when they are the same).
+std::string Differences(const fs::path& a, const fs::path& b) {
+  const auto sa = Snapshot(a), sb = Snapshot(b);
+  std::string diff;
+  for (const auto& [rel, bytes] : sa) {
+    const auto it = sb.find(rel);
+    if (it == sb.end()) diff += "only in the first: " + rel + "\n";
+    else if (it->second != bytes && !RecordsTime(rel)) diff += "differs: " + rel + "\n";
+  }
+  for (const auto& [rel, bytes] : sb)
+    if (!sa.count(rel)) diff += "only in the second: " + rel + "\n";
+  return diff;
+}
+
+struct StageTime {
+  std::string name;
+  double seconds;
+};
+
+// The stages a log shows as run, in order, with their durations ("[3/10] match done in 1.2 s").
+std::vector<StageTime> StagesRun(const std::string& log) {
+  std::vector<StageTime> out;
+  static const std::regex done(R"(\[\d+/\d+\] (\w+) done in ([0-9.]+) s)");
+  for (auto it = std::sregex_iterator(log.begin(), log.end(), done); it != std::sregex_iterator(); ++it)
+    out.push_back({(*it)[1].str(), std::stod((*it)[2].str())});
+  return out;
+}
+
+class CrashSafety : public ::testing::Test {
+ protected:
+  static void SetUpTestSuite() {
+    dir_ = new TempDir("fmv3d-crash safety ü");
+    const fs::path synth = *dir_ / "synth";
+    const auto r = RunCli("-q synth --scene building --path orbit --frames 90 --fps 10 --size 320x180 --klv"
+                          " --seed 5 -o '" + synth.string() + "'");
+    ASSERT_EQ(r.exit_code, 0) << r.err;
+    // The input keeps a name with a space and non-ASCII letters, and is read-only.
+    video_ = new fs::path(*dir_ / "vidéo du vol.ts");
+    fs::rename(synth / "flight.ts", *video_);
+    fs::permissions(*video_, fs::perms::owner_read | fs::perms::group_read | fs::perms::others_read);
+    reference_ = new fs::path(*dir_ / "référence ws");
+    Child ref(Args(*reference_));
+    ASSERT_EQ(ref.Wait(), 0) << ref.log();
+    *stages_ = StagesRun(ref.log());
+  }
+  static void TearDownTestSuite() {
+    delete dir_;
+    delete video_;
+    delete reference_;
+  }
+  static std::vector<std::string> Args(const fs::path& ws) {
+    return {"reconstruct", video_->string(), "-o", ws.string(), "--fast", "--no-report"};
+  }
+
+  static TempDir* dir_;
+  static fs::path* video_;
+  static fs::path* reference_;
+  static std::vector<StageTime>* stages_;
+};
+TempDir* CrashSafety::dir_ = nullptr;
+fs::path* CrashSafety::video_ = nullptr;
+fs::path* CrashSafety::reference_ = nullptr;
+std::vector<StageTime>* CrashSafety::stages_ = new std::vector<StageTime>;
+
+TEST_F(CrashSafety, TwentyKillsAcrossEveryStageThenTheSameWorkspace) {
+  ASSERT_GE(stages_->size(), 10u) << "the reference run should run every stage";
+  const fs::path ws = *dir_ / "killed ws ñ";
+  std::mt19937 rng(26);
+  int kills = 0;
+  std::set<std::string> stages_killed;
+  for (const auto& stage : *stages_) {
+    for (int k = 0; k < 2; ++k) {
+      Child run(Args(ws));
+      // Wait until this stage starts (earlier ones are resumed or skipped), then kill at a random moment of it.
+      ASSERT_TRUE(run.WaitForLine(std::regex("\\] " + stage.name + " \\.\\.\\.$"))) << run.log();
+      const double at = std::uniform_real_distribution<double>(0, std::max(0.05, stage.seconds))(rng);
+      std::this_thread::sleep_for(std::chrono::duration<double>(at));
+      run.Kill();
+      const int status = run.Wait();
+      if (status == -SIGKILL) {
+        ++kills;
+        if (run.log().find("] " + stage.name + " done") == std::string::npos) stages_killed.insert(stage.name);
+      }
+    }
+  }
+  Child last(Args(ws));
+  ASSERT_EQ(last.Wait(), 0) << last.log();
+  std::cout << kills << " kills, inside " << stages_killed.size() << " of " << stages_->size() << " stages\n";
+  EXPECT_GE(kills, 20);
+  EXPECT_GE(stages_killed.size(), stages_->size() - 2) << "most kills should land inside their stage";
+  EXPECT_EQ(Differences(*reference_, ws), "");
+}
+
+TEST_F(CrashSafety, SecondProcessRefusedAndKilledHolderLeavesNoStaleLock) {
+  const fs::path ws = *dir_ / "locked ws";
+  Child first(Args(ws));
+  ASSERT_TRUE(first.WaitForLine(std::regex("\\] features \\.\\.\\.$"))) << first.log();
+  Child second(Args(ws));
+  EXPECT_EQ(second.Wait(), 1);
+  EXPECT_NE(second.log().find("in use by another fmv3d process"), std::string::npos) << second.log();
+  first.Kill();
+  EXPECT_EQ(first.Wait(), -SIGKILL);
+  Child third(Args(ws));
+  EXPECT_EQ(third.Wait(), 0) << third.log();
+  EXPECT_EQ(Differences(*reference_, ws), "");
+}
+
+TEST_F(CrashSafety, FileSizeLimitIsAClearErrorAndResumeCompletes) {
+  const fs::path ws = *dir_ / "full disk ws";
+  // 256 KiB per file: the frames, features and sparse model fit; the depth maps or the dense cloud do not.
+  Child limited(Args(ws), 256 * 1024);
+  EXPECT_EQ(limited.Wait(), 1) << limited.log();
+  EXPECT_NE(limited.log().find("File too large"), std::string::npos) << limited.log();
+  // What finished before the failure is intact: every file present is the reference's.
+  const auto before = Snapshot(ws), reference = Snapshot(*reference_);
+  ASSERT_TRUE(before.count("sparse/images.txt")) << "the run should fail after the sparse stage";
+  for (const auto& [rel, bytes] : before)
+    if (rel != ".lock" && !RecordsTime(rel) && rel != "project.json") {
+      ASSERT_TRUE(reference.count(rel)) << rel << " is not a finished output";
+      EXPECT_EQ(bytes, reference.at(rel)) << rel;
+    }
+  Child resumed(Args(ws));
+  ASSERT_EQ(resumed.Wait(), 0) << resumed.log();
+  EXPECT_NE(resumed.log().find("features: up to date, skipped"), std::string::npos) << resumed.log();
+  EXPECT_EQ(Differences(*reference_, ws), "");
+}
+
+TEST_F(CrashSafety, BadPathsAreClearErrors) {
+  const auto missing = RunCli("reconstruct '" + (*dir_ / "no such vidéo.ts").string() + "' -o '" +
+                              (*dir_ / "ws missing").string() + "'");
+  EXPECT_EQ(missing.exit_code, 1);
+  EXPECT_NE(missing.err.find("no such vidéo.ts: no such file or folder"), std::string::npos) << missing.err;
+  // A workspace under a regular file cannot be created (the same for a folder without write permission).
+  const auto blocked = RunCli("reconstruct '" + video_->string() + "' -o '" + (*video_ / "ws").string() + "'");
+  EXPECT_EQ(blocked.exit_code, 1);
+  EXPECT_NE(blocked.err.find("fmv3d: error: "), std::string::npos) << blocked.err;
+  EXPECT_NE(blocked.err.find("cannot create directory"), std::string::npos) << blocked.err;
+}
+
+TEST_F(CrashSafety, ReplacedInputVideoRerunsFromFrames) {
+  const fs::path ws = *dir_ / "replaced ws";
+  fs::copy(*reference_, ws, fs::copy_options::recursive);
+  fs::remove(ws / ".lock");
+  // Another flight (other seed, fewer frames) takes the video's name, as a copy over it would.
+  const fs::path other = *dir_ / "other";
+  const auto r = RunCli("-q synth --scene building --path orbit --frames 60 --fps 10 --size 320x180 --klv"
+                        " --seed 9 -o '" + other.string() + "'");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const fs::path video = *dir_ / "replaced vidéo.ts";
+  fs::copy_file(*video_, video);
+  fs::permissions(video, fs::perms::owner_write, fs::perm_options::add);
+  std::vector<std::string> args = Args(ws);
+  args[1] = video.string();
+  {
+    Child first(args);  // the workspace's frames now name another input: the frames stage runs again
+    ASSERT_EQ(first.Wait(), 0) << first.log();
+  }
+  const std::string frames_before = core::ReadTextFile(ws / "frames/frames.json");
+  std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  fs::copy_file(other / "flight.ts", video, fs::copy_options::overwrite_existing);
+  Child second(args);
+  ASSERT_EQ(second.Wait(), 0) << second.log();
+  const auto stages = StagesRun(second.log());
+  ASSERT_FALSE(stages.empty()) << second.log();
+  EXPECT_EQ(stages.front().name, "frames") << second.log();
+  EXPECT_NE(core::ReadTextFile(ws / "frames/frames.json"), frames_before);
+}
+
+}  // namespace
+}  // namespace fmv3d::test
