@@ -19,8 +19,9 @@ void Add(CLI::App& app) {
   };
   auto a = std::make_shared<Args>();
   cmd->add_option("WS", a->ws, "Workspace folder (with frames/ and features/)")->required();
-  cmd->add_option("--pairs", a->pairs, "auto | exhaustive | sequential | spatial (auto: exhaustive up to 50 images; spatial: "
-                  "overlapping ground footprints from the frames' telemetry)")
+  cmd->add_option("--pairs", a->pairs, "auto | exhaustive | sequential | spatial (auto: exhaustive up to 50 images, "
+                  "then spatial for photos that all carry GPS, else sequential; spatial: overlapping ground footprints "
+                  "from the frames' telemetry)")
       ->capture_default_str();
   cmd->add_option("--spatial-overlap", a->opt.pairs.spatial_overlap_factor,
                   "spatial: pair frames whose footprint centres are closer than this times the radii sum")

@@ -19,11 +19,11 @@ cv::Mat FaintImage(int w, int h, uint64_t seed) {
   cv::Mat f(h, w, CV_32F);
   cv::RNG rng(seed);
   cv::Mat grain(h / 4, w / 4, CV_32F);
-  rng.fill(grain, cv::RNG::NORMAL, 0, 3.0);
+  rng.fill(grain, cv::RNG::NORMAL, 0, 0.8);
   cv::resize(grain, grain, cv::Size(w, h), 0, 0, cv::INTER_CUBIC);
   for (int y = 0; y < h; ++y)
     for (int x = 0; x < w; ++x)
-      f.at<float>(y, x) = 170 + 2.5f * std::sin(0.09f * (0.8f * x + 0.6f * y)) + grain.at<float>(y, x);
+      f.at<float>(y, x) = 170 + 0.8f * std::sin(0.09f * (0.8f * x + 0.6f * y)) + grain.at<float>(y, x);
   cv::Mat bush(h / 6, w / 6, CV_32F);
   rng.fill(bush, cv::RNG::UNIFORM, 60, 200);
   cv::GaussianBlur(bush, bush, cv::Size(0, 0), 1.5);
