@@ -114,6 +114,11 @@ void Add(CLI::App& app) {
   cmd->add_option("--look-at", *look_at, "Look-at point X,Y,Z in metres (default: the scene's target)")
       ->check(kList3);
   cmd->add_option("--distortion", *distortion, "Lens distortion k1,k2,p1,p2 (default none)")->check(kList4);
+  auto principal = std::make_shared<std::vector<double>>();
+  cmd->add_option("--principal-offset", *principal,
+                  "Principal point minus the image centre DU,DV, pixels (default 0,0)")
+      ->delimiter(',')
+      ->expected(2);
   cmd->add_option("--sun-azimuth", o->render.sun_azimuth_deg, "Sun azimuth, degrees clockwise from north (+y)")
       ->capture_default_str();
   cmd->add_option("--sun-elevation", o->render.sun_elevation_deg, "Sun elevation, degrees")
@@ -171,6 +176,7 @@ void Add(CLI::App& app) {
       if (v.size() != 2) throw Error("--overlap: expected FORWARD,SIDE in percent, e.g. 70,40");
       opts.flight.grid_overlap = std::make_pair(v[0] / 100, v[1] / 100);
     }
+    if (!principal->empty()) opts.principal_offset = {(*principal)[0], (*principal)[1]};
     if (!look_at->empty()) {
       const auto p = ParseList(*look_at);
       opts.flight.look_at = Eigen::Vector3d(p[0], p[1], p[2]);

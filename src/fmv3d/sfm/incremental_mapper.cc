@@ -117,6 +117,7 @@ class ModelBuilder {
   std::pair<uint32_t, uint32_t> init_pair() const { return {gauge1_, gauge2_}; }
   int num_global_ba() const { return num_global_ba_; }
   int num_relocalised() const { return num_relocalised_; }
+  const std::vector<NestedModelTestResult>& self_calibration() const { return self_calibration_; }
 
  private:
   Eigen::Vector2d Normalized(const core::Camera& cam, const Eigen::Vector2d& uv) const {
@@ -139,7 +140,7 @@ class ModelBuilder {
   bool TryRegister(uint32_t image_id);
   int RelocaliseImages();
   void LocalBundleAdjust(uint32_t image_id);
-  BundleAdjustmentSummary GlobalBundleAdjust(bool final_pass, bool principal_point = false);
+  BundleAdjustmentSummary GlobalBundleAdjust(bool final_pass);
   // After an image was registered: whether the model has grown enough for an intermediate global adjustment
   // (or the dolly-zoom scan, which ends with one, is about to run).
   bool GlobalBundleAdjustDue() const {
@@ -153,7 +154,7 @@ class ModelBuilder {
     return remaining >= (opt_.global_ba_growth_ratio - 1) * n;
   }
   // The final nested-model test of one intrinsic group (self_calibration.h); true when it was freed.
-  bool TrySelfCalibration(IntrinsicGroup group, double min_delta_chi2);
+  bool TrySelfCalibration(IntrinsicGroup group);
   BundleAdjustmentOptions BaOptions() const;
 
   const MapperInput& input_;
@@ -177,6 +178,8 @@ class ModelBuilder {
   std::map<uint32_t, int> visible_at_failure_;
   size_t images_at_last_global_ = 0;
   int num_global_ba_ = 0;
+  std::set<IntrinsicGroup> freed_groups_;  // freed by the final self-calibration tests
+  std::vector<NestedModelTestResult> self_calibration_;
 };
 
 int ModelBuilder::TriangulateImage(uint32_t image_id) {
@@ -422,8 +425,9 @@ BundleAdjustmentOptions ModelBuilder::BaOptions() const {
   const bool hold_distortion = narrow_field_ || (focal_from_plateau_ && !dolly_done_);
   o.refine_k1 = n >= opt_.refine_focal_min_images && !hold_distortion;
   o.refine_k2 = n >= opt_.refine_k2_min_images && !hold_distortion;
-  o.refine_principal_point = false;  // only the final model-selection test frees it
+  o.refine_principal_point = false;  // only the final model-selection tests free it (and aspect, tangential)
   o.refine_tangential = opt_.refine_tangential && n >= opt_.refine_principal_point_min_images;
+  for (IntrinsicGroup g : freed_groups_) SetRefine(g, true, &o);
   return o;
 }
 
@@ -548,13 +552,12 @@ void ModelBuilder::LocalBundleAdjust(uint32_t image_id) {
   FilterPoints(&pts);
 }
 
-BundleAdjustmentSummary ModelBuilder::GlobalBundleAdjust(bool final_pass, bool principal_point) {
+BundleAdjustmentSummary ModelBuilder::GlobalBundleAdjust(bool final_pass) {
   const auto start = Clock::now();
   BundleAdjustmentConfig cfg;
   cfg.gauge_image1 = gauge1_;
   cfg.gauge_image2 = gauge2_;
   BundleAdjustmentOptions o = BaOptions();
-  o.refine_principal_point = principal_point;
   // Intermediate adjustments only need to be near the optimum (the next image and the final pass refine further).
   o.max_iterations = opt_.global_ba_max_iterations;
   o.function_tolerance = 1e-5;
@@ -573,29 +576,35 @@ BundleAdjustmentSummary ModelBuilder::GlobalBundleAdjust(bool final_pass, bool p
   return s;
 }
 
-// A telephoto scan's focal is the knee of a plateau (longer focals explain the two-view matches as well); the
+// Held through growth, freed at the end only when the data ask for it and determine it (self_calibration.h):
+// a telephoto scan's focal is the knee of a plateau (longer focals explain the two-view matches as well); the
 // principal point is weakly constrained in many configurations (an orbit of cameras all looking at one centre:
-// a shift trades against a common tilt), and freeing it there only adds noise to every rotation. Both are held
-// through growth and freed at the end only when the nested-model test says the data ask for it.
-bool ModelBuilder::TrySelfCalibration(IntrinsicGroup group, double min_delta_chi2) {
+// a shift trades against a common tilt), and freeing it there only adds noise to every rotation; aspect and
+// tangential distortion are small for most cameras. Each test starts from the previous one's result.
+bool ModelBuilder::TrySelfCalibration(IntrinsicGroup group) {
   BundleAdjustmentOptions o = BaOptions();
   // Δχ² = dof · (ss0 − ss1) / ss0: a relative cost tolerance of 1e-6 moves it by about dof · 1e-6 (≈ 1 for a
-  // large model), far below the threshold, so the test needs no tighter convergence than that.
+  // large model), far below the price of a parameter for such a model, so the test needs no tighter convergence.
   o.function_tolerance = std::max(opt_.final_ba_function_tolerance, 1e-6);
   o.max_iterations = opt_.final_ba_max_iterations;
   BundleAdjustmentConfig cfg;
   cfg.gauge_image1 = gauge1_;
   cfg.gauge_image2 = gauge2_;
   NestedModelTestOptions to;
-  to.min_delta_chi2 = min_delta_chi2;
-  to.require_determined = false;
-  const NestedModelTestResult r = TestNestedModel(&rec_, cfg, o, group, to);
-  if (r.decision == NestedModelDecision::kFailed) return false;
+  to.min_delta_chi2 = opt_.self_calibration_min_delta_chi2;
+  const auto start = Clock::now();
+  NestedModelTestResult r = TestNestedModel(&rec_, cfg, o, group, to);
+  t_->global_ba += Seconds(start);
+  std::string values;
+  for (size_t i = 0; i < r.parameters.size(); ++i)
+    values += fmt::format(" {:.6g}→{:.6g}{}", r.held_values[i], r.freed_values[i],
+                          i < r.sigmas.size() ? fmt::format(" (σ {:.3g})", r.sigmas[i]) : std::string());
+  spdlog::info("self-calibration, {}: Δχ² = {:.1f} vs {:.1f}, 1σ at the corner {:.3f} px vs rms {:.3f} px → {};{}",
+               ToString(group), r.delta_chi2, r.threshold, r.max_sigma_px, r.rms_freed_px, ToString(r.decision),
+               values);
   const bool freed = r.freed_decision();
-  spdlog::info("{} test: Δχ² = {:.1f} → {} (free fit: f {:.1f}, pp {:.2f}, {:.2f}; held: f {:.1f}, pp {:.2f}, "
-               "{:.2f})",
-               ToString(group), r.delta_chi2, freed ? "refined" : "kept", r.freed.f, r.freed.u0, r.freed.v0,
-               r.held.f, r.held.u0, r.held.v0);
+  if (freed) freed_groups_.insert(group);
+  self_calibration_.push_back(std::move(r));
   return freed;
 }
 
@@ -686,13 +695,16 @@ void ModelBuilder::Grow() {
   if (opt_.relocalise && (num_relocalised_ = RelocaliseImages()) > 0) GlobalBundleAdjust(false);
   Retriangulate();
   GlobalBundleAdjust(true);
-  const bool enough = static_cast<int>(rec_.images.size()) >= opt_.refine_principal_point_min_images;
-  if (enough && focal_from_plateau_ && TrySelfCalibration(IntrinsicGroup::kFocal, opt_.focal_min_chi2)) {
-    focal_fixed_ = false;
-    GlobalBundleAdjust(true);
+  if (static_cast<int>(rec_.images.size()) >= opt_.refine_principal_point_min_images) {
+    bool any = false;
+    if (focal_fixed_ && focal_from_plateau_ && TrySelfCalibration(IntrinsicGroup::kFocal)) {
+      focal_fixed_ = false;
+      any = true;
+    }
+    for (IntrinsicGroup g : {IntrinsicGroup::kPrincipalPoint, IntrinsicGroup::kAspect, IntrinsicGroup::kTangential})
+      if (!(g == IntrinsicGroup::kTangential && opt_.refine_tangential)) any = TrySelfCalibration(g) || any;
+    if (any) GlobalBundleAdjust(true);
   }
-  if (enough && TrySelfCalibration(IntrinsicGroup::kPrincipalPoint, opt_.principal_point_min_chi2))
-    GlobalBundleAdjust(true, true);
   UpdatePointErrors(&rec_);
 }
 
@@ -741,17 +753,29 @@ MapperResult RunIncrementalMapper(const MapperInput& input, const MapperOptions&
     builder.Grow();
     relocalised += builder.num_relocalised();
     auto& rec = builder.rec();
+    auto calibration = builder.self_calibration();
     for (const auto& [id, im] : rec.images) pool.erase(id);
     for (const auto& [id, why] : builder.fail_reasons())
       if (!reasons.count(id)) reasons[id] = why;
     if (static_cast<int>(rec.images.size()) < options.min_model_size) continue;
     spdlog::info("model {}: {} images, {} points", result.models.size(), rec.images.size(), rec.points.size());
     result.models.push_back(std::move(rec));
+    result.self_calibration.push_back(std::move(calibration));
   }
-  std::stable_sort(result.models.begin(), result.models.end(),
-                   [](const core::Reconstruction& a, const core::Reconstruction& b) {
-                     return a.images.size() > b.images.size();
-                   });
+  {  // largest first, each model with its self-calibration tests
+    std::vector<size_t> order(result.models.size());
+    std::iota(order.begin(), order.end(), 0);
+    std::stable_sort(order.begin(), order.end(), [&](size_t a, size_t b) {
+      return result.models[a].images.size() > result.models[b].images.size();
+    });
+    MapperResult sorted;
+    for (size_t i : order) {
+      sorted.models.push_back(std::move(result.models[i]));
+      sorted.self_calibration.push_back(std::move(result.self_calibration[i]));
+    }
+    result.models = std::move(sorted.models);
+    result.self_calibration = std::move(sorted.self_calibration);
+  }
   for (size_t m = 0; m < result.models.size(); ++m)
     for (const auto& [id, im] : result.models[m].images) {
       if (m == 0)

@@ -10,8 +10,8 @@
 //      largest first.
 // Intrinsics: one core::Camera per camera id (shared by its frames). When the prior is only a guess
 // (focal_known = false), focal and k1/k2 are refined by global BA once enough images constrain them; the
-// principal point is held during growth; at the end it is freed only when the data clearly ask for it
-// (a Δχ² model-selection test, see TryPrincipalPoint in the .cc).
+// principal point, aspect and tangential distortion are held during growth; at the end each is freed only when
+// the data ask for it and determine it (nested-model tests, self_calibration.h), reported in MapperResult.
 #pragma once
 
 #include <cstdint>
@@ -24,6 +24,7 @@
 
 #include "fmv3d/core/reconstruction.h"
 #include "fmv3d/features/types.h"
+#include "fmv3d/sfm/self_calibration.h"
 
 namespace fmv3d::sfm {
 
@@ -84,11 +85,13 @@ struct MapperOptions {
   double final_ba_function_tolerance = 1e-7;
   int refine_focal_min_images = 3;
   int refine_k2_min_images = 6;
-  int refine_principal_point_min_images = 8;  // from then on the final BA tests freeing it (Δχ²)
-  double principal_point_min_chi2 = 1000;  // high: small systematic effects pass a 2-dof test easily
+  // From this many images on, the final adjustment tests freeing the principal point, aspect and tangential
+  // distortion (and a telephoto scan's focal), each by the nested-model test of self_calibration.h: significant
+  // by BIC and determined by the BA's covariance to better than the observation noise.
+  int refine_principal_point_min_images = 8;
+  double self_calibration_min_delta_chi2 = 0;  // > 0: a fixed Δχ² threshold instead of BIC's k·ln(n)
   // Focal. A guessed prior is replaced by a scan over focal candidates on the strongest pairs (focal_scan.h).
   int focal_scan_pairs = 5;
-  double focal_min_chi2 = 1000;     // telephoto: free the scan's focal at the end only past this Δχ² (1 dof)
   int focal_dolly_min_images = 15;     // telephoto: multi-view focal scan once the model has this many images
   double focal_dolly_max_factor = 64;  // ... over the two-view lower bound times 1 .. this (steps of √2)
   bool fix_known_focal = false;     // a trusted prior (calibration, telemetry, --focal) stays fixed in BA
@@ -104,6 +107,7 @@ struct MapperOptions {
 
 struct MapperResult {
   std::vector<core::Reconstruction> models;     // largest first
+  std::vector<std::vector<NestedModelTestResult>> self_calibration;  // per model: the final tests, in order
   std::map<uint32_t, std::string> left_out;     // image id → reason it is not in the largest model
   nlohmann::json stats;                         // counts and timings per stage
 };

@@ -95,6 +95,38 @@ nlohmann::json RelocaliseLeftOut(const MapperInput& input, const std::vector<fea
           {"seconds", st.seconds}};
 }
 
+namespace {
+
+const char* ParameterName(core::IntrinsicIndex p) {
+  static const char* kNames[core::kNumIntrinsics] = {"f", "aspect", "u0", "v0", "k1", "k2", "p1", "p2"};
+  return kNames[p];
+}
+
+// One self-calibration decision with the figures that made it (self_calibration.h).
+nlohmann::json ToJson(const NestedModelTestResult& r) {
+  nlohmann::json params = nlohmann::json::object();
+  for (size_t i = 0; i < r.parameters.size(); ++i) {
+    nlohmann::json p = {{"held", r.held_values[i]}, {"free_fit", r.freed_values[i]}};
+    if (i < r.sigmas.size()) p["posterior_sigma"] = r.sigmas[i];
+    params[ParameterName(r.parameters[i])] = p;
+  }
+  return {{"group", ToString(r.group)},
+          {"decision", ToString(r.decision)},
+          {"freed", r.freed_decision()},
+          {"delta_chi2", r.delta_chi2},
+          {"delta_chi2_needed", r.threshold},
+          {"criterion", "free when delta_chi2 > k ln(n) (BIC; k extra parameters, n residuals) and the 1-sigma "
+                        "posterior displacement at the image corner < the rms reprojection error"},
+          {"extra_parameters", r.num_parameters},
+          {"observations", r.num_observations},
+          {"corner_displacement_1sigma_px", r.max_sigma_px},
+          {"rms_held_px", r.rms_held_px},
+          {"rms_free_px", r.rms_freed_px},
+          {"parameters", params}};
+}
+
+}  // namespace
+
 void SparseStageOptions::Check() const {
   mapper.Check();
   relocalise.options.Check();
@@ -172,7 +204,11 @@ nlohmann::json RunSparseStage(const core::Workspace& ws, const SparseStageOption
   nlohmann::json report;
   report["total_images"] = input.images.size();
   report["models"] = nlohmann::json::array();
-  for (const auto& rec : result.models) {
+  for (size_t m = 0; m < result.models.size(); ++m) {
+    const core::Reconstruction& rec = result.models[m];
+    nlohmann::json calibration = nlohmann::json::array();
+    if (m < result.self_calibration.size())
+      for (const auto& t : result.self_calibration[m]) calibration.push_back(ToJson(t));
     nlohmann::json cams = nlohmann::json::array();
     for (const auto& [id, c] : rec.cameras)
       cams.push_back({{"id", id}, {"f", c.f}, {"aspect", c.aspect}, {"u0", c.u0}, {"v0", c.v0}, {"k1", c.k1},
@@ -181,13 +217,15 @@ nlohmann::json RunSparseStage(const core::Workspace& ws, const SparseStageOption
                                 {"points", rec.points.size()},
                                 {"mean_track_length", rec.MeanTrackLength()},
                                 {"mean_reprojection_error_px", rec.MeanReprojectionError()},
-                                {"cameras", cams}});
+                                {"cameras", cams},
+                                {"self_calibration", calibration}});
   }
   const core::Reconstruction* best = result.models.empty() ? nullptr : &result.models[0];
   report["registered_images"] = best ? best->images.size() : 0;
   report["points"] = best ? best->points.size() : 0;
   report["mean_track_length"] = best ? best->MeanTrackLength() : 0.0;
   report["mean_reprojection_error_px"] = best ? best->MeanReprojectionError() : 0.0;
+  report["self_calibration"] = best ? report["models"][0]["self_calibration"] : nlohmann::json::array();
   nlohmann::json left = nlohmann::json::array();
   for (const auto& [id, why] : result.left_out) left.push_back({{"image", input.images[id - 1].name}, {"reason", why}});
   report["left_out"] = left;

@@ -29,6 +29,9 @@ void SynthOptions::Check() const {
   if (focal && !(*focal > 0)) throw Error("synth: focal length must be positive");
   for (double d : distortion)
     if (!std::isfinite(d) || std::abs(d) > 10) throw Error("synth: distortion coefficients must be finite, |k| <= 10");
+  for (int k = 0; k < 2; ++k)
+    if (!std::isfinite(principal_offset[k]) || std::abs(principal_offset[k]) >= 0.5 * (k ? height : width))
+      throw Error("synth: the principal point offset must keep the principal point inside the image");
   if (format != "png" && format != "jpg" && format != "mp4" && format != "ts")
     throw Error("synth: unknown format '" + format + "' (expected png, jpg, mp4 or ts)");
   if (IsVideo() && (width % 2 || height % 2))
@@ -59,6 +62,7 @@ nlohmann::json SynthOptions::ToJson() const {
   j["position_jitter"] = flight.position_jitter;
   j["seed"] = flight.seed;
   j["distortion"] = distortion;
+  j["principal_offset"] = principal_offset;
   j["sun_azimuth"] = render.sun_azimuth_deg;
   j["sun_elevation"] = render.sun_elevation_deg;
   j["ambient"] = render.ambient;
@@ -87,6 +91,8 @@ core::Camera SynthCamera(const SynthOptions& o) {
   c.k2 = o.distortion[1];
   c.p1 = o.distortion[2];
   c.p2 = o.distortion[3];
+  c.u0 += o.principal_offset[0];
+  c.v0 += o.principal_offset[1];
   c.Validate();
   return c;
 }

@@ -39,6 +39,7 @@ struct SynthOptions {
   int width = 1280, height = 720;
   std::optional<double> focal;                // pixels; default: 60° horizontal field of view
   std::array<double, 4> distortion{0, 0, 0, 0};  // k1 k2 p1 p2
+  std::array<double, 2> principal_offset{0, 0};  // true principal point minus the image centre, pixels
   // Sun, exposure, noise (default 1.5 DN), supersampling.
   render::RenderOptions render = [] {
     render::RenderOptions r;
@@ -63,7 +64,7 @@ struct SynthOptions {
 };
 
 // The camera the flight uses: focal from options or a 60° horizontal field of view, principal point at the
-// image centre, the given distortion.
+// image centre plus principal_offset, the given distortion.
 core::Camera SynthCamera(const SynthOptions& options);
 
 // Frame file name for index i: flight-000042.png (always .png for video, as the frame extractor names them).
