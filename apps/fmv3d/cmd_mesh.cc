@@ -1,4 +1,7 @@
 // `fmv3d mesh WS`: screened Poisson surface from WS/dense/fused.ply → WS/mesh/poisson.ply, report/mesh.json.
+#include <map>
+#include <string>
+
 #include "command.h"
 #include "fmv3d/surface/mesh_stage.h"
 
@@ -24,8 +27,16 @@ void Add(CLI::App& app) {
   cmd->add_option("--max-distance", p.max_point_distance,
                   "Remove vertices farther than this many point spacings from every point (0: off)")
       ->capture_default_str();
-  cmd->add_option("--component-share", p.min_component_share,
-                  "Keep connected parts with at least this share of the largest part's area (1: largest only)")
+  cmd->add_option("--surface", p.kind, "open (default): trimmed to the points (terrain, towns) | watertight: closed (objects)")
+      ->transform(CLI::CheckedTransformer(
+          std::map<std::string, surface::SurfaceKind>{{"open", surface::SurfaceKind::kOpen},
+                                                      {"watertight", surface::SurfaceKind::kWatertight}},
+          CLI::ignore_case));
+  cmd->add_option("--min-support", p.components.min_support_points,
+                  "Keep connected pieces with at least this many dense points on them")
+      ->capture_default_str();
+  cmd->add_option("--min-area", p.components.min_area_cells,
+                  "Keep connected pieces of at least this area, in octree cells squared")
       ->capture_default_str();
   cmd->add_option("--crop-margin", p.crop_margin, "Crop box enlargement, fraction of the points' diagonal")
       ->capture_default_str();

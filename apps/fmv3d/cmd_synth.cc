@@ -97,8 +97,8 @@ void Add(CLI::App& app) {
   cmd->add_option("--scene", o->scene, "Scene: building | town | terrain | board | sand")
       ->check(CLI::IsMember(synth::SceneNames()))
       ->capture_default_str();
-  cmd->add_option("--path", o->flight.path, "Flight path: orbit | grid | pass")
-      ->check(CLI::IsMember({"orbit", "grid", "pass"}))
+  cmd->add_option("--path", o->flight.path, "Flight path: orbit | grid | pass | oblique")
+      ->check(CLI::IsMember({"orbit", "grid", "pass", "oblique"}))
       ->capture_default_str();
   cmd->add_option("--frames", o->flight.frames, "Number of frames")->check(CLI::PositiveNumber)->capture_default_str();
   cmd->add_option("--size", *size, "Image size WIDTHxHEIGHT")->check(kSize)->capture_default_str();

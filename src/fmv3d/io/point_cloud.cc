@@ -19,6 +19,7 @@ void OrientedPointCloud::Reserve(size_t n) {
   normals.reserve(n);
   colors.reserve(n);
   visibility.reserve(n);
+  if (has_sigma()) sigma.reserve(n);
 }
 
 void OrientedPointCloud::Append(const OrientedPointCloud& other) {
@@ -29,11 +30,13 @@ void OrientedPointCloud::Append(const OrientedPointCloud& other) {
   const bool keep_n = has_normals() && other.has_normals();
   const bool keep_c = has_colors() && other.has_colors();
   const bool keep_v = has_visibility() && other.has_visibility();
+  const bool keep_s = has_sigma() && other.has_sigma();
   positions.insert(positions.end(), other.positions.begin(), other.positions.end());
   if (keep_n) normals.insert(normals.end(), other.normals.begin(), other.normals.end()); else normals.clear();
   if (keep_c) colors.insert(colors.end(), other.colors.begin(), other.colors.end()); else colors.clear();
   if (keep_v) visibility.insert(visibility.end(), other.visibility.begin(), other.visibility.end());
   else visibility.clear();
+  if (keep_s) sigma.insert(sigma.end(), other.sigma.begin(), other.sigma.end()); else sigma.clear();
 }
 
 Eigen::AlignedBox3d OrientedPointCloud::Bounds() const {
@@ -46,7 +49,7 @@ Eigen::AlignedBox3d OrientedPointCloud::Bounds() const {
 void OrientedPointCloud::Validate() const {
   const size_t n = positions.size();
   if ((!normals.empty() && normals.size() != n) || (!colors.empty() && colors.size() != n) ||
-      (!visibility.empty() && visibility.size() != n))
+      (!visibility.empty() && visibility.size() != n) || (!sigma.empty() && sigma.size() != n))
     throw Error("point cloud: attribute count differs from the point count");
 }
 
@@ -59,6 +62,7 @@ void WritePointCloudPly(const OrientedPointCloud& cloud, const fs::path& path) {
         << cloud.size() << "\nproperty float x\nproperty float y\nproperty float z\n";
     if (cloud.has_normals()) out << "property float nx\nproperty float ny\nproperty float nz\n";
     if (cloud.has_colors()) out << "property uchar red\nproperty uchar green\nproperty uchar blue\n";
+    if (cloud.has_sigma()) out << "property float sigma\n";
     if (cloud.has_visibility()) out << "property list uchar int visibility\n";
     out << "end_header\n";
     std::string buf;
@@ -70,6 +74,7 @@ void WritePointCloudPly(const OrientedPointCloud& cloud, const fs::path& path) {
       put(xyz, sizeof xyz);
       if (cloud.has_normals()) put(cloud.normals[i].data(), 3 * sizeof(float));
       if (cloud.has_colors()) put(cloud.colors[i].data(), 3);
+      if (cloud.has_sigma()) put(&cloud.sigma[i], sizeof(float));
       if (cloud.has_visibility()) {
         const auto& v = cloud.visibility[i];
         const uint8_t n = static_cast<uint8_t>(std::min<size_t>(v.size(), 255));
@@ -223,7 +228,7 @@ OrientedPointCloud ReadPointCloudPly(const fs::path& path) {
   ValueReader reader(in, format, file);
   for (const Element& e : elements) {
     const bool is_vertex = e.name == "vertex";
-    int ix = -1, iy = -1, iz = -1, inx = -1, iny = -1, inz = -1, ir = -1, ig = -1, ib = -1, ivis = -1;
+    int ix = -1, iy = -1, iz = -1, inx = -1, iny = -1, inz = -1, ir = -1, ig = -1, ib = -1, ivis = -1, isig = -1;
     for (size_t k = 0; k < e.props.size(); ++k) {
       const auto& n = e.props[k].name;
       const int kk = static_cast<int>(k);
@@ -232,6 +237,7 @@ OrientedPointCloud ReadPointCloudPly(const fs::path& path) {
       else if (n == "red" || n == "r") ir = kk; else if (n == "green" || n == "g") ig = kk;
       else if (n == "blue" || n == "b") ib = kk;
       else if (n == "visibility" && e.props[k].is_list) ivis = kk;
+      else if (n == "sigma" && !e.props[k].is_list) isig = kk;
     }
     if (is_vertex) {
       if (ix < 0 || iy < 0 || iz < 0) throw Error(file + ": PLY vertices have no x, y, z");
@@ -239,6 +245,7 @@ OrientedPointCloud ReadPointCloudPly(const fs::path& path) {
       if (inx >= 0 && iny >= 0 && inz >= 0) cloud.normals.resize(e.count);
       if (ir >= 0 && ig >= 0 && ib >= 0) cloud.colors.resize(e.count);
       if (ivis >= 0) cloud.visibility.resize(e.count);
+      if (isig >= 0) cloud.sigma.resize(e.count);
     }
     std::vector<double> values(e.props.size());
     for (size_t i = 0; i < e.count; ++i) {
@@ -260,6 +267,7 @@ OrientedPointCloud ReadPointCloudPly(const fs::path& path) {
       }
       if (!is_vertex) continue;
       cloud.positions[i] = {values[ix], values[iy], values[iz]};
+      if (cloud.has_sigma()) cloud.sigma[i] = static_cast<float>(values[isig]);
       if (cloud.has_normals())
         cloud.normals[i] = {float(values[inx]), float(values[iny]), float(values[inz])};
       if (cloud.has_colors()) {

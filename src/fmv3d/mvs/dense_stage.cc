@@ -233,6 +233,8 @@ nlohmann::json RunDenseStage(const fs::path& workspace, const DenseStageOptions&
         {"max_relative_uncertainty", options.fusion.max_relative_uncertainty},
         {"median_normal_sigma", fstats.median_uncertainty},
         {"max_normal_sigma", fstats.max_uncertainty},
+        {"sigma_scale", fstats.sigma_scale},
+        {"sigma_coverage", options.fusion.write_sigma ? nlohmann::json(options.fusion.sigma_coverage) : nlohmann::json()},
         {"mean_consistent_views", mean_views},
         {"consistent_views_histogram", hist}}},
       {"seconds",

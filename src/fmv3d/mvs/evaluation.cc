@@ -56,6 +56,98 @@ double Quantile(std::vector<double> v, double q) {
   return v[k];
 }
 
+struct CompletenessResult {
+  size_t surface_samples = 0, seen_samples = 0, complete_samples = 0;
+  double completeness = 0, sample_spacing = 0;
+};
+
+// Completeness of `pts` (truth frame) over the surface of `mesh` inside `region` (empty: everywhere) that
+// min_cameras true cameras see; `breakdown` (optional) gets the per-orientation and per-camera-count parts.
+CompletenessResult Completeness(const std::vector<Eigen::Vector3d>& pts, const geometry::MeshDistance& mesh,
+                                const io::TexturedMesh& scene, const core::Reconstruction& truth,
+                                double characteristic_length, const Eigen::AlignedBox3d& region,
+                                const DenseEvaluationOptions& opt, std::vector<DenseBreakdown>* breakdown_out) {
+  auto horizontal = [](const Eigen::Vector3d& n) { return std::abs(n.z()) >= 0.8; };
+  std::vector<DenseBreakdown> dummy(9);
+  std::vector<DenseBreakdown>& breakdown = breakdown_out ? *breakdown_out : dummy;
+  // Completeness over the surface two or more true cameras see.
+  // Sample only the triangles of the region (their centroid inside it).
+  std::vector<Eigen::Vector3i> region_tris;
+  double area = 0;
+  for (size_t f = 0; f < mesh.num_triangles(); ++f) {
+    const auto& tri = mesh.triangles()[f];
+    const Eigen::Vector3d c = (mesh.vertices()[tri[0]] + mesh.vertices()[tri[1]] + mesh.vertices()[tri[2]]) / 3;
+    if (region.isEmpty() || region.contains(c)) {
+      area += mesh.Area(static_cast<int>(f));
+      region_tris.push_back(tri);
+    }
+  }
+  if (region_tris.empty()) throw Error("evaluate-dense: no surface of the true mesh inside the evaluation region");
+  const geometry::MeshDistance region_mesh(mesh.vertices(), region_tris);
+  const double sample_spacing = std::max(opt.min_spacing_fraction * characteristic_length,
+                               std::sqrt(area / static_cast<double>(opt.max_surface_samples)));
+  std::vector<int> faces;
+  const auto samples = region_mesh.SampleSurface(sample_spacing, &faces, 7);
+  std::vector<std::atomic<uint16_t>> seen(samples.size());
+  for (auto& s : seen) s = 0;
+  const render::Renderer renderer(scene);
+  render::RenderOptions ro;
+  ro.supersample = 1;
+  ro.shading = false;
+  for (const auto& [id, im] : truth.images) {
+    core::Camera cam = truth.cameras.at(im.camera_id);
+    const double scale = std::min(1.0, static_cast<double>(opt.render_max_size) / std::max(cam.width, cam.height));
+    const int w = std::max(1, static_cast<int>(std::lround(cam.width * scale)));
+    const int h = std::max(1, static_cast<int>(std::lround(cam.height * scale)));
+    const double sx = static_cast<double>(w) / cam.width, sy = static_cast<double>(h) / cam.height;
+    cam.f *= sy;
+    cam.aspect *= sx / sy;
+    cam.u0 *= sx;
+    cam.v0 *= sy;
+    cam.width = w;
+    cam.height = h;
+    const cv::Mat depth = renderer.Render(cam, im.pose, ro).depth;
+    tbb::parallel_for(size_t{0}, samples.size(), [&](size_t i) {
+      const Eigen::Vector3d xc = im.pose.Transform(samples[i]);
+      if (!(xc.z() > 0)) return;
+      const Eigen::Vector3d view_dir = (im.pose.Centre() - samples[i]).normalized();
+      if (region_mesh.Normal(faces[i]).dot(view_dir) <= 0) return;  // back side of the face
+      const Eigen::Vector2d uv = cam.Project(xc);
+      const int u = static_cast<int>(std::floor(uv.x())), v = static_cast<int>(std::floor(uv.y()));
+      if (u < 0 || v < 0 || u >= w || v >= h) return;
+      const float d = depth.at<float>(v, u);
+      // Tolerance: the pixel footprint on a slanted surface plus a share of the length.
+      const double tol = 0.01 * characteristic_length + 3 * xc.z() / cam.f;
+      if (d > 0 && std::abs(d - xc.z()) <= tol) seen[i]++;
+    });
+  }
+  const double radius = opt.completeness_fraction * characteristic_length;
+  const PointGrid grid(pts, radius);
+  std::atomic<size_t> n_seen{0}, n_complete{0};
+  std::vector<uint8_t> complete(samples.size(), 0);
+  tbb::parallel_for(size_t{0}, samples.size(), [&](size_t i) {
+    if (seen[i] < opt.min_cameras) return;
+    n_seen++;
+    if (grid.AnyWithin(samples[i], radius)) n_complete++, complete[i] = 1;
+  });
+  for (size_t i = 0; i < samples.size(); ++i) {
+    if (seen[i] < opt.min_cameras) continue;
+    const int by_orientation = horizontal(region_mesh.Normal(faces[i])) ? 4 : 5;
+    const int by_cameras = seen[i] <= 3 ? 6 : (seen[i] <= 7 ? 7 : 8);
+    for (int part : {by_orientation, by_cameras}) {
+      breakdown[part].seen_samples++;
+      breakdown[part].complete_samples += complete[i];
+    }
+  }
+  CompletenessResult r;
+  r.surface_samples = samples.size();
+  r.seen_samples = n_seen;
+  r.complete_samples = n_complete;
+  r.completeness = n_seen ? static_cast<double>(n_complete) / static_cast<double>(n_seen) : 0.0;
+  r.sample_spacing = sample_spacing;
+  return r;
+}
+
 }  // namespace
 
 void DenseEvaluationOptions::Check() const {
@@ -72,11 +164,20 @@ nlohmann::json DenseEvaluation::ToJson() const {
            {{"median", median_error},
             {"p90", p90_error},
             {"mean", mean_error},
+            {"rms", rms_error},
+            {"rms_percent_of_length", 100 * rms_error / characteristic_length},
             {"median_percent_of_length", 100 * median_fraction()},
             {"p90_percent_of_length", 100 * p90_fraction()},
             {"within_1_percent_of_length", within_1_percent}}},
+          {"sigma",
+           {{"exceeded", sigma_exceeded < 0 ? nlohmann::json() : nlohmann::json(sigma_exceeded)},
+            {"exceeded_outside_region",
+             sigma_exceeded_outside < 0 ? nlohmann::json() : nlohmann::json(sigma_exceeded_outside)},
+            {"median", median_sigma}}},
           {"completeness",
            {{"fraction", completeness},
+            {"fraction_everywhere", completeness_everywhere},
+            {"seen_everywhere", seen_samples_everywhere},
             {"surface_samples", surface_samples},
             {"seen_by_2_cameras", seen_samples},
             {"complete_samples", complete_samples},
@@ -132,90 +233,47 @@ DenseEvaluation EvaluateDense(const io::OrientedPointCloud& cloud, const core::R
     ev.breakdown[part].median_error = Quantile(d, 0.5);
     ev.breakdown[part].p90_error = Quantile(d, 0.9);
   }
-  double sum = 0;
+  double sum = 0, sum2 = 0;
   size_t within = 0;
   for (double d : dist) {
     sum += d;
+    sum2 += d * d;
     within += d <= 0.01 * characteristic_length;
   }
   ev.mean_error = sum / static_cast<double>(dist.size());
+  ev.rms_error = std::sqrt(sum2 / static_cast<double>(dist.size()));
+  if (cloud.has_sigma()) {
+    size_t n_all = 0, over_all = 0, n_out = 0, over_out = 0;
+    std::vector<double> sig(dist.size());
+    for (size_t k = 0; k < dist.size(); ++k) {
+      sig[k] = static_cast<double>(cloud.sigma[k * stride]) * ev.alignment.s;
+      const bool over = dist[k] > sig[k];
+      ++n_all, over_all += over;
+      if (part_of[k] >= 2) ++n_out, over_out += over;
+    }
+    ev.sigma_exceeded = static_cast<double>(over_all) / static_cast<double>(std::max<size_t>(n_all, 1));
+    if (n_out > 0) ev.sigma_exceeded_outside = static_cast<double>(over_out) / static_cast<double>(n_out);
+    ev.median_sigma = Quantile(sig, 0.5);
+  }
   ev.within_1_percent = static_cast<double>(within) / static_cast<double>(dist.size());
   ev.median_error = Quantile(dist, 0.5);
   ev.p90_error = Quantile(dist, 0.9);
 
-  // Completeness over the surface two or more true cameras see.
-  // Sample only the triangles of the region (their centroid inside it).
-  std::vector<Eigen::Vector3i> region_tris;
-  double area = 0;
-  for (size_t f = 0; f < mesh.num_triangles(); ++f) {
-    const auto& tri = mesh.triangles()[f];
-    const Eigen::Vector3d c = (mesh.vertices()[tri[0]] + mesh.vertices()[tri[1]] + mesh.vertices()[tri[2]]) / 3;
-    if (opt.region.isEmpty() || opt.region.contains(c)) {
-      area += mesh.Area(static_cast<int>(f));
-      region_tris.push_back(tri);
-    }
+  // Completeness over the surface two or more true cameras see: in the modelled region, and everywhere.
+  const auto in_region = Completeness(pts, mesh, scene, truth, characteristic_length, opt.region, opt, &ev.breakdown);
+  ev.surface_samples = in_region.surface_samples;
+  ev.seen_samples = in_region.seen_samples;
+  ev.complete_samples = in_region.complete_samples;
+  ev.completeness = in_region.completeness;
+  ev.sample_spacing = in_region.sample_spacing;
+  if (opt.region.isEmpty()) {
+    ev.completeness_everywhere = ev.completeness;
+    ev.seen_samples_everywhere = ev.seen_samples;
+  } else {
+    const auto all = Completeness(pts, mesh, scene, truth, characteristic_length, Eigen::AlignedBox3d(), opt, nullptr);
+    ev.completeness_everywhere = all.completeness;
+    ev.seen_samples_everywhere = all.seen_samples;
   }
-  if (region_tris.empty()) throw Error("evaluate-dense: no surface of the true mesh inside the evaluation region");
-  const geometry::MeshDistance region_mesh(mesh.vertices(), region_tris);
-  ev.sample_spacing = std::max(opt.min_spacing_fraction * characteristic_length,
-                               std::sqrt(area / static_cast<double>(opt.max_surface_samples)));
-  std::vector<int> faces;
-  const auto samples = region_mesh.SampleSurface(ev.sample_spacing, &faces, 7);
-  std::vector<std::atomic<uint16_t>> seen(samples.size());
-  for (auto& s : seen) s = 0;
-  const render::Renderer renderer(scene);
-  render::RenderOptions ro;
-  ro.supersample = 1;
-  ro.shading = false;
-  for (const auto& [id, im] : truth.images) {
-    core::Camera cam = truth.cameras.at(im.camera_id);
-    const double scale = std::min(1.0, static_cast<double>(opt.render_max_size) / std::max(cam.width, cam.height));
-    const int w = std::max(1, static_cast<int>(std::lround(cam.width * scale)));
-    const int h = std::max(1, static_cast<int>(std::lround(cam.height * scale)));
-    const double sx = static_cast<double>(w) / cam.width, sy = static_cast<double>(h) / cam.height;
-    cam.f *= sy;
-    cam.aspect *= sx / sy;
-    cam.u0 *= sx;
-    cam.v0 *= sy;
-    cam.width = w;
-    cam.height = h;
-    const cv::Mat depth = renderer.Render(cam, im.pose, ro).depth;
-    tbb::parallel_for(size_t{0}, samples.size(), [&](size_t i) {
-      const Eigen::Vector3d xc = im.pose.Transform(samples[i]);
-      if (!(xc.z() > 0)) return;
-      const Eigen::Vector3d view_dir = (im.pose.Centre() - samples[i]).normalized();
-      if (region_mesh.Normal(faces[i]).dot(view_dir) <= 0) return;  // back side of the face
-      const Eigen::Vector2d uv = cam.Project(xc);
-      const int u = static_cast<int>(std::floor(uv.x())), v = static_cast<int>(std::floor(uv.y()));
-      if (u < 0 || v < 0 || u >= w || v >= h) return;
-      const float d = depth.at<float>(v, u);
-      // Tolerance: the pixel footprint on a slanted surface plus a share of the length.
-      const double tol = 0.01 * characteristic_length + 3 * xc.z() / cam.f;
-      if (d > 0 && std::abs(d - xc.z()) <= tol) seen[i]++;
-    });
-  }
-  const double radius = opt.completeness_fraction * characteristic_length;
-  const PointGrid grid(pts, radius);
-  std::atomic<size_t> n_seen{0}, n_complete{0};
-  std::vector<uint8_t> complete(samples.size(), 0);
-  tbb::parallel_for(size_t{0}, samples.size(), [&](size_t i) {
-    if (seen[i] < opt.min_cameras) return;
-    n_seen++;
-    if (grid.AnyWithin(samples[i], radius)) n_complete++, complete[i] = 1;
-  });
-  for (size_t i = 0; i < samples.size(); ++i) {
-    if (seen[i] < opt.min_cameras) continue;
-    const int by_orientation = horizontal(region_mesh.Normal(faces[i])) ? 4 : 5;
-    const int by_cameras = seen[i] <= 3 ? 6 : (seen[i] <= 7 ? 7 : 8);
-    for (int part : {by_orientation, by_cameras}) {
-      ev.breakdown[part].seen_samples++;
-      ev.breakdown[part].complete_samples += complete[i];
-    }
-  }
-  ev.surface_samples = samples.size();
-  ev.seen_samples = n_seen;
-  ev.complete_samples = n_complete;
-  ev.completeness = n_seen ? static_cast<double>(n_complete) / static_cast<double>(n_seen) : 0.0;
   return ev;
 }
 

@@ -48,11 +48,16 @@ struct DenseBreakdown {
 struct DenseEvaluation {
   size_t points = 0;
   double characteristic_length = 0;
-  double median_error = 0, p90_error = 0, mean_error = 0;  // truth units
+  double median_error = 0, p90_error = 0, mean_error = 0, rms_error = 0;  // truth units
   double within_1_percent = 0;                              // share of points within 1% of the length
   size_t surface_samples = 0, seen_samples = 0, complete_samples = 0;
-  double completeness = 0;
+  double completeness = 0;                      // in the region
+  double completeness_everywhere = 0;           // all the seen surface (the region's when it is everywhere)
+  size_t seen_samples_everywhere = 0;
   double sample_spacing = 0;
+  // Stated σ (truth units) against the true error, when the cloud has one: share exceeded, all points and
+  // those outside the region (the far field of the synthetic scenes); -1 when there is no σ / no such point.
+  double sigma_exceeded = -1, sigma_exceeded_outside = -1, median_sigma = 0;
   core::Sim3 alignment;  // model → truth
   std::vector<DenseBreakdown> breakdown;
   double median_fraction() const { return median_error / characteristic_length; }

@@ -26,6 +26,7 @@ void FusionOptions::Check() const {
   if (!(edge_depth_jump > 0)) throw Error("fusion: edge_depth_jump must be positive");
   if (!(max_relative_uncertainty == 0 || max_relative_uncertainty >= 1))
     throw Error("fusion: max_relative_uncertainty must be 0 (off) or at least 1");
+  if (!(sigma_coverage > 0)) throw Error("fusion: sigma_coverage must be positive");
 }
 
 double NormalUncertainty(const Eigen::Vector3d& X, const Eigen::Vector3d& n,
@@ -156,7 +157,8 @@ struct FusedPoint {
   io::Rgb8 color;
   std::vector<uint32_t> visibility;
   int support = 0;
-  float sigma = 0;  // σ_n (0 when the uncertainty filter is off)
+  float sigma = 0;     // σ_n (0 when neither the uncertainty filter nor the stated σ is on)
+  float scatter = -1;  // RMS spread of the consistent views' points along the normal (-1: fewer than 2)
 };
 
 // The fusion proper over (eroded) maps; every accepted point goes to emit(FusedPoint&&).
@@ -172,7 +174,7 @@ void FuseMaps(const std::map<uint32_t, FusionView>& maps, const FusionOptions& o
     bool fresh;
   };
   std::vector<Hit> hits;
-  const bool uncertainty = opt.max_relative_uncertainty > 0;
+  const bool uncertainty = opt.max_relative_uncertainty > 0 || opt.write_sigma;
   std::vector<const ViewGeometry*> hit_views;
   std::vector<double> hit_px;
   for (const auto& [rid, ref] : maps) {
@@ -242,6 +244,16 @@ void FuseMaps(const std::map<uint32_t, FusionView>& maps, const FusionOptions& o
         if (nrm.norm() < 1e-6f) nrm = n_ref;
         p.position = pos;
         p.normal = nrm.normalized();
+        if (fresh >= 2) {
+          double s2 = 0;
+          const Eigen::Vector3d n = p.normal.cast<double>();
+          for (const Hit& h : hits)
+            if (h.fresh)
+              s2 += std::pow((h.view->geom.Unproject({h.x + 0.5, h.y + 0.5}, h.view->depth.at<float>(h.y, h.x)) - pos)
+                                 .dot(n),
+                             2);
+          p.scatter = static_cast<float>(std::sqrt(s2 / (fresh - 1)));
+        }
         p.color = io::Rgb8(static_cast<uint8_t>(std::lround(col.x())), static_cast<uint8_t>(std::lround(col.y())),
                            static_cast<uint8_t>(std::lround(col.z())));
         p.support = support;
@@ -270,6 +282,22 @@ void SetUncertaintyThreshold(std::vector<float> sigmas, const FusionOptions& opt
   st->max_uncertainty = opt.max_relative_uncertainty * st->median_uncertainty;
 }
 
+// The scale that turns σ_n (pixel precision known up to a common factor) into world units: the median, over
+// the points with a measured spread, of spread / σ_n (both along the normal).
+double SigmaScale(const std::vector<float>& sigmas, const std::vector<float>& scatters) {
+  std::vector<double> r;
+  for (size_t i = 0; i < sigmas.size(); ++i)
+    if (scatters[i] > 0 && sigmas[i] > 0 && std::isfinite(sigmas[i])) r.push_back(scatters[i] / sigmas[i]);
+  if (r.empty()) return 0;
+  std::nth_element(r.begin(), r.begin() + static_cast<std::ptrdiff_t>(r.size() / 2), r.end());
+  return r[r.size() / 2];
+}
+
+float StatedSigma(float sigma_n, double scale, const FusionOptions& opt) {
+  const double s = opt.sigma_coverage * scale * sigma_n;
+  return std::isfinite(s) ? static_cast<float>(s) : std::numeric_limits<float>::max();
+}
+
 bool Keep(float sigma, const FusionOptions& opt, const FusionStats& st) {
   return !(opt.max_relative_uncertainty > 0) || sigma <= st.max_uncertainty;
 }
@@ -294,7 +322,7 @@ io::OrientedPointCloud FuseDepthMaps(const std::map<uint32_t, FusionView>& views
   }
   io::OrientedPointCloud cloud;
   std::vector<int> support_of;
-  std::vector<float> sigma_of;
+  std::vector<float> sigma_of, scatter_of;
   FuseMaps(*maps, opt, &st, [&](FusedPoint&& p) {
     cloud.positions.push_back(p.position);
     cloud.normals.push_back(p.normal);
@@ -302,8 +330,11 @@ io::OrientedPointCloud FuseDepthMaps(const std::map<uint32_t, FusionView>& views
     cloud.visibility.push_back(std::move(p.visibility));
     support_of.push_back(p.support);
     sigma_of.push_back(p.sigma);
+    scatter_of.push_back(p.scatter);
   });
   SetUncertaintyThreshold(sigma_of, opt, &st);
+  st.sigma_scale = opt.write_sigma ? SigmaScale(sigma_of, scatter_of) : 0;
+  if (opt.write_sigma) cloud.sigma.resize(cloud.size());
   // In place (no second copy of the cloud).
   size_t j = 0;
   for (size_t i = 0; i < cloud.size(); ++i) {
@@ -311,6 +342,7 @@ io::OrientedPointCloud FuseDepthMaps(const std::map<uint32_t, FusionView>& views
       ++st.rejected_uncertainty;
       continue;
     }
+    if (opt.write_sigma) cloud.sigma[j] = StatedSigma(sigma_of[i], st.sigma_scale, opt);
     if (j != i) {
       cloud.positions[j] = cloud.positions[i];
       cloud.normals[j] = cloud.normals[i];
@@ -324,6 +356,7 @@ io::OrientedPointCloud FuseDepthMaps(const std::map<uint32_t, FusionView>& views
   cloud.normals.resize(j);
   cloud.colors.resize(j);
   cloud.visibility.resize(j);
+  if (opt.write_sigma) cloud.sigma.resize(j);
   support_of.resize(j);
   for (int s : support_of) ++st.views_histogram[s];
   if (stats) *stats = st;
@@ -338,7 +371,7 @@ size_t FuseDepthMapsToPly(std::map<uint32_t, FusionView> views, const FusionOpti
   // Pass 1: every point's PLY record (float x y z, nx ny nz, uchar r g b, uchar n, n × int32 image id) to a
   // scratch file; only σ_n and the view count stay in memory.
   const std::filesystem::path scratch = ply.string() + ".unfiltered";
-  std::vector<float> sigma_of;
+  std::vector<float> sigma_of, scatter_of;
   std::vector<uint8_t> support_of;
   {
     std::ofstream out(scratch, std::ios::binary);
@@ -360,12 +393,15 @@ size_t FuseDepthMapsToPly(std::map<uint32_t, FusionView> views, const FusionOpti
       }
       out.write(rec.data(), static_cast<std::streamsize>(rec.size()));
       sigma_of.push_back(p.sigma);
+      scatter_of.push_back(p.scatter);
       support_of.push_back(static_cast<uint8_t>(std::min(p.support, 255)));
     });
     if (!out) throw Error(scratch.string() + ": write failed");
   }
   views.clear();
   SetUncertaintyThreshold(sigma_of, opt, &st);
+  st.sigma_scale = opt.write_sigma ? SigmaScale(sigma_of, scatter_of) : 0;
+  scatter_of = {};
   size_t kept = 0;
   for (size_t i = 0; i < sigma_of.size(); ++i)
     if (Keep(sigma_of[i], opt, st)) ++kept, ++st.views_histogram[support_of[i]];
@@ -379,14 +415,22 @@ size_t FuseDepthMapsToPly(std::map<uint32_t, FusionView> views, const FusionOpti
         << "\nproperty float x\nproperty float y\nproperty float z\n"
         << "property float nx\nproperty float ny\nproperty float nz\n"
         << "property uchar red\nproperty uchar green\nproperty uchar blue\n"
-        << "property list uchar int visibility\nend_header\n";
+        << (opt.write_sigma ? "property float sigma\n" : "") << "property list uchar int visibility\nend_header\n";
     constexpr size_t kFixed = 6 * sizeof(float) + 3 + 1;
     char rec[kFixed + 255 * 4];
     for (size_t i = 0; i < sigma_of.size(); ++i) {
       if (!in.read(rec, kFixed)) throw Error(scratch.string() + ": truncated");
       const size_t n = static_cast<uint8_t>(rec[kFixed - 1]);
       if (n > 0 && !in.read(rec + kFixed, static_cast<std::streamsize>(4 * n))) throw Error(scratch.string() + ": truncated");
-      if (Keep(sigma_of[i], opt, st)) out.write(rec, static_cast<std::streamsize>(kFixed + 4 * n));
+      if (!Keep(sigma_of[i], opt, st)) continue;
+      if (opt.write_sigma) {  // between the colour and the visibility list, as io::WritePointCloudPly puts it
+        out.write(rec, static_cast<std::streamsize>(kFixed - 1));
+        const float sigma = StatedSigma(sigma_of[i], st.sigma_scale, opt);
+        out.write(reinterpret_cast<const char*>(&sigma), sizeof sigma);
+        out.write(rec + kFixed - 1, static_cast<std::streamsize>(1 + 4 * n));
+      } else {
+        out.write(rec, static_cast<std::streamsize>(kFixed + 4 * n));
+      }
     }
     if (!out) throw Error(tmp.string() + ": write failed");
   });

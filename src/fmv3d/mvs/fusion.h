@@ -38,6 +38,13 @@
 // distribution. The threshold is relative, so it does not depend on the scene's units, the working
 // resolution or the image noise; COLMAP's and OpenMVS's filters on triangulation angle and view count aim at
 // the same points with absolute thresholds.
+//
+// Stated σ (write_sigma): σ_n in world units, written per point (PLY property "sigma"). σ_n is known up to the
+// common pixel-precision factor; the cloud measures that factor itself: for every point fused from two or more
+// fresh pixels, the RMS spread of their points along the normal, and the scale is the median over the cloud of
+// spread / σ_n. The stated σ is sigma_coverage × scale × σ_n: a bound that the true error along the normal
+// exceeds in few cases (sigma_coverage 3: ≤ 5% on the synthetic scenes, bench/results/coverage.md). Far,
+// grazing or low-parallax surface keeps its points with a large σ rather than being cut off by the depth range.
 #pragma once
 
 #include <cstdint>
@@ -62,6 +69,8 @@ struct FusionOptions {
   int edge_erosion_px = 4;            // 0 = off; about PatchMatch's window radius
   double edge_depth_jump = 0.05;      // relative depth step that makes an occluding edge
   double max_relative_uncertainty = 10;  // 0 = off; drop points with σ_n > this · the median σ_n (above)
+  bool write_sigma = true;            // compute and write each point's stated σ (above)
+  double sigma_coverage = 3;          // stated σ = this × the measured per-point standard deviation
   void Check() const;
 };
 
@@ -87,6 +96,7 @@ struct FusionStats {
   size_t rejected_uncertainty = 0;  // fused points dropped by the uncertainty filter
   double median_uncertainty = 0;    // median σ_n of the fused points before that filter (world units)
   double max_uncertainty = 0;       // the threshold applied (0 when the filter is off)
+  double sigma_scale = 0;           // world units per unit of σ_n (stated σ, above); 0 when not measured
   std::map<int, size_t> views_histogram;  // number of consistent views → points
 };
 

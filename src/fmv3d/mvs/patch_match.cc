@@ -134,7 +134,12 @@ class Solver {
     return -dir;
   }
 
-  float RandomDepth(Rng& rng) const { return dmin_ + rng.Uniform() * (dmax_ - dmin_); }
+  // Uniform in inverse depth (disparity): equal steps of parallax, so a range that reaches far surfaces
+  // does not spend its samples there.
+  float RandomDepth(Rng& rng) const {
+    const float inv_far = 1.0f / dmax_, inv_near = 1.0f / dmin_;
+    return 1.0f / (inv_far + rng.Uniform() * (inv_near - inv_far));
+  }
 
   void ComputeRefPatch(int x, int y, RefPatch* p) const {
     const float* img = L_.ref.ptr<float>(0);

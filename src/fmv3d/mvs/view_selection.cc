@@ -44,6 +44,8 @@ void ViewSelectionOptions::Check() const {
   if (!(min_angle_deg >= 0 && min_angle_deg < max_angle_deg && max_angle_deg <= 180))
     throw Error("view selection: need 0 <= min_angle_deg < max_angle_deg <= 180");
   if (!(good_angle_deg > 0)) throw Error("view selection: good_angle_deg must be positive");
+  if (!(far_parallax_px >= 0)) throw Error("view selection: far_parallax_px must be >= 0");
+  if (!(max_far_factor >= 1)) throw Error("view selection: max_far_factor must be at least 1");
 }
 
 std::vector<uint32_t> SelectReferenceViews(const core::Reconstruction& rec,
@@ -181,9 +183,21 @@ std::map<uint32_t, ReferenceSelection> SelectViews(const core::Reconstruction& r
       for (size_t k = 0; k < pts.size(); ++k) {
         const Eigen::Vector3d& X = pts[k];
         if (sel.from_sparse_points) {
+          // Shared when j observes the point (its track) or sees it: the point projects into j from the same
+          // side of the surface (within max_angle of the reference's ray) at a comparable distance. Video
+          // tracks break into short pieces, so tracks alone would only pair neighbouring keyframes; the wider
+          // baselines over the whole clip are what far surfaces need.
           const auto& tr = sparse[k]->track;
-          if (std::none_of(tr.begin(), tr.end(), [&](const core::TrackElement& te) { return te.image_id == jd; }))
-            continue;
+          if (std::none_of(tr.begin(), tr.end(), [&](const core::TrackElement& te) { return te.image_id == jd; })) {
+            if (!options.sources_by_projection) continue;
+            const Eigen::Vector3d a = cr - X, b = cj - X;
+            const double ratio = b.norm() / a.norm();
+            if (ratio < 0.5 || ratio > 2 || a.dot(b) < std::cos(options.max_angle_deg * kDeg) * a.norm() * b.norm())
+              continue;
+            Eigen::Vector2d uv;
+            if (!src.Project(X, &uv) || uv.x() < 0 || uv.y() < 0 || uv.x() > src.width || uv.y() > src.height)
+              continue;
+          }
         } else {
           Eigen::Vector2d uv;
           if (!src.Project(X, &uv) || uv.x() < 0 || uv.y() < 0 || uv.x() > src.width || uv.y() > src.height)
@@ -208,6 +222,16 @@ std::map<uint32_t, ReferenceSelection> SelectViews(const core::Reconstruction& r
       return a.score != b.score ? a.score > b.score : a.image_id < b.image_id;
     });
     if (cands.size() > static_cast<size_t>(options.max_neighbours)) cands.resize(options.max_neighbours);
+    // Far surfaces: the sparse points rarely reach them (their short tracks triangulate too flatly), so the
+    // range extends to where the widest chosen baseline still gives far_parallax_px of parallax — farther,
+    // nothing can be resolved; nearer, a cut-off range would hide surface the clip's baseline can resolve.
+    if (sel.from_sparse_points && options.far_parallax_px > 0 && !cands.empty()) {
+      double baseline = 0;
+      for (const auto& nb : cands) baseline = std::max(baseline, (geoms.at(nb.image_id).Centre() - cr).norm());
+      const double z_far = fr * baseline / options.far_parallax_px;
+      const double hi = Percentile(depths, 0.99);
+      sel.depth_max = std::max(sel.depth_max, std::min(z_far, options.max_far_factor * hi));
+    }
     sel.neighbours = std::move(cands);
     if (sel.neighbours.empty())
       sel.problem = "no other view shares enough of its surface at a triangulation angle in [" +

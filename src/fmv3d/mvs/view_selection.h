@@ -8,6 +8,8 @@
 // so wide-enough baselines and equal or finer resolution win. A model without sparse points (e.g. ground-truth
 // cameras only) is handled with stand-in points: a grid of the reference's rays at the depth where the
 // cameras' optical axes converge.
+// Candidates share a point by track or by sight (sources_by_projection), so sources can come from anywhere in
+// the clip; the depth range reaches as far as the widest chosen baseline resolves (far_parallax_px).
 #pragma once
 
 #include <cstdint>
@@ -26,6 +28,13 @@ struct ViewSelectionOptions {
   double min_angle_deg = 1.0;    // median triangulation angle below this: too little parallax
   double max_angle_deg = 60.0;   // above this: the patches look too different
   double good_angle_deg = 10.0;  // angle from which a shared point counts fully
+  // A sparse point is shared with j also when j sees it (projects into j, on the reference's side, at 0.5–2x
+  // the distance) without being in its track; false: tracks only.
+  bool sources_by_projection = true;
+  // Depth range: up to where the widest chosen baseline gives this parallax (0 = the sparse points' range
+  // only), at most max_far_factor × the 99th percentile of the sparse depths.
+  double far_parallax_px = 2.0;
+  double max_far_factor = 10.0;
   void Check() const;
 };
 

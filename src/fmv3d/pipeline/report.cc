@@ -13,6 +13,7 @@
 #include "fmv3d/io/frames_index.h"
 #include "fmv3d/io/obj_io.h"
 #include "fmv3d/io/point_cloud.h"
+#include "fmv3d/pipeline/coverage.h"
 #include "fmv3d/pipeline/preview.h"
 #include "fmv3d/core/workspace.h"
 #include "fmv3d/surface/colored_mesh.h"
@@ -135,6 +136,18 @@ nlohmann::json WriteReport(const fs::path& root) {
     report["pictures_error"] = e.what();
   }
   report["pictures"] = images;
+  // Coverage: what share of every view the mesh and the dense cloud hold (pipeline/coverage.h).
+  try {
+    if (fs::exists(ws.sparse_dir() / "images.txt") &&
+        (fs::exists(ws.dense_dir() / "fused.ply") || fs::exists(ws.mesh_dir() / "poisson.ply"))) {
+      const CoverageReport coverage = ComputeWorkspaceCoverage(root, CoverageOptions{});
+      report["coverage"] = coverage.ToJson();
+      core::WriteJson(ws.report_dir() / "coverage.json", report["coverage"]);
+    }
+  } catch (const std::exception& e) {
+    spdlog::warn("report: coverage left out ({})", e.what());
+    report["coverage_error"] = e.what();
+  }
   core::WriteJson(ws.report_dir() / "report.json", report);
 
   // HTML: a table of the headline figures, timings, pictures, and the full JSON for the curious.
@@ -170,12 +183,27 @@ nlohmann::json WriteReport(const fs::path& root) {
     row("mesh vertices", Num(report["mesh"].value("vertices", nlohmann::json())));
     row("mesh faces", Num(report["mesh"].value("faces", nlohmann::json())));
   }
+  if (report["coverage"].is_object()) {
+    const auto& c = report["coverage"];
+    auto pct = [](const nlohmann::json& v) { return v.is_number() ? Num(100 * v.get<double>(), 1) + "%" : "—"; };
+    row("coverage of the views' non-sky pixels, median (mesh / dense)",
+        pct(c["median_mesh"]) + " / " + pct(c["median_dense"]));
+  }
   h << "</table>\n<h2>Time per stage (s)</h2><table>\n";
   for (auto it = all_timings.begin(); it != all_timings.end(); ++it) row(it.key(), Num(it.value(), 1));
   h << "</table>\n<h2>Pictures</h2>\n";
   for (const auto& im : images)
     h << "<figure><img src=\"" << im["file"].get<std::string>() << "\"><figcaption>"
       << Escape(im["title"].get<std::string>()) << "</figcaption></figure>\n";
+  if (report["coverage"].is_object() && !report["coverage"]["pictures"].empty()) {
+    h << "<h2>Least covered views</h2><p>Frame | mesh seen from the frame's camera | frame with the non-sky pixels "
+         "the model leaves out in red (sky in blue)</p>\n";
+    auto pct = [](const nlohmann::json& x) { return x.is_number() ? Num(100 * x.get<double>(), 1) + "%" : "—"; };
+    for (const auto& p : report["coverage"]["pictures"])
+      h << "<figure style=\"width:100%\"><img src=\"" << p["file"].get<std::string>() << "\"><figcaption>"
+        << Escape(p["image"].get<std::string>() + ": mesh " + pct(p["mesh"]) + ", dense " + pct(p["dense"]))
+        << "</figcaption></figure>\n";
+  }
   if (report["compare"].is_object())
     h << "<h2>Accuracy against the CAD model</h2><p><a href=\"compare/compare.html\">comparison report</a></p>\n";
   h << "<h2>All figures (report.json)</h2><pre>" << Escape(report.dump(2)) << "</pre></body></html>\n";

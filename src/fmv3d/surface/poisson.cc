@@ -57,8 +57,7 @@ void PoissonOptions::Check() const {
     throw Error("poisson: need 1 <= min_depth <= max_depth <= 14");
   if (!(density_quantile >= 0 && density_quantile <= 0.9)) throw Error("poisson: density quantile must be in [0, 0.9]");
   if (!(max_point_distance >= 0)) throw Error("poisson: max_point_distance must be >= 0");
-  if (!(min_component_share >= 0 && min_component_share <= 1))
-    throw Error("poisson: min_component_share must be in [0, 1]");
+  components.Check();
   if (!(crop_margin >= 0)) throw Error("poisson: crop margin must be >= 0");
   if (target_faces < 0) throw Error("poisson: target face count must be >= 0");
   if (threads < 0) throw Error("poisson: threads must be >= 0");
@@ -86,6 +85,19 @@ double SpacingFromTree(const open3d::geometry::KDTreeFlann& tree, const std::vec
   auto mid = spacing.begin() + spacing.size() / 2;
   std::nth_element(spacing.begin(), mid, spacing.end());
   return *mid;
+}
+
+// Spacing around each query point (as SpacingFromTree, per point).
+std::vector<double> LocalSpacings(const open3d::geometry::KDTreeFlann& tree, const std::vector<Eigen::Vector3d>& queries) {
+  constexpr int kK = 7;
+  std::vector<double> out(queries.size(), 0);
+  tbb::parallel_for(tbb::blocked_range<size_t>(0, queries.size(), 2048), [&](const tbb::blocked_range<size_t>& r) {
+    std::vector<int> idx;
+    std::vector<double> d2;
+    for (size_t i = r.begin(); i < r.end(); ++i)
+      if (tree.SearchKNN(queries[i], kK, idx, d2) == kK) out[i] = std::sqrt(d2[kK - 1]) * std::sqrt(M_PI / 6.0);
+  });
+  return out;
 }
 
 // Per-axis [q, 1 − q] quantiles of the points: the extent of the scene without its stray far points.
@@ -186,45 +198,78 @@ ColoredMesh ReconstructPoisson(const io::OrientedPointCloud& cloud, const Poisso
   spdlog::debug("poisson: raw {}", DescribeCounts(mesh));
 
   t = Clock::now();
-  // 2 + 3: trim by density and by distance to the samples, in one vertex mask.
-  std::vector<bool> remove(mesh.vertices_.size(), false);
-  if (options.density_quantile > 0 && densities.size() == mesh.vertices_.size()) {
-    std::vector<double> sorted = densities;
-    const size_t k = std::min(sorted.size() - 1, static_cast<size_t>(options.density_quantile * sorted.size()));
-    std::nth_element(sorted.begin(), sorted.begin() + k, sorted.end());
-    const double threshold = sorted[k];
-    st["density_threshold"] = threshold;
-    for (size_t i = 0; i < densities.size(); ++i)
-      if (densities[i] < threshold) remove[i] = true;
-  }
-  if (options.max_point_distance > 0 && spacing > 0) {
+  // 2 + 3: trim by density and by distance to the samples, in one vertex mask (open surfaces only).
+  const double cell = st["cell_width"].get<double>();
+  st["kind"] = ToString(options.kind);
+  if (options.kind == SurfaceKind::kOpen) {
     std::vector<double> dist;
-    NearestPoints(tree, mesh.vertices_, &dist);
-    // The limit never goes below one cell: Poisson vertices sit on the cell grid.
-    const double limit = std::max(options.max_point_distance * spacing, st["cell_width"].get<double>());
-    for (size_t i = 0; i < dist.size(); ++i)
-      if (dist[i] > limit) remove[i] = true;
+    const std::vector<int> nearest = NearestPoints(tree, mesh.vertices_, &dist);
+    std::vector<bool> remove(mesh.vertices_.size(), false);
+    size_t density_trimmed = 0, distance_trimmed = 0;
+    if (options.density_quantile > 0 && densities.size() == mesh.vertices_.size()) {
+      std::vector<double> sorted = densities;
+      const size_t k = std::min(sorted.size() - 1, static_cast<size_t>(options.density_quantile * sorted.size()));
+      std::nth_element(sorted.begin(), sorted.begin() + k, sorted.end());
+      const double threshold = sorted[k];
+      st["density_threshold"] = threshold;
+      for (size_t i = 0; i < densities.size(); ++i)
+        if (densities[i] < threshold && dist[i] > cell) remove[i] = true, ++density_trimmed;
+    }
+    if (options.max_point_distance > 0 && spacing > 0) {
+      // The local spacing of each vertex's nearest point (computed once per point that is someone's nearest):
+      // a sparsely sampled surface keeps its mesh; the limit never goes below one cell (Poisson vertices sit
+      // on the cell grid) nor below the median spacing.
+      std::vector<int> unique = nearest;
+      std::sort(unique.begin(), unique.end());
+      unique.erase(std::unique(unique.begin(), unique.end()), unique.end());
+      if (!unique.empty() && unique.front() < 0) unique.erase(unique.begin());
+      std::vector<Eigen::Vector3d> queries(unique.size());
+      for (size_t i = 0; i < unique.size(); ++i) queries[i] = pc.points_[unique[i]];
+      const std::vector<double> local = LocalSpacings(tree, queries);
+      std::vector<double> local_of(pc.points_.size(), 0);
+      for (size_t i = 0; i < unique.size(); ++i) local_of[unique[i]] = local[i];
+      for (size_t i = 0; i < dist.size(); ++i) {
+        if (remove[i] || nearest[i] < 0) continue;
+        const double limit = options.max_point_distance * std::max(spacing, local_of[nearest[i]]);
+        if (dist[i] > std::max(limit, cell)) remove[i] = true, ++distance_trimmed;
+      }
+    }
+    mesh.RemoveVerticesByMask(remove);
+    st["trimmed"] = {{"vertices", mesh.vertices_.size()},
+                     {"faces", mesh.triangles_.size()},
+                     {"by_density", density_trimmed},
+                     {"by_distance", distance_trimmed}};
+    if (mesh.triangles_.empty()) throw Error("poisson: nothing left after trimming low-density vertices");
   }
-  mesh.RemoveVerticesByMask(remove);
-  st["trimmed"] = {{"vertices", mesh.vertices_.size()}, {"faces", mesh.triangles_.size()}};
-  if (mesh.triangles_.empty()) throw Error("poisson: nothing left after trimming low-density vertices");
 
-  // 4. Main component(s).
+  // 4. Every piece the points support.
   {
-    auto [cluster, counts, areas] = mesh.ClusterConnectedTriangles();
-    const double largest = areas.empty() ? 0 : *std::max_element(areas.begin(), areas.end());
+    const ComponentSelection sel =
+        SelectComponents(mesh.vertices_, mesh.triangles_, pc.points_, cell, spacing, options.components);
     std::vector<bool> drop(mesh.triangles_.size(), false);
-    size_t kept = 0;
-    for (size_t c = 0; c < areas.size(); ++c) kept += areas[c] >= options.min_component_share * largest;
-    for (size_t i = 0; i < cluster.size(); ++i)
-      drop[i] = !(areas[cluster[i]] >= options.min_component_share * largest);
+    for (size_t i = 0; i < drop.size(); ++i)
+      drop[i] = sel.components[sel.face_component[i]].decision != ComponentDecision::kKept;
     mesh.RemoveTrianglesByMask(drop);
     mesh.RemoveUnreferencedVertices();
-    st["components"] = {{"found", areas.size()}, {"kept", kept}};
+    nlohmann::json dropped = nlohmann::json::object();
+    double kept_area = 0, dropped_area = 0;
+    for (const auto& c : sel.components) {
+      if (c.decision == ComponentDecision::kKept) {
+        kept_area += c.area;
+      } else {
+        dropped_area += c.area;
+        auto& d = dropped[ToString(c.decision)];
+        d = d.is_null() ? 1 : d.get<int>() + 1;
+      }
+    }
+    st["components"] = {{"found", sel.components.size()}, {"kept", sel.kept()},  {"kept_area", kept_area},
+                        {"dropped_area", dropped_area}, {"dropped", dropped}};
+    spdlog::info("poisson: {} of {} connected pieces kept ({:.1f}% of their area)", sel.kept(),
+                 sel.components.size(), 100 * kept_area / std::max(kept_area + dropped_area, 1e-300));
   }
 
-  // 5. Crop to the working box (the points' robust bounds, enlarged).
-  {
+  // 5. Crop to the working box (the points' robust bounds, enlarged); a watertight surface stays closed.
+  if (options.kind == SurfaceKind::kOpen) {
     const Eigen::Vector3d lo = bounds.min(), hi = bounds.max();
     std::vector<bool> outside(mesh.vertices_.size(), false);
     for (size_t i = 0; i < mesh.vertices_.size(); ++i)

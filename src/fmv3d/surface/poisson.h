@@ -2,12 +2,14 @@
 // Kazhdan's PoissonRecon) followed by the clean-up that makes its watertight output a faithful surface:
 //   1. octree depth from the point density: the finest cell is about `cell_to_spacing` × the median point
 //      spacing (finer cells only fit the noise; coarser ones round edges off);
-//   2. trim: Poisson closes every hole with a smooth membrane far from the samples; those vertices have a low
-//      sample density (the value Open3D returns per vertex), so the lowest `density_quantile` of them go;
-//   3. trim the membrane further by distance: vertices farther than `max_point_distance` × the spacing from
-//      every input point are removed (0 disables);
-//   4. keep the main connected component (and any other whose area is at least `min_component_share` of
-//      it), dropping floating blobs fitted to outliers;
+//   2. trim (open surfaces only): Poisson closes every hole with a smooth membrane far from the samples; those
+//      vertices have a low sample density (the value Open3D returns per vertex), so the lowest
+//      `density_quantile` of them go, unless a point lies within one cell (mesh_cleanup.h);
+//   3. trim the membrane further by distance (open surfaces only): vertices farther than
+//      `max_point_distance` × the local point spacing (that of their nearest point, at least the median
+//      spacing and one cell) from every input point are removed (0 disables);
+//   4. keep every connected piece that the points support (mesh_cleanup.h: support, area, support density),
+//      dropping floating blobs fitted to outliers whatever the size of the largest piece;
 //   5. crop to the points' bounding box enlarged by `crop_margin` × its diagonal (the box of the 0.1–99.9%
 //      quantiles per axis: stray far points are dropped before reconstruction, as they would otherwise
 //      inflate Poisson's cube and coarsen every cell);
@@ -20,17 +22,19 @@
 
 #include "fmv3d/io/point_cloud.h"
 #include "fmv3d/surface/colored_mesh.h"
+#include "fmv3d/surface/mesh_cleanup.h"
 
 namespace fmv3d::surface {
 
 struct PoissonOptions {
   int depth = 0;                    // octree depth; 0 = from the point density
   double cell_to_spacing = 2.0;     // automatic depth: finest cell width / median point spacing
-  int min_depth = 6, max_depth = 11;
+  int min_depth = 6, max_depth = 12;
   bool linear_fit = true;           // iso-vertices placed by linear interpolation (more accurate)
   double density_quantile = 0.02;   // share of the lowest-density vertices trimmed (0..0.9)
   double max_point_distance = 3.0;  // trim vertices farther than this × spacing from every point; 0 = off
-  double min_component_share = 0.2; // keep components with at least this share of the largest's area
+  SurfaceKind kind = SurfaceKind::kOpen;  // kWatertight: no trimming (steps 2 and 3)
+  ComponentOptions components;      // step 4
   double crop_margin = 0.02;        // bounding-box enlargement, fraction of its diagonal
   int target_faces = 0;             // quadric decimation target; 0 = none
   // Threads of the Poisson solver; 0 = automatic: 1, or core::NumThreads() when OMP_WAIT_POLICY=passive.

@@ -25,8 +25,8 @@ struct Normal {
 }  // namespace
 
 void FlightOptions::Check() const {
-  if (path != "orbit" && path != "grid" && path != "pass")
-    throw Error("flight: unknown path '" + path + "' (expected orbit, grid or pass)");
+  if (path != "orbit" && path != "grid" && path != "pass" && path != "oblique")
+    throw Error("flight: unknown path '" + path + "' (expected orbit, grid, pass or oblique)");
   if (frames < 1) throw Error("flight: --frames must be at least 1");
   if (altitude && !std::isfinite(*altitude)) throw Error("flight: altitude must be finite");
   if (radius && !(*radius > 0)) throw Error("flight: radius must be positive");
@@ -52,6 +52,9 @@ FlightGeometry ResolveFlight(const Scene& scene, const core::Camera& camera, con
   } else if (o.path == "grid") {
     g.radius = o.radius ? *o.radius : r * 1.2;
     g.altitude = o.altitude ? *o.altitude : ground + std::max(dist * 0.8, 2.0 * scene.characteristic_length);
+  } else if (o.path == "oblique") {
+    g.radius = o.radius ? *o.radius : r;
+    g.altitude = o.altitude ? *o.altitude : g.look_at.z() + 0.4 * r;
   } else {
     g.radius = o.radius ? *o.radius : dist * std::cos(M_PI / 4);
     g.altitude = o.altitude ? *o.altitude : g.look_at.z() + dist * std::sin(M_PI / 4);
@@ -122,6 +125,16 @@ std::vector<core::Pose> MakeFlight(const Scene& scene, const core::Camera& camer
         Rwc << yc.cross(zc), yc, zc;
         rotations[k] = Rwc.transpose();
       }
+    }
+  } else if (o.path == "oblique") {
+    // Fly along x, `radius` south of the target, looking north 12° below the horizontal: the horizon is in
+    // the upper part of the frame, the land runs from the near ground to the far distance.
+    const double length = 2 * g.radius, depression = 12 * M_PI / 180;
+    const Eigen::Vector3d ahead(0, std::cos(depression), -std::sin(depression));
+    for (int k = 0; k < n; ++k) {
+      const double f = n > 1 ? static_cast<double>(k) / (n - 1) : 0.5;
+      centres[k] = {g.look_at.x() - length / 2 + length * f, g.look_at.y() - g.radius, g.altitude};
+      rotations[k] = core::Pose::LookAt(centres[k], centres[k] + ahead).R();
     }
   } else {  // pass: fly along x on the south side of the target, looking north-down at the target line
     const double length = 2 * std::max(scene.interest_radius, 0.5 * g.radius);

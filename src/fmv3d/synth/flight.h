@@ -6,6 +6,8 @@
 //          in as many strips as make the covered area closest to square, centred on the look-at point
 //          (`radius` is then unused).
 //   pass   a straight oblique pass at `altitude` beside the target, looking at it at ~45° depression.
+//   oblique  a straight pass `radius` south of the target at a low `altitude`, looking north 12° below the
+//          horizontal: near ground to a far horizon in every frame, as an oblique video sees a landscape.
 // Each frame gets gimbal-like attitude jitter (smooth wander plus a little shake) and position jitter,
 // drawn from `seed` only, so the same seed gives the same flight.
 #pragma once
@@ -24,7 +26,7 @@
 namespace fmv3d::synth {
 
 struct FlightOptions {
-  std::string path = "orbit";                // orbit | grid | pass
+  std::string path = "orbit";                // orbit | grid | pass | oblique
   int frames = 48;
   std::optional<double> altitude;            // metres (world z); default per scene
   std::optional<double> radius;              // orbit radius / grid half-size / pass stand-off, metres
