@@ -153,6 +153,34 @@ TEST(TilesStage, WritesAParseableTilesetWithEveryPointOnce) {
   EXPECT_FALSE(fs::exists(ws / "tiles.tmp"));
 }
 
+TEST(TilesStage, GeoreferencedWorkspaceGetsAnEcefRootTransform) {
+  test::TempDir ws("tiles-geo");
+  io::OrientedPointCloud cloud;
+  for (int i = 0; i < 500; ++i) cloud.positions.emplace_back(i % 10, i / 10, 0.1 * i);
+  fs::create_directories(ws / "dense");
+  fs::create_directories(ws / "geo");
+  io::WritePointCloudPly(cloud, ws / "dense" / "fused.ply");
+  // sparse → ENU: scale 2, a quarter turn about z, then a shift.
+  const nlohmann::json sim = {{0, -2, 0, 10}, {2, 0, 0, 20}, {0, 0, 2, 30}, {0, 0, 0, 1}};
+  core::WriteJson(ws / "geo" / "georef.json", {{"origin", {{"lat", 46.5}, {"lon", 7.25}, {"alt", 800}}},
+                                               {"vertical_datum", "WGS84 ellipsoid"},
+                                               {"similarity", {{"matrix", sim}}}});
+  const nlohmann::json summary = RunTilesStage(ws.path(), {});
+  EXPECT_TRUE(summary["georeferenced"].get<bool>());
+  const nlohmann::json t = core::ReadJson(ws / "tiles" / "tileset.json")["root"]["transform"];
+  ASSERT_EQ(t.size(), 16u);
+  Eigen::Matrix4d S;
+  for (int r = 0; r < 4; ++r)
+    for (int c = 0; c < 4; ++c) S(r, c) = sim[r][c].get<double>();
+  const Eigen::Matrix4d expected = EnuToEcef(46.5, 7.25, 800) * S;
+  for (int c = 0; c < 4; ++c)
+    for (int r = 0; r < 4; ++r) EXPECT_NEAR(t[c * 4 + r].get<double>(), expected(r, c), 1e-6) << r << "," << c;
+  // The model point (1, 0, 0) lands 2 m north of the ENU point (10, 20, 30).
+  const Eigen::Vector4d p = expected * Eigen::Vector4d(1, 0, 0, 1);
+  const Eigen::Vector4d q = EnuToEcef(46.5, 7.25, 800) * Eigen::Vector4d(10, 22, 30, 1);
+  EXPECT_NEAR((p - q).norm(), 0, 1e-6);
+}
+
 TEST(TilesStage, GeoreferencedRootTransformMapsToEcef) {
   // ENU at (0 N, 0 E, 0 m) has east = +Y, north = +Z, up = +X of ECEF, its origin at (a, 0, 0).
   const Eigen::Matrix4d M = EnuToEcef(0, 0, 0);

@@ -107,13 +107,10 @@ struct Builder {
     for (int oct = 0; oct < 8; ++oct) {
       const size_t b = static_cast<size_t>(bounds[oct] - pts.begin()), e = static_cast<size_t>(bounds[oct + 1] - pts.begin());
       if (b == e) continue;
-      Eigen::AlignedBox3f child;
-      child.min() = cell.min();
-      child.max() = c;
-      const Eigen::Vector3f half = c - cell.min();
-      if (oct & 4) child.min().x() += half.x(), child.max().x() += half.x();
-      if (oct & 2) child.min().y() += half.y(), child.max().y() += half.y();
-      if (oct & 1) child.min().z() += half.z(), child.max().z() += half.z();
+      // Low half [min, centre], high half [centre, max]: exact bounds, no rounding outside the parent.
+      Eigen::AlignedBox3f child(cell.min(), c);
+      for (int axis = 0; axis < 3; ++axis)
+        if (oct & (4 >> axis)) child.min()[axis] = c[axis], child.max()[axis] = cell.max()[axis];
       const int child_id = Build(b, e, child, level + 1, name + static_cast<char>('0' + oct));
       nodes[id].children.push_back(child_id);
     }

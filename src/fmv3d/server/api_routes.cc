@@ -187,6 +187,7 @@ void RegisterApiRoutes(httplib::Server& http, Context& ctx) {
       const fs::path dir = WorkspaceDir(ctx, req.matches[1]);
       RequireJsonBody(req);
       const JobRequest r = ParseJobRequest(req.body);
+      ctx.jobs->RequireIdle(dir.filename().string());
       std::vector<fs::path> inputs;
       for (const auto& in : r.inputs) inputs.push_back(ResolveInput(ctx, dir, in));
       if (inputs.empty())

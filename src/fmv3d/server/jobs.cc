@@ -134,6 +134,13 @@ nlohmann::json JobManager::Start(const std::string& workspace, const fs::path& w
   return j;
 }
 
+void JobManager::RequireIdle(const std::string& workspace) const {
+  std::lock_guard<std::mutex> lock(mutex_);
+  for (const auto& j : jobs_)
+    if (j->workspace == workspace && !Finished(j->state))
+      throw RequestError(409, "workspace '" + workspace + "' already runs job " + j->id);
+}
+
 nlohmann::json JobManager::List() const {
   std::lock_guard<std::mutex> lock(mutex_);
   nlohmann::json out = nlohmann::json::array();

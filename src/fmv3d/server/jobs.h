@@ -52,6 +52,8 @@ class JobManager {
   // RequestError(409) when a job of that workspace is running, RequestError(500) when the process cannot start.
   nlohmann::json Start(const std::string& workspace, const std::filesystem::path& ws_dir,
                        const std::vector<std::filesystem::path>& inputs, const JobRequest& request);
+  // Throws RequestError(409) when a job of `workspace` is running (checked again by Start).
+  void RequireIdle(const std::string& workspace) const;
   nlohmann::json List() const;  // every job, oldest first
   std::optional<nlohmann::json> Get(const std::string& id, bool with_log) const;
   std::optional<nlohmann::json> Stop(const std::string& id);
