@@ -67,6 +67,8 @@ for (const n of sizes) {
   const name = `cloud${n >= 1e6 ? n / 1e6 + 'm' : n}`;
   const ws = path.join(root, name);
   fs.mkdirSync(path.join(ws, 'dense'), { recursive: true });
+  // A workspace to the server: a project.json (no inputs: the cloud is all it has).
+  fs.writeFileSync(path.join(ws, 'project.json'), JSON.stringify({ inputs: [] }));
   if (!fs.existsSync(path.join(ws, 'dense/fused.ply'))) writeCloud(path.join(ws, 'dense/fused.ply'), n);
   let t0 = Date.now();
   execFileSync(fmv3d, ['-q', 'tiles', ws], { stdio: 'inherit' });
@@ -77,7 +79,7 @@ for (const n of sizes) {
   const server = spawn(fmv3d, ['serve', root, '--port', String(port), '--assets', web], { stdio: 'ignore' });
   const base = `http://127.0.0.1:${port}/`;
   for (let i = 0; i < 100; i++) { try { if ((await fetch(base + 'api/health')).ok) break; } catch { /* starting */ } await new Promise((r) => setTimeout(r, 100)); }
-  const firsts = [], heaps = [];
+  const firsts = [], heaps = [], rsss = [], sinceLoad = [];
   let last = null;
   for (let r = 0; r < runs; r++) {
     const profile = fs.mkdtempSync(path.join(os.tmpdir(), 'fmv3d-bench-chr-'));
@@ -90,31 +92,49 @@ for (const n of sizes) {
     await page.goto(base + `#/3d/${name}`);
     await page.waitForFunction(() => window.fmv3d?.stats().firstPictureMs != null, null, { timeout: 120000, polling: 20 });
     const first = await page.evaluate(() => window.fmv3d.stats().firstPictureMs);
+    const firstSinceLoad = await page.evaluate(() => window.fmv3d.stats().firstPictureSinceLoadMs);
     await page.evaluate(() => window.fmv3d.idle());
     // A tour: zoom in towards the ground and orbit, so finer tiles are loaded and older ones evicted.
     const box = await page.locator('#view3d-canvas').boundingBox();
-    let peak = 0;
+    let peak = 0, peakRss = 0;
+    // The browser's whole memory: resident set of every Chromium process of this profile (renderer, GPU, browser).
+    const browserRss = () => {
+      let kb = 0;
+      for (const pid of fs.readdirSync('/proc').filter((d) => /^\d+$/.test(d))) {
+        try {
+          if (!fs.readFileSync(`/proc/${pid}/cmdline`, 'utf8').includes(profile)) continue;
+          const m = /VmRSS:\s+(\d+)/.exec(fs.readFileSync(`/proc/${pid}/status`, 'utf8'));
+          if (m) kb += Number(m[1]);
+        } catch { /* gone */ }
+      }
+      return kb * 1024;
+    };
     const heap = async () => { const m = (await cdp.send('Performance.getMetrics')).metrics; return m.find((x) => x.name === 'JSHeapUsedSize').value; };
-    for (let step = 0; step < 12; step++) {
+    peakRss = browserRss();
+    for (let step = 0; step < 8; step++) {
       await page.mouse.move(box.x + box.width / 2, box.y + box.height / 2);
       await page.mouse.wheel(0, -300);
       await page.mouse.down(); await page.mouse.move(box.x + box.width / 2 + 60, box.y + box.height / 2, { steps: 3 }); await page.mouse.up();
       await page.evaluate(() => window.fmv3d.idle());
       peak = Math.max(peak, await heap());
+      peakRss = Math.max(peakRss, browserRss());
     }
     const stats = await page.evaluate(() => window.fmv3d.stats());
     const pm = await page.evaluate(() => performance.memory ? performance.memory.usedJSHeapSize : null);
     last = { ...stats, jsHeapAfterTour: await heap(), performanceMemory: pm };
-    firsts.push(first); heaps.push(peak);
+    firsts.push(first); heaps.push(peak); rsss.push(peakRss);
+    sinceLoad.push(firstSinceLoad);
     await ctx.close();
     fs.rmSync(profile, { recursive: true, force: true });
   }
   server.kill('SIGTERM');
   const med = (v) => [...v].sort((a, b) => a - b)[Math.floor(v.length / 2)];
   const res = { points: n, tile_write_s: tileS, tiles_bytes: Number(tileBytes), first_picture_ms_median: Math.round(med(firsts)),
-    first_picture_ms_runs: firsts.map(Math.round), js_heap_peak_mb_median: +(med(heaps) / 2 ** 20).toFixed(1),
+    first_picture_ms_runs: firsts.map(Math.round), first_picture_since_page_load_ms_median: Math.round(med(sinceLoad)),
+    js_heap_peak_mb_median: +(med(heaps) / 2 ** 20).toFixed(1), browser_rss_peak_mb_median: +(med(rsss) / 2 ** 20).toFixed(0),
     loaded_points_after_tour: last.loadedPoints, drawn_points_after_tour: last.drawnPoints, tiles_loaded_after_tour: last.tilesLoaded,
     loaded_tile_bytes_mb: +(last.loadedBytes / 2 ** 20).toFixed(1) };
+  res.load_average = os.loadavg().map((x) => +x.toFixed(1));
   console.log(JSON.stringify(res));
   results.push(res);
 }
