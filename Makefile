@@ -26,9 +26,11 @@ demo: build
 test: build
 	ctest --test-dir $(BUILD) --output-on-failure -j $(JOBS)
 
-# Unit tests under AddressSanitizer + UndefinedBehaviorSanitizer (the long end-to-end flights are skipped).
+# Unit tests under AddressSanitizer + UndefinedBehaviorSanitizer (the long end-to-end flights are skipped). -O1 and
+# line tables only (-g1) keep the build and the run within CI's time; stack traces still name file and line.
 $(ASAN_BUILD)/build.ninja: | deps
-	cmake -S . -B $(ASAN_BUILD) -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo -DFMV3D_SANITIZE=ON
+	cmake -S . -B $(ASAN_BUILD) -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo -DFMV3D_SANITIZE=ON \
+	  -DCMAKE_CXX_FLAGS_RELWITHDEBINFO="-O1 -g1 -DNDEBUG" -DCMAKE_C_FLAGS_RELWITHDEBINFO="-O1 -g1 -DNDEBUG"
 
 test-asan: deps $(ASAN_BUILD)/build.ninja
 	cmake --build $(ASAN_BUILD) -j $(JOBS)
@@ -47,7 +49,7 @@ web/node_modules/.package-lock.json: web/package-lock.json
 
 # The tests of the multithreaded stages (PatchMatch and fusion, matching, bundle adjustment) under ThreadSanitizer.
 $(TSAN_BUILD)/build.ninja: | deps
-	cmake -S . -B $(TSAN_BUILD) -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo -DCMAKE_CXX_FLAGS_RELWITHDEBINFO="-O1 -g1" \
+	cmake -S . -B $(TSAN_BUILD) -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo -DCMAKE_CXX_FLAGS_RELWITHDEBINFO="-O1 -g1 -DNDEBUG" \
 	  -DFMV3D_TSAN=ON
 
 test-tsan: deps $(TSAN_BUILD)/build.ninja
@@ -55,13 +57,15 @@ test-tsan: deps $(TSAN_BUILD)/build.ninja
 	for t in mvs features sfm; do \
 	  TSAN_OPTIONS=halt_on_error=1:second_deadlock_stack=1 $(TSAN_BUILD)/tests/test_$$t || exit 1; done
 
-# Every tests/fuzz/*_fuzz.cc as a libFuzzer binary (clang, ASan + UBSan), each run FUZZ_SECONDS on a seed corpus
+# Every tests/fuzz/*_fuzz.cc as a libFuzzer binary (clang, ASan + UBSan; the readers under test are compiled
+# instrumented, the rest of the library is linked from $(BUILD)), each run FUZZ_SECONDS on a seed corpus
 # made in $(FUZZ_BUILD) from ../shared/data and a small flight our own writers produce; prints executions and
 # coverage per target. Crashing inputs go to tests/fuzz/regressions/<target>/ once fixed (replayed by `make test`).
 $(FUZZ_BUILD)/build.ninja: | deps
 	@FMV3D_WITH_FUZZ=1 scripts/install-deps.sh
 	CC=clang CXX=clang++ cmake -S . -B $(FUZZ_BUILD) -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo \
-	  -DCMAKE_CXX_FLAGS_RELWITHDEBINFO="-O1 -g" -DFMV3D_FUZZ=ON -DFMV3D_BUILD_TESTS=OFF -DFMV3D_BUILD_BENCH=OFF
+	  -DCMAKE_CXX_FLAGS_RELWITHDEBINFO="-O1 -g" -DFMV3D_FUZZ=ON -DFMV3D_BUILD_TESTS=OFF -DFMV3D_BUILD_BENCH=OFF \
+	  -DFMV3D_FUZZ_PREBUILT=$(abspath $(BUILD))
 
 fuzz: build $(FUZZ_BUILD)/build.ninja
 	cmake --build $(FUZZ_BUILD) -j $(JOBS) --target fuzz_targets

@@ -6,6 +6,7 @@
 
 #include "fmv3d/core/error.h"
 #include "fmv3d/io/colmap_model.h"
+// fuzz-sources: core/reconstruction.cc core/camera.cc core/pose.cc
 #include "fuzz_util.h"
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {

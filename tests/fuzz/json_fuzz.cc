@@ -1,6 +1,6 @@
-// libFuzzer target for the JSON files a workspace or a user hands us: frames/frames.json, project.json (read
-// into the report), camera.json / OpenCV YAML calibrations (`--camera`), the sensor database, telemetry tracks
-// and geo/georef.json. The same bytes go to every reader; each must return a value or throw fmv3d::Error
+// libFuzzer target for the JSON files a workspace or a user hands us: frames/frames.json, project.json and the
+// stage summaries (core::ReadJson, as the report reads them), camera.json calibrations (`--camera`), the sensor
+// database and telemetry tracks. The same bytes go to every reader; each must return a value or throw fmv3d::Error
 // (a nlohmann::json exception escaping is a finding: the user would get a library message, not ours).
 #include <cstddef>
 #include <cstdint>
@@ -9,10 +9,9 @@
 #include "fmv3d/calib/sensor_db.h"
 #include "fmv3d/core/error.h"
 #include "fmv3d/core/files.h"
-#include "fmv3d/geo/georef.h"
 #include "fmv3d/io/frames_index.h"
 #include "fmv3d/telemetry/telemetry.h"
-#include "fmv3d/pipeline/report.h"
+// fuzz-sources: core/camera_json.cc core/camera.cc
 #include "fuzz_util.h"
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
@@ -37,17 +36,8 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
     (void)telemetry::ReadTelemetryTracks(json);
   } catch (const Error&) {
   }
-  // georef.json and project.json are read from a workspace folder.
-  const auto ws = fuzz::ScratchDir() / "ws";
-  core::EnsureDirectory(ws / "geo");
-  fuzz::WriteScratch("ws/geo/georef.json", bytes, size);
   try {
-    (void)geo::ReadGeoref(ws);
-  } catch (const Error&) {
-  }
-  fuzz::WriteScratch("ws/project.json", bytes, size);
-  try {
-    (void)pipeline::WriteReport(ws);
+    (void)core::ReadJson(json);
   } catch (const Error&) {
   }
   return 0;

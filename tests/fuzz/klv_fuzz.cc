@@ -1,7 +1,7 @@
 // libFuzzer target for the KLV parsers (and the DJI SRT reader, fed the same bytes as text): whatever the
 // bytes, parsing, JSON conversion and telemetry extraction must neither crash nor trip ASan/UBSan.
-// Build: CC=clang CXX=clang++ cmake -S . -B build-fuzz -G Ninja -DFMV3D_FUZZ=ON && cmake --build build-fuzz
-//        --target klv_fuzz; run: build-fuzz/tests/fuzz/klv_fuzz -max_total_time=300 CORPUS_DIR
+// Build and run: `make fuzz` (FUZZ_TARGETS=klv_fuzz to run only this one).
+// fuzz-sources: io/klv*.cc io/telemetry.cc io/dji_srt.cc
 #include <cstddef>
 #include <cstdint>
 #include <string>
