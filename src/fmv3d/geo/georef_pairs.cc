@@ -9,7 +9,7 @@
 
 #include "fmv3d/core/error.h"
 #include "fmv3d/geo/trajectory.h"
-#include "fmv3d/telemetry/klv_st0601_writer.h"
+#include "fmv3d/telemetry/attitude.h"
 
 namespace fmv3d::geo {
 namespace {
