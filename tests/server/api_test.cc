@@ -3,6 +3,11 @@
 // bytes, absolute paths, bad bodies, oversize uploads, no CORS) and the token rules.
 #include <gtest/gtest.h>
 
+#include <arpa/inet.h>
+#include <sys/socket.h>
+#include <unistd.h>
+
+#include <chrono>
 #include <fstream>
 
 #include "fmv3d/core/error.h"
@@ -229,6 +234,31 @@ TEST_F(Api, AssetsAndNoCors) {
   ASSERT_TRUE(r);
   EXPECT_FALSE(r->has_header("Access-Control-Allow-Origin"));
   EXPECT_FALSE(r->has_header("Access-Control-Allow-Methods"));
+}
+
+TEST_F(Api, StalledClientsDoNotBlockOthers) {
+  // Four clients that send half a request line and stall; each holds one worker until the read timeout.
+  std::vector<int> sockets;
+  for (int i = 0; i < 4; ++i) {
+    const int fd = ::socket(AF_INET, SOCK_STREAM, 0);
+    sockaddr_in addr{};
+    addr.sin_family = AF_INET;
+    addr.sin_port = htons(static_cast<uint16_t>(server_->port));
+    addr.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+    ASSERT_EQ(::connect(fd, reinterpret_cast<sockaddr*>(&addr), sizeof(addr)), 0);
+    const char partial[] = "GET /api/health HT";
+    ASSERT_GT(::send(fd, partial, sizeof(partial) - 1, 0), 0);
+    sockets.push_back(fd);
+  }
+  const auto t0 = std::chrono::steady_clock::now();
+  for (int i = 0; i < 10; ++i) {
+    auto c = server_->Client();
+    const auto r = c->Get("/api/health");
+    ASSERT_TRUE(r);
+    EXPECT_EQ(r->status, 200);
+  }
+  EXPECT_LT(std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count(), 5.0);
+  for (int fd : sockets) ::close(fd);
 }
 
 TEST(ApiAssets, MissingAssetsGiveAClearPage) {

@@ -10,6 +10,7 @@
 #include "fmv3d/core/files.h"
 #include "fmv3d/core/logging.h"
 #include "fmv3d/geo/geodesy.h"
+#include "fmv3d/io/ply_stream.h"
 #include "fmv3d/io/point_cloud.h"
 #include "fmv3d/io/tiles3d.h"
 
@@ -103,10 +104,19 @@ nlohmann::json RunTilesStage(const fs::path& ws, const TilesOptions& options) {
   const auto t0 = std::chrono::steady_clock::now();
   const fs::path fused = ws / "dense" / "fused.ply";
   if (!fs::exists(fused)) throw Error(ws.string() + ": dense/fused.ply is missing; run `fmv3d dense` first");
+  // Streamed straight into the compact tile points (28 bytes each) when the PLY allows; else read whole.
   std::vector<TilePoint> points;
-  {
+  const bool streamed = io::StreamPlyVertices(
+      fused, [&points](size_t n) { points.reserve(n); },
+      [&points](const io::PlyVertex& v) {
+        TilePoint p;
+        p.position = v.position;
+        p.normal = v.normal;
+        std::copy(v.rgb, v.rgb + 3, p.rgb);
+        points.push_back(p);
+      });
+  if (!streamed) {
     const io::OrientedPointCloud cloud = io::ReadPointCloudPly(fused);
-    if (cloud.empty()) throw Error(fused.string() + ": no points to tile");
     points.resize(cloud.size());
     for (size_t i = 0; i < cloud.size(); ++i) {
       points[i].position = cloud.positions[i].cast<float>();
@@ -114,6 +124,7 @@ nlohmann::json RunTilesStage(const fs::path& ws, const TilesOptions& options) {
       if (cloud.has_colors()) std::copy(cloud.colors[i].data(), cloud.colors[i].data() + 3, points[i].rgb);
     }
   }
+  if (points.empty()) throw Error(fused.string() + ": no points to tile");
   const PointOctree tree = BuildPointOctree(std::move(points), options.octree);
   const fs::path out = ws / "tiles", tmp = ws / "tiles.tmp";
   fs::remove_all(tmp);

@@ -1,0 +1,159 @@
+#include "fmv3d/io/ply_stream.h"
+
+#include <cstring>
+#include <fstream>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include "fmv3d/core/error.h"
+
+namespace fmv3d::io {
+
+namespace {
+
+enum class Type { kI8, kU8, kI16, kU16, kI32, kU32, kF32, kF64, kBad };
+
+Type ParseType(const std::string& t) {
+  if (t == "char" || t == "int8") return Type::kI8;
+  if (t == "uchar" || t == "uint8") return Type::kU8;
+  if (t == "short" || t == "int16") return Type::kI16;
+  if (t == "ushort" || t == "uint16") return Type::kU16;
+  if (t == "int" || t == "int32") return Type::kI32;
+  if (t == "uint" || t == "uint32") return Type::kU32;
+  if (t == "float" || t == "float32") return Type::kF32;
+  if (t == "double" || t == "float64") return Type::kF64;
+  return Type::kBad;
+}
+
+size_t SizeOf(Type t) {
+  switch (t) {
+    case Type::kI8: case Type::kU8: return 1;
+    case Type::kI16: case Type::kU16: return 2;
+    case Type::kI32: case Type::kU32: case Type::kF32: return 4;
+    case Type::kF64: return 8;
+    default: return 0;
+  }
+}
+
+double Value(Type t, const char* p) {
+  switch (t) {
+    case Type::kI8: { int8_t v; std::memcpy(&v, p, 1); return v; }
+    case Type::kU8: { uint8_t v; std::memcpy(&v, p, 1); return v; }
+    case Type::kI16: { int16_t v; std::memcpy(&v, p, 2); return v; }
+    case Type::kU16: { uint16_t v; std::memcpy(&v, p, 2); return v; }
+    case Type::kI32: { int32_t v; std::memcpy(&v, p, 4); return v; }
+    case Type::kU32: { uint32_t v; std::memcpy(&v, p, 4); return v; }
+    case Type::kF32: { float v; std::memcpy(&v, p, 4); return v; }
+    case Type::kF64: { double v; std::memcpy(&v, p, 8); return v; }
+    default: return 0;
+  }
+}
+
+struct Property {
+  Type type = Type::kBad;       // scalar type, or the list's item type
+  Type count_type = Type::kBad;  // set for lists
+  int slot = -1;                 // 0-2 position, 3-5 normal, 6-8 colour, -1 ignored
+};
+
+// Buffered little reader: Take(n) returns a pointer to the next n bytes.
+class Buffer {
+ public:
+  Buffer(std::ifstream& in, const std::filesystem::path& path) : in_(in), path_(path), data_(1 << 20) {}
+  const char* Take(size_t n) {
+    if (end_ - pos_ < n) Refill(n);
+    const char* p = data_.data() + pos_;
+    pos_ += n;
+    return p;
+  }
+
+ private:
+  void Refill(size_t n) {
+    std::memmove(data_.data(), data_.data() + pos_, end_ - pos_);
+    end_ -= pos_;
+    pos_ = 0;
+    if (data_.size() < n) data_.resize(n);
+    in_.read(data_.data() + end_, static_cast<std::streamsize>(data_.size() - end_));
+    end_ += static_cast<size_t>(in_.gcount());
+    if (end_ < n) throw Error(path_.string() + ": the PLY ends before its last vertex");
+  }
+  std::ifstream& in_;
+  const std::filesystem::path& path_;
+  std::vector<char> data_;
+  size_t pos_ = 0, end_ = 0;
+};
+
+}  // namespace
+
+bool StreamPlyVertices(const std::filesystem::path& path, const std::function<void(size_t)>& on_count,
+                       const std::function<void(const PlyVertex&)>& on_vertex) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) throw Error(path.string() + ": cannot open for reading");
+  std::string line;
+  if (!std::getline(in, line) || line.rfind("ply", 0) != 0) throw Error(path.string() + ": not a PLY file");
+  bool little = false, in_vertex = false, seen_element = false;
+  size_t count = 0;
+  std::vector<Property> props;
+  static const char* kSlots[] = {"x", "y", "z", "nx", "ny", "nz", "red", "green", "blue"};
+  while (std::getline(in, line)) {
+    if (!line.empty() && line.back() == '\r') line.pop_back();
+    std::istringstream ss(line);
+    std::string word;
+    ss >> word;
+    if (word == "end_header") break;
+    if (word == "format") {
+      std::string f;
+      ss >> f;
+      little = f == "binary_little_endian";
+    } else if (word == "element") {
+      std::string name;
+      ss >> name;
+      if (!seen_element && name != "vertex") return false;
+      in_vertex = name == "vertex";
+      if (in_vertex && !(ss >> count)) throw Error(path.string() + ": malformed PLY vertex count");
+      seen_element = true;
+    } else if (word == "property" && in_vertex) {
+      std::string type, name;
+      ss >> type;
+      Property p;
+      if (type == "list") {
+        std::string ct, it;
+        ss >> ct >> it >> name;
+        p.count_type = ParseType(ct);
+        p.type = ParseType(it);
+        if (p.count_type == Type::kBad) throw Error(path.string() + ": bad PLY list type '" + ct + "'");
+      } else {
+        ss >> name;
+        p.type = ParseType(type);
+      }
+      if (p.type == Type::kBad) throw Error(path.string() + ": bad PLY property type in '" + line + "'");
+      for (int s = 0; s < 9; ++s)
+        if (name == kSlots[s] && p.count_type == Type::kBad) p.slot = s;
+      props.push_back(p);
+    }
+  }
+  if (!in) throw Error(path.string() + ": PLY header without end_header");
+  if (!little) return false;
+  if (on_count) on_count(count);
+  Buffer buf(in, path);
+  PlyVertex v;
+  for (size_t i = 0; i < count; ++i) {
+    for (const Property& p : props) {
+      if (p.count_type != Type::kBad) {
+        const double n = Value(p.count_type, buf.Take(SizeOf(p.count_type)));
+        if (n < 0 || n > 1e6) throw Error(path.string() + ": implausible PLY list length");
+        buf.Take(static_cast<size_t>(n) * SizeOf(p.type));
+        continue;
+      }
+      const double x = Value(p.type, buf.Take(SizeOf(p.type)));
+      if (p.slot < 0) continue;
+      if (p.slot < 3) v.position[p.slot] = static_cast<float>(x);
+      else if (p.slot < 6) v.normal[p.slot - 3] = static_cast<float>(x);
+      else v.rgb[p.slot - 6] = static_cast<uint8_t>(x);
+    }
+    on_vertex(v);
+  }
+  return true;
+}
+
+}  // namespace fmv3d::io
