@@ -17,7 +17,10 @@ export interface ViewStats {
   pending: number; firstPictureMs: number | null; firstPictureSinceLoadMs: number | null; ready: boolean; canvas: { width: number; height: number };
 }
 declare global {
-  interface Window { fmv3d?: { stats: () => ViewStats; fitView: () => void; idle: () => Promise<void> }; }
+  interface Window {
+    fmv3d?: { stats: () => ViewStats; fitView: () => void; idle: () => Promise<void>;
+      cameraOnScreen: (i: number) => { x: number; y: number } | null };
+  }
 }
 
 export function mountView3d(el: HTMLElement, ws: string | null): () => void {
@@ -80,7 +83,8 @@ class View3d {
     this.resizeObs = new ResizeObserver(() => this.resize());
     this.resizeObs.observe(this.canvasBox);
     this.resize();
-    window.fmv3d = { stats: () => this.stats(), fitView: () => this.fitView(), idle: () => this.idle() };
+    window.fmv3d = { stats: () => this.stats(), fitView: () => this.fitView(), idle: () => this.idle(),
+      cameraOnScreen: (i) => this.cameraOnScreen(i) };
     this.buildSide();
     void this.load();
     this.loop();
@@ -229,6 +233,16 @@ class View3d {
       if (d < bestD) { bestD = d; best = i; }
     });
     if (best >= 0) this.showFrame(this.cameras[best]);
+  }
+
+  /** Where camera i's centre is drawn, in page pixels (null when behind the view or off the canvas). */
+  cameraOnScreen(i: number): { x: number; y: number } | null {
+    const c = this.cameras[i];
+    if (!c) return null;
+    const p = new THREE.Vector3(...c.center).project(this.camera);
+    const r = this.renderer.domElement.getBoundingClientRect();
+    const x = r.left + (p.x * 0.5 + 0.5) * r.width, y = r.top + (-p.y * 0.5 + 0.5) * r.height;
+    return p.z > 1 || x < r.left || x > r.right || y < r.top || y > r.bottom ? null : { x, y };
   }
 
   private showFrame(c: Camera): void {

@@ -154,6 +154,15 @@ try {
     log(`  mesh-only coverage ${(100 * coverage(img, [0x15, 0x18, 0x1d])).toFixed(1)}%`);
     await page.check('#show-dense');
     await page.uncheck('#show-mesh');
+    // Click a camera drawn on the canvas: its frame shows in the side panel.
+    const n = await page.evaluate(() => window.fmv3d.stats().cameras);
+    let at = null;
+    for (let i = 0; i < n && !at; i++) at = await page.evaluate((k) => window.fmv3d.cameraOnScreen(k), i);
+    assert(at, 'no camera is on the canvas');
+    await page.mouse.click(at.x, at.y);
+    await waitFor(page, () => { const im = document.querySelector('#frame-panel img'); return im && im.complete && im.naturalWidth > 0; },
+      null, 15000, 'the clicked camera\'s frame');
+    await shot(page, '3d-camera-frame');
   });
 
   await check('map view shows the orthophoto', async () => {
