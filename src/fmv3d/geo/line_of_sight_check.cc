@@ -2,6 +2,7 @@
 
 #include <fmt/format.h>
 
+#include <Eigen/Eigenvalues>
 #include <cmath>
 
 #include "fmv3d/core/error.h"
@@ -12,29 +13,40 @@ namespace {
 
 constexpr double kDeg = M_PI / 180;
 
-// The model's ground at the image centre: the point on the camera's ray through the principal point at the median
-// depth of the model points seen near it (within a growing share of the half diagonal until min_points are found;
-// on sloping or oblique ground the depths vary about linearly across the image, so their median is the centre's).
-// nullopt when the image sees fewer.
+// The model's ground at the image centre: where the camera's ray through the principal point meets the plane
+// fitted (least squares) to the model points seen near it — within a growing share of the half diagonal until
+// min_points are found; the points' median depth along the ray when that plane is degenerate or nearly parallel
+// to the ray. nullopt when the image sees fewer points.
 std::optional<Eigen::Vector3d> GroundAtImageCentre(const core::Reconstruction& rec, const core::Image& img,
                                                    int min_points) {
   const core::Camera& cam = rec.cameras.at(img.camera_id);
   const Eigen::Vector2d centre = cam.u0 > 0 && cam.v0 > 0 ? Eigen::Vector2d(cam.u0, cam.v0)  // the optical axis
                                                           : Eigen::Vector2d(0.5 * cam.width, 0.5 * cam.height);
   const double half_diagonal = 0.5 * std::hypot(cam.width, cam.height);
+  const Eigen::Vector3d c = img.pose.Centre();
+  const Eigen::Vector3d ray = (img.pose.q.conjugate() * cam.Unproject(centre)).normalized();
   for (double share : {0.1, 0.2, 0.35, 0.5, 0.75, 1.0}) {
+    std::vector<Eigen::Vector3d> pts;
     std::vector<double> depth;
     for (size_t k = 0; k < img.points2d.size(); ++k) {
       if (img.point3d_ids[k] == core::kNoPoint3D) continue;
       if ((img.points2d[k] - centre).norm() > share * half_diagonal) continue;
       const auto it = rec.points.find(static_cast<uint64_t>(img.point3d_ids[k]));
       if (it == rec.points.end()) continue;
-      const double z = img.pose.Transform(it->second.xyz).z();
-      if (z > 0) depth.push_back(z);
+      const double d = (it->second.xyz - c).dot(ray);
+      if (d > 0) pts.push_back(it->second.xyz), depth.push_back(d);
     }
-    if (static_cast<int>(depth.size()) < min_points) continue;
-    const Eigen::Vector3d ray = cam.Unproject(centre);  // camera frame, z = 1
-    return Eigen::Vector3d(img.pose.Centre() + img.pose.q.conjugate() * (core::Median(depth) * ray));
+    if (static_cast<int>(pts.size()) < min_points) continue;
+    Eigen::Vector3d mean = Eigen::Vector3d::Zero();
+    for (const auto& p : pts) mean += p;
+    mean /= static_cast<double>(pts.size());
+    Eigen::Matrix3d cov = Eigen::Matrix3d::Zero();
+    for (const auto& p : pts) cov += (p - mean) * (p - mean).transpose();
+    const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eig(cov);
+    const Eigen::Vector3d n = eig.eigenvectors().col(0);
+    const bool planar = eig.eigenvalues()(1) > 0 && std::abs(n.dot(ray)) > 0.1;
+    const double t = planar ? n.dot(mean - c) / n.dot(ray) : core::Median(depth);
+    return Eigen::Vector3d(c + (t > 0 ? t : core::Median(depth)) * ray);
   }
   return std::nullopt;
 }
