@@ -2,6 +2,7 @@
 
 #include <fmt/format.h>
 
+#include <Eigen/Eigenvalues>
 #include <cmath>
 
 #include "fmv3d/core/error.h"
@@ -12,24 +13,40 @@ namespace {
 
 constexpr double kDeg = M_PI / 180;
 
-// The median position of the model points seen near the image centre: within a growing share of the half
-// diagonal until min_points are found. nullopt when the image sees fewer.
+// The model's ground at the image centre: where the camera's ray through the principal point meets the plane
+// fitted (least squares) to the model points seen near it — within a growing share of the half diagonal until
+// min_points are found; the points' median depth along the ray when that plane is degenerate or nearly parallel
+// to the ray. nullopt when the image sees fewer points.
 std::optional<Eigen::Vector3d> GroundAtImageCentre(const core::Reconstruction& rec, const core::Image& img,
                                                    int min_points) {
   const core::Camera& cam = rec.cameras.at(img.camera_id);
   const Eigen::Vector2d centre = cam.u0 > 0 && cam.v0 > 0 ? Eigen::Vector2d(cam.u0, cam.v0)  // the optical axis
                                                           : Eigen::Vector2d(0.5 * cam.width, 0.5 * cam.height);
   const double half_diagonal = 0.5 * std::hypot(cam.width, cam.height);
+  const Eigen::Vector3d c = img.pose.Centre();
+  const Eigen::Vector3d ray = (img.pose.q.conjugate() * cam.Unproject(centre)).normalized();
   for (double share : {0.1, 0.2, 0.35, 0.5, 0.75, 1.0}) {
-    std::vector<double> x, y, z;
+    std::vector<Eigen::Vector3d> pts;
+    std::vector<double> depth;
     for (size_t k = 0; k < img.points2d.size(); ++k) {
       if (img.point3d_ids[k] == core::kNoPoint3D) continue;
       if ((img.points2d[k] - centre).norm() > share * half_diagonal) continue;
       const auto it = rec.points.find(static_cast<uint64_t>(img.point3d_ids[k]));
       if (it == rec.points.end()) continue;
-      x.push_back(it->second.xyz.x()), y.push_back(it->second.xyz.y()), z.push_back(it->second.xyz.z());
+      const double d = (it->second.xyz - c).dot(ray);
+      if (d > 0) pts.push_back(it->second.xyz), depth.push_back(d);
     }
-    if (static_cast<int>(x.size()) >= min_points) return Eigen::Vector3d(core::Median(x), core::Median(y), core::Median(z));
+    if (static_cast<int>(pts.size()) < min_points) continue;
+    Eigen::Vector3d mean = Eigen::Vector3d::Zero();
+    for (const auto& p : pts) mean += p;
+    mean /= static_cast<double>(pts.size());
+    Eigen::Matrix3d cov = Eigen::Matrix3d::Zero();
+    for (const auto& p : pts) cov += (p - mean) * (p - mean).transpose();
+    const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eig(cov);
+    const Eigen::Vector3d n = eig.eigenvectors().col(0);
+    const bool planar = eig.eigenvalues()(1) > 0 && std::abs(n.dot(ray)) > 0.1;
+    const double t = planar ? n.dot(mean - c) / n.dot(ray) : core::Median(depth);
+    return Eigen::Vector3d(c + (t > 0 ? t : core::Median(depth)) * ray);
   }
   return std::nullopt;
 }
@@ -69,13 +86,20 @@ std::string LineOfSightCheck::Why() const {
       return fmt::format("the model's ground at the image centres lies on the telemetry's lines of sight "
                          "({:.2f}° median, σ {:.2f}°)", median_angle_deg, median_sigma_deg);
     case Verdict::kDisagrees:
+      if (median_chi <= max_chi_used)
+        return fmt::format("the model's ground at the image centres lies {:.0f} m below the telemetry's frame centres "
+                           "(median over {} keyframes, {:.1f}σ): {:.0f} m {} them along the lines of sight, at {:.1f} m "
+                           "against their {:.1f} m ({}); the line of sight meets the ground at or before its frame centre",
+                           median_below_m, keyframes.size(), median_height_chi, std::abs(median_beyond_m),
+                           median_beyond_m >= 0 ? "beyond" : "short of", median_ground_height_m,
+                           median_frame_centre_height_m, datum_name);
       return fmt::format("the model's ground at the image centres is {:.2f}° (median over {} keyframes) off the "
                          "telemetry's lines of sight, {:.1f}σ of the stated accuracy ({:.2f}°): on the ground "
                          "{:.0f} m {} and {:.0f} m across the telemetry's frame centre, at {:.1f} m against the "
-                         "frame centre's {:.1f} m",
+                         "frame centre's {:.1f} m ({})",
                          median_angle_deg, keyframes.size(), median_chi, median_sigma_deg, std::abs(median_along_m),
                          median_along_m >= 0 ? "beyond" : "short of", median_across_m, median_ground_height_m,
-                         median_frame_centre_height_m);
+                         median_frame_centre_height_m, datum_name);
   }
   return "";
 }
@@ -87,6 +111,9 @@ nlohmann::json LineOfSightCheck::ToJson() const {
   j["median_angle_deg"] = median_angle_deg;
   j["median_sigma_deg"] = median_sigma_deg;
   j["median_chi"] = median_chi;
+  j["median_below_frame_centre_m"] = median_below_m;
+  j["median_beyond_frame_centre_m"] = median_beyond_m;
+  j["median_height_chi"] = median_height_chi;
   j["median_along_m"] = median_along_m;
   j["median_across_m"] = median_across_m;
   j["median_ground_height_m"] = median_ground_height_m;
@@ -94,7 +121,8 @@ nlohmann::json LineOfSightCheck::ToJson() const {
   nlohmann::json per = nlohmann::json::array();
   for (const auto& k : keyframes)
     per.push_back({{"name", k.name}, {"angle_deg", k.angle_rad / kDeg}, {"sigma_deg", k.sigma_rad / kDeg},
-                   {"along_m", k.along_m}, {"across_m", k.across_m},
+                   {"along_m", k.along_m}, {"across_m", k.across_m}, {"below_frame_centre_m", k.below_m},
+                   {"beyond_frame_centre_m", k.beyond_m},
                    {"model_ground_enu", {k.model_ground.x(), k.model_ground.y(), k.model_ground.z()}},
                    {"frame_centre_enu", {k.frame_centre.x(), k.frame_centre.y(), k.frame_centre.z()}}});
   j["per_keyframe"] = per;
@@ -110,7 +138,7 @@ LineOfSightCheck CheckLinesOfSight(const core::Reconstruction& model, const std:
     if (p.hae && p.msl) undulations.push_back(*p.hae - *p.msl);
   const std::optional<double> n = undulations.empty() ? std::nullopt : std::optional<double>(core::Median(undulations));
   LineOfSightCheck out;
-  std::vector<double> angle, sigma, chi, along, across, ground_h, fc_h;
+  std::vector<double> angle, sigma, chi, along, across, ground_h, fc_h, below, height_chi, beyond;
   for (const auto& p : keyframes) {
     const core::Image* img = model.FindImageByName(p.name);
     auto h = FrameCentreHeight(p, datum, n);
@@ -136,9 +164,14 @@ LineOfSightCheck CheckLinesOfSight(const core::Reconstruction& model, const std:
     const Eigen::Vector2d d = (c.model_ground - on_ray).head<2>();
     c.along_m = d.dot(u);
     c.across_m = d.x() * u.y() - d.y() * u.x();
+    c.below_m = std::max(0.0, c.frame_centre.z() - c.model_ground.z());
+    c.beyond_m = to_ground.dot(sight.normalized()) - sight.norm();
+    const double geo_m = accuracy ? GeorefSigmaAt(*accuracy, c.model_ground) : 0.0;
+    c.height_sigma_m = std::hypot(geo_m, sight.norm() * o.pointing_sigma_deg * kDeg);
+    below.push_back(c.below_m), height_chi.push_back(c.below_m / c.height_sigma_m), beyond.push_back(c.beyond_m);
     angle.push_back(c.angle_rad / kDeg), sigma.push_back(c.sigma_rad / kDeg), chi.push_back(c.angle_rad / c.sigma_rad);
     along.push_back(c.along_m), across.push_back(c.across_m);
-    ground_h.push_back(c.model_ground.z()), fc_h.push_back(c.frame_centre.z());
+    ground_h.push_back(frame.ToGeodetic(c.model_ground).alt), fc_h.push_back(frame.ToGeodetic(c.frame_centre).alt);
     out.keyframes.push_back(c);
   }
   if (out.keyframes.empty()) return out;
@@ -149,7 +182,14 @@ LineOfSightCheck CheckLinesOfSight(const core::Reconstruction& model, const std:
   out.median_across_m = core::Median(across);
   out.median_ground_height_m = core::Median(ground_h);
   out.median_frame_centre_height_m = core::Median(fc_h);
-  out.verdict = out.median_chi <= o.max_chi ? LineOfSightCheck::Verdict::kAgrees : LineOfSightCheck::Verdict::kDisagrees;
+  out.median_below_m = core::Median(below);
+  out.median_beyond_m = core::Median(beyond);
+  out.median_height_chi = core::Median(height_chi);
+  out.max_chi_used = o.max_chi;
+  out.datum_name = VerticalDatumName(datum);
+  out.verdict = out.median_chi <= o.max_chi && out.median_height_chi <= o.max_chi
+                    ? LineOfSightCheck::Verdict::kAgrees
+                    : LineOfSightCheck::Verdict::kDisagrees;
   return out;
 }
 

@@ -5,6 +5,10 @@
 // so the angle at S between G and F is the product's disagreement with the telemetry. It is expected within the
 // telemetry's pointing accuracy and the georeference's own stated accuracy (expected_accuracy, propagated to G);
 // a model whose typical keyframe misses by more than max_chi of that is not trusted, and says why.
+// The angle cannot see a ground placed too far along the ray. The frame centre lies where the line of sight meets
+// the platform's terrain (or sea level when it has none): real ground lies at or above it, so the ray reaches it at
+// or before the frame centre. A model ground below the frame centre's height (beyond it along the ray) by more than
+// max_chi of σ_h = √(σ_geo² + (r·σ_pointing)²) is not trusted either.
 // The disagreement is also stated on the ground: along the line of sight's horizontal direction (+ beyond) and
 // across it, from the point of the ray at G's height.
 #pragma once
@@ -34,6 +38,9 @@ struct SightComparison {
   Eigen::Vector3d sensor, frame_centre, model_ground;  // ENU
   double angle_rad = 0, sigma_rad = 0;
   double along_m = 0, across_m = 0;  // G − (the ray at G's height), horizontal: along the sight (+ beyond), across
+  double below_m = 0;                // how far G lies below the frame centre's height (0 when above)
+  double beyond_m = 0;               // G's range along the sight minus the frame centre's (+: beyond it)
+  double height_sigma_m = 0;         // σ_h above
 };
 
 struct LineOfSightCheck {
@@ -41,8 +48,12 @@ struct LineOfSightCheck {
   Verdict verdict = Verdict::kNotChecked;
   std::vector<SightComparison> keyframes;
   double median_angle_deg = 0, median_sigma_deg = 0, median_chi = 0;
+  double median_below_m = 0, median_height_chi = 0;  // the ground below the frame centres, and over its σ_h
+  double median_beyond_m = 0;
+  double max_chi_used = 3.0;
+  std::string datum_name;  // of the heights
   double median_along_m = 0, median_across_m = 0;
-  double median_ground_height_m = 0, median_frame_centre_height_m = 0;
+  double median_ground_height_m = 0, median_frame_centre_height_m = 0;  // in the georeference's vertical datum
   std::string Why() const;  // for people: what disagrees and by how much, or why nothing was checked
   nlohmann::json ToJson() const;
 };
