@@ -16,6 +16,7 @@
 #include <unistd.h>
 #include <opencv2/imgcodecs.hpp>
 
+#include "fmv3d/core/files.h"
 #include "fmv3d/io/colmap_model.h"
 #include "fmv3d/io/obj_io.h"
 #include "fmv3d/render/renderer.h"
@@ -61,7 +62,8 @@ Setup& Get() {
     s->root = (dir ? fs::path(dir) : fs::temp_directory_path()) / ("fmv3d-surface-bench-" + std::to_string(::getpid()));
     fs::create_directories(s->root);
     synth::SynthOptions o;
-    o.scene = "building";
+    const char* scene = std::getenv("FMV3D_BENCH_SCENE");  // building (default) | town | terrain
+    o.scene = scene ? scene : "building";
     o.flight.frames = static_cast<int>(EnvDouble("FMV3D_BENCH_FRAMES", 24));
     o.width = 1280;
     o.height = 720;
@@ -77,6 +79,12 @@ Setup& Get() {
     c.outlier_share = 0.01;
     c.outlier_range = 2;
     c.region = Eigen::AlignedBox3d(Eigen::Vector3d(-40, -40, -3), Eigen::Vector3d(40, 40, 35));
+    if (o.scene != "building") {  // the modelled area of truth.json (not synth's backdrop ring)
+      const auto b = core::ReadJson(s->synth_dir / "truth.json").at("bounds");
+      c.region = Eigen::AlignedBox3d(
+          Eigen::Vector3d(b.at("min")[0].get<double>(), b.at("min")[1].get<double>(), b.at("min")[2].get<double>()),
+          Eigen::Vector3d(b.at("max")[0].get<double>(), b.at("max")[1].get<double>(), b.at("max")[2].get<double>()));
+    }
     s->ws = s->root / "ws";
     s->cloud = surface::PrepareSyntheticWorkspace(s->synth_dir, s->ws, c, {kHeldOut});
     s->prepare_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t).count();
@@ -100,6 +108,8 @@ void BM_MeshStage(benchmark::State& state) {
   state.counters["rms_pct"] = 100 * acc.rms / s.length;
   state.counters["median_pct"] = 100 * acc.median / s.length;
   state.counters["complete_pct"] = 100 * acc.completeness;
+  state.counters["pieces_found"] = report["poisson"]["components"]["found"].get<double>();
+  state.counters["pieces_kept"] = report["poisson"]["components"]["kept"].get<double>();
 }
 BENCHMARK(BM_MeshStage)->Unit(benchmark::kSecond)->Iterations(1)->UseRealTime();
 

@@ -111,7 +111,7 @@ TEST(MeshCleanup, DecidesPerPieceOnSupportAndArea) {
   square({0, 0, 0}, 100, 200);   // the big one: 10000 m²
   square({200, 0, 0}, 5, 10);    // a small building roof: 25 m² = 100 cells²
   square({300, 0, 0}, 20, 40);   // a piece with no points
-  square({400, 0, 0}, 1, 2);     // 1 m² = 4 cells²: an outlier blob
+  square({400, 0, 0}, 1.5, 3);   // 2.25 m² = 9 cells², 49 points: an outlier blob
   std::vector<Eigen::Vector3d> pts;
   auto sample = [&](const Eigen::Vector3d& o, double size) {
     for (double y = 0; y <= size; y += spacing)
@@ -119,7 +119,7 @@ TEST(MeshCleanup, DecidesPerPieceOnSupportAndArea) {
   };
   sample({0, 0, 0}, 100);
   sample({200, 0, 0}, 5);
-  sample({400, 0, 0}, 1);
+  sample({400, 0, 0}, 1.5);
   const ComponentSelection sel = SelectComponents(v, t, pts, cell, spacing, ComponentOptions{});
   ASSERT_EQ(sel.components.size(), 4u);
   EXPECT_EQ(sel.components[0].decision, ComponentDecision::kKept);
@@ -130,6 +130,7 @@ TEST(MeshCleanup, DecidesPerPieceOnSupportAndArea) {
   EXPECT_NEAR(sel.components[1].area, 25.0, 1e-9);
   EXPECT_NEAR(static_cast<double>(sel.components[1].support), 21.0 * 21.0, 1.0);
   EXPECT_EQ(sel.kept_faces(), 2u * 200 * 200 + 2u * 10 * 10);
+  EXPECT_NEAR(static_cast<double>(sel.components[3].support), 7.0 * 7.0, 1.0);
   // Without points, only the piece with the most support (all have none: the first) is kept.
   const ComponentSelection none = SelectComponents(v, t, {}, cell, spacing, ComponentOptions{});
   EXPECT_EQ(none.kept(), 1u);

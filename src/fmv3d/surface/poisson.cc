@@ -217,8 +217,8 @@ ColoredMesh ReconstructPoisson(const io::OrientedPointCloud& cloud, const Poisso
     }
     if (options.max_point_distance > 0 && spacing > 0) {
       // The local spacing of each vertex's nearest point (computed once per point that is someone's nearest):
-      // a sparsely sampled surface keeps its mesh; the limit never goes below one cell (Poisson vertices sit
-      // on the cell grid) nor below the median spacing.
+      // a sparsely sampled surface (far land) keeps its mesh; the limit never goes below one cell (Poisson
+      // vertices sit on the cell grid) nor below the median spacing.
       std::vector<int> unique = nearest;
       std::sort(unique.begin(), unique.end());
       unique.erase(std::unique(unique.begin(), unique.end()), unique.end());
@@ -230,7 +230,10 @@ ColoredMesh ReconstructPoisson(const io::OrientedPointCloud& cloud, const Poisso
       for (size_t i = 0; i < unique.size(); ++i) local_of[unique[i]] = local[i];
       for (size_t i = 0; i < dist.size(); ++i) {
         if (remove[i] || nearest[i] < 0) continue;
-        const double limit = options.max_point_distance * std::max(spacing, local_of[nearest[i]]);
+        // A point at the edge of an evenly sampled surface has a local spacing up to ~1.5x the median (its
+        // neighbours are on one side): only a surface sampled clearly sparser gets its own spacing.
+        const double local_spacing = local_of[nearest[i]] > 2 * spacing ? local_of[nearest[i]] : spacing;
+        const double limit = options.max_point_distance * local_spacing;
         if (dist[i] > std::max(limit, cell)) remove[i] = true, ++distance_trimmed;
       }
     }
