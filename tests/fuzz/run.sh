@@ -6,6 +6,7 @@
 # our own writers (`fmv3d synth` + `fmv3d reconstruct --fast`), real files from ../shared/data when present, the
 # committed tests/fuzz/seeds/<target>/ and tests/fuzz/regressions/<target>/. New corpus units go to
 # FUZZ_BUILD/fuzz/corpus/<target>/, crashing inputs to FUZZ_BUILD/fuzz/artifacts/<target>/.
+# The targets' own stdout (library warnings) is discarded; sanitizer reports go to stderr, in the log.
 # FUZZ_TARGETS="a b" limits the run to those targets; FUZZ_PARALLEL=N runs N targets at once (default 1).
 set -uo pipefail
 B=${1:?usage: run.sh FUZZ_BUILD FMV3D_CLI [SECONDS]}
@@ -22,10 +23,12 @@ FLIGHT=$W/flight
 if [[ ! -f "$FLIGHT/done" ]]; then
   rm -rf "$FLIGHT"
   echo "fuzz: writing a seed flight with $CLI (synth + reconstruct --fast) into $FLIGHT"
-  "$CLI" -q synth --scene building --path orbit --frames 60 --fps 6 --size 320x180 --klv -o "$FLIGHT/synth" &&
-    "$CLI" -q reconstruct "$FLIGHT/synth/flight.ts" -o "$FLIGHT/ws" --fast --no-report ||
+  if "$CLI" -q synth --scene building --path orbit --frames 60 --fps 6 --size 320x180 --klv -o "$FLIGHT/synth" &&
+    "$CLI" -q reconstruct "$FLIGHT/synth/flight.ts" -o "$FLIGHT/ws" --fast --no-report; then
+    touch "$FLIGHT/done"
+  else
     echo "fuzz: the seed flight did not finish; seeding with what was written"
-  touch "$FLIGHT/done"
+  fi
 fi
 
 seed() {  # seed TARGET FILE...: copies the existing files into the target's seed folder
@@ -97,7 +100,7 @@ run_one() {
   local tmp
   tmp=$(mktemp -d)
   TMPDIR=$tmp nice -n 10 "$B/tests/fuzz/$t" -max_total_time="$SECONDS_EACH" -max_len=65536 -timeout=20 \
-    -rss_limit_mb=2048 -print_final_stats=1 -artifact_prefix="$W/artifacts/$t/" "${dirs[@]}" \
+    -rss_limit_mb=2048 -close_fd_mask=1 -print_final_stats=1 -artifact_prefix="$W/artifacts/$t/" "${dirs[@]}" \
     > "$W/logs/$t.log" 2>&1
   echo $? > "$W/logs/$t.rc"
   rm -rf "$tmp"
@@ -116,8 +119,8 @@ failed=0
 printf '%-22s %12s %8s %8s %8s %s\n' target executions exec/s cov ft result
 for t in "${targets[@]}"; do
   log=$W/logs/$t.log
-  execs=$(grep -o 'stat::number_of_executed_units: [0-9]*' "$log" | tail -1 | awk '{print $2}')
-  rate=$(grep -o 'stat::average_exec_per_sec: [0-9]*' "$log" | tail -1 | awk '{print $2}')
+  execs=$(awk '/^stat::number_of_executed_units:/ {v = $2} END {print v}' "$log")
+  rate=$(awk '/^stat::average_exec_per_sec:/ {v = $2} END {print v}' "$log")
   cov=$(grep -o 'cov: [0-9]*' "$log" | tail -1 | awk '{print $2}')
   ft=$(grep -o 'ft: [0-9]*' "$log" | tail -1 | awk '{print $2}')
   rc=$(cat "$W/logs/$t.rc" 2>/dev/null || echo 1)

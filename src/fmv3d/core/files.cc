@@ -44,11 +44,14 @@ void WriteAtomically(const fs::path& path, const std::function<void(const fs::pa
     const int err = errno;
     std::error_code ec;
     fs::remove(tmp, ec);
+    // The message names the file the user asked for, not its temporary.
+    std::string what = e.what();
+    for (size_t at; (at = what.find(tmp.string())) != std::string::npos;) what.replace(at, tmp.string().size(), path.string());
     if (err == ENOSPC || err == EFBIG || err == EDQUOT || err == EACCES || err == EROFS || err == EIO) {
       const std::string reason = std::strerror(err);
-      if (std::string(e.what()).find(reason) == std::string::npos) throw Error(std::string(e.what()) + " (" + reason + ")");
+      if (what.find(reason) == std::string::npos) what += " (" + reason + ")";
     }
-    throw;
+    throw Error(what);
   } catch (...) {
     std::error_code ec;
     fs::remove(tmp, ec);
