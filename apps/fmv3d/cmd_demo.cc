@@ -6,6 +6,7 @@
 
 #include "command.h"
 #include "fmv3d/pipeline/demo.h"
+#include "fmv3d/server/server.h"
 
 namespace fmv3d::app {
 namespace {
@@ -23,7 +24,7 @@ void Add(CLI::App& app) {
     o->output = *out;
     pipeline::RunDemo(*o);
     // The console opens the demo's workspace (OUTPUT/ws): WS_ROOT is the output folder.
-    const std::filesystem::path exe = std::filesystem::read_symlink("/proc/self/exe");
+    const std::filesystem::path exe = server::SelfExecutable();
     std::printf("\n  open it in the console:\n    %s serve %s\n", exe.c_str(),
                 std::filesystem::absolute(o->output).lexically_normal().c_str());
   });

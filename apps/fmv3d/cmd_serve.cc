@@ -36,7 +36,7 @@ void Add(CLI::App& app) {
     o.host = a->host;
     o.port = a->port;
     o.max_upload_bytes = static_cast<size_t>(a->max_upload_mb) << 20;
-    const std::filesystem::path exe = std::filesystem::read_symlink("/proc/self/exe");
+    const std::filesystem::path exe = server::SelfExecutable();
     o.executable = exe;
     o.asset_dir = a->assets.empty() ? exe.parent_path() / "web" : std::filesystem::path(a->assets);
     if (!a->token_file.empty()) o.token = server::ReadTokenFile(a->token_file);

@@ -30,6 +30,7 @@ TEST(PlyStream, MatchesTheWholeCloudReaderAndSkipsVisibilityLists) {
     EXPECT_EQ(v.normal, whole.normals[i]);
     EXPECT_EQ(v.rgb[0], whole.colors[i][0]);
     EXPECT_EQ(v.rgb[2], whole.colors[i][2]);
+    EXPECT_EQ(v.views, whole.visibility[i].size());
     ++i;
   }));
   EXPECT_EQ(announced, 1000u);

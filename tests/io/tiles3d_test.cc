@@ -23,16 +23,21 @@ TEST(Tiles3d, PntsRoundTripAndLayout) {
     t.positions.emplace_back(i * 0.5f, -i * 0.25f, 1.0f + i);
     t.colors.emplace_back(uint8_t(i), uint8_t(255 - i), uint8_t(7 * i));
     t.normals.push_back(Eigen::Vector3f(i, 1, 2).normalized());
+    t.views.push_back(static_cast<uint8_t>(3 + i));
   }
   const std::string bytes = EncodePnts(t);
   ASSERT_GE(bytes.size(), 28u);
   EXPECT_EQ(bytes.substr(0, 4), "pnts");
   EXPECT_EQ(U32(bytes, 4), 1u);
   EXPECT_EQ(U32(bytes, 8), bytes.size());
-  const uint32_t json_len = U32(bytes, 12), bin_len = U32(bytes, 16);
+  const uint32_t json_len = U32(bytes, 12), bin_len = U32(bytes, 16), bt_json = U32(bytes, 20), bt_bin = U32(bytes, 24);
   EXPECT_EQ((28 + json_len) % 8, 0u);
   EXPECT_EQ(bin_len % 8, 0u);
-  EXPECT_EQ(28 + json_len + bin_len, bytes.size());
+  EXPECT_EQ((28 + json_len + bin_len + bt_json) % 8, 0u);
+  EXPECT_EQ(bt_bin, 40u);  // 37 bytes padded to 8
+  EXPECT_EQ(28 + json_len + bin_len + bt_json + bt_bin, bytes.size());
+  const auto bt = nlohmann::json::parse(bytes.substr(28 + json_len + bin_len, bt_json));
+  EXPECT_EQ(bt["views"]["componentType"], "UNSIGNED_BYTE");
   EXPECT_GE(bin_len, 37u * (12 + 12 + 3));
   const auto ft = nlohmann::json::parse(bytes.substr(28, json_len));
   EXPECT_EQ(ft["POINTS_LENGTH"], 37);
@@ -47,6 +52,7 @@ TEST(Tiles3d, PntsRoundTripAndLayout) {
     EXPECT_EQ(back.positions[i], t.positions[i]);
     EXPECT_EQ(back.colors[i], t.colors[i]);
     EXPECT_EQ(back.normals[i], t.normals[i]);
+    EXPECT_EQ(back.views[i], t.views[i]);
   }
 }
 
@@ -55,7 +61,8 @@ TEST(Tiles3d, PntsWithoutOptionalAttributesAndEmpty) {
   t.positions = {{1, 2, 3}};
   const PntsTile back = DecodePnts(EncodePnts(t));
   EXPECT_EQ(back.positions.size(), 1u);
-  EXPECT_TRUE(back.colors.empty() && back.normals.empty());
+  EXPECT_TRUE(back.colors.empty() && back.normals.empty() && back.views.empty());
+  EXPECT_EQ(U32(EncodePnts(t), 20), 0u);  // no batch table without views
   EXPECT_TRUE(DecodePnts(EncodePnts(PntsTile{})).positions.empty());
   t.colors.resize(2);
   EXPECT_THROW(EncodePnts(t), Error);

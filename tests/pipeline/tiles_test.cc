@@ -104,7 +104,7 @@ TEST(PointOctree, SmallAndDegenerateClouds) {
 
 // Walks tileset JSON, parsing every .pnts it names and collecting the point ids.
 void Collect(const nlohmann::json& tile, const fs::path& dir, double parent_error, std::vector<int>* seen,
-             int* tiles) {
+             int* tiles, int* tiles_with_views = nullptr) {
   EXPECT_LE(tile["geometricError"].get<double>(), parent_error);
   ASSERT_TRUE(tile["boundingVolume"].contains("box"));
   EXPECT_EQ(tile["boundingVolume"]["box"].size(), 12u);
@@ -114,8 +114,11 @@ void Collect(const nlohmann::json& tile, const fs::path& dir, double parent_erro
       const io::PntsTile t = io::DecodePnts(core::ReadTextFile(dir / uri));
       ++*tiles;
       const auto& b = tile["boundingVolume"]["box"];
+      const bool has_views = !t.views.empty();
+      if (tiles_with_views && has_views) ++*tiles_with_views;
       for (size_t i = 0; i < t.positions.size(); ++i) {
         ++(*seen)[IdOf(t.colors[i].data())];
+        if (has_views) EXPECT_EQ(t.views[i], 2 + IdOf(t.colors[i].data()) % 5);
         const Eigen::Vector3d p = t.rtc_center + t.positions[i].cast<double>();
         for (int k = 0; k < 3; ++k)
           EXPECT_LE(std::abs(p[k] - b[k].get<double>()), b[3 + 4 * k].get<double>() + 1e-3);
@@ -123,7 +126,8 @@ void Collect(const nlohmann::json& tile, const fs::path& dir, double parent_erro
     }
   }
   if (tile.contains("children"))
-    for (const auto& c : tile["children"]) Collect(c, dir, tile["geometricError"].get<double>(), seen, tiles);
+    for (const auto& c : tile["children"])
+      Collect(c, dir, tile["geometricError"].get<double>(), seen, tiles, tiles_with_views);
 }
 
 TEST(TilesStage, WritesAParseableTilesetWithEveryPointOnce) {
@@ -134,6 +138,7 @@ TEST(TilesStage, WritesAParseableTilesetWithEveryPointOnce) {
     cloud.positions.push_back(p.position.cast<double>());
     cloud.normals.push_back(p.normal);
     cloud.colors.emplace_back(p.rgb[0], p.rgb[1], p.rgb[2]);
+    cloud.visibility.push_back(std::vector<uint32_t>(2 + IdOf(p.rgb) % 5, 1));  // 2-6 views
   }
   fs::create_directories(ws / "dense");
   io::WritePointCloudPly(cloud, ws / "dense" / "fused.ply");
@@ -146,9 +151,10 @@ TEST(TilesStage, WritesAParseableTilesetWithEveryPointOnce) {
   EXPECT_EQ(tileset["asset"]["version"], "1.0");
   EXPECT_FALSE(tileset["root"].contains("transform"));
   std::vector<int> seen(60000, 0);
-  int tiles = 0;
-  Collect(tileset["root"], ws / "tiles", tileset["geometricError"].get<double>(), &seen, &tiles);
+  int tiles = 0, with_views = 0;
+  Collect(tileset["root"], ws / "tiles", tileset["geometricError"].get<double>(), &seen, &tiles, &with_views);
   EXPECT_EQ(tiles, summary["tiles"].get<int>());
+  EXPECT_EQ(with_views, tiles);  // fused.ply's visibility lists became every tile's "views"
   for (size_t i = 0; i < seen.size(); ++i) ASSERT_EQ(seen[i], 1) << "point " << i;
   EXPECT_FALSE(fs::exists(ws / "tiles.tmp"));
 }

@@ -1,5 +1,6 @@
 #include "fmv3d/io/ply_stream.h"
 
+#include <algorithm>
 #include <cstring>
 #include <fstream>
 #include <sstream>
@@ -53,7 +54,7 @@ double Value(Type t, const char* p) {
 struct Property {
   Type type = Type::kBad;       // scalar type, or the list's item type
   Type count_type = Type::kBad;  // set for lists
-  int slot = -1;                 // 0-2 position, 3-5 normal, 6-8 colour, -1 ignored
+  int slot = -1;                 // 0-2 position, 3-5 normal, 6-8 colour, 9 the visibility list, -1 ignored
 };
 
 // Buffered little reader: Take(n) returns a pointer to the next n bytes.
@@ -129,6 +130,7 @@ bool StreamPlyVertices(const std::filesystem::path& path, const std::function<vo
       if (p.type == Type::kBad) throw Error(path.string() + ": bad PLY property type in '" + line + "'");
       for (int s = 0; s < 9; ++s)
         if (name == kSlots[s] && p.count_type == Type::kBad) p.slot = s;
+      if (name == "visibility" && p.count_type != Type::kBad) p.slot = 9;
       props.push_back(p);
     }
   }
@@ -143,6 +145,7 @@ bool StreamPlyVertices(const std::filesystem::path& path, const std::function<vo
         const double n = Value(p.count_type, buf.Take(SizeOf(p.count_type)));
         if (n < 0 || n > 1e6) throw Error(path.string() + ": implausible PLY list length");
         buf.Take(static_cast<size_t>(n) * SizeOf(p.type));
+        if (p.slot == 9) v.views = static_cast<uint8_t>(std::min(n, 255.0));
         continue;
       }
       const double x = Value(p.type, buf.Take(SizeOf(p.type)));

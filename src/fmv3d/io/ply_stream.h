@@ -15,6 +15,7 @@ struct PlyVertex {
   Eigen::Vector3f position = Eigen::Vector3f::Zero();
   Eigen::Vector3f normal = Eigen::Vector3f::Zero();  // zero when the file has no nx ny nz
   uint8_t rgb[3] = {0, 0, 0};
+  uint8_t views = 0;  // length of the "visibility" list (images that see the point), capped at 255; 0 without
 };
 
 // Returns the vertex count announced by the header before the first callback through `on_count` (may be null).

@@ -28,22 +28,25 @@ std::string PaddedJson(const nlohmann::json& j, size_t start) {
   return text;
 }
 
+// The batch table binary `bt_bin` is counted in the header; `body` (a b3dm's GLB) follows it uncounted.
 std::string Assemble(const char magic[4], const std::string& ft_json, const std::string& ft_bin,
-                     const std::string& bt_json, const std::string& body) {
+                     const std::string& bt_json, const std::string& bt_bin, const std::string& body) {
   std::string out(magic, 4);
   PutU32(&out, 1);
-  PutU32(&out, static_cast<uint32_t>(kHeader + ft_json.size() + ft_bin.size() + bt_json.size() + body.size()));
+  PutU32(&out, static_cast<uint32_t>(kHeader + ft_json.size() + ft_bin.size() + bt_json.size() + bt_bin.size() +
+                                     body.size()));
   PutU32(&out, static_cast<uint32_t>(ft_json.size()));
   PutU32(&out, static_cast<uint32_t>(ft_bin.size()));
   PutU32(&out, static_cast<uint32_t>(bt_json.size()));
-  PutU32(&out, 0);
-  return out + ft_json + ft_bin + bt_json + body;
+  PutU32(&out, static_cast<uint32_t>(bt_bin.size()));
+  return out + ft_json + ft_bin + bt_json + bt_bin + body;
 }
 }  // namespace
 
 std::string EncodePnts(const PntsTile& t) {
   const size_t n = t.positions.size();
-  if ((!t.colors.empty() && t.colors.size() != n) || (!t.normals.empty() && t.normals.size() != n))
+  if ((!t.colors.empty() && t.colors.size() != n) || (!t.normals.empty() && t.normals.size() != n) ||
+      (!t.views.empty() && t.views.size() != n))
     throw Error("EncodePnts: attribute sizes differ from the point count");
   std::string bin;
   nlohmann::json ft = {{"POINTS_LENGTH", n},
@@ -59,7 +62,14 @@ std::string EncodePnts(const PntsTile& t) {
     bin.append(reinterpret_cast<const char*>(t.colors.data()), n * 3);
   }
   bin.append(Pad8(bin.size()) - bin.size(), '\0');
-  return Assemble("pnts", PaddedJson(ft, kHeader), bin, "", "");
+  const std::string ft_json = PaddedJson(ft, kHeader);
+  if (t.views.empty()) return Assemble("pnts", ft_json, bin, "", "", "");
+  const std::string bt_json = PaddedJson(
+      {{"views", {{"byteOffset", 0}, {"componentType", "UNSIGNED_BYTE"}, {"type", "SCALAR"}}}},
+      kHeader + ft_json.size() + bin.size());
+  std::string bt_bin(t.views.begin(), t.views.end());
+  bt_bin.append(Pad8(bt_bin.size()) - bt_bin.size(), '\0');
+  return Assemble("pnts", ft_json, bin, bt_json, bt_bin, "");
 }
 
 PntsTile DecodePnts(const std::string& bytes) {
@@ -100,6 +110,22 @@ PntsTile DecodePnts(const std::string& bytes) {
     t.colors.resize(n);
     std::memcpy(t.colors.data(), rgb, n * 3);
   }
+  if (bt_json > 0) {
+    const size_t bt_at = kHeader + ft_json + ft_bin;
+    const nlohmann::json bt =
+        nlohmann::json::parse(bytes.begin() + bt_at, bytes.begin() + bt_at + bt_json, nullptr, false);
+    if (bt.is_discarded() || !bt.is_object()) throw Error("pnts: malformed batch table JSON");
+    if (bt.contains("views")) {
+      const auto& v = bt["views"];
+      if (!v.is_object() || v.value("componentType", "") != "UNSIGNED_BYTE" || !v.contains("byteOffset") ||
+          !v["byteOffset"].is_number_unsigned())
+        throw Error("pnts: batch table 'views' is not an UNSIGNED_BYTE reference");
+      const size_t off = v["byteOffset"].get<size_t>();
+      if (off > bt_bin || n > bt_bin - off) throw Error("pnts: batch table 'views' out of range");
+      const char* p = bytes.data() + bt_at + bt_json + off;
+      t.views.assign(reinterpret_cast<const uint8_t*>(p), reinterpret_cast<const uint8_t*>(p) + n);
+    }
+  }
   if (ft.contains("RTC_CENTER")) {
     const auto& c = ft["RTC_CENTER"];
     if (!c.is_array() || c.size() != 3 || !c[0].is_number() || !c[1].is_number() || !c[2].is_number())
@@ -125,7 +151,7 @@ std::string EncodeB3dm(const std::string& glb) {
   GlbJson(glb);
   std::string body = glb;
   body.append(Pad8(body.size()) - body.size(), '\0');  // b3dm ends on 8 bytes; GLB readers use their own length
-  return Assemble("b3dm", PaddedJson({{"BATCH_LENGTH", 0}}, kHeader), "", "", body);
+  return Assemble("b3dm", PaddedJson({{"BATCH_LENGTH", 0}}, kHeader), "", "", "", body);
 }
 
 Eigen::AlignedBox3d GlbBoundsZUp(const std::string& glb) {

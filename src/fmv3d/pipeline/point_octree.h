@@ -22,6 +22,7 @@ struct TilePoint {
   Eigen::Vector3f position;
   Eigen::Vector3f normal;  // zero when the cloud has none
   uint8_t rgb[3] = {0, 0, 0};
+  uint8_t views = 0;  // images that see the point (0: unknown)
 };
 
 struct OctreeNode {

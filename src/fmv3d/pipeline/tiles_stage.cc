@@ -40,13 +40,17 @@ nlohmann::json WritePointTiles(const PointOctree& tree, const fs::path& dir) {
     const Eigen::Vector3f rtc = tile.rtc_center.cast<float>();
     tile.positions.reserve(node.count);
     tile.colors.reserve(node.count);
-    bool normals = false;
-    for (size_t i = node.begin; i < node.begin + node.count; ++i) normals = normals || !tree.points[i].normal.isZero();
+    bool normals = false, views = false;
+    for (size_t i = node.begin; i < node.begin + node.count; ++i) {
+      normals = normals || !tree.points[i].normal.isZero();
+      views = views || tree.points[i].views > 0;
+    }
     for (size_t i = node.begin; i < node.begin + node.count; ++i) {
       const TilePoint& p = tree.points[i];
       tile.positions.push_back(p.position - rtc);
       tile.colors.emplace_back(p.rgb[0], p.rgb[1], p.rgb[2]);
       if (normals) tile.normals.push_back(p.normal);
+      if (views) tile.views.push_back(p.views);
     }
     const std::string uri = "points/" + node.name + ".pnts";
     core::WriteTextFile(dir / uri, io::EncodePnts(tile));
@@ -113,6 +117,7 @@ nlohmann::json RunTilesStage(const fs::path& ws, const TilesOptions& options) {
         p.position = v.position;
         p.normal = v.normal;
         std::copy(v.rgb, v.rgb + 3, p.rgb);
+        p.views = v.views;
         points.push_back(p);
       });
   if (!streamed) {
@@ -122,6 +127,8 @@ nlohmann::json RunTilesStage(const fs::path& ws, const TilesOptions& options) {
       points[i].position = cloud.positions[i].cast<float>();
       points[i].normal = cloud.has_normals() ? cloud.normals[i] : Eigen::Vector3f::Zero();
       if (cloud.has_colors()) std::copy(cloud.colors[i].data(), cloud.colors[i].data() + 3, points[i].rgb);
+      if (cloud.has_visibility())
+        points[i].views = static_cast<uint8_t>(std::min<size_t>(cloud.visibility[i].size(), 255));
     }
   }
   if (points.empty()) throw Error(fused.string() + ": no points to tile");

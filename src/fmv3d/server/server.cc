@@ -37,6 +37,14 @@ std::string RandomToken() {
   return t;
 }
 
+fs::path SelfExecutable() {
+  std::string exe = fs::read_symlink("/proc/self/exe").string();
+  const std::string deleted = " (deleted)";
+  if (exe.size() > deleted.size() && exe.compare(exe.size() - deleted.size(), deleted.size(), deleted) == 0)
+    exe.resize(exe.size() - deleted.size());
+  return exe;
+}
+
 std::string ReadTokenFile(const fs::path& path) {
   std::ifstream in(path);
   if (!in) throw Error(path.string() + ": cannot read the token file");
@@ -126,7 +134,7 @@ struct Server::Impl {
 
 Server::Server(ServerOptions options) : impl_(std::make_unique<Impl>()) {
   options.Check();
-  if (options.executable.empty()) options.executable = fs::read_symlink("/proc/self/exe");
+  if (options.executable.empty()) options.executable = SelfExecutable();
   Context& ctx = impl_->ctx;
   ctx.ws_root = fs::canonical(options.ws_root);
   std::error_code ec;

@@ -33,6 +33,9 @@ struct ServerOptions {
 bool IsLoopbackHost(const std::string& host);
 // 32 random bytes from /dev/urandom as 64 hex digits.
 std::string RandomToken();
+// This process's executable (/proc/self/exe), without the " (deleted)" Linux appends once the file was replaced
+// (a rebuilt binary): jobs then run the new file at the same path.
+std::filesystem::path SelfExecutable();
 // The token in a token file: its first line, trimmed; throws fmv3d::Error when missing or shorter than 16.
 std::string ReadTokenFile(const std::filesystem::path& path);
 
