@@ -103,12 +103,19 @@ NestedModelTestResult TestNestedModel(core::Reconstruction* rec, const BundleAdj
   if (test_options.require_determined) {
     auto cov = s1.intrinsics_covariance.find(cid);
     if (cov == s1.intrinsics_covariance.end()) return r;  // rank-deficient: not determined either
-    for (auto p : r.parameters) {
+    bool determined = true;
+    for (size_t i = 0; i < r.parameters.size(); ++i) {
+      const auto p = r.parameters[i];
       const double sigma = std::sqrt(std::max(0.0, cov->second(p, p)));
       r.sigmas.push_back(sigma);
       r.max_sigma_px = std::max(r.max_sigma_px, sigma * CornerDisplacementPerUnit(r.freed, p));
+      // "Determined": bias against variance. Holding a parameter costs the squared shift Δθ² the data ask for (its
+      // bias), freeing it costs σ_θ² (its variance), so each freed parameter must move by more than its σ. One
+      // the data leave uncertain (a principal point trading against a common tilt of the cameras, a focal on a
+      // telephoto plateau) would only move the cameras by its uncertainty: it stays held.
+      determined = determined && sigma < std::abs(r.freed_values[i] - r.held_values[i]);
     }
-    if (r.max_sigma_px > r.rms_freed_px) {
+    if (!determined) {
       r.decision = NestedModelDecision::kUndetermined;
       return r;
     }

@@ -8,10 +8,11 @@
 //     information criterion's price of k extra parameters, k · ln(n) for n residuals (free when BIC₁ < BIC₀).
 //     A fixed Δχ² threshold instead (min_delta_chi2 > 0) is available for callers that need one.
 //  2. Do the data determine it? The posterior covariance of the freed parameters (the BA's covariance, Ceres)
-//     gives each one's standard deviation σ_θ; its effect on the image — how far 1σ moves a point at the image
-//     corner — must stay below the observations' own noise (the rms reprojection error). A parameter the data
-//     leave uncertain by more than that (a principal point that trades against a common tilt of an orbit's
-//     cameras, a focal on a telephoto plateau) would only move the cameras by its uncertainty: it stays held.
+//     gives each one's standard deviation σ_θ. Holding a parameter costs the squared shift Δθ² the data ask for
+//     (its bias), freeing it costs σ_θ² (its variance): each freed parameter must move by more than its σ. One
+//     the data leave uncertain (a principal point trading against a common tilt of the cameras, a focal on a
+//     telephoto plateau) would only move the cameras by its uncertainty: it stays held. The 1σ displacement at
+//     the image corner is reported beside it.
 #pragma once
 
 #include <array>
@@ -42,7 +43,7 @@ struct NestedModelTestOptions {
 enum class NestedModelDecision {
   kFreed,          // both questions answered yes
   kNotSignificant, // Δχ² below the price of the extra parameters
-  kUndetermined,   // significant, but the data leave the parameters uncertain beyond the observation noise
+  kUndetermined,   // significant, but a parameter's posterior σ exceeds the shift the data ask for
   kFailed,         // a fit failed or the covariance could not be computed (rank-deficient): held
 };
 const char* ToString(NestedModelDecision decision);
