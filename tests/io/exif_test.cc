@@ -9,6 +9,7 @@
 
 #include <opencv2/imgcodecs.hpp>
 
+#include "fmv3d/core/error.h"
 #include "fmv3d/io/exif_writer.h"
 #include "test_util.h"
 

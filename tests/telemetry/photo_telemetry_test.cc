@@ -7,6 +7,7 @@
 #include <Eigen/Geometry>
 #include <functional>
 
+#include "fmv3d/core/error.h"
 #include "fmv3d/telemetry/attitude.h"
 
 namespace fmv3d::telemetry {
