@@ -4,7 +4,9 @@
 #include <cctype>
 #include <cmath>
 #include <cstring>
+#include <cstdio>
 #include <fstream>
+#include <limits>
 #include <vector>
 
 namespace fmv3d::io {
@@ -100,6 +102,16 @@ class TiffReader {
   bool le_ = true;
 };
 
+// v as an integer of type T, 0 when it is not finite or outside T's range (EXIF values are untrusted: a cast
+// of an out-of-range double would be undefined behaviour).
+template <typename T>
+T ToInt(double v) {
+  if (!std::isfinite(v) || v < static_cast<double>(std::numeric_limits<T>::min()) ||
+      v > static_cast<double>(std::numeric_limits<T>::max()))
+    return 0;
+  return static_cast<T>(v);
+}
+
 // Days from 1970-01-01 of a proleptic Gregorian date (H. Hinnant's days_from_civil).
 int64_t DaysFromCivil(int64_t y, unsigned m, unsigned d) {
   y -= m <= 2;
@@ -139,7 +151,7 @@ void ReadGpsIfd(const TiffReader& r, uint32_t off, ExifGps* gps) {
       case 0x0002: lat = dms(e); break;
       case 0x0003: lon_ref = r.Ascii(e).empty() ? 0 : r.Ascii(e)[0]; break;
       case 0x0004: lon = dms(e); break;
-      case 0x0005: alt_ref = static_cast<int>(r.NumberOr0(e)); break;
+      case 0x0005: alt_ref = ToInt<int>(r.NumberOr0(e)); break;
       case 0x0006: alt = r.Number(e); break;
       case 0x0007:
         for (uint32_t i = 0; i < 3; ++i) hms[i] = r.Number(e, i);
@@ -174,8 +186,8 @@ ExifInfo ParseTiffExif(const unsigned char* data, size_t size) {
   r.ForEach(r.FirstIfd(), [&](const TiffReader::Entry& e) {
     if (e.tag == 0x010F) info.make = r.Ascii(e);
     if (e.tag == 0x0110) info.model = r.Ascii(e);
-    if (e.tag == 0x8769) exif_ifd = static_cast<uint32_t>(r.NumberOr0(e));
-    if (e.tag == 0x8825) gps_ifd = static_cast<uint32_t>(r.NumberOr0(e));
+    if (e.tag == 0x8769) exif_ifd = ToInt<uint32_t>(r.NumberOr0(e));
+    if (e.tag == 0x8825) gps_ifd = ToInt<uint32_t>(r.NumberOr0(e));
     if (e.tag == 0x920A) info.focal_mm = r.NumberOr0(e);  // TIFF/EP puts it in IFD0
     if (e.tag == 0x02BC && (e.type == 1 || e.type == 7) && e.count <= kMaxXmp)  // XMLPacket (TIFF files)
       info.xmp.assign(reinterpret_cast<const char*>(data + e.value_offset), e.count);
@@ -187,8 +199,8 @@ ExifInfo ParseTiffExif(const unsigned char* data, size_t size) {
       if (e.tag == 0x920A) info.focal_mm = r.NumberOr0(e);
       if (e.tag == 0xA405) info.focal_35mm = r.NumberOr0(e);
       if (e.tag == 0xA20E) fp_res = r.NumberOr0(e);
-      if (e.tag == 0xA210) fp_unit = static_cast<int>(r.NumberOr0(e));
-      if (e.tag == 0xA002) info.pixel_width = static_cast<int>(r.NumberOr0(e));
+      if (e.tag == 0xA210) fp_unit = ToInt<int>(r.NumberOr0(e));
+      if (e.tag == 0xA002) info.pixel_width = ToInt<int>(r.NumberOr0(e));
       if (e.tag == 0x9003) info.datetime_original = r.Ascii(e);
     });
   }

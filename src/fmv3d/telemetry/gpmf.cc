@@ -167,7 +167,7 @@ class Parser {
       s->altitude_system = h.type == 'F' && h.size() >= 4 ? FourCC(h.data) : Text(h.data, h.size());
     } else if (k == "STMP") {
       const auto v = Numbers(h);
-      if (!v.empty() && v[0] >= 0) s->stmp_us = static_cast<uint64_t>(v[0]);
+      if (!v.empty() && v[0] >= 0 && v[0] < 1.8e19) s->stmp_us = static_cast<uint64_t>(v[0]);
     } else if (k == "TSMP" || k == "TICK" || k == "TOCK" || k == "EMPT" || k == "TMPC" || k == "ORIN" ||
                k == "ORIO" || k == "MTRX" || k == "TIMO" || k == "DVID" || k == "DVNM" || k == "RMRK" ||
                k == "MTYP" || k == "QUAN") {
