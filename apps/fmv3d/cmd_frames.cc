@@ -15,6 +15,7 @@ struct FramesArgs {
   std::vector<std::string> inputs;
   std::string workspace;
   std::string camera_file, sensor;
+  std::string altitude_datum = "auto";
   ingest::IngestOptions options;
 };
 
@@ -34,8 +35,21 @@ void Add(CLI::App& app) {
   cmd->add_option("--camera", a->camera_file, "Calibration file (camera.json from `fmv3d calibrate`, or OpenCV YAML)");
   cmd->add_option("--sensor", a->sensor, "Sensor database entry for all inputs (see `fmv3d cameras`)");
   cmd->add_flag("--all-frames", a->options.keyframes.all_frames, "Keep every decoded video frame");
+  cmd->add_option("--altitude-datum", a->altitude_datum,
+                  "Datum of photo EXIF/XMP altitudes: auto (mean sea level, as EXIF and DJI define them), msl, "
+                  "ellipsoid")
+      ->check(CLI::IsMember({"auto", "msl", "ellipsoid"}))
+      ->capture_default_str();
+  cmd->add_option("--max-dop", a->options.telemetry.fix.max_dop, "Drop GPS fixes with a larger DOP")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
+  cmd->add_option("--max-accuracy", a->options.telemetry.fix.max_horizontal_accuracy,
+                  "Drop GPS fixes stating a worse horizontal accuracy, metres")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
   cmd->callback([a] {
     a->options.workspace = a->workspace;
+    a->options.telemetry.altitude_datum = telemetry::ParseAltitudeDatum(a->altitude_datum);
     calib::PriorOptions po;
     po.camera_file = a->camera_file;
     po.sensor_name = a->sensor;

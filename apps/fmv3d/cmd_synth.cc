@@ -85,6 +85,9 @@ void Add(CLI::App& app) {
       "cameras; frame centre and slant range from the true pose; heights both MSL and ellipsoidal, apart by\n"
       "the EGM96 undulation) and truth.json states geo_origin: the world is the local East-North-Up frame of\n"
       "that point.\n"
+      "--exif-gps writes JPEG frames with EXIF GPS (MSL altitude) and DJI-style XMP (gimbal/flight angles,\n"
+      "absolute/relative altitude); --gpmf writes flight.mp4 with a GoPro GPMF track (GPS5, or GPS9 with --gps9,\n"
+      "one fix per frame, ellipsoidal heights; CORI relative orientations). Same noise options as --klv.\n"
       "A --scene is a fixed world; --seed varies only the flight's jitter and the sensor noise.");
   auto o = std::make_shared<synth::SynthOptions>();
   auto size = std::make_shared<std::string>("1280x720");
@@ -148,6 +151,11 @@ void Add(CLI::App& app) {
   cmd->add_flag("--depth", o->write_depth, "Also write float depth maps to DIR/depth/");
   auto* klv_opt = cmd->add_flag("--klv", o->klv,
                                 "Write flight.ts with a MISB ST 0601 KLV telemetry stream (implies --format ts)");
+  auto* exif_opt = cmd->add_flag("--exif-gps", o->exif_gps,
+                                 "JPEG frames with EXIF GPS and DJI-style XMP attitude/altitudes (implies --format jpg)");
+  auto* gpmf_opt = cmd->add_flag("--gpmf", o->gpmf,
+                                 "Write flight.mp4 with a GoPro GPMF track: GPS5 + CORI (implies --format mp4)");
+  cmd->add_flag("--gps9", o->gpmf_gps9, "With --gpmf: GPS9 fixes instead of GPS5");
   auto geo_origin = std::make_shared<std::string>("38.16,-77.35,60");
   cmd->add_option("--geo-origin", *geo_origin, "With --klv: WGS84 LAT,LON,ALT of the world origin (ellipsoidal m)")
       ->check(kList3)
@@ -181,7 +189,7 @@ void Add(CLI::App& app) {
       const auto p = ParseList(*look_at);
       opts.flight.look_at = Eigen::Vector3d(p[0], p[1], p[2]);
     }
-    if (klv_opt->count()) {
+    if (klv_opt->count() || exif_opt->count() || gpmf_opt->count()) {
       const auto g = ParseList(*geo_origin);
       opts.klv_options.origin = {g[0], g[1], g[2]};
       // Heights above mean sea level (tags 15, 25) differ from ellipsoidal ones (75, 78) by the geoid there.
@@ -190,7 +198,7 @@ void Add(CLI::App& app) {
         if (!n) spdlog::warn("synth: PROJ's EGM96 grid (egm96_15.gtx) is missing; KLV heights MSL = ellipsoidal");
         opts.klv_options.geoid_undulation = n.value_or(0.0);
       }
-      if (!format_opt->count()) opts.format = "ts";
+      if (!format_opt->count()) opts.format = klv_opt->count() ? "ts" : exif_opt->count() ? "jpg" : "mp4";
     }
     opts.output = *output;
     const auto r = synth::RunSynth(opts);

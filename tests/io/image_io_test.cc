@@ -1,4 +1,5 @@
 #include "fmv3d/io/image_io.h"
+#include "fmv3d/io/exif.h"
 
 #include <gtest/gtest.h>
 

@@ -18,6 +18,7 @@
 #include "fmv3d/core/files.h"
 #include "fmv3d/core/logging.h"
 #include "fmv3d/telemetry/dji_srt.h"
+#include "fmv3d/telemetry/gpmf_telemetry.h"
 #include "fmv3d/telemetry/telemetry.h"
 #include "fmv3d/ingest/video_reader.h"
 
@@ -83,6 +84,7 @@ void IngestOptions::Check() const {
   if (workspace.empty()) throw Error("frames: no workspace folder given (-o WS)");
   if (max_frames < 0) throw Error("frames: --max-frames must be >= 0");
   keyframes.Check();
+  telemetry.fix.Check();
 }
 
 std::vector<fs::path> ExpandInputs(const std::vector<fs::path>& inputs) {
@@ -132,9 +134,10 @@ void FocalFromTelemetryHfov(const io::FramesIndex& index, uint32_t camera_id, co
   *source = "telemetry-hfov";
 }
 
-// A video's own telemetry: KLV data streams (MISB ST 0601 / EG0104) or a DJI .SRT beside it. Telemetry is an
-// optional extra: a damaged stream costs a warning, never the frames.
-std::vector<telemetry::TelemetrySample> LoadTelemetry(const std::filesystem::path& video) {
+// A video's own telemetry: KLV data streams (MISB ST 0601 / EG0104), a GoPro GPMF track, or a DJI .SRT beside
+// it. Telemetry is an optional extra: a damaged stream costs a warning, never the frames.
+std::vector<telemetry::TelemetrySample> LoadTelemetry(const std::filesystem::path& video,
+                                                      const telemetry::FixQualityOptions& fix) {
   std::vector<telemetry::TelemetrySample> samples;
   try {
     telemetry::TelemetryStats stats;
@@ -142,13 +145,21 @@ std::vector<telemetry::TelemetrySample> LoadTelemetry(const std::filesystem::pat
     if (stats.klv.bad_checksum + stats.klv.malformed > 0)
       spdlog::warn("{}: {} malformed KLV packets skipped", video.string(),
                    stats.klv.bad_checksum + stats.klv.malformed);
-    if (samples.empty()) {
-      if (auto srt = telemetry::FindDjiSrtBeside(video)) {
-        samples = telemetry::ReadDjiSrt(*srt);
-        spdlog::info("{}: {} telemetry samples from {}", video.string(), samples.size(), srt->string());
-      }
-    } else {
+    if (!samples.empty()) {
       spdlog::info("{}: {} KLV telemetry samples", video.string(), samples.size());
+      return samples;
+    }
+    const telemetry::GpmfTelemetry g = telemetry::ReadGpmfTelemetry(video, fix);
+    if (g.parse.malformed > 0) spdlog::warn("{}: {} malformed GPMF entries skipped", video.string(), g.parse.malformed);
+    if (g.fixes.Rejected() > 0)
+      spdlog::warn("{}: {}; frames there get no position", video.string(), g.fixes.Summary("GPMF GPS fixes"));
+    if (!g.samples.empty()) {
+      spdlog::info("{}: {} GPMF telemetry samples from {} payloads", video.string(), g.samples.size(), g.payloads);
+      return g.samples;
+    }
+    if (auto srt = telemetry::FindDjiSrtBeside(video)) {
+      samples = telemetry::ReadDjiSrt(*srt);
+      spdlog::info("{}: {} telemetry samples from {}", video.string(), samples.size(), srt->string());
     }
   } catch (const Error& e) {
     spdlog::warn("{}: telemetry ignored ({})", video.string(), e.what());
@@ -174,6 +185,7 @@ io::FramesIndex IngestFrames(const std::vector<fs::path>& inputs, const IngestOp
   std::map<ImageCameraKey, uint32_t> image_cameras;
   NameRegistry names;
   std::vector<telemetry::TelemetryTrack> tracks;  // every video's whole telemetry → frames/telemetry.json
+  telemetry::FixCounts photo_fixes;                // photos with a position: kept / dropped
 
   auto add_camera = [&](CameraGroup g) {
     io::CameraPrior c;
@@ -250,6 +262,11 @@ io::FramesIndex IngestFrames(const std::vector<fs::path>& inputs, const IngestOp
       r.camera_id = cam_id;
       r.source = file.string();
       r.sharpness = m.sharpness;
+      const telemetry::PhotoTelemetry t = telemetry::TelemetryFromPhoto(exif, options.telemetry);
+      photo_fixes.Add(t.rejection);
+      if (t.sample) r.telemetry = telemetry::ToJson(*t.sample);
+      if (t.dji.malformed > 0)
+        spdlog::warn("{}: {} DJI XMP fields are not numbers (ignored)", file.string(), t.dji.malformed);
       index.frames.push_back(r);
       continue;
     }
@@ -277,7 +294,7 @@ io::FramesIndex IngestFrames(const std::vector<fs::path>& inputs, const IngestOp
     if (info.interlaced)
       spdlog::warn("{}: interlaced video; frames are used as decoded (no deinterlacing), fast motion will comb",
                    file.string());
-    const std::vector<telemetry::TelemetrySample> samples = LoadTelemetry(file);
+    const std::vector<telemetry::TelemetrySample> samples = LoadTelemetry(file, options.telemetry.fix);
     if (!samples.empty()) tracks.push_back({file.string(), samples});
     core::Progress progress("decode " + stem, static_cast<size_t>(std::max<int64_t>(info.frame_count_hint, 0)));
     std::vector<Keyframe> kept;
@@ -324,6 +341,10 @@ io::FramesIndex IngestFrames(const std::vector<fs::path>& inputs, const IngestOp
     spdlog::info("{}: {} frames decoded, {} blurred, {} keyframes", file.string(), n_video_frames,
                  selector.blurred_frames(), index.frames.size() - first);
   }
+
+  if (photo_fixes.Rejected() > 0)
+    spdlog::warn("{}; those photos carry no telemetry", photo_fixes.Summary("photo GPS fixes"));
+  if (photo_fixes.kept > 0) spdlog::info("{} photos with a GPS position", photo_fixes.kept);
 
   // --max-frames: an even subsample of everything kept.
   if (options.max_frames > 0 && static_cast<int>(index.frames.size()) > options.max_frames) {

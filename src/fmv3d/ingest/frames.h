@@ -4,8 +4,12 @@
 // - Images keep their file name (GIFs are converted to <stem>.png, since later stages read with OpenCV);
 //   each distinct (size, EXIF make/model/focal) is one camera. Folders are read non-recursively, by name.
 // - Each video is one camera; its keyframes (keyframes.h) are written as <video-stem>-<index, 6 digits>.png.
-//   Each kept frame carries the telemetry interpolated at its time; a video's whole telemetry (every packet)
-//   goes to frames/telemetry.json (telemetry.h, TelemetryTrack), absent when no video has any.
+//   Each kept frame carries the telemetry interpolated at its time (KLV, else a GoPro GPMF track, else a DJI
+//   .SRT beside the video); a video's whole telemetry (every packet) goes to frames/telemetry.json (telemetry.h,
+//   TelemetryTrack), absent when no video has any.
+// - Each photo carries the telemetry of its EXIF GPS / DJI XMP (telemetry/photo_telemetry.h).
+// - Position fixes that would georeference wrongly ((0, 0), no lock, DOP or stated accuracy too poor, out of
+//   range) are dropped with a count and a warning (telemetry/fix_quality.h); the frame is kept without them.
 // - The intrinsics prior of each camera comes from options.prior (the CLI wires calib::PriorFromSources:
 //   --camera file, sensor database, EXIF), else f = 1.2 · max(w, h) marked "guess".
 // - Nothing is written half-way: everything goes to WS/.frames-staging-<pid>/ and replaces WS/frames/ only
@@ -18,9 +22,11 @@
 #include <vector>
 
 #include "fmv3d/core/camera.h"
+#include "fmv3d/io/exif.h"
 #include "fmv3d/io/frames_index.h"
 #include "fmv3d/io/image_io.h"
 #include "fmv3d/ingest/keyframes.h"
+#include "fmv3d/telemetry/photo_telemetry.h"
 
 namespace fmv3d::ingest {
 
@@ -45,6 +51,7 @@ struct IngestOptions {
   int max_frames = 0;               // 0 = no limit; else at most this many frames in total, chosen evenly
   KeyframeOptions keyframes;
   IntrinsicsPriorFn prior;          // empty: GuessPrior for every camera
+  telemetry::PhotoTelemetryOptions telemetry;  // photo altitude datum; fix screening for photos and GPMF
   void Check() const;
 };
 

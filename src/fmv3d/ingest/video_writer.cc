@@ -37,8 +37,9 @@ struct VideoWriter::Impl {
   AVFormatContext* fmt = nullptr;
   AVCodecContext* enc = nullptr;
   AVStream* stream = nullptr;
-  AVStream* klv = nullptr;  // optional KLV data stream
-  int64_t last_klv_pts = -1;
+  AVStream* klv = nullptr;   // optional KLV data stream
+  AVStream* gpmf = nullptr;  // optional GPMF data track
+  int64_t last_klv_pts = -1, last_gpmf_pts = -1;
   AVFrame* frame = nullptr;
   AVPacket* pkt = nullptr;
   SwsContext* sws = nullptr;
@@ -61,6 +62,29 @@ struct VideoWriter::Impl {
       ret = av_interleaved_write_frame(fmt, pkt);
       if (ret < 0) Fail("writing failed", ret);
     }
+  }
+  // One data packet at frame time `pts` (encoder time base) lasting `duration` frames (0: unknown).
+  void WriteData(AVStream* st, const std::vector<uint8_t>& bytes, int64_t pts, int64_t duration, int64_t* last,
+                 const char* what) {
+    if (closed) throw Error(path.string() + ": write after close");
+    if (bytes.empty()) throw Error(path.string() + ": empty " + what + " packet");
+    if (pts < 0 || pts < *last) throw Error(path.string() + ": " + what + " packets must come in frame order");
+    AVPacket* p = av_packet_alloc();
+    if (!p) Fail("out of memory", 0);
+    int ret = av_new_packet(p, static_cast<int>(bytes.size()));
+    if (ret < 0) {
+      av_packet_free(&p);
+      Fail("out of memory", ret);
+    }
+    std::copy(bytes.begin(), bytes.end(), p->data);
+    p->pts = p->dts = pts;
+    p->duration = duration;
+    av_packet_rescale_ts(p, enc->time_base, st->time_base);
+    p->stream_index = st->index;
+    *last = pts;
+    ret = av_interleaved_write_frame(fmt, p);
+    av_packet_free(&p);
+    if (ret < 0) Fail(std::string("writing ") + what + " failed", ret);
   }
   ~Impl() {
     if (sws) sws_freeContext(sws);
@@ -136,6 +160,17 @@ VideoWriter::VideoWriter(const fs::path& path, int width, int height, const Vide
     m.klv->codecpar->profile = FF_PROFILE_KLVA_ASYNC;
     m.klv->time_base = m.enc->time_base;
   }
+  if (o.gpmf_stream) {
+    const std::string name = m.fmt->oformat->name;
+    if (name.find("mp4") == std::string::npos && name.find("mov") == std::string::npos)
+      throw Error(path.string() + ": a GPMF track needs an MP4 or MOV container (.mp4)");
+    m.gpmf = avformat_new_stream(m.fmt, nullptr);
+    if (!m.gpmf) m.Fail("out of memory", 0);
+    m.gpmf->codecpar->codec_type = AVMEDIA_TYPE_DATA;
+    m.gpmf->codecpar->codec_id = AV_CODEC_ID_BIN_DATA;
+    m.gpmf->codecpar->codec_tag = MKTAG('g', 'p', 'm', 'd');
+    m.gpmf->time_base = AVRational{1, 1000};  // as GoPro writes it
+  }
   if (!(m.fmt->oformat->flags & AVFMT_NOFILE)) {
     ret = avio_open(&m.fmt->pb, path.string().c_str(), AVIO_FLAG_WRITE);
     if (ret < 0) m.Fail("cannot create file", ret);
@@ -181,25 +216,14 @@ void VideoWriter::Write(const cv::Mat& bgr) {
 void VideoWriter::WriteKlv(const std::vector<uint8_t>& bytes, int64_t frame_index) {
   Impl& m = *impl_;
   if (!m.klv) throw Error(m.path.string() + ": no KLV stream (set VideoWriterOptions::klv_stream)");
-  if (m.closed) throw Error(m.path.string() + ": write after close");
-  if (bytes.empty()) throw Error(m.path.string() + ": empty KLV packet");
-  if (frame_index < 0 || frame_index < m.last_klv_pts)
-    throw Error(m.path.string() + ": KLV packets must come in frame order");
-  AVPacket* p = av_packet_alloc();
-  if (!p) m.Fail("out of memory", 0);
-  int ret = av_new_packet(p, static_cast<int>(bytes.size()));
-  if (ret < 0) {
-    av_packet_free(&p);
-    m.Fail("out of memory", ret);
-  }
-  std::copy(bytes.begin(), bytes.end(), p->data);
-  p->pts = p->dts = frame_index;
-  av_packet_rescale_ts(p, m.enc->time_base, m.klv->time_base);
-  p->stream_index = m.klv->index;
-  m.last_klv_pts = frame_index;
-  ret = av_interleaved_write_frame(m.fmt, p);
-  av_packet_free(&p);
-  if (ret < 0) m.Fail("writing KLV failed", ret);
+  m.WriteData(m.klv, bytes, frame_index, 0, &m.last_klv_pts, "KLV");
+}
+
+void VideoWriter::WriteGpmf(const std::vector<uint8_t>& bytes, int64_t first_frame, int64_t frames) {
+  Impl& m = *impl_;
+  if (!m.gpmf) throw Error(m.path.string() + ": no GPMF track (set VideoWriterOptions::gpmf_stream)");
+  if (frames < 1) throw Error(m.path.string() + ": a GPMF payload must span at least one frame");
+  m.WriteData(m.gpmf, bytes, first_frame, frames, &m.last_gpmf_pts, "GPMF");
 }
 
 void VideoWriter::Close() {

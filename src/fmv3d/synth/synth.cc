@@ -4,6 +4,7 @@
 #include <spdlog/spdlog.h>
 
 #include <cmath>
+#include <fstream>
 #include <opencv2/imgcodecs.hpp>
 #include <random>
 
@@ -11,6 +12,7 @@
 #include "fmv3d/core/files.h"
 #include "fmv3d/core/logging.h"
 #include "fmv3d/io/colmap_model.h"
+#include "fmv3d/io/exif_writer.h"
 #include "fmv3d/io/obj_io.h"
 #include "fmv3d/ingest/video_writer.h"
 #include "fmv3d/synth/noise.h"
@@ -41,10 +43,11 @@ void SynthOptions::Check() const {
   if (!(detail > 0 && detail <= 4)) throw Error("synth: detail must be in (0, 4]");
   if (truth_points < 0) throw Error("synth: truth points must be >= 0");
   if (output.empty()) throw Error("synth: an output folder is required");
-  if (klv) {
-    if (format != "ts") throw Error("synth: --klv writes an MPEG-TS: use --format ts (got '" + format + "')");
-    klv_options.Check();
-  }
+  if (klv && format != "ts") throw Error("synth: --klv writes an MPEG-TS: use --format ts (got '" + format + "')");
+  if (exif_gps && format != "jpg")
+    throw Error("synth: --exif-gps writes JPEG frames: use --format jpg (got '" + format + "')");
+  if (gpmf && format != "mp4") throw Error("synth: --gpmf writes an MP4: use --format mp4 (got '" + format + "')");
+  if (HasTelemetry()) klv_options.Check();
 }
 
 nlohmann::json SynthOptions::ToJson() const {
@@ -76,7 +79,9 @@ nlohmann::json SynthOptions::ToJson() const {
   j["truth_points"] = truth_points;
   j["write_depth"] = write_depth;
   j["klv"] = klv;
-  if (klv) {
+  if (exif_gps) j["exif_gps"] = true;
+  if (gpmf) j["gpmf"] = gpmf_gps9 ? "GPS9" : "GPS5";
+  if (HasTelemetry()) {
     j["geo_origin"] = {{"lat", klv_options.origin.lat}, {"lon", klv_options.origin.lon}, {"alt", klv_options.origin.alt}};
     j["gps_noise"] = klv_options.gps_noise;
     j["attitude_noise"] = klv_options.attitude_noise;
@@ -152,12 +157,13 @@ SynthResult RunSynth(const SynthOptions& o) {
     vo.fps = o.fps;
     vo.gop = std::max(1, static_cast<int>(std::lround(o.fps)));
     vo.klv_stream = o.klv;
+    vo.gpmf_stream = o.gpmf;
     // Write to a temporary and rename at the end, so an interrupted run leaves no truncated video.
     video = std::make_unique<ingest::VideoWriter>(o.output / ("flight.partial." + o.format), o.width, o.height, vo);
   }
 
   SynthResult result;
-  if (o.klv) {
+  if (o.HasTelemetry()) {
     KlvTelemetryOptions ko = o.klv_options;
     ko.fps = o.fps;
     ko.seed = o.flight.seed;
@@ -179,14 +185,33 @@ SynthResult RunSynth(const SynthOptions& o) {
     if (video) {
       video->Write(frame.image);
       if (o.klv) video->WriteKlv(telemetry::klv::EncodeSt0601Packet(result.klv[k]), static_cast<int64_t>(k));
+      // GPMF: one payload per second of frames, written with its first frame.
+      const size_t per_payload = static_cast<size_t>(std::max(1L, std::lround(o.fps)));
+      if (o.gpmf && k % per_payload == 0) {
+        const size_t last = std::min(poses.size(), k + per_payload);
+        video->WriteGpmf(telemetry::gpmf::EncodePayload(MakeGpmfPayload(result.klv, poses, k, last, o.fps, o.gpmf_gps9)),
+                         static_cast<int64_t>(k), static_cast<int64_t>(last - k));
+      }
     } else {
       const fs::path path = frames_dir / FrameName(static_cast<int>(k), o.format);
       std::vector<int> params;
       if (o.format == "jpg") params = {cv::IMWRITE_JPEG_QUALITY, o.jpeg_quality};
       else params = {cv::IMWRITE_PNG_COMPRESSION, 3};
-      core::WriteAtomically(path, [&](const fs::path& tmp) {
-        if (!cv::imwrite(tmp.string(), frame.image, params)) throw Error(path.string() + ": cannot write frame");
-      });
+      if (o.exif_gps) {
+        std::vector<uint8_t> jpeg;
+        if (!cv::imencode(".jpg", frame.image, jpeg, params)) throw Error(path.string() + ": cannot encode frame");
+        const PhotoMetadata meta = MakePhotoMetadata(result.klv[k], camera, o.klv_options);
+        const std::vector<uint8_t> bytes = io::InsertJpegMetadata(jpeg, io::EncodeTiffExif(meta.exif), meta.xmp);
+        core::WriteAtomically(path, [&](const fs::path& tmp) {
+          std::ofstream out(tmp, std::ios::binary);
+          out.write(reinterpret_cast<const char*>(bytes.data()), static_cast<std::streamsize>(bytes.size()));
+          if (!out) throw Error(path.string() + ": cannot write frame");
+        });
+      } else {
+        core::WriteAtomically(path, [&](const fs::path& tmp) {
+          if (!cv::imwrite(tmp.string(), frame.image, params)) throw Error(path.string() + ": cannot write frame");
+        });
+      }
     }
     if (o.write_depth) {
       const fs::path path = depth_dir / fmt::format("flight-{:06d}.tiff", k);
@@ -277,7 +302,7 @@ SynthResult RunSynth(const SynthOptions& o) {
     j["buildings"].push_back({{"name", b.name}, {"base", {b.base.x(), b.base.y(), b.base.z()}}, {"width", b.width},
                               {"depth", b.depth}, {"eave_height", b.eave_height}, {"ridge_height", b.ridge_height},
                               {"heading_deg", b.heading_deg}});
-  if (o.klv) {
+  if (o.HasTelemetry()) {
     const GeoPoint& g = o.klv_options.origin;
     j["geo_origin"] = {{"lat", g.lat}, {"lon", g.lon}, {"alt", g.alt}};
     j["geo_frame"] = "world x = east, y = north, z = up (metres) at geo_origin; alt = WGS84 ellipsoidal height";

@@ -16,6 +16,10 @@
 //                                  "geo_origin": {"lat","lon","alt"} (the world is that origin's ENU frame)
 //   flight.ts with klv             + a MISB ST 0601 KLV data stream, one packet per frame at the
 //                                  frame's PTS, from the truth cameras with GPS/attitude noise (telemetry.h)
+//   frames/*.jpg with exif_gps     + EXIF GPS and a DJI-style XMP packet per frame (MakePhotoMetadata), the same
+//                                  noise model; truth.json gets the geo origin as with klv
+//   flight.mp4 with gpmf           + a GoPro GPMF 'gpmd' track, one payload per second of frames with a GPS5
+//                                  (GPS9 with gpmf_gps9) fix per frame and CORI orientations (MakeGpmfPayload)
 #pragma once
 
 #include <array>
@@ -54,13 +58,17 @@ struct SynthOptions {
   bool write_scene = true;                    // scene.obj + textures
   bool write_depth = false;
   bool klv = false;                           // MPEG-TS with ST 0601 telemetry (needs format ts)
-  KlvTelemetryOptions klv_options;            // geo origin, GPS / attitude noise (fps and seed are set from
-                                              // this struct's fps and flight.seed)
+  bool exif_gps = false;                      // JPEG frames with EXIF GPS + DJI XMP (needs format jpg)
+  bool gpmf = false;                          // MP4 with a GPMF telemetry track (needs format mp4)
+  bool gpmf_gps9 = false;                     // the GPMF track carries GPS9 instead of GPS5
+  KlvTelemetryOptions klv_options;            // geo origin, GPS / attitude noise of every telemetry kind (fps and
+                                              // seed are set from this struct's fps and flight.seed)
   std::filesystem::path output;
 
   void Check() const;
   nlohmann::json ToJson() const;
   bool IsVideo() const { return format == "mp4" || format == "ts"; }
+  bool HasTelemetry() const { return klv || exif_gps || gpmf; }
 };
 
 // The camera the flight uses: focal from options or a 60° horizontal field of view, principal point at the
@@ -74,7 +82,9 @@ struct SynthResult {
   core::Reconstruction truth;
   double characteristic_length = 0;
   int frames = 0;
-  std::vector<telemetry::klv::St0601Record> klv;  // what the KLV stream carries (with klv), one per frame
+  // The telemetry truth + noise, one record per frame (with klv, exif_gps or gpmf): what the KLV stream carries,
+  // and what the EXIF / GPMF writers take their positions and attitudes from.
+  std::vector<telemetry::klv::St0601Record> klv;
 };
 
 // Renders and writes everything (see the layout above). Throws fmv3d::Error on bad options or I/O errors.

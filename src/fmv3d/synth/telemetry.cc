@@ -3,10 +3,12 @@
 #include <fmt/format.h>
 
 #include <cmath>
+#include <ctime>
 #include <random>
 
 #include "fmv3d/core/error.h"
 #include "fmv3d/telemetry/attitude.h"
+#include "fmv3d/telemetry/photo_telemetry.h"
 
 namespace fmv3d::synth {
 namespace {
@@ -132,6 +134,76 @@ std::vector<telemetry::klv::St0601Record> MakeKlvTelemetry(const std::vector<cor
     out.push_back(r);
   }
   return out;
+}
+
+PhotoMetadata MakePhotoMetadata(const telemetry::klv::St0601Record& r, const core::Camera& camera,
+                                const KlvTelemetryOptions& o) {
+  PhotoMetadata m;
+  io::ExifInfo& e = m.exif;
+  e.make = "fmv3d";
+  e.model = "synth";
+  e.focal_35mm = std::round(camera.fx() * std::hypot(36.0, 24.0) / std::hypot(camera.width, camera.height));
+  const double t = r.unix_time_us * 1e-6;
+  const std::time_t secs = static_cast<std::time_t>(t);
+  std::tm tm{};
+  gmtime_r(&secs, &tm);
+  e.datetime_original = fmt::format("{:04d}:{:02d}:{:02d} {:02d}:{:02d}:{:02d}", tm.tm_year + 1900, tm.tm_mon + 1,
+                                    tm.tm_mday, tm.tm_hour, tm.tm_min, tm.tm_sec);
+  e.gps.latitude = r.sensor_latitude;
+  e.gps.longitude = r.sensor_longitude;
+  e.gps.altitude = r.sensor_true_altitude;
+  e.gps.dop = 1.0;
+  if (o.gps_noise > 0) e.gps.horizontal_error = o.gps_noise;
+  e.gps.status = 'A';
+  e.gps.measure_mode = '3';
+  e.gps.map_datum = "WGS-84";
+  e.gps.utc_seconds = t;
+  telemetry::St0601Attitude a;
+  a.platform_heading = r.platform_heading;
+  a.platform_pitch = r.platform_pitch;
+  a.platform_roll = r.platform_roll;
+  a.sensor_relative_azimuth = r.sensor_relative_azimuth;
+  a.sensor_relative_elevation = r.sensor_relative_elevation;
+  a.sensor_relative_roll = r.sensor_relative_roll;
+  const Eigen::Vector3d gimbal = telemetry::GimbalFromCameraToEnu(telemetry::CameraToEnuFromSt0601(a));
+  telemetry::DjiXmp x;
+  x.gimbal_yaw = gimbal[0];
+  x.gimbal_pitch = gimbal[1];
+  x.gimbal_roll = gimbal[2];
+  x.flight_yaw = r.platform_heading > 180 ? r.platform_heading - 360 : r.platform_heading;
+  x.flight_pitch = r.platform_pitch;
+  x.flight_roll = r.platform_roll;
+  x.absolute_altitude = r.sensor_true_altitude;
+  if (r.sensor_ellipsoid_height) x.relative_altitude = *r.sensor_ellipsoid_height - o.origin.alt;
+  m.xmp = telemetry::EncodeDjiXmp(x);
+  return m;
+}
+
+telemetry::gpmf::PayloadContent MakeGpmfPayload(const std::vector<telemetry::klv::St0601Record>& records,
+                                                const std::vector<core::Pose>& poses, size_t first, size_t last,
+                                                double fps, bool gps9) {
+  if (first >= last || last > records.size() || records.size() != poses.size())
+    throw Error("synth: GPMF payload frames out of range");
+  telemetry::gpmf::PayloadContent c;
+  c.gps9 = gps9;
+  const Eigen::Matrix3d r0 = poses[0].R();
+  for (size_t k = first; k < last; ++k) {
+    const auto& r = records[k];
+    telemetry::gpmf::GpsFix f;
+    f.latitude = r.sensor_latitude;
+    f.longitude = r.sensor_longitude;
+    f.altitude = r.sensor_ellipsoid_height.value_or(r.sensor_true_altitude);
+    const Eigen::Vector3d v =
+        (poses[std::min(k + 1, poses.size() - 1)].Centre() - poses[k > 0 ? k - 1 : 0].Centre()) * fps /
+        std::max<double>(1.0, static_cast<double>(std::min(k + 1, poses.size() - 1) - (k > 0 ? k - 1 : 0)));
+    f.speed_2d = v.head<2>().norm();
+    f.speed_3d = v.norm();
+    f.unix_seconds = r.unix_time_us * 1e-6;
+    c.gps.push_back(f);
+    const Eigen::Quaterniond q(r0 * poses[k].R().transpose());
+    c.orientation.push_back({q.w(), q.x(), q.y(), q.z()});
+  }
+  return c;
 }
 
 }  // namespace fmv3d::synth

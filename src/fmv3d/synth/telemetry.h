@@ -17,6 +17,8 @@
 
 #include "fmv3d/core/camera.h"
 #include "fmv3d/core/pose.h"
+#include "fmv3d/io/exif.h"
+#include "fmv3d/telemetry/gpmf_writer.h"
 #include "fmv3d/telemetry/klv_st0601_writer.h"
 
 namespace fmv3d::synth {
@@ -50,5 +52,25 @@ struct KlvTelemetryOptions {
 std::vector<telemetry::klv::St0601Record> MakeKlvTelemetry(const std::vector<core::Pose>& poses,
                                                     const core::Camera& camera, double ground_z,
                                                     const KlvTelemetryOptions& options);
+
+// Photo metadata of one frame as a DJI drone writes it (`fmv3d synth --exif-gps`), from its ST 0601 record
+// (so the same noise model holds): EXIF GPS at the record's noisy position, altitude = its true altitude (MSL,
+// the datum EXIF and DJI use), DOP 1, GPSHPositioningError = gps_noise, GPS time; make "fmv3d", model "synth",
+// the 35 mm equivalent focal (rounded to whole mm, as cameras write it); and a DJI XMP packet with the stated
+// attitude (gimbal angles of the record's camera rotation, flight angles = its platform angles),
+// AbsoluteAltitude (MSL) and RelativeAltitude (ellipsoidal height above the geo origin).
+struct PhotoMetadata {
+  io::ExifInfo exif;  // the fields EncodeTiffExif writes
+  std::string xmp;
+};
+PhotoMetadata MakePhotoMetadata(const telemetry::klv::St0601Record& record, const core::Camera& camera,
+                                const KlvTelemetryOptions& options);
+
+// One GPMF payload (`fmv3d synth --gpmf`) for frames [first, last): one GPS5 (GPS9 with `gps9`) fix per frame at
+// the records' noisy positions (ellipsoidal heights, GPMF's datum), speeds from the true centres, and CORI: the
+// exact camera rotation relative to frame 0 (R_0 R_k^T as w, x, y, z, in our camera axes).
+telemetry::gpmf::PayloadContent MakeGpmfPayload(const std::vector<telemetry::klv::St0601Record>& records,
+                                                const std::vector<core::Pose>& poses, size_t first, size_t last,
+                                                double fps, bool gps9);
 
 }  // namespace fmv3d::synth

@@ -178,7 +178,7 @@ namespace {
 
 using Field = std::optional<double> TelemetrySample::*;
 
-enum class Interp { kLinear, kAngle360, kLongitude };
+enum class Interp { kLinear, kAngle360, kLongitude, kNearest };
 
 struct FieldSpec {
   const char* name;
@@ -210,6 +210,15 @@ const FieldSpec kFields[] = {
     {"frame_center_longitude", &TelemetrySample::frame_center_longitude, Interp::kLongitude},
     {"frame_center_elevation", &TelemetrySample::frame_center_elevation, Interp::kLinear},
     {"frame_center_hae", &TelemetrySample::frame_center_hae, Interp::kLinear},
+    {"gps_dop", &TelemetrySample::gps_dop, Interp::kLinear},
+    {"gps_fix", &TelemetrySample::gps_fix, Interp::kNearest},
+    {"horizontal_accuracy", &TelemetrySample::horizontal_accuracy, Interp::kLinear},
+    {"vertical_accuracy", &TelemetrySample::vertical_accuracy, Interp::kLinear},
+    {"rtk_flag", &TelemetrySample::rtk_flag, Interp::kNearest},
+    {"camera_orientation_w", &TelemetrySample::camera_orientation_w, Interp::kNearest},
+    {"camera_orientation_x", &TelemetrySample::camera_orientation_x, Interp::kNearest},
+    {"camera_orientation_y", &TelemetrySample::camera_orientation_y, Interp::kNearest},
+    {"camera_orientation_z", &TelemetrySample::camera_orientation_z, Interp::kNearest},
 };
 
 // Interpolates along the shorter arc; the result keeps the convention of the inputs' range.
@@ -252,7 +261,7 @@ std::optional<TelemetrySample> InterpolateTelemetry(const std::vector<TelemetryS
   for (const auto& f : kFields) {
     const auto& va = a.*(f.field);
     const auto& vb = b.*(f.field);
-    if (va && vb) s.*(f.field) = Lerp(*va, *vb, w, f.interp);
+    if (va && vb && f.interp != Interp::kNearest) s.*(f.field) = Lerp(*va, *vb, w, f.interp);
     // else: the nearest sample's value (possibly empty) stays; a field only one side has is not invented.
   }
   if (a.unix_time_us && b.unix_time_us) {

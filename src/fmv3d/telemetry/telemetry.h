@@ -1,6 +1,7 @@
-// Telemetry of a video, independent of its source (MISB ST 0601 / EG 0104 KLV in MPEG-TS, DJI .SRT
-// subtitles): one TelemetrySample per packet, with its presentation time; interpolation at a frame's time;
-// the JSON that frames.json carries per frame ("telemetry").
+// Telemetry of a video or a photo, independent of its source (MISB ST 0601 / EG 0104 KLV in MPEG-TS, DJI .SRT
+// subtitles, GoPro GPMF in MP4 (gpmf_telemetry.h), EXIF GPS / DJI XMP of photos (photo_telemetry.h)): one
+// TelemetrySample per packet, with its presentation time; interpolation at a frame's time; the JSON that
+// frames.json carries per frame ("telemetry").
 //
 // Units: degrees (WGS84 latitude/longitude, angles), metres, seconds. Every field is optional: a packet
 // carries what it carries, and an "error"/"N/A" encoding leaves the field empty.
@@ -23,7 +24,7 @@ namespace fmv3d::telemetry {
 
 struct TelemetrySample {
   double time = 0;     // seconds, see above
-  std::string source;  // "ST0601", "EG0104", "DJI-SRT"
+  std::string source;  // "ST0601", "EG0104", "DJI-SRT", "GPMF", "EXIF", "EXIF+DJI-XMP"
 
   std::optional<double> sensor_latitude, sensor_longitude;
   std::optional<double> sensor_altitude_msl;  // ST 0601 tag 15 "true altitude" (MSL); EG0104 device altitude
@@ -44,7 +45,17 @@ struct TelemetrySample {
   std::optional<double> frame_center_elevation;  // MSL (ST 0601 tag 25, EG0104)
   std::optional<double> frame_center_hae;        // ST 0601 tag 78
 
-  std::optional<uint64_t> unix_time_us;  // ST 0601 precision timestamp / EG0104 user-defined timestamp
+  // Fix quality as the source states it (fix_quality.h screens on it).
+  std::optional<double> gps_dop;              // dilution of precision (EXIF GPSDOP, GPMF GPSP / 100 or GPS9)
+  std::optional<double> gps_fix;              // 0 no lock, 2 = 2D, 3 = 3D (GPMF GPSF / GPS9, EXIF GPSMeasureMode)
+  std::optional<double> horizontal_accuracy;  // metres, 1σ (EXIF GPSHPositioningError, DJI RTK std dev)
+  std::optional<double> vertical_accuracy;    // metres, 1σ (DJI RtkStdHgt)
+  std::optional<double> rtk_flag;             // DJI RtkFlag: 0 none, 16 single point, 34 float, 50 fixed
+  // GoPro CORI: the camera's orientation relative to its orientation at the start of the recording (unit
+  // quaternion w, x, y, z in the camera's own frame); not an absolute attitude.
+  std::optional<double> camera_orientation_w, camera_orientation_x, camera_orientation_y, camera_orientation_z;
+
+  std::optional<uint64_t> unix_time_us;  // ST 0601 precision timestamp / EG0104 user-defined timestamp / GPS UTC
 };
 
 struct TelemetryStats {
