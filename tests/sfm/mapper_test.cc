@@ -53,28 +53,6 @@ TEST(IncrementalMapper, OrbitSelfCalibratesFocalAndDistortion) {
   rec.Validate();
 }
 
-// Self-calibration of the principal point (self_calibration.h): 20 px off the centre it is freed and recovered;
-// centred, it stays within a pixel of the centre. The decision is reported with its figures.
-TEST(IncrementalMapper, PrincipalPointOffCentreIsRecoveredCentredStaysCentred) {
-  for (const Eigen::Vector2d offset : {Eigen::Vector2d(12, -16), Eigen::Vector2d(0, 0)}) {
-    SyntheticSceneOptions so;
-    so.u0_offset = offset.x();
-    so.v0_offset = offset.y();
-    const auto scene = MakeSyntheticScene(so);
-    const auto out = RunAndEvaluate(scene);
-    ASSERT_FALSE(out.result.models.empty());
-    const auto& cam = out.result.models[0].cameras.begin()->second;
-    const auto& truth = scene.truth.cameras.begin()->second;
-    EXPECT_LE(std::hypot(cam.u0 - truth.u0, cam.v0 - truth.v0), 1.0) << offset.transpose();
-    EXPECT_LE(out.eval.centre_rmse_fraction, 0.0002) << offset.transpose();
-    ASSERT_EQ(out.result.self_calibration.size(), out.result.models.size());
-    const auto& tests = out.result.self_calibration[0];
-    ASSERT_FALSE(tests.empty());
-    EXPECT_EQ(tests[0].group, IntrinsicGroup::kPrincipalPoint);
-    if (offset.norm() > 0) EXPECT_EQ(tests[0].decision, NestedModelDecision::kFreed);
-  }
-}
-
 TEST(IncrementalMapper, NadirGridOverNearPlanarTerrain) {
   SyntheticSceneOptions so;
   so.layout = SyntheticSceneOptions::Layout::kNadirGrid;
