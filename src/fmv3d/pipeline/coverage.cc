@@ -191,7 +191,7 @@ nlohmann::json CoverageReport::ToJson() const {
 
 CoverageReport ComputeWorkspaceCoverage(const fs::path& root, const CoverageOptions& options) {
   options.Check();
-  const Workspace ws(root);
+  const core::Workspace ws(root);
   ws.Require(ws.sparse_dir() / "images.txt", "sparse");
   const core::Reconstruction rec = io::ReadColmapText(ws.sparse_dir());
   io::TexturedMesh mesh;
