@@ -221,7 +221,8 @@ OrientedPointCloud ReadPointCloudPly(const fs::path& path) {
     unsigned long long record = 0;
     for (const Property& p : e.props) record += format == 0 ? 2 : SizeOf(p.is_list ? p.count_type : p.type);
     needed += e.count * std::max<unsigned long long>(record, 1);
-    if (needed > data_bytes) throw Error(file + ": PLY element '" + e.name + "' count does not fit the file");
+    if (needed > data_bytes) throw Error(file + ": truncated PLY: element '" + e.name + "' needs at least " + std::to_string(needed) +
+                  " bytes of data, the file has " + std::to_string(data_bytes));
   }
 
   OrientedPointCloud cloud;
