@@ -89,7 +89,9 @@ struct MapperOptions {
   // distortion (and a telephoto scan's focal), each by the nested-model test of self_calibration.h: significant
   // by BIC and determined by the BA's covariance to better than the observation noise.
   int refine_principal_point_min_images = 8;
-  double self_calibration_min_delta_chi2 = 0;  // > 0: a fixed Δχ² threshold instead of BIC's k·ln(n)
+  // A fixed Δχ² threshold (0: BIC's k·ln(n)). BIC alone frees v0 on orbits, where it trades against a common tilt
+  // of the cameras (synthetic orbits and the e2e align flights got worse); 1000 keeps them held.
+  double self_calibration_min_delta_chi2 = 1000;
   // Focal. A guessed prior is replaced by a scan over focal candidates on the strongest pairs (focal_scan.h).
   int focal_scan_pairs = 5;
   int focal_dolly_min_images = 15;     // telephoto: multi-view focal scan once the model has this many images
