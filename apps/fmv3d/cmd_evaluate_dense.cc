@@ -44,8 +44,7 @@ void Add(CLI::App& app) {
                                                    : fs::path(a->cloud);
     ws.Require(ws.sparse_dir() / "images.txt", "sparse");
     if (!fs::exists(cloud_path))
-      throw Error(cloud_path.string() + ": not found — run `fmv3d " + (a->mesh.empty() ? "dense" : "mesh") +
-                  "` first");
+      throw Error(cloud_path.string() + ": not found — run `fmv3d " + (a->mesh.empty() ? "dense" : "mesh") + "` first");
     const fs::path truth_dir(a->truth);
     for (const char* f : {"truth/images.txt", "scene.obj", "truth.json"})
       if (!fs::exists(truth_dir / f))

@@ -20,7 +20,8 @@ struct FramesArgs {
 };
 
 void Add(CLI::App& app) {
-  auto* cmd = app.add_subcommand("frames", "Ingest images/folders/videos: keyframes and intrinsics priors into WS/frames");
+  auto* cmd =
+      app.add_subcommand("frames", "Ingest images/folders/videos: keyframes and intrinsics priors into WS/frames");
   auto a = std::make_shared<FramesArgs>();
   cmd->add_option("INPUT", a->inputs, "Image files, image folders, videos (any mix)")->required();
   cmd->add_option("-o,--output", a->workspace, "Workspace folder")->required();

@@ -42,10 +42,9 @@ void Run(const Options& o) {
   if (stats.packets_per_stream.empty()) std::cerr << o.input << ": no KLV data stream (empty list written)\n";
   for (const auto& [idx, n] : stats.packets_per_stream)
     std::cerr << o.input << ": stream " << idx << ": " << n << " KLV packets\n";
-  std::cerr << "packets kept: " << k.packets << ", bad checksum: " << k.bad_checksum
-            << ", malformed: " << k.malformed << ", unknown keys: " << k.unknown_keys
-            << ", items with unexpected length: " << k.bad_items << ", bytes skipped: " << k.skipped_bytes
-            << "\n";
+  std::cerr << "packets kept: " << k.packets << ", bad checksum: " << k.bad_checksum << ", malformed: " << k.malformed
+            << ", unknown keys: " << k.unknown_keys << ", items with unexpected length: " << k.bad_items
+            << ", bytes skipped: " << k.skipped_bytes << "\n";
 }
 
 void Add(CLI::App& app) {

@@ -19,7 +19,8 @@ void Add(CLI::App& app) {
   };
   auto a = std::make_shared<Args>();
   cmd->add_option("WS", a->ws, "Workspace folder (with frames/ and features/)")->required();
-  cmd->add_option("--pairs", a->pairs, "auto | exhaustive | sequential | spatial (auto: exhaustive up to 50 images, "
+  cmd->add_option("--pairs", a->pairs,
+                  "auto | exhaustive | sequential | spatial (auto: exhaustive up to 50 images, "
                   "then spatial for photos that all carry GPS, else sequential; spatial: overlapping ground footprints "
                   "from the frames' telemetry)")
       ->capture_default_str();
@@ -54,10 +55,14 @@ void Add(CLI::App& app) {
     o.pairs.mode = features::ParsePairMode(a->pairs);
     o.pairs.quadratic = !a->no_quadratic;
     o.match.mutual = !a->no_mutual;
-    if (a->matcher == "auto") o.match.type = features::MatcherType::kAuto;
-    else if (a->matcher == "flann") o.match.type = features::MatcherType::kFlann;
-    else if (a->matcher == "bruteforce") o.match.type = features::MatcherType::kBruteForce;
-    else throw Error("match: unknown --matcher '" + a->matcher + "' (auto, flann, bruteforce)");
+    if (a->matcher == "auto")
+      o.match.type = features::MatcherType::kAuto;
+    else if (a->matcher == "flann")
+      o.match.type = features::MatcherType::kFlann;
+    else if (a->matcher == "bruteforce")
+      o.match.type = features::MatcherType::kBruteForce;
+    else
+      throw Error("match: unknown --matcher '" + a->matcher + "' (auto, flann, bruteforce)");
     o.pairs.seed = o.match.seed = o.verify.seed = a->seed;
     features::RunMatchStage(ws.root(), o);
   });

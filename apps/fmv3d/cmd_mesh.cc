@@ -9,7 +9,8 @@ namespace fmv3d::app {
 namespace {
 
 void Add(CLI::App& app) {
-  auto* cmd = app.add_subcommand("mesh", "Poisson surface from the dense cloud (WS/mesh/poisson.ply, report/mesh.json)");
+  auto* cmd =
+      app.add_subcommand("mesh", "Poisson surface from the dense cloud (WS/mesh/poisson.ply, report/mesh.json)");
   struct Args {
     std::string ws;
     surface::MeshStageOptions opt;
@@ -18,8 +19,7 @@ void Add(CLI::App& app) {
   auto& p = a->opt.poisson;
   cmd->add_option("WS", a->ws, "Workspace folder (with dense/fused.ply)")->required();
   cmd->add_option("--depth", p.depth, "Octree depth (0: from the point spacing)")->capture_default_str();
-  cmd->add_option("--cell-spacing", p.cell_to_spacing,
-                  "Automatic depth: finest cell width in median point spacings")
+  cmd->add_option("--cell-spacing", p.cell_to_spacing, "Automatic depth: finest cell width in median point spacings")
       ->capture_default_str();
   cmd->add_option("--max-depth", p.max_depth, "Upper bound of the automatic depth")->capture_default_str();
   cmd->add_option("--trim", p.density_quantile, "Share of lowest-density vertices removed (0..0.9)")
@@ -27,7 +27,8 @@ void Add(CLI::App& app) {
   cmd->add_option("--max-distance", p.max_point_distance,
                   "Remove vertices farther than this many point spacings from every point (0: off)")
       ->capture_default_str();
-  cmd->add_option("--surface", p.kind, "open (default): trimmed to the points (terrain, towns) | watertight: closed (objects)")
+  cmd->add_option("--surface", p.kind,
+                  "open (default): trimmed to the points (terrain, towns) | watertight: closed (objects)")
       ->transform(CLI::CheckedTransformer(
           std::map<std::string, surface::SurfaceKind>{{"open", surface::SurfaceKind::kOpen},
                                                       {"watertight", surface::SurfaceKind::kWatertight}},
@@ -40,8 +41,7 @@ void Add(CLI::App& app) {
       ->capture_default_str();
   cmd->add_option("--crop-margin", p.crop_margin, "Crop box enlargement, fraction of the points' diagonal")
       ->capture_default_str();
-  cmd->add_option("--faces", p.target_faces, "Decimate to about this many faces (0: keep all)")
-      ->capture_default_str();
+  cmd->add_option("--faces", p.target_faces, "Decimate to about this many faces (0: keep all)")->capture_default_str();
   cmd->add_flag("!--no-normal-estimation", a->opt.estimate_missing_normals,
                 "Fail on a cloud without normals instead of estimating them");
   cmd->callback([a] {

@@ -11,8 +11,8 @@ namespace fmv3d::app {
 namespace {
 
 void Add(CLI::App& app) {
-  auto* cmd = app.add_subcommand(
-      "reconstruct", "Run every stage (frames → features → match → sparse → dense → mesh → texture) in WS");
+  auto* cmd = app.add_subcommand("reconstruct",
+                                 "Run every stage (frames → features → match → sparse → dense → mesh → texture) in WS");
   struct Args {
     std::vector<std::string> inputs;
     std::string ws, camera_file, sensor, pairs = "auto", progress_json;
@@ -34,8 +34,9 @@ void Add(CLI::App& app) {
                 "texture for a covering subset of the frames, Poisson one level coarser (a 60 s 960x540 clip: "
                 "~8x faster end to end; bench/RESULTS.md has its accuracy)");
   cmd->add_flag("--no-report", a->no_report, "Skip report/report.html and its pictures");
-  cmd->add_option("--progress-json", a->progress_json,
-                  "Append progress and stage events to FILE as JSON lines (core/progress_log.h; read by `fmv3d serve`)");
+  cmd->add_option(
+      "--progress-json", a->progress_json,
+      "Append progress and stage events to FILE as JSON lines (core/progress_log.h; read by `fmv3d serve`)");
   cmd->callback([a] {
     auto& o = a->opt;
     for (const auto& in : a->inputs) o.inputs.emplace_back(in);

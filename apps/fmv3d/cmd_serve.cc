@@ -17,7 +17,8 @@ namespace {
 std::atomic<server::Server*> g_server{nullptr};
 
 void Add(CLI::App& app) {
-  auto* cmd = app.add_subcommand("serve", "Serve the operator console (web page + HTTP API) for the workspaces in WS_ROOT");
+  auto* cmd =
+      app.add_subcommand("serve", "Serve the operator console (web page + HTTP API) for the workspaces in WS_ROOT");
   struct Args {
     std::string ws_root = ".", host = "127.0.0.1", token_file, assets;
     int port = 8080, max_upload_mb = 2048;
@@ -28,8 +29,9 @@ void Add(CLI::App& app) {
   cmd->add_option("--host", a->host, "Address to bind; anything but loopback requires a token")->capture_default_str();
   cmd->add_option("--token-file", a->token_file, "File whose first line is the access token (else random)");
   cmd->add_option("--assets", a->assets, "The built front end (default: web/ beside the fmv3d binary)");
-  cmd->add_option("--max-upload-mb", a->max_upload_mb, "Upload size limit")->capture_default_str()->check(
-      CLI::Range(1, 1 << 20));
+  cmd->add_option("--max-upload-mb", a->max_upload_mb, "Upload size limit")
+      ->capture_default_str()
+      ->check(CLI::Range(1, 1 << 20));
   cmd->callback([a] {
     server::ServerOptions o;
     o.ws_root = a->ws_root;
@@ -39,8 +41,10 @@ void Add(CLI::App& app) {
     const std::filesystem::path exe = server::SelfExecutable();
     o.executable = exe;
     o.asset_dir = a->assets.empty() ? exe.parent_path() / "web" : std::filesystem::path(a->assets);
-    if (!a->token_file.empty()) o.token = server::ReadTokenFile(a->token_file);
-    else if (!server::IsLoopbackHost(o.host)) o.token = server::RandomToken();
+    if (!a->token_file.empty())
+      o.token = server::ReadTokenFile(a->token_file);
+    else if (!server::IsLoopbackHost(o.host))
+      o.token = server::RandomToken();
     // SIGINT / SIGTERM are blocked in every thread (set before any is started) and taken by a watcher thread
     // that stops the server cleanly (running jobs get SIGTERM too); jobs reset the mask (server/process.h).
     sigset_t set;

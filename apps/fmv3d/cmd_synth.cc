@@ -108,14 +108,14 @@ void Add(CLI::App& app) {
   auto* focal_opt = cmd->add_option("--focal", *focal, "Focal length, pixels (default: 60 deg horizontal FOV)")
                         ->check(CLI::PositiveNumber);
   auto* alt_opt = cmd->add_option("--altitude", *altitude, "Flight altitude, metres (world z; default per scene)");
-  auto* rad_opt = cmd->add_option("--radius", *radius,
-                                  "Orbit radius / grid half-size / pass stand-off, metres (default per scene)")
-                      ->check(CLI::PositiveNumber);
+  auto* rad_opt =
+      cmd->add_option("--radius", *radius, "Orbit radius / grid half-size / pass stand-off, metres (default per scene)")
+          ->check(CLI::PositiveNumber);
   auto grid_overlap = std::make_shared<std::string>();
-  cmd->add_option("--overlap", *grid_overlap, "Grid: forward,side overlap in percent (e.g. 70,40; default: the "
-                                              "--radius layout, ~65% side)");
-  cmd->add_option("--look-at", *look_at, "Look-at point X,Y,Z in metres (default: the scene's target)")
-      ->check(kList3);
+  cmd->add_option("--overlap", *grid_overlap,
+                  "Grid: forward,side overlap in percent (e.g. 70,40; default: the "
+                  "--radius layout, ~65% side)");
+  cmd->add_option("--look-at", *look_at, "Look-at point X,Y,Z in metres (default: the scene's target)")->check(kList3);
   cmd->add_option("--distortion", *distortion, "Lens distortion k1,k2,p1,p2 (default none)")->check(kList4);
   auto principal = std::make_shared<std::vector<double>>();
   cmd->add_option("--principal-offset", *principal,
@@ -139,9 +139,11 @@ void Add(CLI::App& app) {
       ->capture_default_str();
   cmd->add_option("--seed", o->flight.seed, "Seed for the flight jitter and sensor noise")->capture_default_str();
   auto* format_opt = cmd->add_option("--format", o->format, "Output: png | jpg | mp4 | ts")
-      ->check(CLI::IsMember({"png", "jpg", "mp4", "ts"}))
+                         ->check(CLI::IsMember({"png", "jpg", "mp4", "ts"}))
+                         ->capture_default_str();
+  cmd->add_option("--fps", o->fps, "Frame rate (video and truth.json)")
+      ->check(CLI::PositiveNumber)
       ->capture_default_str();
-  cmd->add_option("--fps", o->fps, "Frame rate (video and truth.json)")->check(CLI::PositiveNumber)->capture_default_str();
   cmd->add_option("--detail", o->detail, "Scene texture resolution multiplier (0-4]")
       ->check(CLI::Range(0.01, 4.0))
       ->capture_default_str();
@@ -149,12 +151,13 @@ void Add(CLI::App& app) {
       ->check(CLI::NonNegativeNumber)
       ->capture_default_str();
   cmd->add_flag("--depth", o->write_depth, "Also write float depth maps to DIR/depth/");
-  auto* klv_opt = cmd->add_flag("--klv", o->klv,
-                                "Write flight.ts with a MISB ST 0601 KLV telemetry stream (implies --format ts)");
-  auto* exif_opt = cmd->add_flag("--exif-gps", o->exif_gps,
-                                 "JPEG frames with EXIF GPS and DJI-style XMP attitude/altitudes (implies --format jpg)");
-  auto* gpmf_opt = cmd->add_flag("--gpmf", o->gpmf,
-                                 "Write flight.mp4 with a GoPro GPMF track: GPS5 + CORI (implies --format mp4)");
+  auto* klv_opt =
+      cmd->add_flag("--klv", o->klv, "Write flight.ts with a MISB ST 0601 KLV telemetry stream (implies --format ts)");
+  auto* exif_opt =
+      cmd->add_flag("--exif-gps", o->exif_gps,
+                    "JPEG frames with EXIF GPS and DJI-style XMP attitude/altitudes (implies --format jpg)");
+  auto* gpmf_opt =
+      cmd->add_flag("--gpmf", o->gpmf, "Write flight.mp4 with a GoPro GPMF track: GPS5 + CORI (implies --format mp4)");
   cmd->add_flag("--gps9", o->gpmf_gps9, "With --gpmf: GPS9 fixes instead of GPS5");
   auto geo_origin = std::make_shared<std::string>("38.16,-77.35,60");
   cmd->add_option("--geo-origin", *geo_origin, "With --klv: WGS84 LAT,LON,ALT of the world origin (ellipsoidal m)")

@@ -45,7 +45,7 @@ core::Sim3 RandomSim3(std::mt19937_64& rng) {
   std::normal_distribution<double> g(0, 1);
   core::Sim3 s;
   s.s = std::exp(std::log(0.2) + u(rng) * (std::log(5.0) - std::log(0.2)));  // log-uniform in [0.2, 5]
-  s.q = Eigen::Quaterniond(g(rng), g(rng), g(rng), g(rng)).normalized();   // uniform on SO(3)
+  s.q = Eigen::Quaterniond(g(rng), g(rng), g(rng), g(rng)).normalized();     // uniform on SO(3)
   s.t = Eigen::Vector3d(g(rng), g(rng), g(rng)) * 100;
   return s;
 }

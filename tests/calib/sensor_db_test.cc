@@ -41,7 +41,7 @@ TEST(SensorDb, ShippedDatabaseLoadsAndMatchesExif) {
   const SensorEntry* p4p = db.FindByExif("DJI", "FC6310");
   ASSERT_NE(p4p, nullptr);
   EXPECT_EQ(p4p->name, "DJI Phantom 4 Pro");
-  EXPECT_EQ(db.FindByExif("dji", "fc6310"), p4p);  // case-insensitive
+  EXPECT_EQ(db.FindByExif("dji", "fc6310"), p4p);        // case-insensitive
   EXPECT_EQ(db.FindByExif("Canon", "FC6310"), nullptr);  // wrong make
   EXPECT_EQ(db.FindByName("dji phantom 4 pro"), p4p);
   EXPECT_EQ(db.FindByExif("DJI", ""), nullptr);
@@ -133,8 +133,9 @@ TEST(CameraFile, JsonAndOpenCvYamlRoundTrip) {
   // k3 cannot be represented: refused with the file's name.
   {
     cv::FileStorage fsw((tmp / "k3.yaml").string(), cv::FileStorage::WRITE);
-    fsw << "image_width" << 640 << "image_height" << 480 << "camera_matrix" << cv::Mat(cv::Matx33d(500, 0, 320, 0, 500, 240, 0, 0, 1))
-        << "distortion_coefficients" << cv::Mat(cv::Matx<double, 1, 5>(-0.1, 0.01, 0, 0, 0.003));
+    fsw << "image_width" << 640 << "image_height" << 480 << "camera_matrix"
+        << cv::Mat(cv::Matx33d(500, 0, 320, 0, 500, 240, 0, 0, 1)) << "distortion_coefficients"
+        << cv::Mat(cv::Matx<double, 1, 5>(-0.1, 0.01, 0, 0, 0.003));
   }
   EXPECT_THROW(ReadCameraFile(tmp / "k3.yaml"), Error);
   EXPECT_THROW(ReadCameraFile(tmp / "missing.json"), Error);

@@ -46,8 +46,7 @@ std::string Flight(const fs::path& root, const std::string& name, const std::str
   if (fs::exists(root / name / "sparse" / "images.txt")) return "";
   for (const std::string& args :
        {"-q synth --scene building " + synth_args + " -o " + synth, "-q frames " + synth + "/frames -o " + ws,
-        "-q features --max-features 3000 " + ws, "-q match --pairs sequential --overlap 5 " + ws,
-        "-q sparse " + ws}) {
+        "-q features --max-features 3000 " + ws, "-q match --pairs sequential --overlap 5 " + ws, "-q sparse " + ws}) {
     const auto r = RunCli(args);
     if (r.exit_code != 0) return "fmv3d " + args + "\n" + r.err;
   }
@@ -85,8 +84,10 @@ TEST(E2eAlign, TwoSyntheticFlightsOfOneScene) {
   const fs::path ref = a_is_ref ? "A" : "B", mov = a_is_ref ? "B" : "A";
   const core::Reconstruction rec_ref = io::ReadColmapText(root / ref / "sparse");
   const core::Reconstruction rec_mov = io::ReadColmapText(root / mov / "sparse");
-  const auto eval_ref = sfm::EvaluateSparse(rec_ref, sfm::LoadTruth((root / ("synth_" + ref.string()) / "truth").string()));
-  const auto eval_mov = sfm::EvaluateSparse(rec_mov, sfm::LoadTruth((root / ("synth_" + mov.string()) / "truth").string()));
+  const auto eval_ref =
+      sfm::EvaluateSparse(rec_ref, sfm::LoadTruth((root / ("synth_" + ref.string()) / "truth").string()));
+  const auto eval_mov =
+      sfm::EvaluateSparse(rec_mov, sfm::LoadTruth((root / ("synth_" + mov.string()) / "truth").string()));
 
   Eigen::Vector3d centroid = Eigen::Vector3d::Zero();
   for (const auto& [id, p] : rec_mov.points) centroid += eval_mov.alignment.Apply(p.xyz);

@@ -111,8 +111,10 @@ class Child {
 void DropTimings(nlohmann::json* j) {
   if (j->is_object()) {
     for (auto it = j->begin(); it != j->end();) {
-      if (it.key().rfind("seconds", 0) == 0) it = j->erase(it);
-      else DropTimings(&it.value()), ++it;
+      if (it.key().rfind("seconds", 0) == 0)
+        it = j->erase(it);
+      else
+        DropTimings(&it.value()), ++it;
     }
   } else if (j->is_array()) {
     for (auto& v : *j) DropTimings(&v);
@@ -130,7 +132,8 @@ std::map<std::string, std::string> Snapshot(const fs::path& root) {
     if (rel == ".lock" || rel == "report/timings.json") continue;
     std::string bytes = core::ReadTextFile(e.path());
     if (e.path().extension() == ".json") {
-      for (size_t at; (at = bytes.find(root.string())) != std::string::npos;) bytes.replace(at, root.string().size(), "WS");
+      for (size_t at; (at = bytes.find(root.string())) != std::string::npos;)
+        bytes.replace(at, root.string().size(), "WS");
       auto j = nlohmann::json::parse(bytes, nullptr, false);
       if (!j.is_discarded()) {
         DropTimings(&j);
@@ -148,8 +151,10 @@ std::string Differences(const fs::path& a, const fs::path& b) {
   std::string diff;
   for (const auto& [rel, bytes] : sa) {
     const auto it = sb.find(rel);
-    if (it == sb.end()) diff += "only in the first: " + rel + "\n";
-    else if (it->second != bytes) diff += "differs: " + rel + "\n";
+    if (it == sb.end())
+      diff += "only in the first: " + rel + "\n";
+    else if (it->second != bytes)
+      diff += "differs: " + rel + "\n";
   }
   for (const auto& [rel, bytes] : sb)
     if (!sa.count(rel)) diff += "only in the second: " + rel + "\n";
@@ -175,8 +180,10 @@ class CrashSafety : public ::testing::Test {
   static void SetUpTestSuite() {
     dir_ = new TempDir("fmv3d-crash safety ü");
     const fs::path synth = *dir_ / "synth";
-    const auto r = RunCli("-q synth --scene building --path orbit --frames 90 --fps 10 --size 320x180 --klv"
-                          " --seed 5 -o '" + synth.string() + "'");
+    const auto r = RunCli(
+        "-q synth --scene building --path orbit --frames 90 --fps 10 --size 320x180 --klv"
+        " --seed 5 -o '" +
+        synth.string() + "'");
     ASSERT_EQ(r.exit_code, 0) << r.err;
     // The input keeps a name with a space and non-ASCII letters, and is read-only.
     video_ = new fs::path(*dir_ / "vidéo du vol.ts");
@@ -299,8 +306,10 @@ TEST_F(CrashSafety, ReplacedInputVideoRerunsFromFrames) {
   fs::remove(ws / ".lock");
   // Another flight (other seed, fewer frames) takes the video's name, as a copy over it would.
   const fs::path other = *dir_ / "other";
-  const auto r = RunCli("-q synth --scene building --path orbit --frames 60 --fps 10 --size 320x180 --klv"
-                        " --seed 9 -o '" + other.string() + "'");
+  const auto r = RunCli(
+      "-q synth --scene building --path orbit --frames 60 --fps 10 --size 320x180 --klv"
+      " --seed 9 -o '" +
+      other.string() + "'");
   ASSERT_EQ(r.exit_code, 0) << r.err;
   const fs::path video = *dir_ / "replaced vidéo.ts";
   fs::copy_file(*video_, video);

@@ -31,7 +31,8 @@ TEST(E2eGeo, KlvFlightGeoreferencedDsm) {
   TempDir dir("fmv3d-e2e-geo");
   const std::string synth = (dir / "synth").string(), ws = (dir / "ws").string();
   Cli("-q synth --scene building --path orbit --frames 300 --fps 30 --size 640x360 --klv --gps-noise 3"
-      " --attitude-noise 1 --seed 3 -o " + synth);
+      " --attitude-noise 1 --seed 3 -o " +
+      synth);
   Cli("-q frames " + synth + "/flight.ts -o " + ws);
   ASSERT_TRUE(std::filesystem::exists(dir / "ws/frames/telemetry.json"));
   // The KLV sensor HFOV gives the focal prior (truth: 554.26 px; ST 0601 stores the HFOV to 0.003°).
@@ -57,8 +58,10 @@ TEST(E2eGeo, KlvFlightGeoreferencedDsm) {
   Cli("-q evaluate-geo " + ws + " --truth " + synth);
   const auto georef = core::ReadJson(dir / "ws/geo/georef.json");
   const auto eval = core::ReadJson(dir / "ws/report/geo_eval.json");
-  std::cout << georef.at("fit").dump(2) << "\n" << georef.at("frame_centres").dump(2) << "\n" << eval.dump(2)
-            << "\npositions only: surface RMS " << positions_only << " m (keyframes only " << keyframes_only << " m)\n";
+  std::cout << georef.at("fit").dump(2) << "\n"
+            << georef.at("frame_centres").dump(2) << "\n"
+            << eval.dump(2) << "\npositions only: surface RMS " << positions_only << " m (keyframes only "
+            << keyframes_only << " m)\n";
   EXPECT_EQ(georef.at("utm").at("epsg").get<int>(), 32618);
   // Synth's frame centres are exact: the model's ground lies on the telemetry's lines of sight.
   EXPECT_TRUE(georef.at("trusted").get<bool>()) << georef.at("line_of_sight").dump();
@@ -93,7 +96,8 @@ TEST(E2eGeo, KlvFlightGeoreferencedDsm) {
   // The headline DSM figure is over the modelled area (truth.json's bounds); the whole seen DSM adds synth's
   // far-ground backdrop.
   EXPECT_NE(eval.at("dsm").at("region").get<std::string>().find("bounds"), std::string::npos);
-  EXPECT_GE(eval.at("dsm").at("whole_seen").at("cells_compared").get<int>(), eval.at("dsm").at("cells_compared").get<int>());
+  EXPECT_GE(eval.at("dsm").at("whole_seen").at("cells_compared").get<int>(),
+            eval.at("dsm").at("cells_compared").get<int>());
   // The products open: a UTM GeoTIFF, a LAS 1.4 with the CRS.
   geo::GridSpec grid;
   geo::ReadHeightGeoTiff(dir / "ws/geo/dsm.tif", &grid);

@@ -22,7 +22,8 @@ TEST(E2eSurvey, LowTextureNadirGridRegistersEveryImage) {
   TempDir dir("fmv3d-e2e-survey");
   const std::string synth = (dir / "synth").string(), ws = (dir / "ws").string();
   Cli("-q synth --scene sand --path grid --overlap 70,40 --frames 16 --size 800x450 --altitude 90 --detail 0.5 "
-      "--format jpg --no-scene --seed 5 -o " + synth);
+      "--format jpg --no-scene --seed 5 -o " +
+      synth);
   Cli("-q frames " + synth + "/frames -o " + ws);
   Cli("-q features " + ws);
   Cli("-q match " + ws);
@@ -31,8 +32,9 @@ TEST(E2eSurvey, LowTextureNadirGridRegistersEveryImage) {
   const auto feats = core::ReadJson(dir / "ws/features/features.json");
   const auto sparse = core::ReadJson(dir / "ws/report/sparse.json");
   const auto eval = core::ReadJson(dir / "ws/report/sparse_eval.json");
-  std::cout << "keypoints " << feats.at("mean_keypoints") << ", adapted " << feats.at("adapted_contrast_images")
-            << "\n" << sparse.at("left_out").dump() << "\n" << eval.dump(2) << "\n";
+  std::cout << "keypoints " << feats.at("mean_keypoints") << ", adapted " << feats.at("adapted_contrast_images") << "\n"
+            << sparse.at("left_out").dump() << "\n"
+            << eval.dump(2) << "\n";
   EXPECT_GT(feats.at("adapted_contrast_images").get<int>(), 0) << "the scene is meant to be weak";
   EXPECT_EQ(sparse.at("registered_images").get<int>(), 16) << "every image registered";
   EXPECT_EQ(eval.at("matched_images").get<int>(), 16);

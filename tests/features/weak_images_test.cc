@@ -48,7 +48,8 @@ TEST(WeakImages, AdaptiveThresholdFindsMoreAndBetterSpreadKeypoints) {
   double used_fixed = 0, used_adaptive = 0;
   const auto a = ExtractSift(img, fixed, &used_fixed);
   const auto b = ExtractSift(img, adaptive, &used_adaptive);
-  const double ca = KeypointCoverage(a.keypoints, img.cols, img.rows), cb = KeypointCoverage(b.keypoints, img.cols, img.rows);
+  const double ca = KeypointCoverage(a.keypoints, img.cols, img.rows),
+               cb = KeypointCoverage(b.keypoints, img.cols, img.rows);
   std::printf("fixed: %zu keypoints, coverage %.2f; adaptive: %zu keypoints, coverage %.2f, threshold %.4f\n",
               a.keypoints.size(), ca, b.keypoints.size(), cb, used_adaptive);
   EXPECT_DOUBLE_EQ(used_fixed, fixed.contrast_threshold);
@@ -87,7 +88,8 @@ io::FramesIndex Photos(int n, bool gps_on_all, bool one_source) {
     f.name = "p" + std::to_string(k) + ".jpg";
     f.source = one_source ? "clip.mp4" : "/in/p" + std::to_string(k) + ".jpg";
     if (gps_on_all || k != 3)
-      f.telemetry = {{"sensor_latitude", 47.0 + 1e-5 * (k % 10)}, {"sensor_longitude", 8.0 + 1e-5 * (k / 10)},
+      f.telemetry = {{"sensor_latitude", 47.0 + 1e-5 * (k % 10)},
+                     {"sensor_longitude", 8.0 + 1e-5 * (k / 10)},
                      {"sensor_relative_altitude", 80.0}};
     index.frames.push_back(f);
   }

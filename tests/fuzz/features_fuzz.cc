@@ -13,7 +13,8 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   const auto path = fmv3d::fuzz::WriteScratch("in.bin", reinterpret_cast<const char*>(data), size);
   try {
     const auto f = fmv3d::features::ReadFeatures(path);
-    if (static_cast<size_t>(f.descriptors.rows()) != f.keypoints.size() || f.colors.size() != f.keypoints.size()) __builtin_trap();
+    if (static_cast<size_t>(f.descriptors.rows()) != f.keypoints.size() || f.colors.size() != f.keypoints.size())
+      __builtin_trap();
   } catch (const fmv3d::Error&) {
   }
   try {

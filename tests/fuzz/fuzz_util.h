@@ -18,8 +18,8 @@ namespace fmv3d::fuzz {
 inline const std::filesystem::path& ScratchDir() {
   static const std::filesystem::path dir = [] {
     const char* tmp = std::getenv("TMPDIR");
-    const std::filesystem::path d = std::filesystem::path(tmp && *tmp ? tmp : "/tmp") /
-                                    ("fmv3d-fuzz-" + std::to_string(getpid()));
+    const std::filesystem::path d =
+        std::filesystem::path(tmp && *tmp ? tmp : "/tmp") / ("fmv3d-fuzz-" + std::to_string(getpid()));
     std::filesystem::create_directories(d);
     return d;
   }();

@@ -19,8 +19,7 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
     switch (selector % 7) {
       case 0: {
         const JobRequest r = ParseJobRequest(text);
-        if ((!r.from.empty() && !IsStageName(r.from)) || (!r.until.empty() && !IsStageName(r.until)))
-          __builtin_trap();
+        if ((!r.from.empty() && !IsStageName(r.from)) || (!r.until.empty() && !IsStageName(r.until))) __builtin_trap();
         for (const auto& in : r.inputs)
           if (in.empty() || in.find('\0') != std::string::npos) __builtin_trap();
         break;

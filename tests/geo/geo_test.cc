@@ -61,8 +61,8 @@ const GeoPoint kOrigin{38.16, -77.35, 60};
 TEST(Geodesy, ProjAgreesWithClosedFormEnu) {
   const LocalFrame frame(kOrigin);
   const synth::GeoPoint so{kOrigin.lat, kOrigin.lon, kOrigin.alt};
-  for (const Eigen::Vector3d& enu : {Eigen::Vector3d(0, 0, 0), Eigen::Vector3d(120, -340, 95),
-                                    Eigen::Vector3d(-3000, 2500, 800)}) {
+  for (const Eigen::Vector3d& enu :
+       {Eigen::Vector3d(0, 0, 0), Eigen::Vector3d(120, -340, 95), Eigen::Vector3d(-3000, 2500, 800)}) {
     const auto g = synth::EnuToGeodetic(enu, so);
     const Eigen::Vector3d back = frame.ToEnu({g.lat, g.lon, g.alt});
     EXPECT_LT((back - enu).norm(), 1e-6) << enu.transpose();
@@ -117,7 +117,9 @@ struct GeorefCase {
 // frame_centre_noise < 0: no frame centres; else each packet states the true look-at point (plus that noise per
 // axis and frame_centre_offset) with its slant range. ground_tilt_deg tilts the model's ground about the x axis.
 // The point camera k looks at (its frame centre): the origin, or spread about it as a jittery gimbal's.
-Eigen::Vector3d CaseLookAt(int k, double spread) { return spread * Eigen::Vector3d(std::cos(2.7 * k), std::sin(2.7 * k), 0); }
+Eigen::Vector3d CaseLookAt(int k, double spread) {
+  return spread * Eigen::Vector3d(std::cos(2.7 * k), std::sin(2.7 * k), 0);
+}
 
 void MakeGeorefCase(GeorefCase* g, int n, double noise, bool straight, int outlier, double attitude_noise = -1,
                     double heading_offset = 0, double radius = 200, double bend = 0, double frame_centre_noise = -1,
@@ -138,8 +140,11 @@ void MakeGeorefCase(GeorefCase* g, int n, double noise, bool straight, int outli
   const LocalFrame frame(kOrigin);
   for (int k = 0; k < n; ++k) {
     Eigen::Vector3d c;
-    if (straight) c = Eigen::Vector3d(-300 + 600.0 * k / (n - 1), -150, 120);
-    else c = Eigen::Vector3d(radius * std::cos(2 * M_PI * k / n), radius * std::sin(2 * M_PI * k / n), 120 + 10 * std::sin(3.0 * k));
+    if (straight)
+      c = Eigen::Vector3d(-300 + 600.0 * k / (n - 1), -150, 120);
+    else
+      c = Eigen::Vector3d(radius * std::cos(2 * M_PI * k / n), radius * std::sin(2 * M_PI * k / n),
+                          120 + 10 * std::sin(3.0 * k));
     g->true_centres.push_back(c);
     const Eigen::Vector3d look_at = CaseLookAt(k, look_at_spread);
     core::Image img;
@@ -155,8 +160,8 @@ void MakeGeorefCase(GeorefCase* g, int n, double noise, bool straight, int outli
     if (k == outlier) noisy += Eigen::Vector3d(150, -80, 40);
     if (10 * k >= 7 * n) noisy += Eigen::Vector3d(bend, 0, 0);  // the model's last 30% is not where the flight was
     const GeoPoint p = frame.ToGeodetic(noisy);
-    f.telemetry = {{"time", k * 0.1}, {"source", "ST0601"}, {"sensor_latitude", p.lat}, {"sensor_longitude", p.lon},
-                   {"sensor_altitude_hae", p.alt}, {"sensor_altitude_msl", p.alt}};
+    f.telemetry = {{"time", k * 0.1},           {"source", "ST0601"},           {"sensor_latitude", p.lat},
+                   {"sensor_longitude", p.lon}, {"sensor_altitude_hae", p.alt}, {"sensor_altitude_msl", p.alt}};
     if (attitude_noise >= 0) {
       // Split the true attitude for a nominal platform, then state a noisy (and offset) platform, as synth does:
       // the telemetry's camera attitude is off by about attitude_noise per axis (and by heading_offset).
@@ -185,8 +190,8 @@ void MakeGeorefCase(GeorefCase* g, int n, double noise, bool straight, int outli
     core::Point3D pt;
     pt.id = i + 1;
     const double y = -200 + 20.0 * (i / 20);
-    pt.xyz = g->true_to_model.Apply(Eigen::Vector3d(-200 + 20.0 * (i % 20), y,
-                                                    0.5 * N(rng) + y * std::tan(ground_tilt_deg * M_PI / 180)));
+    pt.xyz = g->true_to_model.Apply(
+        Eigen::Vector3d(-200 + 20.0 * (i % 20), y, 0.5 * N(rng) + y * std::tan(ground_tilt_deg * M_PI / 180)));
     rec.points[pt.id] = pt;
   }
   core::EnsureDirectory(g->dir / "frames");
@@ -271,7 +276,8 @@ void ObserveAndBend(GeorefCase* g, int n, double look_at_spread, double bend_m =
   }
   for (auto& [id, img] : rec.images) {
     if (10 * (id - 1) < 7 * n) continue;
-    const Eigen::Vector3d c = img.pose.Centre() + g->true_to_model.s * (g->true_to_model.q * Eigen::Vector3d(bend_m, 0, 0));
+    const Eigen::Vector3d c =
+        img.pose.Centre() + g->true_to_model.s * (g->true_to_model.q * Eigen::Vector3d(bend_m, 0, 0));
     img.pose.t = -(img.pose.q * c);
   }
   rec.Validate();
@@ -424,59 +430,59 @@ TEST(Georef, FrameCentresFromThePlatformsOwnGpsDoNotHurt) {
   // GPS error white (3 m per packet) or smooth (a 3 m drift at the orbit's period, which the positions alone
   // cannot tell from a 0.9° tilt, plus 0.5 m white).
   for (const bool smooth : {false, true}) {
-  double rms[2], tilt[2];
-  nlohmann::json with;
-  for (int use = 0; use < 2; ++use) {
-    GeorefCase g;
-    const int n = 60;
-    MakeGeorefCase(&g, n, smooth ? 0.5 : 3.0, false, -1, 1.0);
-    io::FramesIndex index = io::ReadFramesIndex(g.dir / "frames/frames.json");
-    const LocalFrame frame(kOrigin);
-    for (size_t k = 0; k < index.frames.size(); ++k) {
-      auto& f = index.frames[k];
-      auto& t = f.telemetry;
-      if (smooth) {
-        const double a = 2 * M_PI * k / n;
-        const Eigen::Vector3d drift = 3.0 * Eigen::Vector3d(std::sin(a + 1), std::cos(a + 2), std::sin(a));
-        const GeoPoint p = frame.ToGeodetic(
-            frame.ToEnu({t["sensor_latitude"], t["sensor_longitude"], t["sensor_altitude_hae"]}) + drift);
-        t["sensor_latitude"] = p.lat, t["sensor_longitude"] = p.lon, t["sensor_altitude_hae"] = p.alt;
-        t["sensor_altitude_msl"] = p.alt;
+    double rms[2], tilt[2];
+    nlohmann::json with;
+    for (int use = 0; use < 2; ++use) {
+      GeorefCase g;
+      const int n = 60;
+      MakeGeorefCase(&g, n, smooth ? 0.5 : 3.0, false, -1, 1.0);
+      io::FramesIndex index = io::ReadFramesIndex(g.dir / "frames/frames.json");
+      const LocalFrame frame(kOrigin);
+      for (size_t k = 0; k < index.frames.size(); ++k) {
+        auto& f = index.frames[k];
+        auto& t = f.telemetry;
+        if (smooth) {
+          const double a = 2 * M_PI * k / n;
+          const Eigen::Vector3d drift = 3.0 * Eigen::Vector3d(std::sin(a + 1), std::cos(a + 2), std::sin(a));
+          const GeoPoint p = frame.ToGeodetic(
+              frame.ToEnu({t["sensor_latitude"], t["sensor_longitude"], t["sensor_altitude_hae"]}) + drift);
+          t["sensor_latitude"] = p.lat, t["sensor_longitude"] = p.lon, t["sensor_altitude_hae"] = p.alt;
+          t["sensor_altitude_msl"] = p.alt;
+        }
+        telemetry::St0601Attitude a;
+        a.platform_heading = t["platform_heading"], a.platform_pitch = t["platform_pitch"];
+        a.platform_roll = t["platform_roll"];
+        a.sensor_relative_azimuth = t["sensor_relative_azimuth"];
+        a.sensor_relative_elevation = t["sensor_relative_elevation"];
+        a.sensor_relative_roll = t["sensor_relative_roll"];
+        const Eigen::Vector3d d = telemetry::CameraToEnuFromSt0601(a).col(2);
+        const Eigen::Vector3d p = frame.ToEnu({t["sensor_latitude"], t["sensor_longitude"], t["sensor_altitude_hae"]});
+        ASSERT_LT(d.z(), 0);
+        const double range = -p.z() / d.z();
+        const GeoPoint q = frame.ToGeodetic(p + range * d);
+        f.telemetry["frame_center_latitude"] = q.lat;
+        f.telemetry["frame_center_longitude"] = q.lon;
+        f.telemetry["frame_center_elevation"] = q.alt;
+        f.telemetry["slant_range"] = range;
       }
-      telemetry::St0601Attitude a;
-      a.platform_heading = t["platform_heading"], a.platform_pitch = t["platform_pitch"];
-      a.platform_roll = t["platform_roll"];
-      a.sensor_relative_azimuth = t["sensor_relative_azimuth"];
-      a.sensor_relative_elevation = t["sensor_relative_elevation"];
-      a.sensor_relative_roll = t["sensor_relative_roll"];
-      const Eigen::Vector3d d = telemetry::CameraToEnuFromSt0601(a).col(2);
-      const Eigen::Vector3d p = frame.ToEnu({t["sensor_latitude"], t["sensor_longitude"], t["sensor_altitude_hae"]});
-      ASSERT_LT(d.z(), 0);
-      const double range = -p.z() / d.z();
-      const GeoPoint q = frame.ToGeodetic(p + range * d);
-      f.telemetry["frame_center_latitude"] = q.lat;
-      f.telemetry["frame_center_longitude"] = q.lon;
-      f.telemetry["frame_center_elevation"] = q.alt;
-      f.telemetry["slant_range"] = range;
+      io::WriteFramesIndex(index, g.dir / "frames/frames.json");
+      GeorefOptions o;
+      o.origin = kOrigin;
+      o.use_frame_centres = use == 1;
+      const auto j = RunGeorefStage(g.dir.path(), o);
+      rms[use] = CentreRms(g);
+      tilt[use] = RotationErrorDeg(g);
+      if (use == 1) with = j;
     }
-    io::WriteFramesIndex(index, g.dir / "frames/frames.json");
-    GeorefOptions o;
-    o.origin = kOrigin;
-    o.use_frame_centres = use == 1;
-    const auto j = RunGeorefStage(g.dir.path(), o);
-    rms[use] = CentreRms(g);
-    tilt[use] = RotationErrorDeg(g);
-    if (use == 1) with = j;
-  }
-  std::cout << (smooth ? "smooth" : "white") << " GPS error: camera centres RMS / rotation error: positions "
-            << rms[0] << " m / " << tilt[0] << "°, with the platform's frame centres " << rms[1] << " m / "
-            << tilt[1] << "°; " << with["frame_centres"].dump() << "\n";
-  EXPECT_LT(rms[1], 1.1 * rms[0]);
-  EXPECT_LT(tilt[1], 1.1 * tilt[0] + 0.05);
-  if (with["frame_centres"]["used"].get<bool>() && !smooth) {
-    // The stated accuracy must not be below the positions' own (σ·√(3/N) ≈ 0.7 m): the frame centres add none.
-    EXPECT_GT(with["frame_centres"]["expected_translation_error_m"].get<double>(), 0.5);
-  }
+    std::cout << (smooth ? "smooth" : "white") << " GPS error: camera centres RMS / rotation error: positions "
+              << rms[0] << " m / " << tilt[0] << "°, with the platform's frame centres " << rms[1] << " m / " << tilt[1]
+              << "°; " << with["frame_centres"].dump() << "\n";
+    EXPECT_LT(rms[1], 1.1 * rms[0]);
+    EXPECT_LT(tilt[1], 1.1 * tilt[0] + 0.05);
+    if (with["frame_centres"]["used"].get<bool>() && !smooth) {
+      // The stated accuracy must not be below the positions' own (σ·√(3/N) ≈ 0.7 m): the frame centres add none.
+      EXPECT_GT(with["frame_centres"]["expected_translation_error_m"].get<double>(), 0.5);
+    }
   }
 }
 
@@ -498,9 +504,8 @@ TEST(Georef, SpreadFrameCentresFixTheRotation) {
     angle[use] = RotationErrorDeg(g);
     acc[use] = j["expected_accuracy"];
   }
-  std::cout << "rotation error: positions + attitudes " << angle[0] << "° (expected tilt "
-            << acc[0]["tilt_deg"] << "°), + frame centres " << angle[1] << "° (expected " << acc[1]["tilt_deg"]
-            << "°)\n";
+  std::cout << "rotation error: positions + attitudes " << angle[0] << "° (expected tilt " << acc[0]["tilt_deg"]
+            << "°), + frame centres " << angle[1] << "° (expected " << acc[1]["tilt_deg"] << "°)\n";
   EXPECT_GT(angle[0], 0.05);
   EXPECT_LT(angle[1], 0.01);
   // The expected tilt follows: near the attitudes' floor (1°/√40 per axis) without, far below it with.
@@ -553,7 +558,8 @@ TEST(Georef, FrameCentreHeightsInBothDatumsNarrowTheStep) {
       EXPECT_NEAR(j["frame_centres"]["elevation_offset_prior_sd_m"].get<double>(), step / std::sqrt(12.0), 0.002);
     }
   }
-  std::cout << "mean vertical error: HAE code only " << vertical[0] << " m, HAE and MSL codes " << vertical[1] << " m\n";
+  std::cout << "mean vertical error: HAE code only " << vertical[0] << " m, HAE and MSL codes " << vertical[1]
+            << " m\n";
   // Each stays inside its interval (the positions, σ 3 m over 40 packets, weigh where): HAE alone [−0.30, +0.004],
   // both [−0.169, +0.004]; measured −0.195 and −0.096.
   EXPECT_GT(vertical[0], -0.32);
@@ -660,7 +666,8 @@ TEST(Georef, RebuildThatDisagreesFarLessIsKept) {
     core::Reconstruction rec = io::ReadColmapText(g.dir / "sparse");
     for (auto& [id, img] : rec.images) {
       const Eigen::Vector3d c = img.pose.Centre();
-      img.pose.q = (Eigen::Quaterniond(Eigen::AngleAxisd(M_PI / 180, Eigen::Vector3d::UnitX())) * img.pose.q).normalized();
+      img.pose.q =
+          (Eigen::Quaterniond(Eigen::AngleAxisd(M_PI / 180, Eigen::Vector3d::UnitX())) * img.pose.q).normalized();
       img.pose.t = -(img.pose.q * c);
     }
     io::WriteColmapText(rec, g.dir / "sparse");
@@ -675,7 +682,8 @@ TEST(Georef, RebuildThatDisagreesFarLessIsKept) {
       EXPECT_TRUE(t.value("applied", false)) << t.dump();
       EXPECT_EQ(t.value("trigger", ""), "the frame centres disagree with the model") << t.dump();
       EXPECT_GT(t.value("frame_centres_chi2", 0.0), kFrameCentreAgreementChi2) << t.dump();
-      EXPECT_LT(t.value("frame_centres_chi2", 1e9), t.value("frame_centres_chi2_image_only", 0.0) - kFrameCentreAgreementChi2)
+      EXPECT_LT(t.value("frame_centres_chi2", 1e9),
+                t.value("frame_centres_chi2_image_only", 0.0) - kFrameCentreAgreementChi2)
           << t.dump();
     }
     worst[mode] = WorstOrientationErrorDeg(g);
@@ -713,7 +721,8 @@ void MakeDsmWorkspace(const test::TempDir& dir, const core::Sim3& enu_to_model) 
   };
   // Ground (with a hole under the box is unnecessary: the roof is higher and wins).
   for (int x = -50; x < 50; x += 10)
-    for (int y = -50; y < 50; y += 10) quad({x * 1.0, y * 1.0, 0}, {x + 10.0, y * 1.0, 0}, {x + 10.0, y + 10.0, 0}, {x * 1.0, y + 10.0, 0});
+    for (int y = -50; y < 50; y += 10)
+      quad({x * 1.0, y * 1.0, 0}, {x + 10.0, y * 1.0, 0}, {x + 10.0, y + 10.0, 0}, {x * 1.0, y + 10.0, 0});
   quad({-10, -5, 12}, {10, -5, 12}, {10, 5, 12}, {-10, 5, 12});  // roof
   quad({-10, -5, 0}, {10, -5, 0}, {10, -5, 12}, {-10, -5, 12});  // a wall
   core::EnsureDirectory(dir / "mesh");

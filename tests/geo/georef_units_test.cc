@@ -181,7 +181,8 @@ SightCase MakeSightCase(const LocalFrame& frame, LookAt look_at, Stated stated) 
     pair.centre = centre;
     pair.rotation = img.pose.q;
     // GPS noise of about half a metre (deterministic).
-    pair.pos = frame.ToGeodetic(centre + 0.5 * Eigen::Vector3d(std::sin(1.7 * k), std::cos(2.3 * k), std::sin(0.9 * k)));
+    pair.pos =
+        frame.ToGeodetic(centre + 0.5 * Eigen::Vector3d(std::sin(1.7 * k), std::cos(2.3 * k), std::sin(0.9 * k)));
     pair.hae = pair.msl = pair.pos.alt;
     const GeoPoint f = frame.ToGeodetic(stated(centre));
     pair.frame_centre = GeoPoint{f.lat, f.lon, 0};
@@ -192,10 +193,15 @@ SightCase MakeSightCase(const LocalFrame& frame, LookAt look_at, Stated stated) 
     r.name = img.name;
     r.frame_index = k;
     r.timestamp = 0.5 * k;
-    r.telemetry = {{"time", r.timestamp}, {"source", "ST0601"}, {"sensor_latitude", pair.pos.lat},
-                   {"sensor_longitude", pair.pos.lon}, {"sensor_altitude_hae", pair.pos.alt},
-                   {"sensor_altitude_msl", pair.pos.alt}, {"frame_center_latitude", f.lat},
-                   {"frame_center_longitude", f.lon}, {"frame_center_elevation", f.alt},
+    r.telemetry = {{"time", r.timestamp},
+                   {"source", "ST0601"},
+                   {"sensor_latitude", pair.pos.lat},
+                   {"sensor_longitude", pair.pos.lon},
+                   {"sensor_altitude_hae", pair.pos.alt},
+                   {"sensor_altitude_msl", pair.pos.alt},
+                   {"frame_center_latitude", f.lat},
+                   {"frame_center_longitude", f.lon},
+                   {"frame_center_elevation", f.alt},
                    {"slant_range", *pair.slant_range}};
     c.index.frames.push_back(r);
   }
@@ -233,8 +239,7 @@ TEST(LineOfSightCheck, DisagreesAndSaysWhereWhenTheGroundIsBeyond) {
   // Without stated heights the slant range places the frame centre: the same verdict.
   std::vector<GeorefPair> ranged = c.keyframes;
   for (auto& p : ranged) p.frame_centre_hae.reset(), p.frame_centre_msl.reset();
-  const LineOfSightCheck from_range =
-      CheckLinesOfSight(c.model, ranged, VerticalDatum::kEllipsoid, frame, &acc, {});
+  const LineOfSightCheck from_range = CheckLinesOfSight(c.model, ranged, VerticalDatum::kEllipsoid, frame, &acc, {});
   EXPECT_EQ(from_range.verdict, LineOfSightCheck::Verdict::kDisagrees);
   EXPECT_NEAR(from_range.median_frame_centre_height_m, r.median_frame_centre_height_m, 1.0);  // GPS noise 0.5 m
   // Nothing to compare: neither a height nor a slant range.

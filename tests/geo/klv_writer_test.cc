@@ -102,7 +102,8 @@ TEST(KlvWriter, BerAndMappingPrimitives) {
     EXPECT_NEAR(telemetry::klv::MapUnsigned(telemetry::klv::EncodeUnsignedMapped(v, 2, -900, 19000), 2, -900, 19000), v,
                 0.5 * kAltStep);
   for (double v : {-90.0, -12.345678, 0.0, 90.0})
-    EXPECT_NEAR(*telemetry::klv::MapSigned(telemetry::klv::EncodeSignedMapped(v, 4, 90), 4, 90), v, 0.5 * kLatStep + 1e-12);
+    EXPECT_NEAR(*telemetry::klv::MapSigned(telemetry::klv::EncodeSignedMapped(v, 4, 90), 4, 90), v,
+                0.5 * kLatStep + 1e-12);
   // The reserved "error" code is never produced.
   EXPECT_EQ(telemetry::klv::EncodeSignedMapped(-90, 4, 90), -2147483647);
   EXPECT_THROW(telemetry::klv::EncodeSignedMapped(90.001, 4, 90), Error);
@@ -119,8 +120,7 @@ TEST(KlvWriter, AttitudeSplitReproducesTheCameraRotation) {
   std::mt19937 rng(7);
   std::uniform_real_distribution<double> u(-1, 1);
   for (int i = 0; i < 200; ++i) {
-    const Eigen::Matrix3d R =
-        Eigen::Quaterniond(u(rng), u(rng), u(rng), u(rng)).normalized().toRotationMatrix();
+    const Eigen::Matrix3d R = Eigen::Quaterniond(u(rng), u(rng), u(rng), u(rng)).normalized().toRotationMatrix();
     const double heading = 180 * u(rng) + 180, pitch = 20 * u(rng), roll = 30 * u(rng);
     const auto a = telemetry::St0601FromCameraToEnu(R, heading, pitch, roll);
     EXPECT_TRUE((telemetry::CameraToEnuFromSt0601(a) - R).norm() < 1e-9) << i;
@@ -141,8 +141,8 @@ TEST(KlvWriter, AttitudeSplitReproducesTheCameraRotation) {
 
 TEST(SynthGeodesy, EnuRoundTripAndKnownValues) {
   const synth::GeoPoint o{38.16, -77.35, 60};
-  for (const Eigen::Vector3d& enu : {Eigen::Vector3d(0, 0, 0), Eigen::Vector3d(1000, -2000, 300),
-                                    Eigen::Vector3d(-50000, 40000, 5000)}) {
+  for (const Eigen::Vector3d& enu :
+       {Eigen::Vector3d(0, 0, 0), Eigen::Vector3d(1000, -2000, 300), Eigen::Vector3d(-50000, 40000, 5000)}) {
     const auto g = synth::EnuToGeodetic(enu, o);
     EXPECT_LT((synth::GeodeticToEnu(g, o) - enu).norm(), 1e-6);
   }

@@ -38,8 +38,8 @@ TEST(Trajectory, CubicInTimeAndSlerpInRotation) {
     const auto k = traj.At(t);
     ASSERT_TRUE(k) << t;
     worst = std::max(worst, (k->centre - Orbit(t)).norm());
-    const double angle = k->rotation.angularDistance(
-        Eigen::Quaterniond(Eigen::AngleAxisd(0.1 * t, Eigen::Vector3d::UnitZ())));
+    const double angle =
+        k->rotation.angularDistance(Eigen::Quaterniond(Eigen::AngleAxisd(0.1 * t, Eigen::Vector3d::UnitZ())));
     EXPECT_LT(angle, 1e-9);
   }
   EXPECT_LT(worst, 0.05);  // a linear interpolation would be off by ~R(1 − cos 7.2°) = 0.63 m
@@ -162,7 +162,8 @@ TEST(Georef, EveryTelemetryPacketAgainstTheTrajectory) {
   EXPECT_LT(tr_bias, kf_bias);
   // Scale (true 1 / 0.05 = 20): known to ~σ/(R·√N) — 0.07% with every packet, 0.25% with the keyframes.
   EXPECT_NEAR(tr["similarity"]["scale"].get<double>(), 20, 20 * 0.002);
-  EXPECT_LT(std::abs(tr["similarity"]["scale"].get<double>() - 20), std::abs(kf["similarity"]["scale"].get<double>() - 20));
+  EXPECT_LT(std::abs(tr["similarity"]["scale"].get<double>() - 20),
+            std::abs(kf["similarity"]["scale"].get<double>() - 20));
   o.use_track = false;
   EXPECT_EQ(RunGeorefStage(dir.path(), o)["fit"]["from"], "keyframes");
 }

@@ -46,8 +46,9 @@ double PositionRms(const io::FramesIndex& index, const synth::SynthResult& r, co
   for (size_t k = 0; k < index.frames.size(); ++k) {
     const auto& f = index.frames[k];
     const auto& t = f.telemetry;
-    const double alt = t.contains("sensor_altitude_hae") ? t.at("sensor_altitude_hae").get<double>()
-                                                         : t.at("sensor_altitude_msl").get<double>() + undulation_to_add;
+    const double alt = t.contains("sensor_altitude_hae")
+                           ? t.at("sensor_altitude_hae").get<double>()
+                           : t.at("sensor_altitude_msl").get<double>() + undulation_to_add;
     const synth::GeoPoint g{t.at("sensor_latitude").get<double>(), t.at("sensor_longitude").get<double>(), alt};
     const Eigen::Vector3d enu = synth::GeodeticToEnu(g, o.klv_options.origin);
     // Video frames by their index, photos (frame_index 0) by their position: both name the truth image.
@@ -78,9 +79,12 @@ TEST(FieldTelemetry, SynthExifJpegsThroughFrames) {
     EXPECT_NEAR(f.telemetry.at("sensor_altitude_msl").get<double>(), r.sensor_true_altitude, 1e-6) << f.name;
     // The stated attitude reproduces the truth camera within the attitude noise (0.5° per platform angle).
     auto num = [&](const char* key) { return f.telemetry.at(key).get<double>(); };
-    const telemetry::St0601Attitude a{num("platform_heading"),        num("platform_pitch"),
-                                      num("platform_roll"),           num("sensor_relative_azimuth"),
-                                      num("sensor_relative_elevation"), num("sensor_relative_roll")};
+    const telemetry::St0601Attitude a{num("platform_heading"),
+                                      num("platform_pitch"),
+                                      num("platform_roll"),
+                                      num("sensor_relative_azimuth"),
+                                      num("sensor_relative_elevation"),
+                                      num("sensor_relative_roll")};
     const Eigen::Matrix3d truth = result.truth.images.at(static_cast<uint32_t>(k + 1)).pose.R().transpose();
     const double err = Eigen::AngleAxisd(truth.transpose() * telemetry::CameraToEnuFromSt0601(a)).angle() * 180 / M_PI;
     EXPECT_LT(err, 4 * 0.5 * std::sqrt(3.0)) << f.name;
@@ -117,13 +121,14 @@ TEST(FieldTelemetry, CorruptPhotoMetadataIsDroppedWithACount) {
     std::vector<uint8_t> bytes{std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
     in.close();
     spoil(&bytes);
-    std::ofstream(path, std::ios::binary).write(reinterpret_cast<const char*>(bytes.data()),
-                                                static_cast<std::streamsize>(bytes.size()));
+    std::ofstream(path, std::ios::binary)
+        .write(reinterpret_cast<const char*>(bytes.data()), static_cast<std::streamsize>(bytes.size()));
   };
   auto plain = [](std::vector<uint8_t>* b) {  // the JPEG without its metadata segments
     std::vector<uint8_t> out = {0xFF, 0xD8};
     size_t pos = 2;
-    while (pos + 4 <= b->size() && (*b)[pos] == 0xFF && (*b)[pos + 1] == 0xE1) pos += 2 + ((*b)[pos + 2] << 8 | (*b)[pos + 3]);
+    while (pos + 4 <= b->size() && (*b)[pos] == 0xFF && (*b)[pos + 1] == 0xE1)
+      pos += 2 + ((*b)[pos + 2] << 8 | (*b)[pos + 3]);
     out.insert(out.end(), b->begin() + static_cast<long>(pos), b->end());
     return out;
   };
@@ -175,12 +180,12 @@ TEST(FieldTelemetry, SynthGpmfMp4ThroughFrames) {
       EXPECT_NEAR(f.telemetry.at("sensor_longitude").get<double>(), r.sensor_longitude, 1.1e-7) << f.name;
       EXPECT_NEAR(f.telemetry.at("sensor_altitude_hae").get<double>(), *r.sensor_ellipsoid_height, 2e-3) << f.name;
       // CORI: the truth rotation relative to frame 0 (16-bit components).
-      const Eigen::Quaterniond q(f.telemetry.at("camera_orientation_w").get<double>(),
-                                 f.telemetry.at("camera_orientation_x").get<double>(),
-                                 f.telemetry.at("camera_orientation_y").get<double>(),
-                                 f.telemetry.at("camera_orientation_z").get<double>());
+      const Eigen::Quaterniond q(
+          f.telemetry.at("camera_orientation_w").get<double>(), f.telemetry.at("camera_orientation_x").get<double>(),
+          f.telemetry.at("camera_orientation_y").get<double>(), f.telemetry.at("camera_orientation_z").get<double>());
       const auto& truth = result.truth.images;
-      const Eigen::Matrix3d rel = truth.at(1).pose.R() * truth.at(static_cast<uint32_t>(f.frame_index + 1)).pose.R().transpose();
+      const Eigen::Matrix3d rel =
+          truth.at(1).pose.R() * truth.at(static_cast<uint32_t>(f.frame_index + 1)).pose.R().transpose();
       EXPECT_LT(Eigen::AngleAxisd(q.toRotationMatrix().transpose() * rel).angle(), 2e-4) << f.name;
     }
     const double rms = PositionRms(index, result, o, 0);

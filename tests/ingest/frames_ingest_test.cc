@@ -31,8 +31,12 @@ struct MixedInputs {
       cv::imwrite((images / ("small" + std::to_string(i) + ".jpg")).string(),
                   test::ViewOf(tex, {160, 120}, 300 + 40 * i, 300));
     std::ofstream(images / "notes.txt") << "ignored: not an image";
-    test::EncodeVideo(video, 90, 30, [&](int i) { return test::ViewOf(tex, {343, 259}, 300 + 4.0 * i, 300); },
-                      "mjpeg");
+    test::EncodeVideo(
+        video, 90, 30,
+        [&](int i) {
+          return test::ViewOf(tex, {343, 259}, 300 + 4.0 * i, 300);
+        },
+        "mjpeg");
   }
 };
 
@@ -133,8 +137,12 @@ TEST(FramesIngest, BadInputLeavesWorkspaceUntouched) {
 TEST(FramesIngest, CorruptVideoKeepsFramesBeforeDamage) {
   MixedInputs in;
   const fs::path full = in.tmp / "full.ts", cut = in.tmp / "cut.ts", stub = in.tmp / "stub.ts";
-  test::EncodeVideo(full, 60, 30, [&](int i) { return test::ViewOf(in.tex, {320, 240}, 300 + 3.0 * i, 300); },
-                    "mpeg2video");
+  test::EncodeVideo(
+      full, 60, 30,
+      [&](int i) {
+        return test::ViewOf(in.tex, {320, 240}, 300 + 3.0 * i, 300);
+      },
+      "mpeg2video");
   test::TruncateCopy(full, cut, 0.5);
   IngestOptions opt;
   opt.workspace = in.tmp / "ws";
@@ -158,8 +166,12 @@ TEST(FramesIngest, NonSquarePixelsSetTheAspectPrior) {
   // SD video with 10:11 pixels (narrower than tall): the horizontal focal in pixels is f · 11/10.
   MixedInputs in;
   const fs::path sd = in.tmp / "sd.mkv";
-  test::EncodeVideo(sd, 10, 30, [&](int i) { return test::ViewOf(in.tex, {360, 240}, 300 + i, 300); }, "ffv1", 12,
-                    10, 11);
+  test::EncodeVideo(
+      sd, 10, 30,
+      [&](int i) {
+        return test::ViewOf(in.tex, {360, 240}, 300 + i, 300);
+      },
+      "ffv1", 12, 10, 11);
   IngestOptions opt;
   opt.workspace = in.tmp / "ws";
   const io::FramesIndex index = IngestFrames({sd}, opt);

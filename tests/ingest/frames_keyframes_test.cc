@@ -47,9 +47,9 @@ TEST(Keyframes, OrbitSixtySecondsGivesDozensOfOverlappingKeyframes) {
   const Orbit orbit;
   const cv::Size size(320, 240);
   KeyframeSelector sel(KeyframeOptions(), 30.0);
-  const auto kept = RunSelector(sel, orbit.frames, [&](int i) {
-    return test::ViewOf(tex, size, orbit.Centre(i).x, orbit.Centre(i).y, 1.0, orbit.Angle(i));
-  }, 30.0);
+  const auto kept = RunSelector(
+      sel, orbit.frames,
+      [&](int i) { return test::ViewOf(tex, size, orbit.Centre(i).x, orbit.Centre(i).y, 1.0, orbit.Angle(i)); }, 30.0);
   RecordProperty("keyframes", static_cast<int>(kept.size()));
   std::printf("orbit 60 s @ 30 fps: %zu keyframes\n", kept.size());
   EXPECT_GE(kept.size(), 60u);
@@ -81,7 +81,12 @@ TEST(Keyframes, SpacingFollowsSpeed) {
   opt.min_gap = 2;
   opt.max_gap = 100;
   KeyframeSelector sel(opt, 30.0);
-  const auto kept = RunSelector(sel, n, [&](int i) { return test::ViewOf(tex, {320, 240}, x(i), 200); }, 30.0);
+  const auto kept = RunSelector(
+      sel, n,
+      [&](int i) {
+        return test::ViewOf(tex, {320, 240}, x(i), 200);
+      },
+      30.0);
   int slow = 0, fast = 0;
   for (const auto& k : kept) (k.index < n / 2 ? slow : fast)++;
   EXPECT_GE(slow, 5);
@@ -97,7 +102,8 @@ TEST(Keyframes, StaticSceneKeepsOnePerMaxGap) {
   KeyframeOptions opt;
   opt.max_gap = 25;
   KeyframeSelector sel(opt, 30.0);
-  const auto kept = RunSelector(sel, 200, [&](int) { return view; }, 30.0);
+  const auto kept = RunSelector(
+      sel, 200, [&](int) { return view; }, 30.0);
   // 0, 25, ..., 175 = 8 frames, plus possibly the tail (frame 199).
   EXPECT_GE(kept.size(), 8u);
   EXPECT_LE(kept.size(), 9u);
@@ -111,11 +117,14 @@ TEST(Keyframes, BlurredFramesAreNeverKept) {
   for (int i = 5; i < n; i += 7) blurred.insert(i);
   for (int i = 100; i < 115; ++i) blurred.insert(i);  // a burst longer than the wait for a sharp frame
   KeyframeSelector sel(KeyframeOptions(), 30.0);
-  const auto kept = RunSelector(sel, n, [&](int i) {
-    cv::Mat v = test::ViewOf(tex, {320, 240}, 300 + 3.0 * i, 200);
-    if (blurred.count(i)) cv::GaussianBlur(v, v, cv::Size(0, 0), 2.5);
-    return v;
-  }, 30.0);
+  const auto kept = RunSelector(
+      sel, n,
+      [&](int i) {
+        cv::Mat v = test::ViewOf(tex, {320, 240}, 300 + 3.0 * i, 200);
+        if (blurred.count(i)) cv::GaussianBlur(v, v, cv::Size(0, 0), 2.5);
+        return v;
+      },
+      30.0);
   ASSERT_GT(kept.size(), 10u);
   int kept_blurred = 0;
   for (const auto& k : kept)
@@ -143,7 +152,12 @@ TEST(Keyframes, AllFramesAndAutoGaps) {
   opt.all_frames = true;
   KeyframeSelector sel(opt, 30.0);
   const cv::Mat tex = test::RandomTexture(400, 300, 15);
-  const auto kept = RunSelector(sel, 20, [&](int i) { return test::ViewOf(tex, {160, 120}, 200 + i, 150); }, 30.0);
+  const auto kept = RunSelector(
+      sel, 20,
+      [&](int i) {
+        return test::ViewOf(tex, {160, 120}, 200 + i, 150);
+      },
+      30.0);
   EXPECT_EQ(kept.size(), 20u);
   // Auto gaps: 0.4 s and 1 s of video, at least one frame.
   KeyframeSelector one_fps(KeyframeOptions(), 1.0);

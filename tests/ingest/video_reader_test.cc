@@ -59,8 +59,12 @@ TEST(VideoReader, TruncatedKeepsFramesBeforeDamage) {
   // Every frame is an I-frame so damage cannot reach back; truncation at 60% of the bytes.
   for (const std::string ext : {".ts", ".avi", ".mkv"}) {
     const auto full = tmp / ("full" + ext), cut = tmp / ("cut" + ext);
-    test::EncodeVideo(full, n, 30, [&](int i) { return test::ViewOf(tex, {320, 240}, 200 + 3 * i, 240); },
-                      "mpeg4", 1);
+    test::EncodeVideo(
+        full, n, 30,
+        [&](int i) {
+          return test::ViewOf(tex, {320, 240}, 200 + 3 * i, 240);
+        },
+        "mpeg4", 1);
     test::TruncateCopy(full, cut, 0.6);
     VideoReader reader(cut);
     VideoFrame f;
@@ -85,7 +89,12 @@ TEST(VideoReader, TruncatedMp4WithoutIndexThrowsNamingIt) {
   TempDir tmp("fmv3d-video");
   const cv::Mat tex = test::RandomTexture(640, 480, 6);
   const auto full = tmp / "full.mp4", cut = tmp / "cut.mp4";
-  test::EncodeVideo(full, 40, 30, [&](int i) { return test::ViewOf(tex, {320, 240}, 200 + 3 * i, 240); }, "mpeg4");
+  test::EncodeVideo(
+      full, 40, 30,
+      [&](int i) {
+        return test::ViewOf(tex, {320, 240}, 200 + 3 * i, 240);
+      },
+      "mpeg4");
   test::TruncateCopy(full, cut, 0.5);
   try {
     VideoReader reader(cut);
@@ -119,10 +128,10 @@ TEST(VideoReader, RealKwiverClips) {
     const char* name;
     int width, height, min_frames;
   };
-  for (const Clip& c : {Clip{"aphill_240_1fps_crf32.mp4", 360, 240, 310}, Clip{"aphill_klv_10s.ts", 360, 240, 10},
-                        Clip{"aphill_short.ts", 720, 480, 40}, Clip{"h264_klv.ts", 160, 120, 30},
-                        Clip{"h265_klv.ts", 160, 120, 30}, Clip{"mpeg2_klv.ts", 160, 120, 30},
-                        Clip{"h264_no_klv.ts", 160, 120, 30}}) {
+  for (const Clip& c :
+       {Clip{"aphill_240_1fps_crf32.mp4", 360, 240, 310}, Clip{"aphill_klv_10s.ts", 360, 240, 10},
+        Clip{"aphill_short.ts", 720, 480, 40}, Clip{"h264_klv.ts", 160, 120, 30}, Clip{"h265_klv.ts", 160, 120, 30},
+        Clip{"mpeg2_klv.ts", 160, 120, 30}, Clip{"h264_no_klv.ts", 160, 120, 30}}) {
     VideoReader reader(dir / c.name);
     EXPECT_EQ(reader.info().width, c.width) << c.name;
     EXPECT_EQ(reader.info().height, c.height) << c.name;
@@ -147,7 +156,8 @@ TEST(ReadInputImage, GifThroughFfmpegOthersThroughOpenCv) {
   TempDir tmp("fmv3d-img");
   const cv::Mat img = test::ViewOf(test::RandomTexture(400, 300, 21), {255, 171}, 200, 150);
   // GIF (palette): through FFmpeg, since OpenCV 4.6 has none.
-  test::EncodeVideo(tmp / "a.gif", 1, 10, [&](int) { return img; }, "gif");
+  test::EncodeVideo(
+      tmp / "a.gif", 1, 10, [&](int) { return img; }, "gif");
   const cv::Mat gif = ReadInputImage(tmp / "a.gif");
   ASSERT_EQ(gif.size(), img.size());
   cv::Mat d;

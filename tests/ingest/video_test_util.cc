@@ -70,8 +70,10 @@ void EncodeVideo(const std::filesystem::path& path, int n, double fps, const std
   enc->gop_size = gop;
   enc->sample_aspect_ratio = AVRational{sar_num, sar_den};
   enc->max_b_frames = codec_name == "mpeg2video" ? 2 : 0;  // B-frames: decode-order ≠ output order
-  enc->pix_fmt = codec_name == "gif" ? AV_PIX_FMT_RGB8 : codec_name == "mjpeg" ? AV_PIX_FMT_YUVJ420P
-               : codec_name == "ffv1" ? AV_PIX_FMT_YUV444P : AV_PIX_FMT_YUV420P;
+  enc->pix_fmt = codec_name == "gif"     ? AV_PIX_FMT_RGB8
+                 : codec_name == "mjpeg" ? AV_PIX_FMT_YUVJ420P
+                 : codec_name == "ffv1"  ? AV_PIX_FMT_YUV444P
+                                         : AV_PIX_FMT_YUV420P;
   if (codec_name == "mpeg4" || codec_name == "mpeg2video" || codec_name == "mjpeg") {
     // Constant quality: frame sizes stay even (truncation tests cut at a predictable frame) and sharp.
     enc->flags |= AV_CODEC_FLAG_QSCALE;

@@ -16,8 +16,7 @@ cv::Mat RandomTexture(int width, int height, unsigned seed);
 // The view of `texture` through a window of size out_size centred at (cx, cy) and scaled by zoom
 // (zoom > 1 magnifies) and rotated by angle (radians), with sub-pixel positioning (bilinear). A texture
 // point t appears at centre + zoom · R(-angle) (t - c).
-cv::Mat ViewOf(const cv::Mat& texture, cv::Size out_size, double cx, double cy, double zoom = 1.0,
-               double angle = 0.0);
+cv::Mat ViewOf(const cv::Mat& texture, cv::Size out_size, double cx, double cy, double zoom = 1.0, double angle = 0.0);
 
 // Encodes n frames produced by frame(i) (BGR, all the same size) with an FFmpeg encoder ("mpeg4", "ffv1",
 // "libx264", "mpeg2video", "gif", "mjpeg") into `path` (container from its extension). Throws on failure.

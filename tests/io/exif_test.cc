@@ -97,13 +97,15 @@ TEST(Exif, OutOfRangeIntegersAreDroppedNotCast) {
   // Found by exif_fuzz: a PixelXDimension rational of 2684354560/1 was cast to int (undefined behaviour).
   std::vector<unsigned char> b = {'I', 'I', 42, 0, 8, 0, 0, 0};
   auto u16 = [&](uint16_t v) { b.push_back(v & 0xFF), b.push_back(v >> 8); };
-  auto u32 = [&](uint32_t v) { for (int i = 0; i < 4; ++i) b.push_back((v >> (8 * i)) & 0xFF); };
-  u16(1), u16(0x8769), u16(4), u32(1), u32(26), u32(0);          // IFD0 at 8: the EXIF IFD pointer
-  u16(1), u16(0xA002), u16(5), u32(1), u32(44), u32(0);          // EXIF IFD at 26: PixelXDimension
-  u32(2684354560u), u32(1);                                      // the rational at 44
+  auto u32 = [&](uint32_t v) {
+    for (int i = 0; i < 4; ++i) b.push_back((v >> (8 * i)) & 0xFF);
+  };
+  u16(1), u16(0x8769), u16(4), u32(1), u32(26), u32(0);  // IFD0 at 8: the EXIF IFD pointer
+  u16(1), u16(0xA002), u16(5), u32(1), u32(44), u32(0);  // EXIF IFD at 26: PixelXDimension
+  u32(2684354560u), u32(1);                              // the rational at 44
   ASSERT_EQ(b.size(), 52u);
   EXPECT_EQ(ParseTiffExif(b.data(), b.size()).pixel_width, 0);
-  b[44] = 0x40, b[45] = 0x1F, b[46] = 0, b[47] = 0;             // 8000
+  b[44] = 0x40, b[45] = 0x1F, b[46] = 0, b[47] = 0;  // 8000
   EXPECT_EQ(ParseTiffExif(b.data(), b.size()).pixel_width, 8000);
 }
 

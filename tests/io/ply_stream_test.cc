@@ -24,15 +24,17 @@ TEST(PlyStream, MatchesTheWholeCloudReaderAndSkipsVisibilityLists) {
   WritePointCloudPly(cloud, tmp / "c.ply");
   const OrientedPointCloud whole = ReadPointCloudPly(tmp / "c.ply");
   size_t announced = 0, i = 0;
-  ASSERT_TRUE(StreamPlyVertices(tmp / "c.ply", [&](size_t n) { announced = n; }, [&](const PlyVertex& v) {
-    ASSERT_LT(i, whole.size());
-    EXPECT_EQ(v.position, whole.positions[i].cast<float>());
-    EXPECT_EQ(v.normal, whole.normals[i]);
-    EXPECT_EQ(v.rgb[0], whole.colors[i][0]);
-    EXPECT_EQ(v.rgb[2], whole.colors[i][2]);
-    EXPECT_EQ(v.views, whole.visibility[i].size());
-    ++i;
-  }));
+  ASSERT_TRUE(StreamPlyVertices(
+      tmp / "c.ply", [&](size_t n) { announced = n; },
+      [&](const PlyVertex& v) {
+        ASSERT_LT(i, whole.size());
+        EXPECT_EQ(v.position, whole.positions[i].cast<float>());
+        EXPECT_EQ(v.normal, whole.normals[i]);
+        EXPECT_EQ(v.rgb[0], whole.colors[i][0]);
+        EXPECT_EQ(v.rgb[2], whole.colors[i][2]);
+        EXPECT_EQ(v.views, whole.visibility[i].size());
+        ++i;
+      }));
   EXPECT_EQ(announced, 1000u);
   EXPECT_EQ(i, 1000u);
 }
@@ -44,7 +46,8 @@ TEST(PlyStream, AsciiIsLeftToTheWholeReaderAndTruncationIsAnError) {
   EXPECT_FALSE(StreamPlyVertices(tmp / "a.ply", nullptr, [](const PlyVertex&) {}));
   std::ofstream(tmp / "t.ply", std::ios::binary)
       << "ply\nformat binary_little_endian 1.0\nelement vertex 3\nproperty float x\nproperty float y\n"
-         "property float z\nend_header\n" << std::string(20, '\0');
+         "property float z\nend_header\n"
+      << std::string(20, '\0');
   EXPECT_THROW(StreamPlyVertices(tmp / "t.ply", nullptr, [](const PlyVertex&) {}), Error);
   EXPECT_THROW(StreamPlyVertices(tmp / "missing.ply", nullptr, [](const PlyVertex&) {}), Error);
 }

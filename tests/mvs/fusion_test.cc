@@ -76,8 +76,10 @@ Counts Classify(const io::OrientedPointCloud& cloud) {
   for (const auto& p : cloud.positions) {
     const double r = std::max(std::abs(p.x()), std::abs(p.y()));
     if (p.z() > kPlateZ / 2) {
-      if (r <= kPlateHalf + 0.05) ++c.plate;
-      else ++c.beyond_edge;
+      if (r <= kPlateHalf + 0.05)
+        ++c.plate;
+      else
+        ++c.beyond_edge;
     } else {
       ++c.ground;
     }
@@ -130,7 +132,6 @@ TEST(Fusion, EdgeOptionsAreChecked) {
   o.edge_depth_jump = 0;
   EXPECT_THROW(o.Check(), Error);
 }
-
 
 // The uncertainty filter. Two nadir cameras 2b apart at height h over a point with an upward normal: each
 // constrains the point perpendicular to its ray with one surface footprint r/f (r: range; the ray meets the
@@ -272,15 +273,17 @@ TEST(Fusion, UncertaintyFilterDropsWeaklyTexturedSurface) {
       std::vector<uint32_t> nbs;
       for (uint32_t j = 1; j <= 5; ++j)
         if (j != id) nbs.push_back(j);
-      views.emplace(id, TexturedGroundView(NadirView(id, offsets[id - 1][0], offsets[id - 1][1]), nbs, id,
-                                           with_texture_map));
+      views.emplace(
+          id, TexturedGroundView(NadirView(id, offsets[id - 1][0], offsets[id - 1][1]), nbs, id, with_texture_map));
     }
     const io::OrientedPointCloud cloud = FuseDepthMaps(views, FusionOptions{});
     *strong = *weak = 0;
     std::vector<double> err;
     for (const auto& p : cloud.positions) {
-      if (p.x() > kWeakX + 0.5) ++*weak;
-      else if (p.x() < kWeakX - 0.5) ++*strong;  // (a metre-wide band at the boundary is not counted)
+      if (p.x() > kWeakX + 0.5)
+        ++*weak;
+      else if (p.x() < kWeakX - 0.5)
+        ++*strong;  // (a metre-wide band at the boundary is not counted)
       err.push_back(std::abs(p.z()));
     }
     const size_t k = err.size() * 9 / 10;
@@ -291,8 +294,8 @@ TEST(Fusion, UncertaintyFilterDropsWeaklyTexturedSurface) {
   double p90_0, p90_1;
   fuse(false, &strong0, &weak0, &p90_0);  // geometry alone cannot tell the halves apart
   fuse(true, &strong1, &weak1, &p90_1);
-  std::printf("no texture map: %zu + %zu faint, p90 %.4f m; with: %zu + %zu faint, p90 %.4f m\n", strong0, weak0,
-              p90_0, strong1, weak1, p90_1);
+  std::printf("no texture map: %zu + %zu faint, p90 %.4f m; with: %zu + %zu faint, p90 %.4f m\n", strong0, weak0, p90_0,
+              strong1, weak1, p90_1);
   ASSERT_GT(weak0, strong0 / 4);
   EXPECT_LT(weak1, weak0 / 20);
   EXPECT_GT(strong1, strong0 * 98 / 100);
@@ -305,7 +308,8 @@ TEST(Fusion, UncertaintyFilterDropsWeaklyTexturedSurface) {
 TEST(TexturePrecisionMap, SharpTextureLocatesBetterThanFaintTexture) {
   cv::Mat board(64, 64, CV_8UC3);
   for (int y = 0; y < 64; ++y)
-    for (int x = 0; x < 64; ++x) board.at<cv::Vec3b>(y, x) = ((x / 4 + y / 4) % 2) ? cv::Vec3b(200, 200, 200) : cv::Vec3b(40, 40, 40);
+    for (int x = 0; x < 64; ++x)
+      board.at<cv::Vec3b>(y, x) = ((x / 4 + y / 4) % 2) ? cv::Vec3b(200, 200, 200) : cv::Vec3b(40, 40, 40);
   cv::Mat faint;
   cv::GaussianBlur(board, faint, cv::Size(0, 0), 2.0);
   faint.convertTo(faint, -1, 0.25, 90);

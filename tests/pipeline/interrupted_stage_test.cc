@@ -21,7 +21,8 @@ TEST(InterruptedStage, MarkerWrittenThenDiedRunsAgainOnResume) {
   int runs = 0;
   bool die = true;
   const fs::path marker = dir / "marker";
-  std::vector<Stage> stages{{"s", [&] { return std::vector<fs::path>{dir / "input"}; }, marker, [&] {
+  std::vector<Stage> stages{{"s", [&] { return std::vector<fs::path>{dir / "input"}; }, marker,
+                             [&] {
                                ++runs;
                                std::ofstream(marker) << "done";
                                if (die) throw Error("died after the marker");  // as a kill would
@@ -51,8 +52,7 @@ TEST(WorkspaceLock, SecondHolderRefusedUntilTheFirstIsReleased) {
       const core::FileLock second(dir / ".lock", "WS");
       FAIL() << "a second lock was granted";
     } catch (const Error& e) {
-      EXPECT_NE(std::string(e.what()).find("WS: in use by another fmv3d process (pid "), std::string::npos)
-          << e.what();
+      EXPECT_NE(std::string(e.what()).find("WS: in use by another fmv3d process (pid "), std::string::npos) << e.what();
     }
   }
   EXPECT_NO_THROW(core::FileLock(dir / ".lock", "WS"));

@@ -80,7 +80,8 @@ TEST(PointOctree, RootSubsampleCoversTheWholeCloud) {
   // Every 10 x 10 m block of the 100 x 60 m surface has root points: a coarse picture of everything.
   std::set<std::pair<int, int>> blocks;
   for (size_t i = root.begin; i < root.begin + root.count; ++i)
-    blocks.insert({static_cast<int>(tree.points[i].position.x() / 10), static_cast<int>(tree.points[i].position.y() / 10)});
+    blocks.insert(
+        {static_cast<int>(tree.points[i].position.x() / 10), static_cast<int>(tree.points[i].position.y() / 10)});
   EXPECT_EQ(blocks.size(), 60u);
 }
 
@@ -103,8 +104,8 @@ TEST(PointOctree, SmallAndDegenerateClouds) {
 }
 
 // Walks tileset JSON, parsing every .pnts it names and collecting the point ids.
-void Collect(const nlohmann::json& tile, const fs::path& dir, double parent_error, std::vector<int>* seen,
-             int* tiles, int* tiles_with_views = nullptr) {
+void Collect(const nlohmann::json& tile, const fs::path& dir, double parent_error, std::vector<int>* seen, int* tiles,
+             int* tiles_with_views = nullptr) {
   EXPECT_LE(tile["geometricError"].get<double>(), parent_error);
   ASSERT_TRUE(tile["boundingVolume"].contains("box"));
   EXPECT_EQ(tile["boundingVolume"]["box"].size(), 12u);
@@ -120,8 +121,7 @@ void Collect(const nlohmann::json& tile, const fs::path& dir, double parent_erro
         ++(*seen)[IdOf(t.colors[i].data())];
         if (has_views) EXPECT_EQ(t.views[i], 2 + IdOf(t.colors[i].data()) % 5);
         const Eigen::Vector3d p = t.rtc_center + t.positions[i].cast<double>();
-        for (int k = 0; k < 3; ++k)
-          EXPECT_LE(std::abs(p[k] - b[k].get<double>()), b[3 + 4 * k].get<double>() + 1e-3);
+        for (int k = 0; k < 3; ++k) EXPECT_LE(std::abs(p[k] - b[k].get<double>()), b[3 + 4 * k].get<double>() + 1e-3);
       }
     }
   }

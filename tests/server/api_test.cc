@@ -202,15 +202,26 @@ TEST_F(Api, FilesAndRanges) {
 }
 
 TEST_F(Api, TraversalSymlinksNulAndAbsolutePathsAreRefused) {
-  for (const char* path : {"/files/ws1/../../outside/secret.txt", "/files/ws1/%2e%2e/%2e%2e/outside/secret.txt",
-                           "/files/ws1/%2E%2E/%2E%2E/outside/secret.txt", "/files/ws1/..%2f..%2foutside%2fsecret.txt",
+  for (const char* path : {"/files/ws1/../../outside/secret.txt",
+                           "/files/ws1/%2e%2e/%2e%2e/outside/secret.txt",
+                           "/files/ws1/%2E%2E/%2E%2E/outside/secret.txt",
+                           "/files/ws1/..%2f..%2foutside%2fsecret.txt",
                            "/files/ws1/frames/%2e%2e/%2e%2e/%2e%2e/outside/secret.txt",
-                           "/files/ws1/escape/secret.txt", "/files/evil/secret.txt", "/files/%2e%2e/outside/secret.txt",
-                           "/files/..%2Foutside/secret.txt", "/files/ws1//etc/passwd", "/files/ws1/%2fetc%2fpasswd",
-                           "/files/ws1/frames/f1.png%00.txt", "/files/ws1%00/frames/f1.png",
-                           "/files/.hidden/project.json", "/files/ws1/..%5c..%5coutside%5csecret.txt",
-                           "/%2e%2e/outside/secret.txt", "/../outside/secret.txt", "/..%2f..%2foutside/secret.txt",
-                           "/app.js%00.html", "/api/workspaces/..%2foutside"}) {
+                           "/files/ws1/escape/secret.txt",
+                           "/files/evil/secret.txt",
+                           "/files/%2e%2e/outside/secret.txt",
+                           "/files/..%2Foutside/secret.txt",
+                           "/files/ws1//etc/passwd",
+                           "/files/ws1/%2fetc%2fpasswd",
+                           "/files/ws1/frames/f1.png%00.txt",
+                           "/files/ws1%00/frames/f1.png",
+                           "/files/.hidden/project.json",
+                           "/files/ws1/..%5c..%5coutside%5csecret.txt",
+                           "/%2e%2e/outside/secret.txt",
+                           "/../outside/secret.txt",
+                           "/..%2f..%2foutside/secret.txt",
+                           "/app.js%00.html",
+                           "/api/workspaces/..%2foutside"}) {
     const auto r = client_->Get(path);
     ASSERT_TRUE(r) << path;
     EXPECT_GE(r->status, 400) << path;
@@ -230,7 +241,8 @@ TEST_F(Api, AssetsAndNoCors) {
   EXPECT_EQ(client_->Get("/missing.js")->status, 404);
   r = client_->Get("/api/workspaces", {{"Origin", "http://evil.example"}});
   EXPECT_FALSE(r->has_header("Access-Control-Allow-Origin"));
-  r = client_->Options("/api/workspaces", {{"Origin", "http://evil.example"}, {"Access-Control-Request-Method", "POST"}});
+  r = client_->Options("/api/workspaces",
+                       {{"Origin", "http://evil.example"}, {"Access-Control-Request-Method", "POST"}});
   ASSERT_TRUE(r);
   EXPECT_FALSE(r->has_header("Access-Control-Allow-Origin"));
   EXPECT_FALSE(r->has_header("Access-Control-Allow-Methods"));
@@ -317,12 +329,12 @@ TEST_F(Api, JobRequestsAreValidated) {
     const char* field;
   };
   std::ofstream(tmp_ / "root" / "elsewhere.mp4") << "x";
-  for (const Bad& b : {Bad{R"({"inputs": ["../../outside/secret.txt"]})", "inputs"},
-                       Bad{R"({"inputs": ["/etc/passwd"]})", "inputs"}, Bad{R"({"inputs": ["missing.mp4"]})", "inputs"},
-                       Bad{R"({"inputs": ["escape/secret.txt"]})", "inputs"}, Bad{R"({"inputs": "a.mp4"})", "inputs"},
-                       Bad{R"({"inputs": [3]})", "inputs"}, Bad{R"({"fast": "yes"})", "fast"},
-                       Bad{R"({"from": "nowhere"})", "from"}, Bad{R"({"argv": ["sh"]})", "argv"},
-                       Bad{"{]", "body"}, Bad{R"({})", "inputs"}}) {
+  for (const Bad& b :
+       {Bad{R"({"inputs": ["../../outside/secret.txt"]})", "inputs"}, Bad{R"({"inputs": ["/etc/passwd"]})", "inputs"},
+        Bad{R"({"inputs": ["missing.mp4"]})", "inputs"}, Bad{R"({"inputs": ["escape/secret.txt"]})", "inputs"},
+        Bad{R"({"inputs": "a.mp4"})", "inputs"}, Bad{R"({"inputs": [3]})", "inputs"}, Bad{R"({"fast": "yes"})", "fast"},
+        Bad{R"({"from": "nowhere"})", "from"}, Bad{R"({"argv": ["sh"]})", "argv"}, Bad{"{]", "body"},
+        Bad{R"({})", "inputs"}}) {
     const auto r = client_->Post("/api/workspaces/ws1/jobs", b.body, "application/json");
     ASSERT_TRUE(r);
     EXPECT_EQ(r->status, 400) << b.body << " " << r->body;

@@ -71,8 +71,8 @@ TEST(Jobs, RunFromAnUploadWithLiveProgressThenResumeAndStop) {
   fmv3d::test::TempDir tmp("api-job");
   fs::create_directories(tmp / "root");
   // Ten still frames (a video this short would give the keyframe selector too few frames to model).
-  const auto synth = fmv3d::test::RunCli("synth --frames 10 --size 320x180 --format png --supersample 1 --no-scene -o " +
-                                         (tmp / "synth").string());
+  const auto synth = fmv3d::test::RunCli(
+      "synth --frames 10 --size 320x180 --format png --supersample 1 --no-scene -o " + (tmp / "synth").string());
   ASSERT_EQ(synth.exit_code, 0) << synth.err;
   httplib::MultipartFormDataItems items;
   for (const auto& e : fs::directory_iterator(tmp / "synth" / "frames"))
@@ -105,9 +105,8 @@ TEST(Jobs, RunFromAnUploadWithLiveProgressThenResumeAndStop) {
   // A second job on the same workspace while it runs: 409.
   EXPECT_EQ(c->Post("/api/workspaces/flight/jobs", R"({})", "application/json")->status, 409);
 
-  ASSERT_TRUE(events.WaitFor(
-      [&](const auto& ev) { return JobInState(ev, id, "done") || JobInState(ev, id, "failed"); },
-      std::chrono::seconds(600)));
+  ASSERT_TRUE(events.WaitFor([&](const auto& ev) { return JobInState(ev, id, "done") || JobInState(ev, id, "failed"); },
+                             std::chrono::seconds(600)));
   const auto job = Json(c->Get("/api/jobs/" + id));
   ASSERT_EQ(job["state"], "done") << job.dump(1);
   EXPECT_EQ(job["exit_code"], 0);

@@ -64,7 +64,8 @@ TEST(Validation, ConstantTimeEquals) {
 }
 
 TEST(Validation, JobRequests) {
-  JobRequest r = ParseJobRequest(R"({"inputs": ["uploads/a.mp4", "b"], "from": "dense", "until": "tiles", "fast": true})");
+  JobRequest r =
+      ParseJobRequest(R"({"inputs": ["uploads/a.mp4", "b"], "from": "dense", "until": "tiles", "fast": true})");
   EXPECT_EQ(r.inputs, (std::vector<std::string>{"uploads/a.mp4", "b"}));
   EXPECT_EQ(r.from, "dense");
   EXPECT_EQ(r.until, "tiles");
@@ -75,12 +76,12 @@ TEST(Validation, JobRequests) {
     const char* body;
     const char* field;
   };
-  for (const Bad& b : {Bad{"", "body"}, Bad{"{", "body"}, Bad{"[]", "body"}, Bad{"\"x\"", "body"},
-                       Bad{R"({"inputs": "a.mp4"})", "inputs"}, Bad{R"({"inputs": [1]})", "inputs"},
-                       Bad{R"({"inputs": [""]})", "inputs"}, Bad{R"({"from": "bogus"})", "from"},
-                       Bad{R"({"from": 3})", "from"}, Bad{R"({"until": "frames", "from": "dense"})", "until"},
-                       Bad{R"({"fast": "yes"})", "fast"}, Bad{R"({"fast": 1})", "fast"},
-                       Bad{R"({"shell": "rm -rf /"})", "shell"}}) {
+  for (const Bad& b :
+       {Bad{"", "body"}, Bad{"{", "body"}, Bad{"[]", "body"}, Bad{"\"x\"", "body"},
+        Bad{R"({"inputs": "a.mp4"})", "inputs"}, Bad{R"({"inputs": [1]})", "inputs"},
+        Bad{R"({"inputs": [""]})", "inputs"}, Bad{R"({"from": "bogus"})", "from"}, Bad{R"({"from": 3})", "from"},
+        Bad{R"({"until": "frames", "from": "dense"})", "until"}, Bad{R"({"fast": "yes"})", "fast"},
+        Bad{R"({"fast": 1})", "fast"}, Bad{R"({"shell": "rm -rf /"})", "shell"}}) {
     try {
       ParseJobRequest(b.body);
       ADD_FAILURE() << "accepted " << b.body;
@@ -101,7 +102,8 @@ TEST(Validation, CreateWorkspaceAndQueryValues) {
   for (const char* bad : {"", "47.5", "91,0", "0,181", "a,b", "1,2,3", "nan,0", "inf,0"})
     EXPECT_THROW(ParseLatLon(bad, "to"), RequestError) << bad;
   EXPECT_EQ(ParseBoundedInt("200", 2, 5000, "n"), 200);
-  for (const char* bad : {"", "1", "5001", "12x", "-3", " 5"}) EXPECT_THROW(ParseBoundedInt(bad, 2, 5000, "n"), RequestError);
+  for (const char* bad : {"", "1", "5001", "12x", "-3", " 5"})
+    EXPECT_THROW(ParseBoundedInt(bad, 2, 5000, "n"), RequestError);
 }
 
 TEST(Validation, UploadNames) {

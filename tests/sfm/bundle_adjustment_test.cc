@@ -35,7 +35,9 @@ TEST(BundleAdjustment, PerturbedPosesPointsAndFocalConverge) {
   std::normal_distribution<double> g(0, 1);
   for (auto& [id, im] : rec.images) {
     if (id <= 2) continue;  // images 1 and 2 hold the gauge
-    im.pose.q = (im.pose.q * Eigen::Quaterniond(Eigen::AngleAxisd(0.01, Eigen::Vector3d(g(rng), g(rng), g(rng)).normalized()))).normalized();
+    im.pose.q =
+        (im.pose.q * Eigen::Quaterniond(Eigen::AngleAxisd(0.01, Eigen::Vector3d(g(rng), g(rng), g(rng)).normalized())))
+            .normalized();
     im.pose.t += 0.05 * Eigen::Vector3d(g(rng), g(rng), g(rng));
   }
   for (auto& [id, p] : rec.points) p.xyz += 0.05 * Eigen::Vector3d(g(rng), g(rng), g(rng));
@@ -87,7 +89,8 @@ TEST(BundleAdjustment, CentrePriorsFixTheGaugeInTheirFrame) {
   double extent = 0, before = 0, after = 0;
   for (const auto& [id, im] : truth.images) {
     before = std::max(before, (rec.images.at(id).pose.Centre() - im.pose.Centre()).norm());
-    for (const auto& [id2, im2] : truth.images) extent = std::max(extent, (im.pose.Centre() - im2.pose.Centre()).norm());
+    for (const auto& [id2, im2] : truth.images)
+      extent = std::max(extent, (im.pose.Centre() - im2.pose.Centre()).norm());
   }
   const auto s = BundleAdjust(&rec, cfg, o);
   ASSERT_TRUE(s.success);
@@ -139,8 +142,7 @@ TEST(BundleAdjustment, LocalAdjustmentMovesOnlyVariableImages) {
   cfg.constant_cameras = {1};
   ASSERT_TRUE(BundleAdjust(&rec, cfg, {}).success);
   EXPECT_LT((rec.images.at(5).pose.Centre() - truth.images.at(5).pose.Centre()).norm(), 1e-5);
-  for (uint32_t id : {1u, 2u, 3u, 8u})
-    EXPECT_EQ((rec.images.at(id).pose.t - truth.images.at(id).pose.t).norm(), 0.0);
+  for (uint32_t id : {1u, 2u, 3u, 8u}) EXPECT_EQ((rec.images.at(id).pose.t - truth.images.at(id).pose.t).norm(), 0.0);
   EXPECT_EQ(rec.cameras.at(1).f, truth.cameras.at(1).f);
 }
 

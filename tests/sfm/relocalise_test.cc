@@ -39,8 +39,8 @@ struct World {
   std::vector<core::Pose> poses;
   std::vector<Eigen::Vector3d> X;
   std::vector<Desc> point_desc;
-  std::vector<features::FeatureSet> feats;   // per image
-  std::vector<std::vector<int>> point_of;    // per image, per keypoint: the point (-1: clutter)
+  std::vector<features::FeatureSet> feats;  // per image
+  std::vector<std::vector<int>> point_of;   // per image, per keypoint: the point (-1: clutter)
 };
 
 World MakeWorld(bool shared_descriptors, uint64_t seed = 3) {
@@ -55,8 +55,8 @@ World MakeWorld(bool shared_descriptors, uint64_t seed = 3) {
       const Eigen::Vector3d centre(c * 25.0, r * 40.0, 100 + u(rng));
       Eigen::Matrix3d Rwc;  // camera x east, y south, z down
       Rwc << 1, 0, 0, 0, -1, 0, 0, 0, -1;
-      const Eigen::Matrix3d jitter = Eigen::AngleAxisd(0.01 * u(rng), Eigen::Vector3d(u(rng), u(rng), 1).normalized())
-                                         .toRotationMatrix();
+      const Eigen::Matrix3d jitter =
+          Eigen::AngleAxisd(0.01 * u(rng), Eigen::Vector3d(u(rng), u(rng), 1).normalized()).toRotationMatrix();
       w.poses.push_back(core::Pose::FromRotationAndCentre(jitter * Rwc.transpose(), centre));
     }
   const int num_points = 6000;
@@ -173,7 +173,8 @@ TEST(Relocalise, RegistersLeftOutImagesAndTriangulatesWithTheirNeighbours) {
 TEST(Relocalise, ImageOfSomewhereElseStaysOut) {
   World w = MakeWorld(false);
   std::mt19937_64 rng(9);
-  for (Eigen::Index r = 0; r < w.feats[5].descriptors.rows(); ++r) w.feats[5].descriptors.row(r) = RandomDescriptor(rng);
+  for (Eigen::Index r = 0; r < w.feats[5].descriptors.rows(); ++r)
+    w.feats[5].descriptors.row(r) = RandomDescriptor(rng);
   core::Reconstruction rec = MakeModel(w, {6}, 0);
   const auto st = RelocaliseImages(&rec, {{6, 1, "img6"}}, FeatureMap(w), {{1, w.camera}}, RelocaliseOptions{});
   EXPECT_TRUE(st.registered.empty());

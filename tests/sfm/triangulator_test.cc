@@ -25,8 +25,7 @@ struct Views {
 Views MakeViews(const std::vector<std::pair<uint32_t, uint32_t>>& pairs, double arc_deg = 40) {
   Views v;
   v.rec.cameras[1] = core::Camera::Pinhole(1000, 800, 900);
-  for (int k = 0; k < kPoints; ++k)
-    v.X.emplace_back(std::sin(1.3 * k), std::cos(0.7 * k), 0.5 * std::sin(2.1 * k));
+  for (int k = 0; k < kPoints; ++k) v.X.emplace_back(std::sin(1.3 * k), std::cos(0.7 * k), 0.5 * std::sin(2.1 * k));
   for (uint32_t id = 1; id <= 4; ++id) {
     const double a = arc_deg * M_PI / 180 * (static_cast<double>(id) - 2.5) / 3;
     core::Image im;

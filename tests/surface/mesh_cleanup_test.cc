@@ -62,9 +62,11 @@ TEST(MeshCleanup, KeepsTerrainAndEverySeparateBuildingDropsOutlierBlobs) {
   const double s = 0.25;
   AddTerrain(&cloud, -40, 40, -40, -5, s);
   const std::vector<Eigen::Vector3d> terrain_points = cloud.positions;
-  std::vector<std::pair<Eigen::Vector3d, Eigen::Vector3d>> buildings = {
-      {{-35, 5, 0}, {-25, 15, 12}}, {{-15, 8, 0}, {-5, 14, 8}},  {{5, 5, 0}, {15, 20, 20}},
-      {{25, 10, 0}, {33, 18, 6}},   {{-30, 28, 0}, {-26, 32, 4}}};
+  std::vector<std::pair<Eigen::Vector3d, Eigen::Vector3d>> buildings = {{{-35, 5, 0}, {-25, 15, 12}},
+                                                                        {{-15, 8, 0}, {-5, 14, 8}},
+                                                                        {{5, 5, 0}, {15, 20, 20}},
+                                                                        {{25, 10, 0}, {33, 18, 6}},
+                                                                        {{-30, 28, 0}, {-26, 32, 4}}};
   std::vector<std::vector<Eigen::Vector3d>> building_points;
   for (const auto& [lo, hi] : buildings) {
     const size_t before = cloud.size();
@@ -72,7 +74,8 @@ TEST(MeshCleanup, KeepsTerrainAndEverySeparateBuildingDropsOutlierBlobs) {
     building_points.emplace_back(cloud.positions.begin() + static_cast<std::ptrdiff_t>(before), cloud.positions.end());
   }
   std::normal_distribution<double> g(0, 0.15);
-  for (const Eigen::Vector3d c : {Eigen::Vector3d(0, -20, 15), Eigen::Vector3d(20, 30, 25), Eigen::Vector3d(-10, 25, 30)})
+  for (const Eigen::Vector3d c :
+       {Eigen::Vector3d(0, -20, 15), Eigen::Vector3d(20, 30, 25), Eigen::Vector3d(-10, 25, 30)})
     for (int i = 0; i < 12; ++i) {
       cloud.positions.push_back(c + Eigen::Vector3d(g(rng), g(rng), g(rng)));
       cloud.normals.push_back(Eigen::Vector3d(g(rng), g(rng), 1).normalized().cast<float>());
@@ -87,7 +90,8 @@ TEST(MeshCleanup, KeepsTerrainAndEverySeparateBuildingDropsOutlierBlobs) {
     EXPECT_GT(CoveredShare(mesh, building_points[b], 3 * s), 0.95) << "building " << b;
   // Nothing left near the outlier clusters.
   const geometry::MeshDistance md(mesh.vertices, mesh.triangles);
-  for (const Eigen::Vector3d c : {Eigen::Vector3d(0, -20, 15), Eigen::Vector3d(20, 30, 25), Eigen::Vector3d(-10, 25, 30)})
+  for (const Eigen::Vector3d c :
+       {Eigen::Vector3d(0, -20, 15), Eigen::Vector3d(20, 30, 25), Eigen::Vector3d(-10, 25, 30)})
     EXPECT_GT(md.Closest(c).distance, 1.0);
 }
 
@@ -108,10 +112,10 @@ TEST(MeshCleanup, DecidesPerPieceOnSupportAndArea) {
       }
   };
   const double cell = 0.5, spacing = 0.25;
-  square({0, 0, 0}, 100, 200);   // the big one: 10000 m²
-  square({200, 0, 0}, 5, 10);    // a small building roof: 25 m² = 100 cells²
-  square({300, 0, 0}, 20, 40);   // a piece with no points
-  square({400, 0, 0}, 1.5, 3);   // 2.25 m² = 9 cells², 49 points: an outlier blob
+  square({0, 0, 0}, 100, 200);  // the big one: 10000 m²
+  square({200, 0, 0}, 5, 10);   // a small building roof: 25 m² = 100 cells²
+  square({300, 0, 0}, 20, 40);  // a piece with no points
+  square({400, 0, 0}, 1.5, 3);  // 2.25 m² = 9 cells², 49 points: an outlier blob
   std::vector<Eigen::Vector3d> pts;
   auto sample = [&](const Eigen::Vector3d& o, double size) {
     for (double y = 0; y <= size; y += spacing)

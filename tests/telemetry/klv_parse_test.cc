@@ -69,8 +69,8 @@ TEST(KlvMapping, St0601ExampleValues) {
   // Encodings and decimal values from the ST 0601 example packet.
   EXPECT_NEAR(MapUnsigned(0x71C2, 2, 0, 360), 159.9744, 1e-4);
   EXPECT_NEAR(*MapSigned(0x5595B66D, 4, 90), 60.176822966978335, 1e-12);
-  EXPECT_NEAR(*MapSigned(ReadIntBE(ByteSpan(Bytes{0x87, 0xF8, 0x4B, 0x86}.data(), 4)), 4, 180),
-              -168.79232483394085, 1e-12);
+  EXPECT_NEAR(*MapSigned(ReadIntBE(ByteSpan(Bytes{0x87, 0xF8, 0x4B, 0x86}.data(), 4)), 4, 180), -168.79232483394085,
+              1e-12);
   EXPECT_NEAR(MapUnsigned(0xC221, 2, -900, 19000), 14190.72, 0.01);
   // The reserved most-negative value means "error / N/A".
   EXPECT_FALSE(MapSigned(ReadIntBE(ByteSpan(Bytes{0x80, 0x00, 0x00, 0x00}.data(), 4)), 4, 90).has_value());
@@ -130,8 +130,8 @@ TEST(KlvSt0601, MissingChecksumIsRejected) {
 }
 
 TEST(KlvSt0601, TruncationsNeverCrashAndAreCounted) {
-  const Bytes full = St0601Packet({Tlv(3, Str("MISSION01")), Tlv(13, BigEndian(0x5595B66D, 4)),
-                                   Tlv(14, BigEndian(0x5B5360C4, 4))});
+  const Bytes full =
+      St0601Packet({Tlv(3, Str("MISSION01")), Tlv(13, BigEndian(0x5595B66D, 4)), Tlv(14, BigEndian(0x5B5360C4, 4))});
   for (size_t n = 0; n < full.size(); ++n) {
     ParseStats stats;
     const auto packets = Parse(Bytes(full.begin(), full.begin() + static_cast<long>(n)), &stats);
@@ -164,13 +164,13 @@ TEST(KlvSt0601, ResynchronisesAfterGarbage) {
 
 TEST(KlvSt0601, ErrorValuesUnknownTagsWrongLengthsAndStrings) {
   const Bytes pkt = St0601Packet({
-      Tlv(13, {0x80, 0x00, 0x00, 0x00}),         // latitude "N/A (off-earth)"
-      Tlv(6, {0x80, 0x00}),                      // pitch error value
-      Tlv(5, {0x71}),                            // heading with a wrong length
+      Tlv(13, {0x80, 0x00, 0x00, 0x00}),             // latitude "N/A (off-earth)"
+      Tlv(6, {0x80, 0x00}),                          // pitch error value
+      Tlv(5, {0x71}),                                // heading with a wrong length
       Tlv(3, Str(std::string("TEST\0STRING", 11))),  // klv_gold.json keeps the NUL
-      Tlv(4, {0x00, 0xFF}),                      // invalid UTF-8: kept as bytes ("AP8=" in the gold)
-      Tlv(120, {0x48, 0x00}),                    // IMAPB percent full 72 %
-      Tlv(63, {0x02}),                           // enum: Medium
+      Tlv(4, {0x00, 0xFF}),                          // invalid UTF-8: kept as bytes ("AP8=" in the gold)
+      Tlv(120, {0x48, 0x00}),                        // IMAPB percent full 72 %
+      Tlv(63, {0x02}),                               // enum: Medium
   });
   ParseStats stats;
   const auto packets = Parse(pkt, &stats);

@@ -27,12 +27,12 @@ TelemetrySample Sample(double t, double lat, double lon, double heading) {
 }
 
 TEST(Telemetry, SampleFromSt0601Packet) {
-  const auto bytes = klv::test::St0601Packet({
-      Tlv(2, BigEndian(1224807209913000ull, 8)), Tlv(13, BigEndian(0x5595B66D, 4)),
-      Tlv(14, BigEndian(0x5B5360C4, 4)), Tlv(15, BigEndian(0xC221, 2)), Tlv(5, BigEndian(0x71C2, 2)),
-      Tlv(6, BigEndian(0xFD3D, 2)), Tlv(90, BigEndian(0xFF62E2F2, 4)), Tlv(16, BigEndian(0xCD9C, 2)),
-      Tlv(19, {0x80, 0x00, 0x00, 0x00}),  // error value -> no elevation
-      Tlv(104, {0x2F, 0x92, 0x1E})});
+  const auto bytes = klv::test::St0601Packet(
+      {Tlv(2, BigEndian(1224807209913000ull, 8)), Tlv(13, BigEndian(0x5595B66D, 4)), Tlv(14, BigEndian(0x5B5360C4, 4)),
+       Tlv(15, BigEndian(0xC221, 2)), Tlv(5, BigEndian(0x71C2, 2)), Tlv(6, BigEndian(0xFD3D, 2)),
+       Tlv(90, BigEndian(0xFF62E2F2, 4)), Tlv(16, BigEndian(0xCD9C, 2)),
+       Tlv(19, {0x80, 0x00, 0x00, 0x00}),  // error value -> no elevation
+       Tlv(104, {0x2F, 0x92, 0x1E})});
   std::vector<klv::Packet> packets;
   klv::ParseStats stats;
   klv::ParseBuffer(klv::ByteSpan(bytes.data(), bytes.size()), &packets, &stats);
@@ -105,7 +105,8 @@ TEST(KlvCli, DumpsTheStreamAsJsonWithASummary) {
   const std::string rel = "fmv/kwiver/videos/aphill_short.ts";
   FMV3D_REQUIRE_SHARED_DATA(rel);
   test::TempDir dir;
-  const auto r = test::RunCli("klv '" + (test::SharedData() / rel).string() + "' -o '" + (dir / "k.json").string() + "'");
+  const auto r =
+      test::RunCli("klv '" + (test::SharedData() / rel).string() + "' -o '" + (dir / "k.json").string() + "'");
   ASSERT_EQ(r.exit_code, 0) << r.err;
   EXPECT_NE(r.err.find("stream 1: 48 KLV packets"), std::string::npos) << r.err;
   EXPECT_NE(r.err.find("bad checksum: 0"), std::string::npos) << r.err;

@@ -29,7 +29,8 @@ TEST(DjiXmp, AttributesElementsAndDjisSpelling) {
   const std::string attrs =
       "<rdf:Description xmlns:drone-dji=\"http://www.dji.com/drone-dji/1.0/\" drone-dji:AbsoluteAltitude=\"+512.37\" "
       "drone-dji:RelativeAltitude=\"+80.10\" drone-dji:GimbalRollDegree=\"+0.00\" drone-dji:GimbalYawDegree=\"-45.50\" "
-      "drone-dji:GimbalPitchDegree=\"-89.90\" drone-dji:FlightRollDegree=\"+1.20\" drone-dji:FlightYawDegree=\"-44.90\" "
+      "drone-dji:GimbalPitchDegree=\"-89.90\" drone-dji:FlightRollDegree=\"+1.20\" "
+      "drone-dji:FlightYawDegree=\"-44.90\" "
       "drone-dji:FlightPitchDegree=\"-3.10\" drone-dji:GpsLongtitude=\"8.5456\" drone-dji:RtkFlag='50' "
       "drone-dji:RtkStdLon=\"0.012\" drone-dji:RtkStdLat=\"0.015\" drone-dji:RtkStdHgt=\"0.030\"/>";
   const DjiXmp d = ParseDjiXmp(attrs);
@@ -96,14 +97,15 @@ TEST(PhotoTelemetry, ExifPositionAltitudeDatumAndQuality) {
 
 TEST(PhotoTelemetry, GimbalAndFlightAnglesGiveTheSt0601Chain) {
   io::ExifInfo e = Photo();
-  e.xmp = "drone-dji:GimbalYawDegree=\"-45.5\" drone-dji:GimbalPitchDegree=\"-60\" drone-dji:GimbalRollDegree=\"0.5\" "
-          "drone-dji:FlightYawDegree=\"-40\" drone-dji:FlightPitchDegree=\"-5\" drone-dji:FlightRollDegree=\"2\"";
+  e.xmp =
+      "drone-dji:GimbalYawDegree=\"-45.5\" drone-dji:GimbalPitchDegree=\"-60\" drone-dji:GimbalRollDegree=\"0.5\" "
+      "drone-dji:FlightYawDegree=\"-40\" drone-dji:FlightPitchDegree=\"-5\" drone-dji:FlightRollDegree=\"2\"";
   const PhotoTelemetry t = TelemetryFromPhoto(e, {});
   ASSERT_TRUE(t.sample && t.sample->sensor_relative_azimuth);
   const TelemetrySample& s = *t.sample;
   EXPECT_DOUBLE_EQ(*s.platform_heading, 320);
-  St0601Attitude a{*s.platform_heading,         *s.platform_pitch,           *s.platform_roll,
-                   *s.sensor_relative_azimuth, *s.sensor_relative_elevation, *s.sensor_relative_roll};
+  St0601Attitude a{*s.platform_heading,          *s.platform_pitch,      *s.platform_roll, *s.sensor_relative_azimuth,
+                   *s.sensor_relative_elevation, *s.sensor_relative_roll};
   EXPECT_LT((CameraToEnuFromSt0601(a) - CameraToEnuFromGimbal(-45.5, -60, 0.5)).norm(), 1e-9);
   // Nadir gimbal: the camera looks down (−Up) and its image top (−y) points along the gimbal yaw (north here).
   const Eigen::Matrix3d nadir = CameraToEnuFromGimbal(0, -90, 0);
@@ -142,8 +144,9 @@ TEST(PhotoTelemetry, BadFixesAreRejectedNeverUsed) {
     counts.Add(t.rejection);
   }
   EXPECT_EQ(counts.Rejected(), 7u);  // "no GPS" is not a bad fix
-  EXPECT_EQ(counts.Summary("photo fixes"),
-            "7 of 7 photo fixes dropped: 1 (0, 0) fix, 3 out of range, 1 no lock, 1 DOP too large, 1 accuracy too poor");
+  EXPECT_EQ(
+      counts.Summary("photo fixes"),
+      "7 of 7 photo fixes dropped: 1 (0, 0) fix, 3 out of range, 1 no lock, 1 DOP too large, 1 accuracy too poor");
   // DJI writes RTK standard deviations of 0 without an RTK solution: not an accuracy claim.
   io::ExifInfo e = Photo();
   e.xmp = "drone-dji:RtkFlag=\"0\" drone-dji:RtkStdLon=\"0\" drone-dji:RtkStdLat=\"0\"";

@@ -44,8 +44,8 @@ ErrorStats Stats(const std::vector<double>& values) {
 // Per CAD sample: seen by at least min_views cameras of the model (in front, inside the image, facing the
 // camera, not hidden by the CAD itself in a depth map rendered at reduced resolution).
 std::vector<char> SeenSamples(const io::TexturedMesh& cad, const std::vector<Eigen::Vector3d>& samples,
-                              const std::vector<Eigen::Vector3d>& sample_normals,
-                              const core::Reconstruction& cameras, double length, const CompareOptions& o) {
+                              const std::vector<Eigen::Vector3d>& sample_normals, const core::Reconstruction& cameras,
+                              double length, const CompareOptions& o) {
   std::vector<int> views(samples.size(), 0);
   render::Renderer renderer(cad);
   render::RenderOptions ro;
@@ -99,8 +99,8 @@ bool PlyHasFaces(const std::filesystem::path& path) {
 // Points on the triangles (already in the CAD frame) with a vertex inside `box`: a barycentric grid with
 // steps of at most `spacing` along the longest edge (vertices excluded: they are measured already).
 std::vector<Eigen::Vector3d> SampleFaces(const std::vector<Eigen::Vector3d>& v,
-                                         const std::vector<Eigen::Vector3i>& triangles,
-                                         const Eigen::AlignedBox3d& box, double spacing) {
+                                         const std::vector<Eigen::Vector3i>& triangles, const Eigen::AlignedBox3d& box,
+                                         double spacing) {
   std::vector<Eigen::Vector3d> out;
   for (const auto& f : triangles) {
     const Eigen::Vector3d &a = v[f[0]], &b = v[f[1]], &c = v[f[2]];
@@ -142,7 +142,7 @@ void CompareOptions::Check() const {
 }
 
 nlohmann::json ErrorStats::ToJson() const {
-  return {{"mean_percent", 100 * mean}, {"std_percent", 100 * std}, {"rms_percent", 100 * rms},
+  return {{"mean_percent", 100 * mean},   {"std_percent", 100 * std},     {"rms_percent", 100 * rms},
           {"p50_abs_percent", 100 * p50}, {"p90_abs_percent", 100 * p90}, {"p99_abs_percent", 100 * p99}};
 }
 
@@ -153,8 +153,9 @@ nlohmann::json CompareResult::ToJson() const {
   j["transform"] = Sim3ToJson(transform);
   j["coarse_alignment"] = coarse;
   if (icp) {
-    j["icp"] = {{"estimation", icp->estimation}, {"converged", icp->converged}, {"iterations", icp->iterations},
-                {"fitness", icp->fitness}, {"rmse_before", icp->initial_rmse}, {"rmse_after", icp->rmse},
+    j["icp"] = {{"estimation", icp->estimation},          {"converged", icp->converged},
+                {"iterations", icp->iterations},          {"fitness", icp->fitness},
+                {"rmse_before", icp->initial_rmse},       {"rmse_after", icp->rmse},
                 {"correspondences", icp->correspondences}};
   } else {
     j["icp"] = nullptr;
@@ -171,8 +172,7 @@ nlohmann::json CompareResult::ToJson() const {
 
 CompareResult CompareToCad(const CompareOptions& options) {
   options.Check();
-  if (!std::filesystem::exists(options.reconstruction))
-    throw Error(options.reconstruction.string() + ": no such file");
+  if (!std::filesystem::exists(options.reconstruction)) throw Error(options.reconstruction.string() + ": no such file");
   if (!std::filesystem::exists(options.cad)) throw Error(options.cad.string() + ": no such file");
   const io::OrientedPointCloud recon = io::ReadPointCloudPly(options.reconstruction);
   const io::TexturedMesh cad = io::ReadObj(options.cad, /*load_textures=*/false);
@@ -187,8 +187,8 @@ CompareResult CompareToCad(const CompareOptions& options) {
   return CompareToCad(recon, cad, options, triangles);
 }
 
-CompareResult CompareToCad(const io::OrientedPointCloud& recon_in, const io::TexturedMesh& cad,
-                           const CompareOptions& o, const std::vector<Eigen::Vector3i>& triangles) {
+CompareResult CompareToCad(const io::OrientedPointCloud& recon_in, const io::TexturedMesh& cad, const CompareOptions& o,
+                           const std::vector<Eigen::Vector3i>& triangles) {
   o.Check();
   if (recon_in.empty()) throw Error("compare: the reconstruction has no points");
   cad.Validate();
@@ -208,8 +208,10 @@ CompareResult CompareToCad(const io::OrientedPointCloud& recon_in, const io::Tex
   double spacing = o.sample_spacing * H;
   if (area / (spacing * spacing) > kMaxSamples) {
     spacing = std::sqrt(area / kMaxSamples);
-    spdlog::warn("compare: the CAD surface ({:.0f} m²) is large for --length {}: surface samples {:.3f} apart "
-                 "instead of {:.3f} (completeness is coarser)", area, H, spacing, o.sample_spacing * H);
+    spdlog::warn(
+        "compare: the CAD surface ({:.0f} m²) is large for --length {}: surface samples {:.3f} apart "
+        "instead of {:.3f} (completeness is coarser)",
+        area, H, spacing, o.sample_spacing * H);
   }
   const std::vector<Eigen::Vector3d> samples = cad_distance.SampleSurface(spacing, &sample_faces, 7);
   if (samples.size() < 10) throw Error("compare: the CAD surface is too small for --length " + std::to_string(H));
@@ -258,8 +260,8 @@ CompareResult CompareToCad(const io::OrientedPointCloud& recon_in, const io::Tex
     const IcpTarget target(cad_cloud);
     IcpResult r = ScaledIcp(near, target, core::Sim3(), o.icp_options);
     spdlog::info("compare: ICP {} after {} iterations, RMS {:.4g} → {:.4g} ({:.3f}% → {:.3f}% of H), scale ×{:.6f}",
-                 r.converged ? "converged" : "stopped", r.iterations, r.initial_rmse, r.rmse,
-                 100 * r.initial_rmse / H, 100 * r.rmse / H, r.transform.s);
+                 r.converged ? "converged" : "stopped", r.iterations, r.initial_rmse, r.rmse, 100 * r.initial_rmse / H,
+                 100 * r.rmse / H, r.transform.s);
     T = ComposeSim3(r.transform, T);
     res.icp = r;
   }
@@ -328,10 +330,11 @@ CompareResult CompareToCad(const io::OrientedPointCloud& recon_in, const io::Tex
   res.completeness_threshold = o.completeness_threshold;
   res.completeness = n_counted ? double(n_covered) / n_counted : 0;
 
-  spdlog::info("compare: {} of {} points measured; RMS {:.3f}% of H (x {:.3f}%, y {:.3f}%, z {:.3f}%), "
-               "completeness {:.1f}%",
-               res.points_measured, res.points_total, 100 * res.total.rms, 100 * res.x.rms, 100 * res.y.rms,
-               100 * res.z.rms, 100 * res.completeness);
+  spdlog::info(
+      "compare: {} of {} points measured; RMS {:.3f}% of H (x {:.3f}%, y {:.3f}%, z {:.3f}%), "
+      "completeness {:.1f}%",
+      res.points_measured, res.points_total, 100 * res.total.rms, 100 * res.x.rms, 100 * res.y.rms, 100 * res.z.rms,
+      100 * res.completeness);
 
   // 5. Outputs.
   if (!o.output_dir.empty()) {

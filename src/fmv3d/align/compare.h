@@ -13,8 +13,9 @@
 //      mean, standard deviation, RMS of the signed values, and 50/90/99th percentiles of the absolute values.
 //   4. Completeness: the share of CAD surface samples with a reconstructed point within
 //      completeness_threshold·H (for a mesh: a point of its surface, i.e. its vertices and points sampled
-//      on its faces every sample_spacing·H, so a coarse but faithful mesh is not counted as holes); with `cameras` (a COLMAP model in the CAD frame) only samples that at least
-//      min_views cameras see (depth test against the CAD rendered by render::Renderer) count.
+//      on its faces every sample_spacing·H, so a coarse but faithful mesh is not counted as holes); with `cameras` (a
+//      COLMAP model in the CAD frame) only samples that at least min_views cameras see (depth test against the CAD
+//      rendered by render::Renderer) count.
 //   5. Outputs in output_dir: compare.json (everything below), histograms.png (X, Y, Z error histograms in
 //      one plot), top.png and side.png (the CAD with the points coloured by error), compare.html.
 //
@@ -59,23 +60,23 @@ struct CompareOptions {
   static IcpOptions DefaultIcpOptions();
 };
 
-struct ErrorStats {  // fractions of H
+struct ErrorStats {                   // fractions of H
   double mean = 0, std = 0, rms = 0;  // of the signed values
   double p50 = 0, p90 = 0, p99 = 0;   // of the absolute values
   nlohmann::json ToJson() const;      // in percent of H
 };
 
 struct CompareResult {
-  core::Sim3 transform;              // reconstruction → CAD, final
-  std::string coarse;                // "transform" | "global:pca" | "global:fpfh"
+  core::Sim3 transform;  // reconstruction → CAD, final
+  std::string coarse;    // "transform" | "global:pca" | "global:fpfh"
   std::optional<IcpResult> icp;
   size_t points_total = 0, points_measured = 0, points_cropped = 0;
-  ErrorStats x, y, z, total;         // total: signed distance
-  double completeness = 0;           // share of counted CAD samples with a point within the threshold
-  double completeness_threshold = 0; // fraction of H
-  size_t surface_samples = 0;        // counted samples
-  bool completeness_seen_only = false;  // samples restricted to those seen by ≥ min_views cameras
-  bool completeness_from_faces = false; // the reconstruction's faces were sampled for completeness
+  ErrorStats x, y, z, total;             // total: signed distance
+  double completeness = 0;               // share of counted CAD samples with a point within the threshold
+  double completeness_threshold = 0;     // fraction of H
+  size_t surface_samples = 0;            // counted samples
+  bool completeness_seen_only = false;   // samples restricted to those seen by ≥ min_views cameras
+  bool completeness_from_faces = false;  // the reconstruction's faces were sampled for completeness
   double length = 0;
   nlohmann::json ToJson() const;
 };

@@ -62,9 +62,12 @@ struct ColourResidual {
 
 ceres::LossFunction* MakeLoss(RobustLoss loss, double scale) {
   switch (loss) {
-    case RobustLoss::kHuber: return new ceres::HuberLoss(scale);
-    case RobustLoss::kCauchy: return new ceres::CauchyLoss(scale);
-    case RobustLoss::kNone: break;
+    case RobustLoss::kHuber:
+      return new ceres::HuberLoss(scale);
+    case RobustLoss::kCauchy:
+      return new ceres::CauchyLoss(scale);
+    case RobustLoss::kNone:
+      break;
   }
   return nullptr;
 }
@@ -371,8 +374,8 @@ IcpResult ScaledIcp(const io::OrientedPointCloud& source, const IcpTarget& targe
     const double radius = std::max(RmsRadius(src.points, &c), 1e-300);
     const double move = (delta.Apply(c) - c).norm() +
                         (2 * std::asin(std::min(1.0, delta.q.vec().norm())) + std::abs(delta.s - 1)) * 3 * radius;
-    spdlog::debug("ICP {:2d}: {} pairs, max distance {:.4g}, rmse {:.6g}, update {:.3g} of radius", it,
-                  m.kept.size(), m.max_distance, Rms(est, src, target, m.kept), move / radius);
+    spdlog::debug("ICP {:2d}: {} pairs, max distance {:.4g}, rmse {:.6g}, update {:.3g} of radius", it, m.kept.size(),
+                  m.max_distance, Rms(est, src, target, m.kept), move / radius);
     // Converged: the update is below the tolerance, or — at the noise floor, where nearest neighbours flip
     // between equally good partners and the estimate jitters instead of shrinking — small (1e-5 of the
     // radius) and no longer at least halving.

@@ -53,7 +53,7 @@ struct IcpOptions {
   // Robust loss scale in target spacings; 0 = 2.5 robust standard deviations of the current residuals.
   double loss_scale = 0;
   int max_iterations = 60;
-  double tolerance = 1e-9;     // converged when the last update moved every point by < tolerance × radius
+  double tolerance = 1e-9;        // converged when the last update moved every point by < tolerance × radius
   int max_source_points = 60000;  // evenly spread subsample of the source used for the fit (0 = all)
   int normal_neighbours = 20;     // k for PCA normals when a set has none
   int lm_iterations = 10;         // Levenberg–Marquardt iterations per ICP iteration
@@ -137,16 +137,16 @@ class PointToPlaneEstimation : public SimilarityEstimation {
 };
 
 struct IcpResult {
-  core::Sim3 transform;         // source → target
-  bool converged = false;       // the tolerance was met before max_iterations
+  core::Sim3 transform;    // source → target
+  bool converged = false;  // the tolerance was met before max_iterations
   int iterations = 0;
-  size_t source_points = 0;     // used for the fit (after subsampling)
-  size_t correspondences = 0;   // kept in the final evaluation
-  double fitness = 0;           // correspondences / source_points
-  double initial_rmse = 0;      // RMS of the estimation's residual (target units) at the start …
-  double rmse = 0;              // … and at the end, over the kept correspondences
-  double rmse_point = 0;        // RMS point-to-point distance at the end (includes sampling spacing)
-  std::string estimation;       // the estimation's name
+  size_t source_points = 0;    // used for the fit (after subsampling)
+  size_t correspondences = 0;  // kept in the final evaluation
+  double fitness = 0;          // correspondences / source_points
+  double initial_rmse = 0;     // RMS of the estimation's residual (target units) at the start …
+  double rmse = 0;             // … and at the end, over the kept correspondences
+  double rmse_point = 0;       // RMS point-to-point distance at the end (includes sampling spacing)
+  std::string estimation;      // the estimation's name
 };
 
 // Runs the loop from `initial`. Throws fmv3d::Error when the source is empty or fewer than 10

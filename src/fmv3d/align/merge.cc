@@ -243,7 +243,8 @@ JointAdjustmentResult JointBundleAdjust(MergedModel* merged, const MultiTrackAli
       const Eigen::Vector3d mid = 0.5 * (a.xyz + b.xyz);
       bool ok = true;
       for (const core::Point3D* p : {static_cast<const core::Point3D*>(&a), &b})
-        for (const auto& el : p->track) ok = ok && sfm::ObservationError(rec, el.image_id, el.point2d_idx, mid) <= max_link_error_px;
+        for (const auto& el : p->track)
+          ok = ok && sfm::ObservationError(rec, el.image_id, el.point2d_idx, mid) <= max_link_error_px;
       if (!ok) continue;
       used.insert(pa);
       used.insert(pb);
@@ -387,21 +388,24 @@ nlohmann::json RunAlignStage(const std::vector<fs::path>& workspaces, const fs::
                    dense_options.max_size);
       try {
         const nlohmann::json r = mvs::RunDenseStage(output, dense_options);
-        dense_json = {{"method", "recomputed over every track's views"}, {"points", r.at("points")},
-                      {"max_size", dense_options.max_size}, {"max_sources", dense_options.max_sources},
+        dense_json = {{"method", "recomputed over every track's views"},
+                      {"points", r.at("points")},
+                      {"max_size", dense_options.max_size},
+                      {"max_sources", dense_options.max_sources},
                       {"geometric_pass", dense_options.geometric},
                       {"reference_coverage", dense_options.references.coverage}};
       } catch (const Error& e) {
-        spdlog::warn("align: multi-view stereo over the merged model failed ({}); writing the union of the "
-                     "tracks' dense clouds instead",
-                     e.what());
+        spdlog::warn(
+            "align: multi-view stereo over the merged model failed ({}); writing the union of the "
+            "tracks' dense clouds instead",
+            e.what());
         dense_json = {{"method", "union"}, {"recompute_failed", e.what()}};
       }
     } else {
       dense_json = {{"method", "union"}};
       if (merge_options.recompute_dense)
-        dense_json["why_not_recomputed"] = !every_track_dense ? "a track has no dense cloud"
-                                                               : "frame images of the tracks are missing";
+        dense_json["why_not_recomputed"] =
+            !every_track_dense ? "a track has no dense cloud" : "frame images of the tracks are missing";
     }
     if (dense_json.at("method") == "union") {
       core::EnsureDirectory(out.dense_dir());

@@ -42,9 +42,9 @@ struct MergedModel {
   std::vector<std::map<uint32_t, uint32_t>> image_ids;
   std::vector<std::map<std::string, std::string>> image_names;
   std::vector<std::map<uint32_t, uint32_t>> camera_ids;
-  std::vector<std::map<uint64_t, uint64_t>> point_ids;       // per track: old 3D point id → merged id
-  std::vector<std::pair<size_t, size_t>> dense_ranges;       // per track: [begin, end) in `dense`
-  std::vector<std::string> name_prefix;  // per track, "" when its names are kept
+  std::vector<std::map<uint64_t, uint64_t>> point_ids;  // per track: old 3D point id → merged id
+  std::vector<std::pair<size_t, size_t>> dense_ranges;  // per track: [begin, end) in `dense`
+  std::vector<std::string> name_prefix;                 // per track, "" when its names are kept
 };
 
 // The images of a merged model split by a track's name prefix (e.g. "B-"): .first the images without it, .second
@@ -57,7 +57,7 @@ std::pair<core::Reconstruction, core::Reconstruction> SplitByNamePrefix(const co
 MergedModel MergeTracks(const std::vector<Track>& tracks, const MultiTrackAlignment& alignment);
 
 struct JointAdjustmentResult {
-  size_t links = 0, links_fused = 0;   // cross-track 3D links offered / fused into one point
+  size_t links = 0, links_fused = 0;  // cross-track 3D links offered / fused into one point
   int iterations = 0;
   double rms_before_px = 0, rms_after_px = 0;  // reprojection RMS of all observations
   double seconds = 0;
@@ -96,8 +96,7 @@ mvs::DenseStageOptions MergedDenseOptions(const std::vector<Track>& tracks);
 // `fmv3d align WS_A WS_B ... -o WS_MERGED`: load, align, merge, write. Returns the report (also written to
 // WS_MERGED/report/align.json). Throws fmv3d::Error — writing nothing — when a track cannot be loaded or
 // overlaps no other ("no overlap found between A and B").
-nlohmann::json RunAlignStage(const std::vector<std::filesystem::path>& workspaces,
-                             const std::filesystem::path& output, const TrackAlignOptions& options,
-                             const MergeOptions& merge_options = {});
+nlohmann::json RunAlignStage(const std::vector<std::filesystem::path>& workspaces, const std::filesystem::path& output,
+                             const TrackAlignOptions& options, const MergeOptions& merge_options = {});
 
 }  // namespace fmv3d::align

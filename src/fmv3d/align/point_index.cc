@@ -54,8 +54,7 @@ int PointIndex::Build(int begin, int end) {
 }
 
 // heap: max-heap on squared distance of the best k so far.
-void PointIndex::Search(int node, const Eigen::Vector3d& q, size_t k,
-                        std::vector<std::pair<double, int>>* heap) const {
+void PointIndex::Search(int node, const Eigen::Vector3d& q, size_t k, std::vector<std::pair<double, int>>* heap) const {
   const Node& n = nodes_[node];
   if (n.left < 0) {
     for (int i = n.begin; i < n.end; ++i) {

@@ -43,15 +43,17 @@ std::vector<ImageFeatures> LoadFeatures(const Track& t) {
       throw Error(t.name + ": no features for " + image.name + " (" + path.string() + ") — run `fmv3d features` first");
     const features::FeatureSet fset = features::ReadFeatures(path);
     if (fset.keypoints.size() != image.points2d.size())
-      throw Error(path.string() + ": " + std::to_string(fset.keypoints.size()) + " keypoints, but the sparse model has " +
-                  std::to_string(image.points2d.size()) + " for " + image.name + " (features newer than the model?)");
+      throw Error(path.string() + ": " + std::to_string(fset.keypoints.size()) +
+                  " keypoints, but the sparse model has " + std::to_string(image.points2d.size()) + " for " +
+                  image.name + " (features newer than the model?)");
     const core::Camera& cam = t.sparse.cameras.at(image.camera_id);
     ImageFeatures f;
     f.image_id = id;
     f.focal = cam.f;
     std::vector<int> rows;
     for (size_t k = 0; k < image.point3d_ids.size(); ++k)
-      if (image.point3d_ids[k] != core::kNoPoint3D && t.sparse.points.count(image.point3d_ids[k])) rows.push_back(int(k));
+      if (image.point3d_ids[k] != core::kNoPoint3D && t.sparse.points.count(image.point3d_ids[k]))
+        rows.push_back(int(k));
     f.descriptors.resize(rows.size(), 128);
     for (size_t r = 0; r < rows.size(); ++r) {
       f.descriptors.row(r) = fset.descriptors.row(rows[r]);
@@ -97,7 +99,9 @@ struct FeatureCache {
   }
 };
 
-std::string NoOverlap(const Track& a, const Track& b) { return "no overlap found between " + a.name + " and " + b.name; }
+std::string NoOverlap(const Track& a, const Track& b) {
+  return "no overlap found between " + a.name + " and " + b.name;
+}
 
 PairAlignment AlignPair(const std::vector<Track>& tracks, size_t ri, size_t mi, const TrackAlignOptions& o,
                         FeatureCache& cache) {
@@ -197,9 +201,9 @@ PairAlignment AlignPair(const std::vector<Track>& tracks, size_t ri, size_t mi, 
   core::Sim3 sim;
   std::vector<char> mask;
   const int inliers = geometry::EstimateSimilarityRansac(src, dst, ro, &sim, &mask);
-  if (inliers < o.min_inliers) throw NoOverlapError(NoOverlap(ref, mov) + " (" + std::to_string(inliers) +
-                                           " consistent 3D correspondences, " + std::to_string(o.min_inliers) +
-                                           " needed)");
+  if (inliers < o.min_inliers)
+    throw NoOverlapError(NoOverlap(ref, mov) + " (" + std::to_string(inliers) + " consistent 3D correspondences, " +
+                         std::to_string(o.min_inliers) + " needed)");
 
   // Robust refit: IRLS with Huber weights, the inlier set re-chosen at 3 robust sigmas of the residuals.
   const core::Sim3 coarse = sim;
@@ -268,7 +272,8 @@ Track LoadTrack(const fs::path& workspace) {
   Track t;
   t.workspace = workspace;
   t.name = fs::path(workspace).lexically_normal().filename().string();
-  if (t.name.empty() || t.name == ".") t.name = fs::absolute(workspace).lexically_normal().parent_path().filename().string();
+  if (t.name.empty() || t.name == ".")
+    t.name = fs::absolute(workspace).lexically_normal().parent_path().filename().string();
   const core::Workspace ws(workspace);
   const fs::path sparse = ws.sparse_dir();
   if (!fs::exists(sparse / "images.txt"))
@@ -327,7 +332,9 @@ MultiTrackAlignment AlignTracks(const std::vector<Track>& tracks, const TrackAli
   if (n < 2) throw Error("align: need at least two workspaces");
   MultiTrackAlignment out;
   for (size_t i = 1; i < n; ++i) {
-    const auto key = [&](size_t k) { return std::make_pair(tracks[k].sparse.images.size(), tracks[k].sparse.points.size()); };
+    const auto key = [&](size_t k) {
+      return std::make_pair(tracks[k].sparse.images.size(), tracks[k].sparse.points.size());
+    };
     if (key(i) > key(out.reference)) out.reference = i;
   }
   // Every pair, each aligned towards the larger of the two (the one nearer the reference, by size).

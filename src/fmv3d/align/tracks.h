@@ -34,11 +34,11 @@ namespace fmv3d::align {
 // One workspace's products.
 struct Track {
   std::filesystem::path workspace;
-  std::string name;                 // the workspace folder's name (for messages and reports)
-  core::Reconstruction sparse;      // WS/sparse (COLMAP text)
-  io::OrientedPointCloud dense;     // WS/dense/fused.ply, empty when absent
-  nlohmann::json dense_report;      // WS/report/dense.json (the dense stage's settings), null when absent
-  double radius = 0;                // RMS distance of the sparse points to their centroid (model units)
+  std::string name;              // the workspace folder's name (for messages and reports)
+  core::Reconstruction sparse;   // WS/sparse (COLMAP text)
+  io::OrientedPointCloud dense;  // WS/dense/fused.ply, empty when absent
+  nlohmann::json dense_report;   // WS/report/dense.json (the dense stage's settings), null when absent
+  double radius = 0;             // RMS distance of the sparse points to their centroid (model units)
 };
 
 // Throws fmv3d::Error when WS/sparse is missing or has fewer than 3 images or 3 points.
@@ -55,18 +55,18 @@ struct TrackAlignOptions {
   bool icp = true;                   // fine ICP on the dense clouds when both tracks have one
   IcpOptions icp_options;
   uint64_t seed = 42;
-  void Check() const;                // throws fmv3d::Error naming the bad field
+  void Check() const;  // throws fmv3d::Error naming the bad field
 };
 
 struct PairAlignment {
   size_t reference = 0, moving = 0;  // track indices; `sim` maps the moving track into the reference frame
   core::Sim3 sim;
   size_t image_pairs_tried = 0, image_pairs_verified = 0;
-  size_t correspondences = 0;        // distinct 3D–3D pairs from verified matches
-  size_t inliers = 0;                // consistent with the similarity
-  double overlap_fraction = 0;       // share of the moving track's points with a reference point nearby
+  size_t correspondences = 0;            // distinct 3D–3D pairs from verified matches
+  size_t inliers = 0;                    // consistent with the similarity
+  double overlap_fraction = 0;           // share of the moving track's points with a reference point nearby
   double rms_before = 0, rms_after = 0;  // fine step's residual RMS before / after (reference units)
-  std::string fine;                  // "icp-dense" or "correspondences"
+  std::string fine;                      // "icp-dense" or "correspondences"
   // The consistent 3D–3D links (reference point id, moving point id), for the merge's joint bundle adjustment.
   std::vector<std::pair<uint64_t, uint64_t>> links;
   nlohmann::json ToJson(const std::vector<Track>& tracks) const;

@@ -28,7 +28,8 @@ PriorChooser::PriorChooser(const PriorOptions& options, SensorDatabase db) : opt
   if (!options_.camera_file.empty()) calibration_ = ReadCameraFile(options_.camera_file);
   if (!options_.sensor_name.empty()) {
     forced_ = db_.FindByName(options_.sensor_name);
-    if (!forced_) throw Error("--sensor: '" + options_.sensor_name + "' is not in the sensor database (see `fmv3d cameras`)");
+    if (!forced_)
+      throw Error("--sensor: '" + options_.sensor_name + "' is not in the sensor database (see `fmv3d cameras`)");
   }
 }
 

@@ -33,7 +33,8 @@ size_t RemoveStaleTemporaries(const fs::path& dir) {
 
 FileLock::FileLock(const fs::path& lock_file, const std::string& what) {
   fd_ = open(lock_file.c_str(), O_RDWR | O_CREAT | O_CLOEXEC, 0644);
-  if (fd_ < 0) throw Error(what + ": cannot create the lock file " + lock_file.string() + " (" + std::strerror(errno) + ")");
+  if (fd_ < 0)
+    throw Error(what + ": cannot create the lock file " + lock_file.string() + " (" + std::strerror(errno) + ")");
   if (flock(fd_, LOCK_EX | LOCK_NB) != 0) {
     const int err = errno;
     char buf[32] = {};

@@ -27,13 +27,12 @@ int Sync(const fs::path& p, bool directory) {
 
 void WriteAtomically(const fs::path& path, const std::function<void(const fs::path& tmp)>& write) {
   if (path.has_parent_path()) EnsureDirectory(path.parent_path());
-  const fs::path tmp = path.parent_path() / ("." + path.stem().string() + ".tmp" + std::to_string(getpid()) +
-                                             path.extension().string());
+  const fs::path tmp =
+      path.parent_path() / ("." + path.stem().string() + ".tmp" + std::to_string(getpid()) + path.extension().string());
   try {
     errno = 0;
     write(tmp);
-    if (const int e = Sync(tmp, false))
-      throw Error(path.string() + ": cannot write (" + std::strerror(e) + ")");
+    if (const int e = Sync(tmp, false)) throw Error(path.string() + ": cannot write (" + std::strerror(e) + ")");
     std::error_code ec;
     fs::rename(tmp, path, ec);
     if (ec) throw Error(path.string() + ": cannot write (" + ec.message() + ")");
@@ -46,7 +45,8 @@ void WriteAtomically(const fs::path& path, const std::function<void(const fs::pa
     fs::remove(tmp, ec);
     // The message names the file the user asked for, not its temporary.
     std::string what = e.what();
-    for (size_t at; (at = what.find(tmp.string())) != std::string::npos;) what.replace(at, tmp.string().size(), path.string());
+    for (size_t at; (at = what.find(tmp.string())) != std::string::npos;)
+      what.replace(at, tmp.string().size(), path.string());
     if (err == ENOSPC || err == EFBIG || err == EDQUOT || err == EACCES || err == EROFS || err == EIO) {
       const std::string reason = std::strerror(err);
       if (what.find(reason) == std::string::npos) what += " (" + reason + ")";

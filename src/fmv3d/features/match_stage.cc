@@ -25,19 +25,27 @@ double Since(Clock::time_point t) { return std::chrono::duration<double>(Clock::
 
 PairGeometry ToPairGeometry(geometry::TwoViewClass c) {
   switch (c) {
-    case geometry::TwoViewClass::kCalibrated: return PairGeometry::kCalibrated;
-    case geometry::TwoViewClass::kUncalibrated: return PairGeometry::kUncalibrated;
-    case geometry::TwoViewClass::kPlanarOrRotation: return PairGeometry::kPlanarOrRotation;
-    default: return PairGeometry::kUndefined;
+    case geometry::TwoViewClass::kCalibrated:
+      return PairGeometry::kCalibrated;
+    case geometry::TwoViewClass::kUncalibrated:
+      return PairGeometry::kUncalibrated;
+    case geometry::TwoViewClass::kPlanarOrRotation:
+      return PairGeometry::kPlanarOrRotation;
+    default:
+      return PairGeometry::kUndefined;
   }
 }
 
 const char* GeometryName(PairGeometry g) {
   switch (g) {
-    case PairGeometry::kCalibrated: return "calibrated";
-    case PairGeometry::kUncalibrated: return "uncalibrated";
-    case PairGeometry::kPlanarOrRotation: return "planar_or_rotation";
-    default: return "undefined";
+    case PairGeometry::kCalibrated:
+      return "calibrated";
+    case PairGeometry::kUncalibrated:
+      return "uncalibrated";
+    case PairGeometry::kPlanarOrRotation:
+      return "planar_or_rotation";
+    default:
+      return "undefined";
   }
 }
 
@@ -87,12 +95,11 @@ MatchStageStats RunMatchStage(const core::Workspace& ws, const MatchStageOptions
   tbb::parallel_for(size_t{0}, n, [&](size_t i) {
     try {
       const fs::path p = FeaturePath(features_dir, index.frames[i].name);
-      if (!fs::exists(p))
-        throw Error(p.string() + " is missing; run `fmv3d features " + ws.name() + "` first");
+      if (!fs::exists(p)) throw Error(p.string() + " is missing; run `fmv3d features " + ws.name() + "` first");
       features[i] = ReadFeatures(p);
       if (features[i].image_name != index.frames[i].name)
-        throw Error(p.string() + ": holds features of '" + features[i].image_name + "', not '" +
-                    index.frames[i].name + "' (re-run `fmv3d features --force`)");
+        throw Error(p.string() + ": holds features of '" + features[i].image_name + "', not '" + index.frames[i].name +
+                    "' (re-run `fmv3d features --force`)");
     } catch (const std::exception& e) {
       errors[i] = e.what();
     }
@@ -145,56 +152,55 @@ MatchStageStats RunMatchStage(const core::Workspace& ws, const MatchStageOptions
   std::vector<char> verified(pairs.size(), 0);
   std::atomic<int64_t> ns_match{0}, ns_verify{0};
   core::Progress progress("match", pairs.size());
-  tbb::parallel_for(
-      tbb::blocked_range<size_t>(0, pairs.size(), 1), [&](const tbb::blocked_range<size_t>& range) {
-        for (size_t k = range.begin(); k != range.end(); ++k) {
-          const auto [i, j] = pairs[k];
-          auto t0 = Clock::now();
-          std::vector<FeatureMatch> putative;
-          {
-            auto a = cache.Get(i), b = cache.Get(j);
-            putative = MatchDescriptors(*a, *b, options.match);
-          }
-          cache.Done(i);
-          cache.Done(j);
-          auto t1 = Clock::now();
-          ns_match += std::chrono::duration_cast<std::chrono::nanoseconds>(t1 - t0).count();
-          VerifiedPair& vp = results[k];
-          vp.image_id1 = i + 1;
-          vp.image_id2 = j + 1;
-          vp.num_putative = static_cast<uint32_t>(putative.size());
-          if (putative.size() >= static_cast<size_t>(options.verify.min_inliers)) {
-            geometry::Points2 x1(putative.size()), x2(putative.size());
-            for (size_t m = 0; m < putative.size(); ++m) {
-              const auto& k1 = features[i].keypoints[putative[m].idx1];
-              const auto& k2 = features[j].keypoints[putative[m].idx2];
-              x1[m] = {k1.x, k1.y};
-              x2[m] = {k2.x, k2.y};
-            }
-            geometry::TwoViewOptions vopt = options.verify;
-            vopt.seed = options.verify.seed ^ (uint64_t(i) << 32 | j);
-            const auto r = geometry::VerifyTwoView(x1, x2, *cameras[i], *cameras[j], trusted[i] && trusted[j], vopt);
-            vp.num_inliers_F = r.num_inliers_F;
-            vp.num_inliers_E = r.num_inliers_E;
-            vp.num_inliers_H = r.num_inliers_H;
-            vp.geometry = ToPairGeometry(r.geometry);
-            if (r.geometry != geometry::TwoViewClass::kRejected) {
-              vp.F = r.F;
-              vp.E = r.E;
-              vp.H = r.H;
-              vp.has_pose = r.has_pose;
-              vp.R = r.R;
-              vp.t = r.t;
-              vp.median_triangulation_angle_deg = r.median_triangulation_angle_deg;
-              vp.inliers.reserve(r.inliers.size());
-              for (int m : r.inliers) vp.inliers.push_back(putative[m]);
-              verified[k] = 1;
-            }
-          }
-          ns_verify += std::chrono::duration_cast<std::chrono::nanoseconds>(Clock::now() - t1).count();
-          progress.Add();
+  tbb::parallel_for(tbb::blocked_range<size_t>(0, pairs.size(), 1), [&](const tbb::blocked_range<size_t>& range) {
+    for (size_t k = range.begin(); k != range.end(); ++k) {
+      const auto [i, j] = pairs[k];
+      auto t0 = Clock::now();
+      std::vector<FeatureMatch> putative;
+      {
+        auto a = cache.Get(i), b = cache.Get(j);
+        putative = MatchDescriptors(*a, *b, options.match);
+      }
+      cache.Done(i);
+      cache.Done(j);
+      auto t1 = Clock::now();
+      ns_match += std::chrono::duration_cast<std::chrono::nanoseconds>(t1 - t0).count();
+      VerifiedPair& vp = results[k];
+      vp.image_id1 = i + 1;
+      vp.image_id2 = j + 1;
+      vp.num_putative = static_cast<uint32_t>(putative.size());
+      if (putative.size() >= static_cast<size_t>(options.verify.min_inliers)) {
+        geometry::Points2 x1(putative.size()), x2(putative.size());
+        for (size_t m = 0; m < putative.size(); ++m) {
+          const auto& k1 = features[i].keypoints[putative[m].idx1];
+          const auto& k2 = features[j].keypoints[putative[m].idx2];
+          x1[m] = {k1.x, k1.y};
+          x2[m] = {k2.x, k2.y};
         }
-      });
+        geometry::TwoViewOptions vopt = options.verify;
+        vopt.seed = options.verify.seed ^ (uint64_t(i) << 32 | j);
+        const auto r = geometry::VerifyTwoView(x1, x2, *cameras[i], *cameras[j], trusted[i] && trusted[j], vopt);
+        vp.num_inliers_F = r.num_inliers_F;
+        vp.num_inliers_E = r.num_inliers_E;
+        vp.num_inliers_H = r.num_inliers_H;
+        vp.geometry = ToPairGeometry(r.geometry);
+        if (r.geometry != geometry::TwoViewClass::kRejected) {
+          vp.F = r.F;
+          vp.E = r.E;
+          vp.H = r.H;
+          vp.has_pose = r.has_pose;
+          vp.R = r.R;
+          vp.t = r.t;
+          vp.median_triangulation_angle_deg = r.median_triangulation_angle_deg;
+          vp.inliers.reserve(r.inliers.size());
+          for (int m : r.inliers) vp.inliers.push_back(putative[m]);
+          verified[k] = 1;
+        }
+      }
+      ns_verify += std::chrono::duration_cast<std::chrono::nanoseconds>(Clock::now() - t1).count();
+      progress.Add();
+    }
+  });
   progress.Finish();
   cv::setNumThreads(cv_threads);
   stats.cpu_seconds_match = ns_match * 1e-9;

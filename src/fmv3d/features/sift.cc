@@ -50,8 +50,7 @@ void QuantiseDescriptors(const cv::Mat& d, bool root_sift, Descriptors* out) {
       const double inv = l2 > 0 ? 1.0 / std::sqrt(l2) : 0;
       for (int k = 0; k < 128; ++k) v[k] = static_cast<float>(row[k] * inv);
     }
-    for (int k = 0; k < 128; ++k)
-      (*out)(i, k) = static_cast<uint8_t>(std::min(255.0f, std::round(512.0f * v[k])));
+    for (int k = 0; k < 128; ++k) (*out)(i, k) = static_cast<uint8_t>(std::min(255.0f, std::round(512.0f * v[k])));
   }
 }
 
@@ -94,8 +93,8 @@ FeatureSet ExtractSift(const cv::Mat& image, const SiftOptions& options, double*
   cv::Mat desc;
   double threshold = options.contrast_threshold;
   for (;;) {
-    auto sift = cv::SIFT::create(options.max_features, options.octave_layers, threshold, options.edge_threshold, 1.6,
-                                 CV_32F);
+    auto sift =
+        cv::SIFT::create(options.max_features, options.octave_layers, threshold, options.edge_threshold, 1.6, CV_32F);
     kps.clear();
     desc = cv::Mat();
     if (!options.upright) {
@@ -128,8 +127,7 @@ FeatureSet ExtractSift(const cv::Mat& image, const SiftOptions& options, double*
   if (options.max_features > 0 && static_cast<int>(kps.size()) > options.max_features) {
     std::vector<int> order(kps.size());
     for (size_t i = 0; i < order.size(); ++i) order[i] = static_cast<int>(i);
-    std::stable_sort(order.begin(), order.end(),
-                     [&](int a, int b) { return kps[a].response > kps[b].response; });
+    std::stable_sort(order.begin(), order.end(), [&](int a, int b) { return kps[a].response > kps[b].response; });
     order.resize(options.max_features);
     std::sort(order.begin(), order.end());
     std::vector<cv::KeyPoint> kept;
@@ -256,8 +254,9 @@ FeaturesStageStats RunFeaturesStage(const core::Workspace& ws, const SiftOptions
   core::WriteJson(features_dir / "features.json", summary);
   spdlog::info("features: {} images, {} keypoints (min {}, max {}), {:.1f} s{}", n, stats.total_keypoints,
                stats.min_keypoints, stats.max_keypoints, stats.seconds,
-               stats.adapted_images ? fmt::format("; contrast threshold lowered on {} weak images", stats.adapted_images)
-                                    : std::string());
+               stats.adapted_images
+                   ? fmt::format("; contrast threshold lowered on {} weak images", stats.adapted_images)
+                   : std::string());
   return stats;
 }
 

@@ -17,8 +17,8 @@
 namespace fmv3d::features {
 
 struct SiftOptions {
-  int max_features = 8000;         // per image; the strongest responses are kept (0 = no cap)
-  int max_image_size = 3200;       // larger images are downscaled for extraction; coordinates are rescaled
+  int max_features = 8000;    // per image; the strongest responses are kept (0 = no cap)
+  int max_image_size = 3200;  // larger images are downscaled for extraction; coordinates are rescaled
   double contrast_threshold = 0.01;
   double edge_threshold = 10;
   int octave_layers = 3;
@@ -55,7 +55,6 @@ struct FeaturesStageStats {
 // The `fmv3d features` stage: reads WS/frames/frames.json, writes WS/features/<stem>.feat for every frame
 // (parallel over images), and WS/features/features.json (counts, timing). Skips frames whose .feat is newer
 // than the image unless `force`. Throws fmv3d::Error for a missing workspace or an unreadable image.
-FeaturesStageStats RunFeaturesStage(const core::Workspace& workspace, const SiftOptions& options,
-                                    bool force = false);
+FeaturesStageStats RunFeaturesStage(const core::Workspace& workspace, const SiftOptions& options, bool force = false);
 
 }  // namespace fmv3d::features

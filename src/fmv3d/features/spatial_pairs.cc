@@ -103,8 +103,7 @@ std::vector<Footprint> FootprintsFromTelemetry(const io::FramesIndex& index) {
           azimuth = n;
         else if (auto h = Field(t, "platform_heading"))
           azimuth = *h + Field(t, "sensor_relative_azimuth").value_or(0);
-        if (auto e = Field(t, "sensor_relative_elevation"))
-          elevation = *e + Field(t, "platform_pitch").value_or(0);
+        if (auto e = Field(t, "sensor_relative_elevation")) elevation = *e + Field(t, "platform_pitch").value_or(0);
       }
       if (elevation) depression = std::clamp(-*elevation, kMinDepressionDeg, 90.0);
       depression = std::max(depression, kMinDepressionDeg);

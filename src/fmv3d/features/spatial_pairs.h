@@ -18,8 +18,8 @@ namespace fmv3d::features {
 struct Footprint {
   bool valid = false;
   Eigen::Vector2d centre = Eigen::Vector2d::Zero();  // metres east, north of the first valid frame's sensor
-  double radius = 0;                                  // metres
-  std::string why_invalid;                            // when !valid: which telemetry field is missing
+  double radius = 0;                                 // metres
+  std::string why_invalid;                           // when !valid: which telemetry field is missing
 };
 
 // One footprint per frame of the index (same order). A frame needs sensor latitude/longitude and an altitude;

@@ -110,8 +110,7 @@ AttitudeFusion FuseAttitude(const core::Sim3& sim, const std::vector<GeorefPair>
   }
   const Eigen::Vector3d w = (info_pos + info_att).inverse() * info_att * w_att;
   const Eigen::Matrix3d R =
-      Eigen::AngleAxisd(w.norm(), w.norm() > 0 ? w.normalized() : Eigen::Vector3d::UnitZ()).toRotationMatrix() *
-      r_pos;
+      Eigen::AngleAxisd(w.norm(), w.norm() > 0 ? w.normalized() : Eigen::Vector3d::UnitZ()).toRotationMatrix() * r_pos;
   std::vector<Eigen::Vector3d> s_in, d_in;
   for (size_t i = 0; i < src.size(); ++i)
     if (inliers[i]) s_in.push_back(src[i]), d_in.push_back(dst[i]);

@@ -23,7 +23,7 @@ struct AttitudeFusion {
   double sigma_rad = 0;         // scatter per axis about the mean
   double disagreement_rad = 0;  // the attitudes' rotation against the positions'
   double chi2 = 0;
-  double correction_rad = 0;             // when used: how far the rotation turned
+  double correction_rad = 0;               // when used: how far the rotation turned
   std::vector<Eigen::Matrix3d> rotations;  // when used: the model-to-ENU rotations, for the joint refinement
   // σ per axis widened for correlated samples: σ·√(n / n_eff) (1 when not evaluated).
   double EffectiveSigma() const;

@@ -46,7 +46,8 @@ io::OrientedPointCloud LoadPoints(const core::Workspace& ws, std::string* source
   }
   const fs::path sparse = ws.sparse_dir();
   if (!fs::exists(sparse / "points3D.txt"))
-    throw Error(ws.name() + ": no surface to map (mesh/poisson.ply, dense/fused.ply or sparse/) — run the "
+    throw Error(ws.name() +
+                ": no surface to map (mesh/poisson.ply, dense/fused.ply or sparse/) — run the "
                 "reconstruction first");
   *source = sparse.string();
   const core::Reconstruction rec = io::ReadColmapText(sparse);
@@ -108,7 +109,8 @@ double ChooseGsd(const UtmSurface& s) {
   for (int round = 0; round < 2; ++round) {
     std::unordered_set<int64_t> occupied;
     for (const auto& p : s.vertices) {
-      const int64_t cx = static_cast<int64_t>((p.x() - lo.x()) / (4 * g)), cy = static_cast<int64_t>((p.y() - lo.y()) / (4 * g));
+      const int64_t cx = static_cast<int64_t>((p.x() - lo.x()) / (4 * g)),
+                    cy = static_cast<int64_t>((p.y() - lo.y()) / (4 * g));
       occupied.insert(cx * 4000003 + cy);
     }
     const double area = occupied.size() * 16 * g * g;
@@ -214,8 +216,9 @@ nlohmann::json RunDsmStage(const core::Workspace& ws, const DsmOptions& o) {
   j["valid_cells"] = valid;
   j["georef_consistent_with_telemetry"] = g.consistent_with_telemetry;
   if (!g.consistent_with_telemetry)
-    spdlog::warn("dsm: the georeference disagrees with the telemetry (see geo/georef.json): heights and "
-                 "positions of this DSM are not reliable");
+    spdlog::warn(
+        "dsm: the georeference disagrees with the telemetry (see geo/georef.json): heights and "
+        "positions of this DSM are not reliable");
   j["trusted"] = g.trusted;
   if (!g.trusted) {
     j["untrusted_reason"] = g.untrusted_reason;
@@ -233,7 +236,8 @@ nlohmann::json RunDsmStage(const core::Workspace& ws, const DsmOptions& o) {
         const float v = h.at<float>(r, c);
         if (!std::isfinite(v)) continue;
         const Eigen::Vector2d e = grid.CellCentre(r, c);
-        sq += std::pow(g.accuracy->HeightSigma(Eigen::Vector3d(e.x() - pivot.x(), e.y() - pivot.y(), v - pivot.z())), 2);
+        sq +=
+            std::pow(g.accuracy->HeightSigma(Eigen::Vector3d(e.x() - pivot.x(), e.y() - pivot.y(), v - pivot.z())), 2);
       }
     j["expected_height_error_m"] = std::sqrt(sq / static_cast<double>(valid));
     spdlog::info("dsm: expected absolute height error from the georeference {:.3f} m RMS (1σ, telemetry alone)",
@@ -243,7 +247,8 @@ nlohmann::json RunDsmStage(const core::Workspace& ws, const DsmOptions& o) {
     j["expected_height_error_why"] = g.accuracy ? "the georeference leaves a rotation unknown (straight track)"
                                                 : "geo/georef.json states no expected accuracy";
   }
-  const GeoPoint centre = frame.UtmToGeodetic({grid.min_e + 0.5 * grid.width * gsd, grid.max_n - 0.5 * grid.height * gsd, 0});
+  const GeoPoint centre =
+      frame.UtmToGeodetic({grid.min_e + 0.5 * grid.width * gsd, grid.max_n - 0.5 * grid.height * gsd, 0});
   j["centre_wgs84"] = {{"lat", centre.lat}, {"lon", centre.lon}};
   if (o.write_las) {
     // The LAS holds points, not mesh vertices: the dense cloud, else the sparse one.
@@ -267,7 +272,8 @@ nlohmann::json RunDsmStage(const core::Workspace& ws, const DsmOptions& o) {
 nlohmann::json RunOrthoStage(const core::Workspace& ws) {
   const Georef g = ReadGeoref(ws);
   const fs::path dsm = ws.geo_dir() / "dsm.tif";
-  if (!fs::exists(dsm)) throw Error(ws.name() + ": no geo/dsm.tif — run `fmv3d dsm` first (the orthophoto uses its grid)");
+  if (!fs::exists(dsm))
+    throw Error(ws.name() + ": no geo/dsm.tif — run `fmv3d dsm` first (the orthophoto uses its grid)");
   GridSpec grid;
   ReadHeightGeoTiff(dsm, &grid);
   cv::Mat bgr(grid.height, grid.width, CV_8UC3, cv::Scalar(0, 0, 0));
@@ -304,8 +310,9 @@ nlohmann::json RunOrthoStage(const core::Workspace& ws) {
           colour = f.material >= 0 ? Eigen::Vector3f(mesh.materials[f.material].diffuse_bgr * 255.f)
                                    : Eigen::Vector3f(200, 200, 200);
         }
-        bgr.at<cv::Vec3b>(r, col) = cv::Vec3b(cv::saturate_cast<uint8_t>(colour[0]), cv::saturate_cast<uint8_t>(colour[1]),
-                                              cv::saturate_cast<uint8_t>(colour[2]));
+        bgr.at<cv::Vec3b>(r, col) =
+            cv::Vec3b(cv::saturate_cast<uint8_t>(colour[0]), cv::saturate_cast<uint8_t>(colour[1]),
+                      cv::saturate_cast<uint8_t>(colour[2]));
         valid.at<uint8_t>(r, col) = 1;
       });
       progress.Add();

@@ -40,7 +40,8 @@ struct Stats {
 // The modelled area: truth.json's "bounds" (world frame of the truth); empty when it states none.
 Eigen::AlignedBox3d ModelledRegion(const nlohmann::json& truth) {
   if (!truth.contains("bounds")) return {};
-  const auto lo = truth["bounds"].at("min").get<std::vector<double>>(), hi = truth["bounds"].at("max").get<std::vector<double>>();
+  const auto lo = truth["bounds"].at("min").get<std::vector<double>>(),
+             hi = truth["bounds"].at("max").get<std::vector<double>>();
   if (lo.size() != 3 || hi.size() != 3) return {};
   return Eigen::AlignedBox3d(Eigen::Vector3d(lo[0], lo[1], lo[2]), Eigen::Vector3d(hi[0], hi[1], hi[2]));
 }
@@ -104,7 +105,8 @@ core::Sim3 GeorefErrorSimilarity(const core::Reconstruction& est, const core::Re
     Eigen::Matrix3d cov = Eigen::Matrix3d::Zero();
     for (const auto& p : dst) cov += (p - mean) * (p - mean).transpose();
     const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eig(cov / static_cast<double>(dst.size()));
-    const double along = std::sqrt(std::max(0.0, eig.eigenvalues()(2))), lateral = std::sqrt(std::max(0.0, eig.eigenvalues()(1)));
+    const double along = std::sqrt(std::max(0.0, eig.eigenvalues()(2))),
+                 lateral = std::sqrt(std::max(0.0, eig.eigenvalues()(1)));
     if (lateral < 0.05 * along) {
       const double reach = 2 * along;
       for (const auto& [e, t] : matched) {
@@ -151,7 +153,8 @@ nlohmann::json SurfaceError(const core::Reconstruction& est, const core::Reconst
     int seen = 0;
     for (const core::Image* v : views) {
       const Eigen::Vector3d xc = v->pose.Transform(x);
-      if (xc.z() > 0 && tru.cameras.at(v->camera_id).InImage(tru.cameras.at(v->camera_id).Project(xc)) && ++seen >= 2) break;
+      if (xc.z() > 0 && tru.cameras.at(v->camera_id).InImage(tru.cameras.at(v->camera_id).Project(xc)) && ++seen >= 2)
+        break;
     }
     if (seen < 2) continue;
     const Eigen::Vector3d xw = to_ws(x), d = inv.Apply(xw) - xw;
@@ -160,21 +163,23 @@ nlohmann::json SurfaceError(const core::Reconstruction& est, const core::Reconst
     worst = std::max(worst, d.norm());
   }
   if (e3.n == 0) throw Error("evaluate-geo: no sample of the true mesh is in view of 2 registered cameras");
-  nlohmann::json j = {{"samples", e3.n},
-          {"samples_in_region", all},
-          {"region", std::string(region.isEmpty() ? "whole mesh" : "truth.json bounds") +
-                         ", in the field of view of >= 2 registered cameras (true poses; no occlusion test)"},
-          {"rms_m", e3.Rms()},
-          {"horizontal_rms_m", eh.Rms()},
-          {"vertical_rms_m", ev.Rms()},
-          {"vertical_mean_m", ev.Mean()},
-          {"max_m", worst},
-          {"cameras_fit_rms_m", fit_rms},
-          // The georeference's own error, as S: its rotation, the part of it that tilts the vertical, scale.
-          {"rotation_error_deg", Eigen::AngleAxisd(s.q).angle() * 180 / M_PI},
-          {"tilt_error_deg", std::acos(std::clamp((s.q * Eigen::Vector3d::UnitZ()).z(), -1.0, 1.0)) * 180 / M_PI},
-          {"scale_error", s.s - 1},
-          {"maps", "error of true point X = S^-1(X) - X, S = similarity of geo/sparse_enu camera centres onto the true ones"}};
+  nlohmann::json j = {
+      {"samples", e3.n},
+      {"samples_in_region", all},
+      {"region", std::string(region.isEmpty() ? "whole mesh" : "truth.json bounds") +
+                     ", in the field of view of >= 2 registered cameras (true poses; no occlusion test)"},
+      {"rms_m", e3.Rms()},
+      {"horizontal_rms_m", eh.Rms()},
+      {"vertical_rms_m", ev.Rms()},
+      {"vertical_mean_m", ev.Mean()},
+      {"max_m", worst},
+      {"cameras_fit_rms_m", fit_rms},
+      // The georeference's own error, as S: its rotation, the part of it that tilts the vertical, scale.
+      {"rotation_error_deg", Eigen::AngleAxisd(s.q).angle() * 180 / M_PI},
+      {"tilt_error_deg", std::acos(std::clamp((s.q * Eigen::Vector3d::UnitZ()).z(), -1.0, 1.0)) * 180 / M_PI},
+      {"scale_error", s.s - 1},
+      {"maps",
+       "error of true point X = S^-1(X) - X, S = similarity of geo/sparse_enu camera centres onto the true ones"}};
   // What georef expected of the vertical here (1σ RMS over the same samples), beside what it got.
   j["expected_vertical_rms_m"] = predict ? nlohmann::json(expected.Rms()) : nlohmann::json();
   return j;
@@ -230,7 +235,8 @@ nlohmann::json EvaluateGeoAgainstSynth(const core::Workspace& ws, const fs::path
       if (!t || !tel.is_object() || !tel.contains("sensor_latitude") || !tel.contains("sensor_longitude")) continue;
       const char* alt = tel.contains("sensor_altitude_hae") ? "sensor_altitude_hae" : "sensor_altitude_msl";
       if (!tel.contains(alt)) continue;
-      const GeoPoint p{tel["sensor_latitude"].get<double>(), tel["sensor_longitude"].get<double>(), tel[alt].get<double>()};
+      const GeoPoint p{tel["sensor_latitude"].get<double>(), tel["sensor_longitude"].get<double>(),
+                       tel[alt].get<double>()};
       const Eigen::Vector3d d = fg.ToEnu(p) - to_ws(t->pose.Centre());
       tx.Add(d.x()), ty.Add(d.y()), tz.Add(d.z());
       mean += d;
@@ -288,8 +294,11 @@ nlohmann::json EvaluateGeoAgainstSynth(const core::Workspace& ws, const fs::path
     all.push_back(c.distance);
   }
   std::sort(all.begin(), all.end());
-  j["points"] = {{"count", pd.n}, {"rms_m", pd.Rms()}, {"median_m", all.empty() ? 0.0 : all[all.size() / 2]},
-                 {"signed_mean_m", ps.Mean()}, {"signed_mean_of", "points within 5% of H of the true mesh; + outside"}};
+  j["points"] = {{"count", pd.n},
+                 {"rms_m", pd.Rms()},
+                 {"median_m", all.empty() ? 0.0 : all[all.size() / 2]},
+                 {"signed_mean_m", ps.Mean()},
+                 {"signed_mean_of", "points within 5% of H of the true mesh; + outside"}};
   // DSM.
   const fs::path dsm_path = ws.geo_dir() / "dsm.tif";
   if (fs::exists(dsm_path)) {
@@ -322,9 +331,8 @@ nlohmann::json EvaluateGeoAgainstSynth(const core::Workspace& ws, const fs::path
     // there so oblique views see land). Its seam with the tile is a step of synth's own making, and its land is
     // made not to be matched. The headline is the modelled area, as for the surface.
     const Eigen::AlignedBox3d region = ModelledRegion(truth);
-    const Eigen::AlignedBox2d modelled = region.isEmpty()
-                                             ? Eigen::AlignedBox2d()
-                                             : Eigen::AlignedBox2d(region.min().head<2>(), region.max().head<2>());
+    const Eigen::AlignedBox2d modelled =
+        region.isEmpty() ? Eigen::AlignedBox2d() : Eigen::AlignedBox2d(region.min().head<2>(), region.max().head<2>());
     DsmTally in_area, all_cells;
     size_t seen = 0;
     // Signed error per compared cell, for dsm_error.png: blue below the truth, red above, full colour at 1% of
@@ -355,17 +363,19 @@ nlohmann::json EvaluateGeoAgainstSynth(const core::Workspace& ws, const fs::path
       }
     core::EnsureDirectory(ws.report_dir());
     core::WriteAtomically(ws.report_dir() / "dsm_error.png", [&](const fs::path& tmp) {
-      if (!cv::imwrite(tmp.string() + ".png", err_png)) throw Error((ws.report_dir() / "dsm_error.png").string() + ": cannot write");
+      if (!cv::imwrite(tmp.string() + ".png", err_png))
+        throw Error((ws.report_dir() / "dsm_error.png").string() + ": cannot write");
       fs::rename(tmp.string() + ".png", tmp);
     });
     j["dsm"] = in_area.ToJson(building);
-    j["dsm"].update({{"cells_seen", seen},
-                     {"region", modelled.isEmpty() ? "whole DSM (truth.json has no bounds)"
-                                                   : "truth.json bounds (the modelled area, as for the surface)"},
-                     {"flat_tolerance_m", flat},
-                     {"step_margin_m", margin},
-                     {"compared", "cells whose true surface is flat within flat_tolerance_m over a disc of step_margin_m"},
-                     {"error_map", "report/dsm_error.png (blue below, red above the truth, saturated at 1% of H)"}});
+    j["dsm"].update(
+        {{"cells_seen", seen},
+         {"region", modelled.isEmpty() ? "whole DSM (truth.json has no bounds)"
+                                       : "truth.json bounds (the modelled area, as for the surface)"},
+         {"flat_tolerance_m", flat},
+         {"step_margin_m", margin},
+         {"compared", "cells whose true surface is flat within flat_tolerance_m over a disc of step_margin_m"},
+         {"error_map", "report/dsm_error.png (blue below, red above the truth, saturated at 1% of H)"}});
     j["dsm"]["whole_seen"] = all_cells.ToJson(building);
     j["dsm"]["whole_seen"]["region"] = "every compared cell, synth's far-ground backdrop included";
   }

@@ -22,7 +22,6 @@ Eigen::Vector4d Params(const ScaleShift& s) {
   return x;
 }
 
-
 // Residual of one point: exp(ls)·rot(ω)·u + t + range·rot(ω)·v − target, over σ. u, v already rotated by the
 // starting rotation; a position is the case v = 0.
 struct PointResidual {
@@ -67,9 +66,9 @@ core::Sim3 RefineSimilarity(const core::Sim3& start, const JointMeasurements& m)
                              nullptr, w, ls, t);
   for (const auto& a : m.attitudes) {
     const Eigen::AngleAxisd d(a * R0.transpose());
-    problem.AddResidualBlock(
-        new ceres::AutoDiffCostFunction<RotationResidual, 3, 3>(new RotationResidual{d.angle() * d.axis(), m.attitude_sigma_rad}),
-        nullptr, w);
+    problem.AddResidualBlock(new ceres::AutoDiffCostFunction<RotationResidual, 3, 3>(
+                                 new RotationResidual{d.angle() * d.axis(), m.attitude_sigma_rad}),
+                             nullptr, w);
   }
   problem.AddResidualBlock(new ceres::AutoDiffCostFunction<RotationResidual, 3, 3>(
                                new RotationResidual{Eigen::Vector3d::Zero(), 5 * M_PI / 180}),
@@ -238,12 +237,18 @@ FrameCentreFusion FuseFrameCentres(const Eigen::Matrix3d& R, const ScaleShift& p
 
 std::string FrameCentreFusion::Why() const {
   switch (outcome) {
-    case Outcome::kUsed: return "";
-    case Outcome::kTooFew: return "fewer than 3 packets state a frame centre and a slant range";
-    case Outcome::kUndetermined: return "the lines of sight do not determine a scale and translation";
-    case Outcome::kInconsistent: return "fewer than 3 lines of sight agree with each other";
-    case Outcome::kDisagree: return "the frame centres disagree with the positions beyond their uncertainties";
-    case Outcome::kNonPositiveScale: return "the fused scale is not positive";
+    case Outcome::kUsed:
+      return "";
+    case Outcome::kTooFew:
+      return "fewer than 3 packets state a frame centre and a slant range";
+    case Outcome::kUndetermined:
+      return "the lines of sight do not determine a scale and translation";
+    case Outcome::kInconsistent:
+      return "fewer than 3 lines of sight agree with each other";
+    case Outcome::kDisagree:
+      return "the frame centres disagree with the positions beyond their uncertainties";
+    case Outcome::kNonPositiveScale:
+      return "the fused scale is not positive";
   }
   return "";
 }

@@ -27,11 +27,11 @@ constexpr double kFrameCentreAgreementChi2 = 18.47;
 
 // One packet's (or keyframe's) line of sight: the model camera and the telemetry's frame centre and range.
 struct LineOfSight {
-  Eigen::Vector3d model_centre;   // model camera centre (sparse coordinates)
-  Eigen::Vector3d model_axis;     // model optical axis, unit (sparse coordinates)
-  double slant_range = 0;         // metres
-  Eigen::Vector3d frame_centre;   // ENU metres
-  int track = -1;                 // consecutive entries of one track are correlated in time
+  Eigen::Vector3d model_centre;  // model camera centre (sparse coordinates)
+  Eigen::Vector3d model_axis;    // model optical axis, unit (sparse coordinates)
+  double slant_range = 0;        // metres
+  Eigen::Vector3d frame_centre;  // ENU metres
+  int track = -1;                // consecutive entries of one track are correlated in time
 };
 
 using geometry::ScaleShift;
@@ -51,8 +51,8 @@ struct FrameCentreFusion {
   std::vector<char> inlier_mask;  // per line of sight
   double sigma_m = 0;             // per axis, of the line-of-sight centres about their own fit
   double autocorrelation = 0, effective_samples = 0;
-  double chi2 = 0;                // disagreement with the positions' fit
-  ScaleShift fused;               // when used
+  double chi2 = 0;          // disagreement with the positions' fit
+  ScaleShift fused;         // when used
   std::string Why() const;  // why not used, for people
   nlohmann::json ToJson() const;
 };

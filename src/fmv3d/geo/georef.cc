@@ -51,11 +51,16 @@ Georef ReadGeoref(const core::Workspace& ws) {
 
 const char* RebuildTriggerName(RebuildTrigger t) {
   switch (t) {
-    case RebuildTrigger::kNone: return "none";
-    case RebuildTrigger::kForced: return "forced (--constrain always)";
-    case RebuildTrigger::kTrackDoesNotFit: return "the track does not fit the model";
-    case RebuildTrigger::kFrameCentresDisagree: return "the frame centres disagree with the model";
-    case RebuildTrigger::kStraightTrackWithFrameCentres: return "a nearly straight track with frame centres";
+    case RebuildTrigger::kNone:
+      return "none";
+    case RebuildTrigger::kForced:
+      return "forced (--constrain always)";
+    case RebuildTrigger::kTrackDoesNotFit:
+      return "the track does not fit the model";
+    case RebuildTrigger::kFrameCentresDisagree:
+      return "the frame centres disagree with the model";
+    case RebuildTrigger::kStraightTrackWithFrameCentres:
+      return "a nearly straight track with frame centres";
   }
   return "";
 }
@@ -76,8 +81,8 @@ RebuildTrigger WhyRebuild(const GeorefSolution& g, GeorefOptions::Constrain cons
   return RebuildTrigger::kNone;
 }
 
-bool RebuildMends(RebuildTrigger trigger, const GeorefSolution& image, const GeorefSolution& rebuilt,
-                  double image_px, double rebuilt_px) {
+bool RebuildMends(RebuildTrigger trigger, const GeorefSolution& image, const GeorefSolution& rebuilt, double image_px,
+                  double rebuilt_px) {
   const bool explains_images = rebuilt_px <= 1.5 * image_px + 0.1;
   if (trigger == RebuildTrigger::kTrackDoesNotFit) return rebuilt.fit_fraction > image.fit_fraction;
   // A rebuild whose frame centres still disagree mends it too when it removes more of their disagreement than
@@ -125,9 +130,10 @@ Choice ChooseModel(const io::FramesIndex& index, const std::vector<telemetry::Te
   Choice c{&image_model, false, std::move(image), pairs, {{"applied", false}}};
   if (trigger == RebuildTrigger::kNone) return c;
   const GeorefSolution& g = c.solution;
-  spdlog::info("georef: {:.0f}% of the telemetry fits the model's trajectory ({}); building the model again from "
-               "the telemetry's cameras",
-               100 * g.fit_fraction, RebuildTriggerName(trigger));
+  spdlog::info(
+      "georef: {:.0f}% of the telemetry fits the model's trajectory ({}); building the model again from "
+      "the telemetry's cameras",
+      100 * g.fit_fraction, RebuildTriggerName(trigger));
   core::Reconstruction image_enu = image_model;
   image_enu.Transform(g.sim);
   const LocalFrame frame(g.origin);
@@ -149,20 +155,21 @@ Choice ChooseModel(const io::FramesIndex& index, const std::vector<telemetry::Te
   info["reprojection_rms_px_image_only"] = image_px;
   info["frame_centres_chi2_image_only"] = g.frame_centres.chi2().value_or(0.0);
   if (const auto chi2 = rebuilt->frame_centres.chi2()) info["frame_centres_chi2"] = *chi2;
-  const bool keep = trigger == RebuildTrigger::kForced ||
-                    RebuildMends(trigger, g, *rebuilt, image_px, built->reprojection_rms_px);
+  const bool keep =
+      trigger == RebuildTrigger::kForced || RebuildMends(trigger, g, *rebuilt, image_px, built->reprojection_rms_px);
   if (keep) {
     info["applied"] = true;
     info["fit_fraction_image_only"] = g.fit_fraction;
     c = Choice{&built->model, true, std::move(*rebuilt), std::move(again), std::move(info)};
     return c;
   }
-  spdlog::warn("georef: the telemetry-initialised model mends nothing ({:.0f}% of the track fits it, its frame "
-               "centres {} (χ² {:.1f} against the image model's {:.1f}), reprojection {:.2f} px RMS against the "
-               "image model's {:.2f}); keeping the image-only model",
-               100 * rebuilt->fit_fraction, rebuilt->frame_centres.used() ? "agree" : "do not agree either",
-               rebuilt->frame_centres.chi2().value_or(-1.0), g.frame_centres.chi2().value_or(0.0),
-               built->reprojection_rms_px, image_px);
+  spdlog::warn(
+      "georef: the telemetry-initialised model mends nothing ({:.0f}% of the track fits it, its frame "
+      "centres {} (χ² {:.1f} against the image model's {:.1f}), reprojection {:.2f} px RMS against the "
+      "image model's {:.2f}); keeping the image-only model",
+      100 * rebuilt->fit_fraction, rebuilt->frame_centres.used() ? "agree" : "do not agree either",
+      rebuilt->frame_centres.chi2().value_or(-1.0), g.frame_centres.chi2().value_or(0.0), built->reprojection_rms_px,
+      image_px);
   info["applied"] = false;
   info["fit_fraction_telemetry_model"] = rebuilt->fit_fraction;
   c.telemetry_constrained = std::move(info);
@@ -182,8 +189,7 @@ nlohmann::json RunGeorefStage(const core::Workspace& ws, const GeorefOptions& o)
   if (o.use_track && fs::exists(ws.telemetry_json())) tracks = telemetry::ReadTelemetryTracks(ws.telemetry_json());
   const std::vector<telemetry::TelemetryTrack>* track_ptr = tracks ? &*tracks : nullptr;
 
-  const PairedTelemetry pairs =
-      PairTelemetry(index, image_model, track_ptr, o.min_cameras, ws.frames_json().string());
+  const PairedTelemetry pairs = PairTelemetry(index, image_model, track_ptr, o.min_cameras, ws.frames_json().string());
   const GeoPoint origin = o.origin ? *o.origin : TelemetryCentroid(pairs.fit());
   GeorefSolution image = EstimateGeoref(pairs, Points(image_model), origin, o.origin.has_value(), o);
   const RebuildTrigger trigger = WhyRebuild(image, o.constrain);
@@ -203,9 +209,10 @@ nlohmann::json RunGeorefStage(const core::Workspace& ws, const GeorefOptions& o)
   nlohmann::json j = g.ToJson();
   j["telemetry_constrained"] = choice.telemetry_constrained;
   if (!g.consistent_with_telemetry())
-    spdlog::warn("georef: only {:.0f}% of the telemetry fits the model's trajectory: the reconstruction's shape "
-                 "disagrees with the flight (too little parallax?); georeferenced products are not reliable",
-                 100 * g.fit_fraction);
+    spdlog::warn(
+        "georef: only {:.0f}% of the telemetry fits the model's trajectory: the reconstruction's shape "
+        "disagrees with the flight (too little parallax?); georeferenced products are not reliable",
+        100 * g.fit_fraction);
   LineOfSightOptions lo;
   lo.pointing_sigma_deg = o.attitude_sigma_deg;
   const LineOfSightCheck sight =
@@ -222,11 +229,11 @@ nlohmann::json RunGeorefStage(const core::Workspace& ws, const GeorefOptions& o)
   core::WriteJson(ws.georef_json(), j);
   size_t keyframe_inliers = 0;
   for (const auto& k : g.keyframes) keyframe_inliers += k.inlier;
-  spdlog::info("georef: fit on {} {} ({} inliers, σ {:.2f} m per axis, expected translation error {:.2f} m); "
-               "{} of {} keyframes inliers, scale {:.4f} → {}",
-               g.fit_pairs, g.use_track ? "telemetry packets" : "keyframes", g.fit_inliers, g.fit.sigma,
-               g.expected_translation_error_m, keyframe_inliers, g.keyframes.size(), g.sim.s,
-               ws.georef_json().string());
+  spdlog::info(
+      "georef: fit on {} {} ({} inliers, σ {:.2f} m per axis, expected translation error {:.2f} m); "
+      "{} of {} keyframes inliers, scale {:.4f} → {}",
+      g.fit_pairs, g.use_track ? "telemetry packets" : "keyframes", g.fit_inliers, g.fit.sigma,
+      g.expected_translation_error_m, keyframe_inliers, g.keyframes.size(), g.sim.s, ws.georef_json().string());
   return j;
 }
 

@@ -52,10 +52,10 @@ Georef ReadGeoref(const core::Workspace& workspace);
 // Why the image-only model is built again from the telemetry (GeorefOptions::constrain).
 enum class RebuildTrigger {
   kNone,
-  kForced,                          // --constrain always
-  kTrackDoesNotFit,                 // fit fraction below min_fit_fraction: the shape is wrong
-  kFrameCentresDisagree,            // with the model placed by the positions (its lines of sight are bent)
-  kStraightTrackWithFrameCentres,   // they fix the bend about the track that nothing else sees
+  kForced,                         // --constrain always
+  kTrackDoesNotFit,                // fit fraction below min_fit_fraction: the shape is wrong
+  kFrameCentresDisagree,           // with the model placed by the positions (its lines of sight are bent)
+  kStraightTrackWithFrameCentres,  // they fix the bend about the track that nothing else sees
 };
 const char* RebuildTriggerName(RebuildTrigger t);
 RebuildTrigger WhyRebuild(const GeorefSolution& image_model, GeorefOptions::Constrain constrain);

@@ -139,9 +139,8 @@ GeorefSolution EstimateGeoref(const PairedTelemetry& paired, const std::vector<E
     g.sim = g.attitude.sim;
   }
   if (o.use_frame_centres) {
-    g.frame_centres =
-        FuseGeorefFrameCentres({g.sim, src, dst, g.fit.inliers, sigma}, paired, g.attitude, frame,
-                               o.min_inlier_threshold);
+    g.frame_centres = FuseGeorefFrameCentres({g.sim, src, dst, g.fit.inliers, sigma}, paired, g.attitude, frame,
+                                             o.min_inlier_threshold);
     g.sim = g.frame_centres.sim;
   }
   g.inlier_bound_m = std::max(o.min_inlier_threshold, 3.5 * sigma);
@@ -153,8 +152,8 @@ GeorefSolution EstimateGeoref(const PairedTelemetry& paired, const std::vector<E
   g.autocorrelation = g.use_track ? ResidualAutocorrelation(pairs, fit_res, g.fit.inliers) : 0.0;
   g.effective_samples =
       std::max(1.0, static_cast<double>(g.fit_inliers) * (1 - g.autocorrelation) / (1 + g.autocorrelation));
-  g.expected_translation_error_m = g.frame_centres.used() ? g.frame_centres.TranslationError()
-                                                          : sigma * std::sqrt(3.0 / g.effective_samples);
+  g.expected_translation_error_m =
+      g.frame_centres.used() ? g.frame_centres.TranslationError() : sigma * std::sqrt(3.0 / g.effective_samples);
   g.accuracy = ExpectedAccuracy(g, dst);
   g.fit_fraction = pairs.empty() ? 0.0 : static_cast<double>(g.fit_inliers) / pairs.size();
   return g;
@@ -176,8 +175,8 @@ nlohmann::json GeorefSolution::ToJson() const {
   nlohmann::json per = nlohmann::json::array();
   for (const auto& k : keyframes) {
     const Eigen::Vector3d& d = k.enu_error;
-    per.push_back({{"name", k.name}, {"residual_m", d.norm()}, {"enu_error", {d.x(), d.y(), d.z()}},
-                   {"inlier", k.inlier}});
+    per.push_back(
+        {{"name", k.name}, {"residual_m", d.norm()}, {"enu_error", {d.x(), d.y(), d.z()}}, {"inlier", k.inlier}});
     if (k.inlier) res.push_back(d.norm());
   }
   j["residuals"] = {{"rms_m", core::Rms(res)},
@@ -201,8 +200,8 @@ nlohmann::json GeorefSolution::ToJson() const {
   j["fit_fraction"] = fit_fraction;
   const UtmZone zone = frame.utm_zone();
   j["utm"] = {{"zone", zone.zone}, {"north", zone.north}, {"epsg", zone.Epsg()}, {"name", zone.Name()}};
-  j["proj"] = {{"enu_from_wgs84", frame.EnuPipeline()}, {"utm_from_wgs84", frame.UtmPipeline()},
-               {"wgs84_crs", "EPSG:4979"}};
+  j["proj"] = {
+      {"enu_from_wgs84", frame.EnuPipeline()}, {"utm_from_wgs84", frame.UtmPipeline()}, {"wgs84_crs", "EPSG:4979"}};
   j["to_wgs84"] = "WGS84 (lon, lat, h) = inverse of proj.enu_from_wgs84 applied to X_enu";
   j["wkt_utm"] = UtmWkt(zone);
   return j;

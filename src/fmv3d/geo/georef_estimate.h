@@ -32,12 +32,12 @@
 namespace fmv3d::geo {
 
 struct GeorefOptions {
-  std::optional<GeoPoint> origin;  // default: the centroid of the telemetry positions used
-  int min_cameras = 3;              // with telemetry and registered
-  int max_samples = 2000;           // LMedS minimal samples
+  std::optional<GeoPoint> origin;      // default: the centroid of the telemetry positions used
+  int min_cameras = 3;                 // with telemetry and registered
+  int max_samples = 2000;              // LMedS minimal samples
   double min_inlier_threshold = 0.05;  // metres: floor of the 3σ inlier bound (noise-free telemetry)
   uint64_t seed = 42;
-  bool use_track = true;  // fit every packet of frames/telemetry.json (else the keyframes' telemetry only)
+  bool use_track = true;          // fit every packet of frames/telemetry.json (else the keyframes' telemetry only)
   bool use_frame_centres = true;  // fuse the frame centres at their slant range when they agree (frame_centres.h)
   // When the image model disagrees with the telemetry it is built again from it (geo/telemetry_model.h) and kept
   // when that mends what was wrong (geo/georef.h); kAlways keeps the rebuild, kNever never builds one.
@@ -59,8 +59,8 @@ struct GeorefSolution {
   GeoPoint origin;
   bool origin_given = false;  // GeorefOptions::origin, else the telemetry centroid
   VerticalDatum datum = VerticalDatum::kEllipsoid;
-  core::Sim3 sim;                  // sparse → ENU
-  geometry::SimilarityLMedS fit;   // the positions' robust fit (its inliers and σ)
+  core::Sim3 sim;                 // sparse → ENU
+  geometry::SimilarityLMedS fit;  // the positions' robust fit (its inliers and σ)
   RollSource roll_source = RollSource::kCameraPositions;
   AttitudeFusion attitude;
   GeorefFrameCentres frame_centres;

@@ -181,12 +181,12 @@ GeorefFrameCentres FuseGeorefFrameCentres(const PositionFit& fit, const PairedTe
   }
   const Eigen::Vector3d systematic(0, 0, floor_sd);
   out.elevation_steps = steps;
-  out.encoding = !coded ? ElevationEncoding::kExact : one_step ? ElevationEncoding::kOneCode
-                                                               : ElevationEncoding::kSeveralCodes;
+  out.encoding = !coded     ? ElevationEncoding::kExact
+                 : one_step ? ElevationEncoding::kOneCode
+                            : ElevationEncoding::kSeveralCodes;
   out.both_datums = heights.front().other.has_value();
   out.offset_prior_sd = coded ? PriorSd(OffsetPrior(heights.front(), out.undulation_sigma)) : 0.0;
-  FrameCentreFusion fusion =
-      FuseFrameCentres(R, positions, sights, min_inlier_threshold, systematic, vertical_prior);
+  FrameCentreFusion fusion = FuseFrameCentres(R, positions, sights, min_inlier_threshold, systematic, vertical_prior);
   if (fusion.inliers >= 3 && fusion.sigma_m > 0) {
     // Refine the rotation on positions, lines of sight and attitudes together (frame centres off the track fix
     // the roll a straight track leaves to the ground plane, and spread ones the whole rotation), each weighed by
@@ -216,11 +216,11 @@ GeorefFrameCentres FuseGeorefFrameCentres(const PositionFit& fit, const PairedTe
         info_pa += Eigen::Matrix3d::Identity() / std::pow(m.attitude_sigma_rad, 2) * m.attitudes.size();
       const Eigen::Vector3d turn = LogRotation(R2 * R.transpose());
       const double turn_chi2 = turn.dot(info_pa * turn);
-      spdlog::debug("georef: frame centres' own σ {:.3f} m (effective {:.3f}, under the positions' rotation {:.3f}); "
-                    "joint refinement turned the rotation {:.3f}° (χ² {:.1f}); frame centres χ² {:.1f} → {:.1f}",
-                    own.sigma, own.sigma_effective,
-                    fusion.sigma_m * std::sqrt(fusion.inliers / fusion.effective_samples), turn.norm() * 180 / M_PI,
-                    turn_chi2, fusion.chi2, again.chi2);
+      spdlog::debug(
+          "georef: frame centres' own σ {:.3f} m (effective {:.3f}, under the positions' rotation {:.3f}); "
+          "joint refinement turned the rotation {:.3f}° (χ² {:.1f}); frame centres χ² {:.1f} → {:.1f}",
+          own.sigma, own.sigma_effective, fusion.sigma_m * std::sqrt(fusion.inliers / fusion.effective_samples),
+          turn.norm() * 180 / M_PI, turn_chi2, fusion.chi2, again.chi2);
       out.turn = GeorefFrameCentres::Turn{turn.norm() * 180 / M_PI, turn_chi2, again.used && turn_chi2 <= 21.11};
       if (out.turn->applied) {
         out.sim.q = joint.q;
@@ -236,8 +236,8 @@ GeorefFrameCentres FuseGeorefFrameCentres(const PositionFit& fit, const PairedTe
     for (size_t i = 0; i < sights.size(); ++i)
       if (fusion.inlier_mask[i]) out.points.push_back(sights[i].frame_centre);
     if (!(out.sigma > 0)) out.sigma = fusion.sigma_m * std::sqrt(fusion.inliers / fusion.effective_samples);
-    spdlog::info("georef: {} frame centres at their slant range fused (σ {:.2f} m per axis, χ² {:.1f})",
-                 fusion.inliers, fusion.sigma_m, fusion.chi2);
+    spdlog::info("georef: {} frame centres at their slant range fused (σ {:.2f} m per axis, χ² {:.1f})", fusion.inliers,
+                 fusion.sigma_m, fusion.chi2);
   } else {
     spdlog::info("georef: frame centres not used: {} (σ {:.2f} m, χ² {:.1f})", fusion.Why(), fusion.sigma_m,
                  fusion.chi2);

@@ -36,21 +36,21 @@ enum class ElevationEncoding {
 };
 
 struct GeorefFrameCentres {
-  bool attempted = false;          // GeorefOptions::use_frame_centres
-  core::Sim3 sim;                  // the input similarity, refined when the frame centres were used
-  size_t sights = 0;               // keyframes with a frame centre, its height and a slant range
+  bool attempted = false;                   // GeorefOptions::use_frame_centres
+  core::Sim3 sim;                           // the input similarity, refined when the frame centres were used
+  size_t sights = 0;                        // keyframes with a frame centre, its height and a slant range
   std::optional<FrameCentreFusion> fusion;  // when the fusion ran
   size_t elevation_steps = 0;
   ElevationEncoding encoding = ElevationEncoding::kExact;
-  bool both_datums = false;        // the MSL and HAE codes' common interval narrowed the step
-  double offset_prior_sd = 0;      // m
+  bool both_datums = false;    // the MSL and HAE codes' common interval narrowed the step
+  double offset_prior_sd = 0;  // m
   std::optional<double> undulation;
   double undulation_sigma = 0;
   struct Turn {
     double deg = 0, chi2 = 0;
     bool applied = false;
   };
-  std::optional<Turn> turn;        // the joint refinement's rotation change
+  std::optional<Turn> turn;  // the joint refinement's rotation change
   // When used: what the expected accuracy weighs.
   std::vector<Eigen::Vector3d> points;  // the inlier frame centres (ENU)
   double sigma = 0;                     // their effective σ per axis

@@ -115,7 +115,8 @@ std::optional<double> FrameCentreHeightFromRange(const GeorefPair& p, const Loca
   const double horizontal = (f - s).head<2>().norm();
   if (!(horizontal < *p.slant_range)) return std::nullopt;
   // ENU z of the point at the slant range, back to a height in the pair's datum at the frame centre.
-  const Eigen::Vector3d at_range(f.x(), f.y(), s.z() - std::sqrt(*p.slant_range * *p.slant_range - horizontal * horizontal));
+  const Eigen::Vector3d at_range(f.x(), f.y(),
+                                 s.z() - std::sqrt(*p.slant_range * *p.slant_range - horizontal * horizontal));
   return frame.ToGeodetic(at_range).alt;
 }
 

@@ -36,11 +36,11 @@ struct GeorefPair {
 };
 
 struct PairedTelemetry {
-  std::vector<GeorefPair> keyframes;  // registered keyframes with a telemetry position
-  std::vector<GeorefPair> track;      // track packets; empty unless they outnumber the keyframes
-  size_t frames_with_position = 0;    // keyframes with a position, registered or not
-  bool track_file = false;            // a telemetry.json was given
-  size_t track_samples = 0, track_spanned = 0;  // its packets with a position, and those inside the model's span
+  std::vector<GeorefPair> keyframes;                // registered keyframes with a telemetry position
+  std::vector<GeorefPair> track;                    // track packets; empty unless they outnumber the keyframes
+  size_t frames_with_position = 0;                  // keyframes with a position, registered or not
+  bool track_file = false;                          // a telemetry.json was given
+  size_t track_samples = 0, track_spanned = 0;      // its packets with a position, and those inside the model's span
   VerticalDatum datum = VerticalDatum::kEllipsoid;  // of every pair's pos.alt
 
   bool use_track() const { return !track.empty(); }

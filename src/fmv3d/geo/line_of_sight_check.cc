@@ -81,25 +81,30 @@ void LineOfSightOptions::Check() const {
 
 std::string LineOfSightCheck::Why() const {
   switch (verdict) {
-    case Verdict::kNotChecked: return "no keyframe states a frame centre with its height and sees enough points";
+    case Verdict::kNotChecked:
+      return "no keyframe states a frame centre with its height and sees enough points";
     case Verdict::kAgrees:
-      return fmt::format("the model's ground at the image centres lies on the telemetry's lines of sight "
-                         "({:.2f}° median, σ {:.2f}°)", median_angle_deg, median_sigma_deg);
+      return fmt::format(
+          "the model's ground at the image centres lies on the telemetry's lines of sight "
+          "({:.2f}° median, σ {:.2f}°)",
+          median_angle_deg, median_sigma_deg);
     case Verdict::kDisagrees:
       if (median_chi <= max_chi_used)
-        return fmt::format("the model's ground at the image centres lies {:.0f} m below the telemetry's frame centres "
-                           "(median over {} keyframes, {:.1f}σ): {:.0f} m {} them along the lines of sight, at {:.1f} m "
-                           "against their {:.1f} m ({}); the line of sight meets the ground at or before its frame centre",
-                           median_below_m, keyframes.size(), median_height_chi, std::abs(median_beyond_m),
-                           median_beyond_m >= 0 ? "beyond" : "short of", median_ground_height_m,
-                           median_frame_centre_height_m, datum_name);
-      return fmt::format("the model's ground at the image centres is {:.2f}° (median over {} keyframes) off the "
-                         "telemetry's lines of sight, {:.1f}σ of the stated accuracy ({:.2f}°): on the ground "
-                         "{:.0f} m {} and {:.0f} m across the telemetry's frame centre, at {:.1f} m against the "
-                         "frame centre's {:.1f} m ({})",
-                         median_angle_deg, keyframes.size(), median_chi, median_sigma_deg, std::abs(median_along_m),
-                         median_along_m >= 0 ? "beyond" : "short of", median_across_m, median_ground_height_m,
-                         median_frame_centre_height_m, datum_name);
+        return fmt::format(
+            "the model's ground at the image centres lies {:.0f} m below the telemetry's frame centres "
+            "(median over {} keyframes, {:.1f}σ): {:.0f} m {} them along the lines of sight, at {:.1f} m "
+            "against their {:.1f} m ({}); the line of sight meets the ground at or before its frame centre",
+            median_below_m, keyframes.size(), median_height_chi, std::abs(median_beyond_m),
+            median_beyond_m >= 0 ? "beyond" : "short of", median_ground_height_m, median_frame_centre_height_m,
+            datum_name);
+      return fmt::format(
+          "the model's ground at the image centres is {:.2f}° (median over {} keyframes) off the "
+          "telemetry's lines of sight, {:.1f}σ of the stated accuracy ({:.2f}°): on the ground "
+          "{:.0f} m {} and {:.0f} m across the telemetry's frame centre, at {:.1f} m against the "
+          "frame centre's {:.1f} m ({})",
+          median_angle_deg, keyframes.size(), median_chi, median_sigma_deg, std::abs(median_along_m),
+          median_along_m >= 0 ? "beyond" : "short of", median_across_m, median_ground_height_m,
+          median_frame_centre_height_m, datum_name);
   }
   return "";
 }
@@ -120,8 +125,12 @@ nlohmann::json LineOfSightCheck::ToJson() const {
   j["median_frame_centre_height_m"] = median_frame_centre_height_m;
   nlohmann::json per = nlohmann::json::array();
   for (const auto& k : keyframes)
-    per.push_back({{"name", k.name}, {"angle_deg", k.angle_rad / kDeg}, {"sigma_deg", k.sigma_rad / kDeg},
-                   {"along_m", k.along_m}, {"across_m", k.across_m}, {"below_frame_centre_m", k.below_m},
+    per.push_back({{"name", k.name},
+                   {"angle_deg", k.angle_rad / kDeg},
+                   {"sigma_deg", k.sigma_rad / kDeg},
+                   {"along_m", k.along_m},
+                   {"across_m", k.across_m},
+                   {"below_frame_centre_m", k.below_m},
                    {"beyond_frame_centre_m", k.beyond_m},
                    {"model_ground_enu", {k.model_ground.x(), k.model_ground.y(), k.model_ground.z()}},
                    {"frame_centre_enu", {k.frame_centre.x(), k.frame_centre.y(), k.frame_centre.z()}}});
@@ -159,8 +168,8 @@ LineOfSightCheck CheckLinesOfSight(const core::Reconstruction& model, const std:
     // On the ground: the ray's point at G's height (when the ray descends), horizontal offsets from it.
     Eigen::Vector3d on_ray = c.frame_centre;
     if (sight.z() < -1e-9) on_ray = c.sensor + (c.model_ground.z() - c.sensor.z()) / sight.z() * sight;
-    const Eigen::Vector2d u = sight.head<2>().norm() > 0 ? Eigen::Vector2d(sight.head<2>().normalized())
-                                                          : Eigen::Vector2d::UnitY();
+    const Eigen::Vector2d u =
+        sight.head<2>().norm() > 0 ? Eigen::Vector2d(sight.head<2>().normalized()) : Eigen::Vector2d::UnitY();
     const Eigen::Vector2d d = (c.model_ground - on_ray).head<2>();
     c.along_m = d.dot(u);
     c.across_m = d.x() * u.y() - d.y() * u.x();

@@ -92,7 +92,8 @@ void WriteCog(GDALDataset* mem, const fs::path& path) {
 }  // namespace
 
 void WriteHeightGeoTiff(const fs::path& path, const GridSpec& g, const cv::Mat& h) {
-  if (h.type() != CV_32F || h.rows != g.height || h.cols != g.width) throw Error(path.string() + ": raster size mismatch");
+  if (h.type() != CV_32F || h.rows != g.height || h.cols != g.width)
+    throw Error(path.string() + ": raster size mismatch");
   cv::Mat out = h.clone();
   out.forEach<float>([](float& v, const int*) {
     if (!std::isfinite(v)) v = kNoData;
@@ -125,9 +126,12 @@ void WriteRgbaGeoTiff(const fs::path& path, const GridSpec& g, const cv::Mat& bg
     for (int b = 0; b < 4; ++b) {
       const cv::Mat p = planes[b].isContinuous() ? planes[b] : planes[b].clone();
       GDALRasterBand* band = ds->GetRasterBand(b + 1);
-      band->SetColorInterpretation(b == 0 ? GCI_RedBand : b == 1 ? GCI_GreenBand : b == 2 ? GCI_BlueBand : GCI_AlphaBand);
-      if (band->RasterIO(GF_Write, 0, 0, g.width, g.height, const_cast<uint8_t*>(p.ptr<uint8_t>()), g.width,
-                         g.height, GDT_Byte, 0, 0) != CE_None)
+      band->SetColorInterpretation(b == 0   ? GCI_RedBand
+                                   : b == 1 ? GCI_GreenBand
+                                   : b == 2 ? GCI_BlueBand
+                                            : GCI_AlphaBand);
+      if (band->RasterIO(GF_Write, 0, 0, g.width, g.height, const_cast<uint8_t*>(p.ptr<uint8_t>()), g.width, g.height,
+                         GDT_Byte, 0, 0) != CE_None)
         throw Error(path.string() + ": GDAL write failed: " + CPLGetLastErrorMsg());
     }
     WriteCog(ds, tmp);
@@ -153,14 +157,15 @@ cv::Mat ReadHeightGeoTiff(const fs::path& path, GridSpec* grid) {
   if (!srs || (zone = srs->GetUTMZone(&north)) == 0) throw Error(path.string() + ": not in a UTM CRS");
   g.zone = {zone, north != 0};
   cv::Mat h(g.height, g.width, CV_32F);
-  if (ds->GetRasterBand(1)->RasterIO(GF_Read, 0, 0, g.width, g.height, h.ptr<float>(), g.width, g.height,
-                                     GDT_Float32, 0, 0) != CE_None)
+  if (ds->GetRasterBand(1)->RasterIO(GF_Read, 0, 0, g.width, g.height, h.ptr<float>(), g.width, g.height, GDT_Float32,
+                                     0, 0) != CE_None)
     throw Error(path.string() + ": GDAL read failed: " + CPLGetLastErrorMsg());
   int has_nodata = 0;
   const double nd = ds->GetRasterBand(1)->GetNoDataValue(&has_nodata);
-  if (has_nodata) h.forEach<float>([nd](float& v, const int*) {
-    if (v == static_cast<float>(nd)) v = std::numeric_limits<float>::quiet_NaN();
-  });
+  if (has_nodata)
+    h.forEach<float>([nd](float& v, const int*) {
+      if (v == static_cast<float>(nd)) v = std::numeric_limits<float>::quiet_NaN();
+    });
   if (grid) *grid = g;
   return h;
 }

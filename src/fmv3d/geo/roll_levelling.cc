@@ -105,8 +105,9 @@ RollLevelling LevelRollFromGround(const core::Sim3& sim, const std::vector<Eigen
   for (const auto& c : src) model_above += c;
   const auto normal = GroundNormal(model_points, model_above / static_cast<double>(src.size()));
   if (!normal)
-    throw Error("georef: the camera positions lie nearly on a line and the model has too few points to find "
-                "the ground: the rotation about the track is unknown (fly a curve or an orbit)");
+    throw Error(
+        "georef: the camera positions lie nearly on a line and the model has too few points to find "
+        "the ground: the rotation about the track is unknown (fly a curve or an orbit)");
   out.sim = LevelAboutAxis(sim, eig.eigenvectors().col(2), mean, *normal);
   out.source = RollSource::kGroundPlane;
   return out;

@@ -107,9 +107,9 @@ TelemetryCameras PlaceCameras(const std::vector<GeorefPair>& keyframes, const Lo
     for (int64_t pid : rec->images.at(id).point3d_ids) {
       if (pid == core::kNoPoint3D) continue;
       auto& track = rec->points.at(static_cast<uint64_t>(pid)).track;
-      track.erase(std::remove_if(track.begin(), track.end(),
-                                 [id](const core::TrackElement& e) { return e.image_id == id; }),
-                  track.end());
+      track.erase(
+          std::remove_if(track.begin(), track.end(), [id](const core::TrackElement& e) { return e.image_id == id; }),
+          track.end());
     }
     rec->images.erase(id);
   }
@@ -124,8 +124,11 @@ nlohmann::json UseTelemetryCameras(const io::FramesIndex& index, core::Reconstru
   for (const auto& cp : index.cameras) {
     const auto it = rec->cameras.find(cp.camera.id);
     if (it == rec->cameras.end() || cp.prior_source != "telemetry-hfov") continue;
-    focal.push_back({{"camera", cp.camera.id}, {"f_image_model", it->second.f}, {"f", cp.camera.f},
-                     {"k1_image_model", it->second.k1}, {"k2_image_model", it->second.k2}});
+    focal.push_back({{"camera", cp.camera.id},
+                     {"f_image_model", it->second.f},
+                     {"f", cp.camera.f},
+                     {"k1_image_model", it->second.k1},
+                     {"k2_image_model", it->second.k2}});
     const uint32_t id = it->second.id;
     it->second = cp.camera;
     it->second.id = id;
@@ -186,8 +189,7 @@ void AdjustWithSightPriors(const std::map<std::string, std::pair<Eigen::Vector3d
     std::vector<double> norms;
     for (const auto& [id, fr] : config->sight_priors) {
       const core::Pose& pose = rec->images.at(id).pose;
-      norms.push_back(
-          (pose.Centre() + fr.second * (pose.q.conjugate() * Eigen::Vector3d::UnitZ()) - fr.first).norm());
+      norms.push_back((pose.Centre() + fr.second * (pose.q.conjugate() * Eigen::Vector3d::UnitZ()) - fr.first).norm());
     }
     const double sigma_fc = std::max(0.005, core::Median(norms) / 1.538);  // per axis, from the 3D median (χ₃)
     out->frame_centre_prior_sigma_m.push_back(sigma_fc);
@@ -259,10 +261,11 @@ TelemetryModel BuildTelemetryModel(const io::FramesIndex& index, const core::Rec
   for (const auto& [id, c] : cams.centres) prior_sq += (rec.images.at(id).pose.Centre() - c).squaredNorm();
   out.reprojection_rms_px = last.final_rms_px;
   out.centre_rms_from_telemetry_m = std::sqrt(prior_sq / cams.centres.size());
-  spdlog::info("georef: telemetry-initialised model: {} keyframes, {} points, reprojection {:.2f} → {:.3f} px RMS, "
-               "centres {:.2f} m RMS from the telemetry",
-               out.keyframes, rec.points.size(), out.mean_reprojection_px_start, out.reprojection_rms_px,
-               out.centre_rms_from_telemetry_m);
+  spdlog::info(
+      "georef: telemetry-initialised model: {} keyframes, {} points, reprojection {:.2f} → {:.3f} px RMS, "
+      "centres {:.2f} m RMS from the telemetry",
+      out.keyframes, rec.points.size(), out.mean_reprojection_px_start, out.reprojection_rms_px,
+      out.centre_rms_from_telemetry_m);
   return out;
 }
 

@@ -32,7 +32,7 @@ struct TelemetryModelOptions {
 struct TelemetryModel {
   core::Reconstruction model;  // ENU of the frame given
   size_t keyframes = 0, frames_left_out = 0;
-  std::optional<double> ground_z_start;  // m, ENU
+  std::optional<double> ground_z_start;                           // m, ENU
   nlohmann::json focal_from_telemetry = nlohmann::json::array();  // per camera: the image model's f, k and the prior's
   double mean_reprojection_px_start = 0, reprojection_rms_px = 0;
   size_t observations_dropped = 0, frame_centre_priors = 0;

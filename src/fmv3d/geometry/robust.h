@@ -30,9 +30,9 @@ struct RobustOptions {
     kLMedS,   // smallest median residual
   };
   Score score = Score::kRansac;
-  double max_residual = 0;     // kRansac's inlier bound; must be > 0 for it
-  int max_iterations = 1000;   // random samples drawn
-  size_t exhaustive_up_to = 0;  // every k-subset when NumData() ≤ this (kSampleSize 3: 14 data → 364 subsets)
+  double max_residual = 0;            // kRansac's inlier bound; must be > 0 for it
+  int max_iterations = 1000;          // random samples drawn
+  size_t exhaustive_up_to = 0;        // every k-subset when NumData() ≤ this (kSampleSize 3: 14 data → 364 subsets)
   bool stop_when_all_inliers = true;  // kRansac: a sample that explains every datum ends the search
   uint64_t seed = 42;
   void Check() const {

@@ -149,8 +149,7 @@ void SimilarityRansacOptions::Check() const {
 }
 
 int EstimateSimilarityRansac(const std::vector<Eigen::Vector3d>& src, const std::vector<Eigen::Vector3d>& dst,
-                             const SimilarityRansacOptions& options, core::Sim3* sim,
-                             std::vector<char>* inlier_mask) {
+                             const SimilarityRansacOptions& options, core::Sim3* sim, std::vector<char>* inlier_mask) {
   options.Check();
   const size_t n = src.size();
   if (n < 3 || dst.size() != n) return 0;

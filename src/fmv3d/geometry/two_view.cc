@@ -256,8 +256,7 @@ bool RefineFundamental(const Points2& x1, const Points2& x2, Eigen::Matrix3d* F)
   return true;
 }
 
-bool RefineRelativePose(const Points2& n1, const Points2& n2, double focal, Eigen::Matrix3d* R,
-                        Eigen::Vector3d* t) {
+bool RefineRelativePose(const Points2& n1, const Points2& n2, double focal, Eigen::Matrix3d* R, Eigen::Vector3d* t) {
   if (n1.size() < 6 || n1.size() != n2.size() || !(t->norm() > 0)) return false;
   Eigen::Quaterniond q(*R);
   double pq[4] = {q.x(), q.y(), q.z(), q.w()};
@@ -265,8 +264,7 @@ bool RefineRelativePose(const Points2& n1, const Points2& n2, double focal, Eige
   double pt[3] = {tn.x(), tn.y(), tn.z()};
   ceres::Problem problem;
   for (size_t i = 0; i < n1.size(); ++i) {
-    auto* cost =
-        new ceres::AutoDiffCostFunction<SampsonECost, 1, 4, 3>(new SampsonECost{n1[i], n2[i], focal});
+    auto* cost = new ceres::AutoDiffCostFunction<SampsonECost, 1, 4, 3>(new SampsonECost{n1[i], n2[i], focal});
     // Soft outlier down-weighting: the inliers come from a threshold of a few pixels.
     problem.AddResidualBlock(cost, new ceres::CauchyLoss(2.0), pq, pt);
   }
@@ -317,8 +315,7 @@ TwoViewResult VerifyTwoView(const Points2& x1, const Points2& x2, const core::Ca
     cv::Mat mask;
     cv::Mat Fcv;
     try {
-      Fcv = cv::findFundamentalMat(p1, p2, cv::USAC_FM_8PTS, thr, options.confidence, options.max_iterations,
-                                   mask);
+      Fcv = cv::findFundamentalMat(p1, p2, cv::USAC_FM_8PTS, thr, options.confidence, options.max_iterations, mask);
     } catch (const cv::Exception&) {
       Fcv.release();
     }
@@ -400,8 +397,7 @@ TwoViewResult VerifyTwoView(const Points2& x1, const Points2& x2, const core::Ca
     }
     if (Ecv.rows == 3 && Ecv.cols == 3 && cv::countNonZero(mask) >= 6) {
       cv::Mat Rcv, tcv, pose_mask = mask.clone();
-      const int in_front =
-          cv::recoverPose(Ecv, c1, c2, cv::Mat::eye(3, 3, CV_64F), Rcv, tcv, pose_mask);
+      const int in_front = cv::recoverPose(Ecv, c1, c2, cv::Mat::eye(3, 3, CV_64F), Rcv, tcv, pose_mask);
       Eigen::Matrix3d R;
       Eigen::Vector3d t;
       cv::cv2eigen(Rcv, R);

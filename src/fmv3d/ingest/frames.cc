@@ -128,8 +128,10 @@ void FocalFromTelemetryHfov(const io::FramesIndex& index, uint32_t camera_id, co
   std::sort(hfov.begin(), hfov.end());
   const double median = hfov[hfov.size() / 2];
   if (hfov.back() > 1.05 * hfov.front())
-    spdlog::warn("camera {}: the telemetry HFOV changes from {:.3f}° to {:.3f}° (zoom); the focal prior uses the "
-                 "median, {:.3f}°", camera_id, hfov.front(), hfov.back(), median);
+    spdlog::warn(
+        "camera {}: the telemetry HFOV changes from {:.3f}° to {:.3f}° (zoom); the focal prior uses the "
+        "median, {:.3f}°",
+        camera_id, hfov.front(), hfov.back(), median);
   cam->f = 0.5 * cam->width / std::tan(0.5 * median * M_PI / 180) / cam->aspect;  // the horizontal focal is f · aspect
   *source = "telemetry-hfov";
 }
@@ -185,7 +187,7 @@ io::FramesIndex IngestFrames(const std::vector<fs::path>& inputs, const IngestOp
   std::map<ImageCameraKey, uint32_t> image_cameras;
   NameRegistry names;
   std::vector<telemetry::TelemetryTrack> tracks;  // every video's whole telemetry → frames/telemetry.json
-  telemetry::FixCounts photo_fixes;                // photos with a position: kept / dropped
+  telemetry::FixCounts photo_fixes;               // photos with a position: kept / dropped
 
   auto add_camera = [&](CameraGroup g) {
     io::CameraPrior c;
@@ -388,7 +390,8 @@ io::FramesIndex IngestFrames(const std::vector<fs::path>& inputs, const IngestOp
   // Intrinsics priors.
   for (size_t i = 0; i < index.cameras.size(); ++i) {
     std::string source = "guess";
-    core::Camera cam = options.prior ? options.prior(groups[i], &source) : GuessPrior(groups[i].width, groups[i].height);
+    core::Camera cam =
+        options.prior ? options.prior(groups[i], &source) : GuessPrior(groups[i].width, groups[i].height);
     cam.id = index.cameras[i].camera.id;
     if (cam.width != groups[i].width || cam.height != groups[i].height)
       throw Error(groups[i].source + ": intrinsics prior has the wrong image size");

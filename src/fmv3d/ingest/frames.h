@@ -36,7 +36,7 @@ struct CameraGroup {
   std::string source;  // video file, or the folder/file of the first image
   bool is_video = false;
   double pixel_aspect = 1;  // video sample aspect ratio (pixel width / height); applied after the prior
-  io::ExifInfo exif;       // of the first image (empty for videos)
+  io::ExifInfo exif;        // of the first image (empty for videos)
 };
 
 // Returns the prior intrinsics (size must be the group's) and where they came from ("guess",
@@ -50,7 +50,7 @@ struct IngestOptions {
   std::filesystem::path workspace;  // frames go to workspace/frames/
   int max_frames = 0;               // 0 = no limit; else at most this many frames in total, chosen evenly
   KeyframeOptions keyframes;
-  IntrinsicsPriorFn prior;          // empty: GuessPrior for every camera
+  IntrinsicsPriorFn prior;                     // empty: GuessPrior for every camera
   telemetry::PhotoTelemetryOptions telemetry;  // photo altitude datum; fix screening for photos and GPMF
   void Check() const;
 };

@@ -24,8 +24,9 @@ cv::Mat Downscale(const cv::Mat& grey, int max_side) {
   if (side <= max_side) return grey;
   const double s = static_cast<double>(max_side) / side;
   cv::Mat out;
-  cv::resize(grey, out, cv::Size(std::max(1, int(std::lround(grey.cols * s))), std::max(1, int(std::lround(grey.rows * s)))),
-             0, 0, cv::INTER_AREA);
+  cv::resize(grey, out,
+             cv::Size(std::max(1, int(std::lround(grey.cols * s))), std::max(1, int(std::lround(grey.rows * s)))), 0, 0,
+             cv::INTER_AREA);
   return out;
 }
 

@@ -24,15 +24,15 @@
 namespace fmv3d::ingest {
 
 struct KeyframeOptions {
-  int min_gap = 0;            // frames; 0 = auto: 0.4 s of video (at least 1)
-  int max_gap = 0;            // frames; 0 = auto: 1 s of video (at least min_gap)
-  double min_motion = 0.05;   // median track displacement, as a fraction of the image's larger side
-  double min_overlap = 0.6;   // fraction of the keyframe's tracks still alive
-  double blur_ratio = 0.6;    // blurred when sharpness < blur_ratio × running median
-  int blur_window = 15;       // frames in the running median
-  int track_size = 480;       // larger side of the KLT working image, pixels
+  int min_gap = 0;           // frames; 0 = auto: 0.4 s of video (at least 1)
+  int max_gap = 0;           // frames; 0 = auto: 1 s of video (at least min_gap)
+  double min_motion = 0.05;  // median track displacement, as a fraction of the image's larger side
+  double min_overlap = 0.6;  // fraction of the keyframe's tracks still alive
+  double blur_ratio = 0.6;   // blurred when sharpness < blur_ratio × running median
+  int blur_window = 15;      // frames in the running median
+  int track_size = 480;      // larger side of the KLT working image, pixels
   int max_features = 120;
-  bool all_frames = false;    // keep every decoded frame (no selection, no blur rejection)
+  bool all_frames = false;  // keep every decoded frame (no selection, no blur rejection)
   // Throws fmv3d::Error on nonsensical values.
   void Check() const;
 };
@@ -71,7 +71,7 @@ class KeyframeSelector {
   std::vector<double> sharpness_history_;  // ring of the last blur_window values
   size_t history_pos_ = 0;
 
-  cv::Mat work_, prev_work_;  // grey working images (current, previous)
+  cv::Mat work_, prev_work_;             // grey working images (current, previous)
   std::vector<cv::Mat> pyr_, prev_pyr_;  // their KLT pyramids
   std::vector<cv::Point2f> key_pts_, pts_;
   size_t initial_tracks_ = 0;

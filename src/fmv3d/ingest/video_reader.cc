@@ -116,8 +116,8 @@ struct VideoReader::Impl {
     const AVRational sar = av_guess_sample_aspect_ratio(fmt, st, nullptr);
     if (sar.num > 0 && sar.den > 0) info.pixel_aspect = av_q2d(sar);
     if (info.pixel_aspect < 0.25 || info.pixel_aspect > 4) info.pixel_aspect = 1;  // nonsense metadata
-    info.interlaced = st->codecpar->field_order != AV_FIELD_PROGRESSIVE &&
-                      st->codecpar->field_order != AV_FIELD_UNKNOWN;
+    info.interlaced =
+        st->codecpar->field_order != AV_FIELD_PROGRESSIVE && st->codecpar->field_order != AV_FIELD_UNKNOWN;
     info.container = fmt->iformat ? fmt->iformat->name : "";
     const AVRational fr = st->avg_frame_rate.num > 0 ? st->avg_frame_rate : st->r_frame_rate;
     info.fps = fr.num > 0 && fr.den > 0 ? av_q2d(fr) : 0;
@@ -130,8 +130,8 @@ struct VideoReader::Impl {
       // MPEG-TS durations are estimated from the bit rate, so they never prove truncation.
       duration_is_video = fmt->nb_streams == 1 && info.container != "mpegts";
     }
-    info.frame_count_hint = st->nb_frames > 0 ? st->nb_frames
-                                              : static_cast<int64_t>(std::llround(info.duration * info.fps));
+    info.frame_count_hint =
+        st->nb_frames > 0 ? st->nb_frames : static_cast<int64_t>(std::llround(info.duration * info.fps));
     if (fmt->start_time != AV_NOPTS_VALUE)
       start_seconds = fmt->start_time / static_cast<double>(AV_TIME_BASE);
     else if (st->start_time != AV_NOPTS_VALUE)
@@ -241,8 +241,8 @@ struct VideoReader::Impl {
         av_frame_unref(frame);
         if (next_index == 0 && warning.empty()) continue;  // leading broken references (mid-GOP start)
         if (warning.empty())
-          warning = "damaged picture after frame " + std::to_string(next_index) +
-                    "; keeping the frames decoded before it";
+          warning =
+              "damaged picture after frame " + std::to_string(next_index) + "; keeping the frames decoded before it";
         done = true;
         break;
       }
@@ -267,9 +267,9 @@ struct VideoReader::Impl {
   }
 
   void Convert(VideoFrame* out) {
-    sws = sws_getCachedContext(sws, frame->width, frame->height, static_cast<AVPixelFormat>(frame->format),
-                               info.width, info.height, AV_PIX_FMT_BGR24, SWS_BICUBIC | SWS_ACCURATE_RND,
-                               nullptr, nullptr, nullptr);
+    sws =
+        sws_getCachedContext(sws, frame->width, frame->height, static_cast<AVPixelFormat>(frame->format), info.width,
+                             info.height, AV_PIX_FMT_BGR24, SWS_BICUBIC | SWS_ACCURATE_RND, nullptr, nullptr, nullptr);
     if (!sws) Fail("cannot convert pixel format " + std::to_string(frame->format));
     out->image.create(info.height, info.width, CV_8UC3);
     uint8_t* dst[4] = {out->image.data, nullptr, nullptr, nullptr};

@@ -21,19 +21,19 @@ namespace fmv3d::ingest {
 
 struct VideoInfo {
   int width = 0, height = 0;
-  double pixel_aspect = 1;        // sample aspect ratio (pixel width / pixel height), 1 when unknown
-  bool interlaced = false;        // the stream declares interlaced fields (frames are returned as decoded)
-  double fps = 0;                 // average frame rate (0 when unknown)
-  double duration = 0;            // seconds (0 when unknown)
-  int64_t frame_count_hint = 0;   // from the container or duration × fps; 0 when unknown; not exact
-  std::string codec;              // e.g. "h264"
-  std::string container;          // e.g. "mpegts"
+  double pixel_aspect = 1;       // sample aspect ratio (pixel width / pixel height), 1 when unknown
+  bool interlaced = false;       // the stream declares interlaced fields (frames are returned as decoded)
+  double fps = 0;                // average frame rate (0 when unknown)
+  double duration = 0;           // seconds (0 when unknown)
+  int64_t frame_count_hint = 0;  // from the container or duration × fps; 0 when unknown; not exact
+  std::string codec;             // e.g. "h264"
+  std::string container;         // e.g. "mpegts"
 };
 
 struct VideoFrame {
-  cv::Mat image;           // 8-bit BGR, width × height of the stream
-  int64_t index = 0;       // 0-based, in output order
-  double timestamp = 0;    // seconds from the container start
+  cv::Mat image;         // 8-bit BGR, width × height of the stream
+  int64_t index = 0;     // 0-based, in output order
+  double timestamp = 0;  // seconds from the container start
 };
 
 class VideoReader {

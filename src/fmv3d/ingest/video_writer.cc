@@ -107,8 +107,8 @@ VideoWriter::VideoWriter(const fs::path& path, int width, int height, const Vide
   m.height = height;
   if (width <= 0 || height <= 0) throw Error(path.string() + ": video size must be positive");
   if (width % 2 || height % 2)
-    throw Error(path.string() + ": video frames need an even width and height (yuv420p), got " +
-                std::to_string(width) + "x" + std::to_string(height));
+    throw Error(path.string() + ": video frames need an even width and height (yuv420p), got " + std::to_string(width) +
+                "x" + std::to_string(height));
   // FFmpeg and x264 chatter (e.g. "using cpu capabilities") would pollute the CLI's stderr.
   if (av_log_get_level() > AV_LOG_ERROR) av_log_set_level(AV_LOG_ERROR);
   int ret = avformat_alloc_output_context2(&m.fmt, nullptr, nullptr, path.string().c_str());

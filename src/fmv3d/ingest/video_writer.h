@@ -17,10 +17,10 @@ namespace fmv3d::ingest {
 
 struct VideoWriterOptions {
   double fps = 25;
-  int crf = 18;         // x264 quality (lower = better); other codecs get a matching bit rate
-  int gop = 25;         // key-frame interval, frames
+  int crf = 18;  // x264 quality (lower = better); other codecs get a matching bit rate
+  int gop = 25;  // key-frame interval, frames
   std::string preset = "medium";
-  bool klv_stream = false;  // add a KLV data stream, packets stamped with frame PTS (MPEG-TS only)
+  bool klv_stream = false;   // add a KLV data stream, packets stamped with frame PTS (MPEG-TS only)
   bool gpmf_stream = false;  // add a GPMF 'gpmd' data track (MP4/MOV only)
   void Check() const;
 };

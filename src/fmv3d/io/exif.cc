@@ -18,9 +18,12 @@ class TiffReader {
   TiffReader(const unsigned char* d, size_t n) : d_(d), n_(n) {}
   bool Init() {
     if (n_ < 8) return false;
-    if (d_[0] == 'I' && d_[1] == 'I') le_ = true;
-    else if (d_[0] == 'M' && d_[1] == 'M') le_ = false;
-    else return false;
+    if (d_[0] == 'I' && d_[1] == 'I')
+      le_ = true;
+    else if (d_[0] == 'M' && d_[1] == 'M')
+      le_ = false;
+    else
+      return false;
     return U16(2) == 42;
   }
   uint32_t FirstIfd() const { return U32(4); }
@@ -71,12 +74,18 @@ class TiffReader {
     if (i >= e.count) return std::nullopt;
     const size_t o = e.value_offset + size_t(i) * TypeSize(e.type);
     switch (e.type) {
-      case 1: return d_[o];
-      case 3: return U16(o);
-      case 4: return U32(o);
-      case 6: return static_cast<int8_t>(d_[o]);
-      case 8: return static_cast<int16_t>(U16(o));
-      case 9: return static_cast<int32_t>(U32(o));
+      case 1:
+        return d_[o];
+      case 3:
+        return U16(o);
+      case 4:
+        return U32(o);
+      case 6:
+        return static_cast<int8_t>(d_[o]);
+      case 8:
+        return static_cast<int16_t>(U16(o));
+      case 9:
+        return static_cast<int32_t>(U32(o));
       case 5: {
         const uint32_t num = U32(o), den = U32(o + 4);
         if (den == 0) return std::nullopt;
@@ -87,7 +96,8 @@ class TiffReader {
         if (den == 0) return std::nullopt;
         return double(num) / den;
       }
-      default: return std::nullopt;
+      default:
+        return std::nullopt;
     }
   }
   double NumberOr0(const Entry& e) const { return Number(e).value_or(0); }
@@ -147,22 +157,47 @@ void ReadGpsIfd(const TiffReader& r, uint32_t off, ExifGps* gps) {
   };
   r.ForEach(off, [&](const TiffReader::Entry& e) {
     switch (e.tag) {
-      case 0x0001: lat_ref = r.Ascii(e).empty() ? 0 : r.Ascii(e)[0]; break;
-      case 0x0002: lat = dms(e); break;
-      case 0x0003: lon_ref = r.Ascii(e).empty() ? 0 : r.Ascii(e)[0]; break;
-      case 0x0004: lon = dms(e); break;
-      case 0x0005: alt_ref = ToInt<int>(r.NumberOr0(e)); break;
-      case 0x0006: alt = r.Number(e); break;
+      case 0x0001:
+        lat_ref = r.Ascii(e).empty() ? 0 : r.Ascii(e)[0];
+        break;
+      case 0x0002:
+        lat = dms(e);
+        break;
+      case 0x0003:
+        lon_ref = r.Ascii(e).empty() ? 0 : r.Ascii(e)[0];
+        break;
+      case 0x0004:
+        lon = dms(e);
+        break;
+      case 0x0005:
+        alt_ref = ToInt<int>(r.NumberOr0(e));
+        break;
+      case 0x0006:
+        alt = r.Number(e);
+        break;
       case 0x0007:
         for (uint32_t i = 0; i < 3; ++i) hms[i] = r.Number(e, i);
         break;
-      case 0x0009: gps->status = r.Ascii(e).empty() ? 0 : r.Ascii(e)[0]; break;
-      case 0x000A: gps->measure_mode = r.Ascii(e).empty() ? 0 : r.Ascii(e)[0]; break;
-      case 0x000B: gps->dop = r.Number(e); break;
-      case 0x0012: gps->map_datum = r.Ascii(e); break;
-      case 0x001D: date = r.Ascii(e); break;
-      case 0x001F: gps->horizontal_error = r.Number(e); break;
-      default: break;
+      case 0x0009:
+        gps->status = r.Ascii(e).empty() ? 0 : r.Ascii(e)[0];
+        break;
+      case 0x000A:
+        gps->measure_mode = r.Ascii(e).empty() ? 0 : r.Ascii(e)[0];
+        break;
+      case 0x000B:
+        gps->dop = r.Number(e);
+        break;
+      case 0x0012:
+        gps->map_datum = r.Ascii(e);
+        break;
+      case 0x001D:
+        date = r.Ascii(e);
+        break;
+      case 0x001F:
+        gps->horizontal_error = r.Number(e);
+        break;
+      default:
+        break;
     }
   });
   if (lat) gps->latitude = (lat_ref == 'S' || lat_ref == 's') ? -*lat : *lat;
@@ -188,7 +223,7 @@ ExifInfo ParseTiffExif(const unsigned char* data, size_t size) {
     if (e.tag == 0x0110) info.model = r.Ascii(e);
     if (e.tag == 0x8769) exif_ifd = ToInt<uint32_t>(r.NumberOr0(e));
     if (e.tag == 0x8825) gps_ifd = ToInt<uint32_t>(r.NumberOr0(e));
-    if (e.tag == 0x920A) info.focal_mm = r.NumberOr0(e);  // TIFF/EP puts it in IFD0
+    if (e.tag == 0x920A) info.focal_mm = r.NumberOr0(e);                        // TIFF/EP puts it in IFD0
     if (e.tag == 0x02BC && (e.type == 1 || e.type == 7) && e.count <= kMaxXmp)  // XMLPacket (TIFF files)
       info.xmp.assign(reinterpret_cast<const char*>(data + e.value_offset), e.count);
   });

@@ -30,14 +30,14 @@ struct ExifGps {
 };
 
 struct ExifInfo {
-  std::string make, model;      // trimmed; empty when absent
-  double focal_mm = 0;          // FocalLength; 0 when absent
-  double focal_35mm = 0;        // FocalLengthIn35mmFilm; 0 when absent
-  double focal_plane_x_res = 0; // FocalPlaneXResolution in pixels per mm (unit converted); 0 when absent
-  int pixel_width = 0;          // PixelXDimension (the width the focal-plane resolution refers to)
+  std::string make, model;        // trimmed; empty when absent
+  double focal_mm = 0;            // FocalLength; 0 when absent
+  double focal_35mm = 0;          // FocalLengthIn35mmFilm; 0 when absent
+  double focal_plane_x_res = 0;   // FocalPlaneXResolution in pixels per mm (unit converted); 0 when absent
+  int pixel_width = 0;            // PixelXDimension (the width the focal-plane resolution refers to)
   std::string datetime_original;  // DateTimeOriginal "YYYY:MM:DD HH:MM:SS" (local time of the camera)
   ExifGps gps;
-  std::string xmp;              // the XMP packet (JPEG APP1 "http://ns.adobe.com/xap/1.0/", TIFF tag 700)
+  std::string xmp;  // the XMP packet (JPEG APP1 "http://ns.adobe.com/xap/1.0/", TIFF tag 700)
   // True when none of the camera fields (make, model, focal) is present.
   bool empty() const { return make.empty() && model.empty() && focal_mm == 0 && focal_35mm == 0; }
 };

@@ -51,7 +51,8 @@ Field Rationals(uint16_t tag, const std::vector<std::pair<uint32_t, uint32_t>>& 
   return f;
 }
 std::pair<uint32_t, uint32_t> Rational(double v, uint32_t den) {
-  if (!std::isfinite(v) || v < 0 || v * den > 4294967295.0) throw Error("EXIF: value " + std::to_string(v) + " cannot be written as a rational");
+  if (!std::isfinite(v) || v < 0 || v * den > 4294967295.0)
+    throw Error("EXIF: value " + std::to_string(v) + " cannot be written as a rational");
   return {static_cast<uint32_t>(std::llround(v * den)), den};
 }
 // |angle| as degrees, minutes, seconds (1e-4 s).
@@ -106,10 +107,12 @@ std::string FormatDate(double utc_seconds, bool date) {
   const unsigned d = doy - (153 * mp + 2) / 5 + 1, m = mp < 10 ? mp + 3 : mp - 9;
   const int64_t y = static_cast<int64_t>(yoe) + era * 400 + (m <= 2);
   char buf[32];
-  if (date) std::snprintf(buf, sizeof buf, "%04lld:%02u:%02u", static_cast<long long>(y), m, d);
-  else std::snprintf(buf, sizeof buf, "%04lld:%02u:%02u %02lld:%02lld:%02lld", static_cast<long long>(y), m, d,
-                     static_cast<long long>(secs % 86400 / 3600), static_cast<long long>(secs % 3600 / 60),
-                     static_cast<long long>(secs % 60));
+  if (date)
+    std::snprintf(buf, sizeof buf, "%04lld:%02u:%02u", static_cast<long long>(y), m, d);
+  else
+    std::snprintf(buf, sizeof buf, "%04lld:%02u:%02u %02lld:%02lld:%02lld", static_cast<long long>(y), m, d,
+                  static_cast<long long>(secs % 86400 / 3600), static_cast<long long>(secs % 3600 / 60),
+                  static_cast<long long>(secs % 60));
   return buf;
 }
 

@@ -28,8 +28,8 @@ bool HasImageExtension(const std::filesystem::path& path) {
 }
 
 bool HasVideoExtension(const std::filesystem::path& path) {
-  static const char* kExt[] = {".mp4", ".m4v", ".avi", ".mpg", ".mpeg", ".ts",  ".m2ts", ".mts", ".mov",
-                               ".mkv", ".webm", ".wmv", ".flv", ".3gp", ".mxf", ".vob", ".ogv"};
+  static const char* kExt[] = {".mp4", ".m4v",  ".avi", ".mpg", ".mpeg", ".ts",  ".m2ts", ".mts", ".mov",
+                               ".mkv", ".webm", ".wmv", ".flv", ".3gp",  ".mxf", ".vob",  ".ogv"};
   const std::string e = LowerExt(path);
   return std::any_of(std::begin(kExt), std::end(kExt), [&](const char* k) { return e == k; });
 }

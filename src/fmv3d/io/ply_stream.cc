@@ -29,30 +29,72 @@ Type ParseType(const std::string& t) {
 
 size_t SizeOf(Type t) {
   switch (t) {
-    case Type::kI8: case Type::kU8: return 1;
-    case Type::kI16: case Type::kU16: return 2;
-    case Type::kI32: case Type::kU32: case Type::kF32: return 4;
-    case Type::kF64: return 8;
-    default: return 0;
+    case Type::kI8:
+    case Type::kU8:
+      return 1;
+    case Type::kI16:
+    case Type::kU16:
+      return 2;
+    case Type::kI32:
+    case Type::kU32:
+    case Type::kF32:
+      return 4;
+    case Type::kF64:
+      return 8;
+    default:
+      return 0;
   }
 }
 
 double Value(Type t, const char* p) {
   switch (t) {
-    case Type::kI8: { int8_t v; std::memcpy(&v, p, 1); return v; }
-    case Type::kU8: { uint8_t v; std::memcpy(&v, p, 1); return v; }
-    case Type::kI16: { int16_t v; std::memcpy(&v, p, 2); return v; }
-    case Type::kU16: { uint16_t v; std::memcpy(&v, p, 2); return v; }
-    case Type::kI32: { int32_t v; std::memcpy(&v, p, 4); return v; }
-    case Type::kU32: { uint32_t v; std::memcpy(&v, p, 4); return v; }
-    case Type::kF32: { float v; std::memcpy(&v, p, 4); return v; }
-    case Type::kF64: { double v; std::memcpy(&v, p, 8); return v; }
-    default: return 0;
+    case Type::kI8: {
+      int8_t v;
+      std::memcpy(&v, p, 1);
+      return v;
+    }
+    case Type::kU8: {
+      uint8_t v;
+      std::memcpy(&v, p, 1);
+      return v;
+    }
+    case Type::kI16: {
+      int16_t v;
+      std::memcpy(&v, p, 2);
+      return v;
+    }
+    case Type::kU16: {
+      uint16_t v;
+      std::memcpy(&v, p, 2);
+      return v;
+    }
+    case Type::kI32: {
+      int32_t v;
+      std::memcpy(&v, p, 4);
+      return v;
+    }
+    case Type::kU32: {
+      uint32_t v;
+      std::memcpy(&v, p, 4);
+      return v;
+    }
+    case Type::kF32: {
+      float v;
+      std::memcpy(&v, p, 4);
+      return v;
+    }
+    case Type::kF64: {
+      double v;
+      std::memcpy(&v, p, 8);
+      return v;
+    }
+    default:
+      return 0;
   }
 }
 
 struct Property {
-  Type type = Type::kBad;       // scalar type, or the list's item type
+  Type type = Type::kBad;        // scalar type, or the list's item type
   Type count_type = Type::kBad;  // set for lists
   int slot = -1;                 // 0-2 position, 3-5 normal, 6-8 colour, 9 the visibility list, -1 ignored
 };
@@ -150,9 +192,12 @@ bool StreamPlyVertices(const std::filesystem::path& path, const std::function<vo
       }
       const double x = Value(p.type, buf.Take(SizeOf(p.type)));
       if (p.slot < 0) continue;
-      if (p.slot < 3) v.position[p.slot] = static_cast<float>(x);
-      else if (p.slot < 6) v.normal[p.slot - 3] = static_cast<float>(x);
-      else v.rgb[p.slot - 6] = static_cast<uint8_t>(x);
+      if (p.slot < 3)
+        v.position[p.slot] = static_cast<float>(x);
+      else if (p.slot < 6)
+        v.normal[p.slot - 3] = static_cast<float>(x);
+      else
+        v.rgb[p.slot - 6] = static_cast<uint8_t>(x);
     }
     on_vertex(v);
   }

@@ -32,11 +32,22 @@ void OrientedPointCloud::Append(const OrientedPointCloud& other) {
   const bool keep_v = has_visibility() && other.has_visibility();
   const bool keep_s = has_sigma() && other.has_sigma();
   positions.insert(positions.end(), other.positions.begin(), other.positions.end());
-  if (keep_n) normals.insert(normals.end(), other.normals.begin(), other.normals.end()); else normals.clear();
-  if (keep_c) colors.insert(colors.end(), other.colors.begin(), other.colors.end()); else colors.clear();
-  if (keep_v) visibility.insert(visibility.end(), other.visibility.begin(), other.visibility.end());
-  else visibility.clear();
-  if (keep_s) sigma.insert(sigma.end(), other.sigma.begin(), other.sigma.end()); else sigma.clear();
+  if (keep_n)
+    normals.insert(normals.end(), other.normals.begin(), other.normals.end());
+  else
+    normals.clear();
+  if (keep_c)
+    colors.insert(colors.end(), other.colors.begin(), other.colors.end());
+  else
+    colors.clear();
+  if (keep_v)
+    visibility.insert(visibility.end(), other.visibility.begin(), other.visibility.end());
+  else
+    visibility.clear();
+  if (keep_s)
+    sigma.insert(sigma.end(), other.sigma.begin(), other.sigma.end());
+  else
+    sigma.clear();
 }
 
 Eigen::AlignedBox3d OrientedPointCloud::Bounds() const {
@@ -58,8 +69,8 @@ void WritePointCloudPly(const OrientedPointCloud& cloud, const fs::path& path) {
   core::WriteAtomically(path, [&](const fs::path& tmp) {
     std::ofstream out(tmp, std::ios::binary);
     if (!out) throw Error(tmp.string() + ": cannot write");
-    out << "ply\nformat binary_little_endian 1.0\ncomment fmv3d oriented points\nelement vertex "
-        << cloud.size() << "\nproperty float x\nproperty float y\nproperty float z\n";
+    out << "ply\nformat binary_little_endian 1.0\ncomment fmv3d oriented points\nelement vertex " << cloud.size()
+        << "\nproperty float x\nproperty float y\nproperty float z\n";
     if (cloud.has_normals()) out << "property float nx\nproperty float ny\nproperty float nz\n";
     if (cloud.has_colors()) out << "property uchar red\nproperty uchar green\nproperty uchar blue\n";
     if (cloud.has_sigma()) out << "property float sigma\n";
@@ -108,10 +119,18 @@ Type ParseType(const std::string& s, const std::string& file) {
 
 size_t SizeOf(Type t) {
   switch (t) {
-    case Type::kI8: case Type::kU8: return 1;
-    case Type::kI16: case Type::kU16: return 2;
-    case Type::kI32: case Type::kU32: case Type::kF32: return 4;
-    case Type::kF64: return 8;
+    case Type::kI8:
+    case Type::kU8:
+      return 1;
+    case Type::kI16:
+    case Type::kU16:
+      return 2;
+    case Type::kI32:
+    case Type::kU32:
+    case Type::kF32:
+      return 4;
+    case Type::kF64:
+      return 8;
   }
   return 0;
 }
@@ -144,14 +163,40 @@ class ValueReader {
       throw Error(file_ + ": truncated PLY data");
     if (format_ == 2) std::reverse(b, b + n);
     switch (t) {
-      case Type::kI8: return static_cast<int8_t>(b[0]);
-      case Type::kU8: return b[0];
-      case Type::kI16: { int16_t v; std::memcpy(&v, b, 2); return v; }
-      case Type::kU16: { uint16_t v; std::memcpy(&v, b, 2); return v; }
-      case Type::kI32: { int32_t v; std::memcpy(&v, b, 4); return v; }
-      case Type::kU32: { uint32_t v; std::memcpy(&v, b, 4); return v; }
-      case Type::kF32: { float v; std::memcpy(&v, b, 4); return v; }
-      case Type::kF64: { double v; std::memcpy(&v, b, 8); return v; }
+      case Type::kI8:
+        return static_cast<int8_t>(b[0]);
+      case Type::kU8:
+        return b[0];
+      case Type::kI16: {
+        int16_t v;
+        std::memcpy(&v, b, 2);
+        return v;
+      }
+      case Type::kU16: {
+        uint16_t v;
+        std::memcpy(&v, b, 2);
+        return v;
+      }
+      case Type::kI32: {
+        int32_t v;
+        std::memcpy(&v, b, 4);
+        return v;
+      }
+      case Type::kU32: {
+        uint32_t v;
+        std::memcpy(&v, b, 4);
+        return v;
+      }
+      case Type::kF32: {
+        float v;
+        std::memcpy(&v, b, 4);
+        return v;
+      }
+      case Type::kF64: {
+        double v;
+        std::memcpy(&v, b, 8);
+        return v;
+      }
     }
     return 0;
   }
@@ -221,7 +266,8 @@ OrientedPointCloud ReadPointCloudPly(const fs::path& path) {
     unsigned long long record = 0;
     for (const Property& p : e.props) record += format == 0 ? 2 : SizeOf(p.is_list ? p.count_type : p.type);
     needed += e.count * std::max<unsigned long long>(record, 1);
-    if (needed > data_bytes) throw Error(file + ": truncated PLY: element '" + e.name + "' needs at least " + std::to_string(needed) +
+    if (needed > data_bytes)
+      throw Error(file + ": truncated PLY: element '" + e.name + "' needs at least " + std::to_string(needed) +
                   " bytes of data, the file has " + std::to_string(data_bytes));
   }
 
@@ -233,12 +279,28 @@ OrientedPointCloud ReadPointCloudPly(const fs::path& path) {
     for (size_t k = 0; k < e.props.size(); ++k) {
       const auto& n = e.props[k].name;
       const int kk = static_cast<int>(k);
-      if (n == "x") ix = kk; else if (n == "y") iy = kk; else if (n == "z") iz = kk;
-      else if (n == "nx") inx = kk; else if (n == "ny") iny = kk; else if (n == "nz") inz = kk;
-      else if (n == "red" || n == "r") ir = kk; else if (n == "green" || n == "g") ig = kk;
-      else if (n == "blue" || n == "b") ib = kk;
-      else if (n == "visibility" && e.props[k].is_list) ivis = kk;
-      else if (n == "sigma" && !e.props[k].is_list) isig = kk;
+      if (n == "x")
+        ix = kk;
+      else if (n == "y")
+        iy = kk;
+      else if (n == "z")
+        iz = kk;
+      else if (n == "nx")
+        inx = kk;
+      else if (n == "ny")
+        iny = kk;
+      else if (n == "nz")
+        inz = kk;
+      else if (n == "red" || n == "r")
+        ir = kk;
+      else if (n == "green" || n == "g")
+        ig = kk;
+      else if (n == "blue" || n == "b")
+        ib = kk;
+      else if (n == "visibility" && e.props[k].is_list)
+        ivis = kk;
+      else if (n == "sigma" && !e.props[k].is_list)
+        isig = kk;
     }
     if (is_vertex) {
       if (ix < 0 || iy < 0 || iz < 0) throw Error(file + ": PLY vertices have no x, y, z");
@@ -269,8 +331,7 @@ OrientedPointCloud ReadPointCloudPly(const fs::path& path) {
       if (!is_vertex) continue;
       cloud.positions[i] = {values[ix], values[iy], values[iz]};
       if (cloud.has_sigma()) cloud.sigma[i] = static_cast<float>(values[isig]);
-      if (cloud.has_normals())
-        cloud.normals[i] = {float(values[inx]), float(values[iny]), float(values[inz])};
+      if (cloud.has_normals()) cloud.normals[i] = {float(values[inx]), float(values[iny]), float(values[inz])};
       if (cloud.has_colors()) {
         // Float colours in [0, 1] are scaled to 8 bits.
         const bool unit = e.props[ir].type == Type::kF32 || e.props[ir].type == Type::kF64;

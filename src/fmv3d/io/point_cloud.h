@@ -27,10 +27,10 @@ using Rgb8 = Eigen::Matrix<uint8_t, 3, 1>;
 
 struct OrientedPointCloud {
   std::vector<Eigen::Vector3d> positions;
-  std::vector<Eigen::Vector3f> normals;             // empty or one per point
-  std::vector<Rgb8> colors;                          // RGB; empty or one per point
-  std::vector<std::vector<uint32_t>> visibility;    // empty or one list of image ids per point
-  std::vector<float> sigma;                          // empty or one uncertainty (world units) per point
+  std::vector<Eigen::Vector3f> normals;           // empty or one per point
+  std::vector<Rgb8> colors;                       // RGB; empty or one per point
+  std::vector<std::vector<uint32_t>> visibility;  // empty or one list of image ids per point
+  std::vector<float> sigma;                       // empty or one uncertainty (world units) per point
 
   size_t size() const { return positions.size(); }
   bool empty() const { return positions.empty(); }

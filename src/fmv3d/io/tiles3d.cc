@@ -64,9 +64,9 @@ std::string EncodePnts(const PntsTile& t) {
   bin.append(Pad8(bin.size()) - bin.size(), '\0');
   const std::string ft_json = PaddedJson(ft, kHeader);
   if (t.views.empty()) return Assemble("pnts", ft_json, bin, "", "", "");
-  const std::string bt_json = PaddedJson(
-      {{"views", {{"byteOffset", 0}, {"componentType", "UNSIGNED_BYTE"}, {"type", "SCALAR"}}}},
-      kHeader + ft_json.size() + bin.size());
+  const std::string bt_json =
+      PaddedJson({{"views", {{"byteOffset", 0}, {"componentType", "UNSIGNED_BYTE"}, {"type", "SCALAR"}}}},
+                 kHeader + ft_json.size() + bin.size());
   std::string bt_bin(t.views.begin(), t.views.end());
   bt_bin.append(Pad8(bt_bin.size()) - bt_bin.size(), '\0');
   return Assemble("pnts", ft_json, bin, bt_json, bt_bin, "");
@@ -82,7 +82,8 @@ PntsTile DecodePnts(const std::string& bytes) {
   if ((kHeader + ft_json) % 8 != 0 || ft_bin % 8 != 0) throw Error("pnts: sections not padded to 8 bytes");
   const nlohmann::json ft =
       nlohmann::json::parse(bytes.begin() + kHeader, bytes.begin() + kHeader + ft_json, nullptr, false);
-  if (ft.is_discarded() || !ft.is_object() || !ft.contains("POINTS_LENGTH") || !ft["POINTS_LENGTH"].is_number_unsigned())
+  if (ft.is_discarded() || !ft.is_object() || !ft.contains("POINTS_LENGTH") ||
+      !ft["POINTS_LENGTH"].is_number_unsigned())
     throw Error("pnts: feature table JSON without POINTS_LENGTH");
   for (const char* unsupported : {"POSITION_QUANTIZED", "NORMAL_OCT16P", "RGBA", "RGB565", "BATCH_ID"})
     if (ft.contains(unsupported)) throw Error(std::string("pnts: ") + unsupported + " is not read here");

@@ -21,9 +21,9 @@ namespace fmv3d::io {
 struct PntsTile {
   Eigen::Vector3d rtc_center = Eigen::Vector3d::Zero();  // positions are relative to it
   std::vector<Eigen::Vector3f> positions;
-  std::vector<Eigen::Matrix<uint8_t, 3, 1>> colors;      // empty or one per point
-  std::vector<Eigen::Vector3f> normals;                  // empty or one per point
-  std::vector<uint8_t> views;                            // empty or one per point (batch table "views")
+  std::vector<Eigen::Matrix<uint8_t, 3, 1>> colors;  // empty or one per point
+  std::vector<Eigen::Vector3f> normals;              // empty or one per point
+  std::vector<uint8_t> views;                        // empty or one per point (batch table "views")
 };
 
 // Throws fmv3d::Error when the attribute sizes disagree.

@@ -94,9 +94,7 @@ nlohmann::json RunDenseStage(const fs::path& workspace, const DenseStageOptions&
     }
     return s;
   };
-  auto map_path = [&](uint32_t id, const char* suffix) {
-    return maps_dir / (MapFileStem(geoms.at(id).name) + suffix);
-  };
+  auto map_path = [&](uint32_t id, const char* suffix) { return maps_dir / (MapFileStem(geoms.at(id).name) + suffix); };
   std::map<uint32_t, std::vector<Eigen::Vector3d>> seeds;
   for (const auto& [pid, p] : rec.points)
     for (const auto& te : p.track) seeds[te.image_id].push_back(p.xyz);
@@ -183,12 +181,13 @@ nlohmann::json RunDenseStage(const fs::path& workspace, const DenseStageOptions&
     core::Progress progress("dense: loading maps for fusion", usable.size());
     for (uint32_t id : usable) {
       const DepthMap map = ReadDepthMap(map_path(id, ".dmap"));
-      if (options.previews && !options.fuse_only) WriteDepthPreview(map, map_path(id, ".depth.png"), map_path(id, ".normal.png"));
+      if (options.previews && !options.fuse_only)
+        WriteDepthPreview(map, map_path(id, ".depth.png"), map_path(id, ".normal.png"));
       valid_pixels += static_cast<size_t>(map.CountValid());
       total_pixels += map.depth.total();
       const auto view = cache.Get(id);
-      FusionView fv = MakeFusionView(geoms.at(id), map, view->color,
-                                     std::vector<uint32_t>(links[id].begin(), links[id].end()));
+      FusionView fv =
+          MakeFusionView(geoms.at(id), map, view->color, std::vector<uint32_t>(links[id].begin(), links[id].end()));
       if (options.fusion.max_relative_uncertainty > 0)
         fv.texture = TexturePrecisionMap(view->color, options.patch_match.window_radius);
       fviews.emplace(id, std::move(fv));
@@ -234,7 +233,8 @@ nlohmann::json RunDenseStage(const fs::path& workspace, const DenseStageOptions&
         {"median_normal_sigma", fstats.median_uncertainty},
         {"max_normal_sigma", fstats.max_uncertainty},
         {"sigma_scale", fstats.sigma_scale},
-        {"sigma_coverage", options.fusion.write_sigma ? nlohmann::json(options.fusion.sigma_coverage) : nlohmann::json()},
+        {"sigma_coverage",
+         options.fusion.write_sigma ? nlohmann::json(options.fusion.sigma_coverage) : nlohmann::json()},
         {"mean_consistent_views", mean_views},
         {"consistent_views_histogram", hist}}},
       {"seconds",
@@ -248,8 +248,8 @@ nlohmann::json RunDenseStage(const fs::path& workspace, const DenseStageOptions&
         {"total", seconds_since(t_start)}}},
       {"output", (dense_dir / "fused.ply").string()}};
   core::WriteJson(report_dir / "dense.json", report);
-  spdlog::info("dense: {} points from {} views ({} skipped) in {:.1f} s", n_points, usable.size(),
-               skipped.size(), seconds_since(t_start));
+  spdlog::info("dense: {} points from {} views ({} skipped) in {:.1f} s", n_points, usable.size(), skipped.size(),
+               seconds_since(t_start));
   return report;
 }
 

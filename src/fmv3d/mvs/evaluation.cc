@@ -85,7 +85,7 @@ CompletenessResult Completeness(const std::vector<Eigen::Vector3d>& pts, const g
   if (region_tris.empty()) throw Error("evaluate-dense: no surface of the true mesh inside the evaluation region");
   const geometry::MeshDistance region_mesh(mesh.vertices(), region_tris);
   const double sample_spacing = std::max(opt.min_spacing_fraction * characteristic_length,
-                               std::sqrt(area / static_cast<double>(opt.max_surface_samples)));
+                                         std::sqrt(area / static_cast<double>(opt.max_surface_samples)));
   std::vector<int> faces;
   const auto samples = region_mesh.SampleSurface(sample_spacing, &faces, 7);
   std::vector<std::atomic<uint16_t>> seen(samples.size());
@@ -158,42 +158,44 @@ void DenseEvaluationOptions::Check() const {
 }
 
 nlohmann::json DenseEvaluation::ToJson() const {
-  return {{"points", points},
-          {"characteristic_length", characteristic_length},
-          {"accuracy",
-           {{"median", median_error},
-            {"p90", p90_error},
-            {"mean", mean_error},
-            {"rms", rms_error},
-            {"rms_percent_of_length", 100 * rms_error / characteristic_length},
-            {"median_percent_of_length", 100 * median_fraction()},
-            {"p90_percent_of_length", 100 * p90_fraction()},
-            {"within_1_percent_of_length", within_1_percent}}},
-          {"sigma",
-           {{"exceeded", sigma_exceeded < 0 ? nlohmann::json() : nlohmann::json(sigma_exceeded)},
-            {"exceeded_outside_region",
-             sigma_exceeded_outside < 0 ? nlohmann::json() : nlohmann::json(sigma_exceeded_outside)},
-            {"median", median_sigma}}},
-          {"completeness",
-           {{"fraction", completeness},
-            {"fraction_everywhere", completeness_everywhere},
-            {"seen_everywhere", seen_samples_everywhere},
-            {"surface_samples", surface_samples},
-            {"seen_by_2_cameras", seen_samples},
-            {"complete_samples", complete_samples},
-            {"sample_spacing", sample_spacing}}},
-          {"breakdown", [&] {
-             nlohmann::json b = nlohmann::json::array();
-             for (const auto& d : breakdown)
-               b.push_back({{"part", d.name},
-                            {"points", d.points},
-                            {"median_percent_of_length", 100 * d.median_error / characteristic_length},
-                            {"p90_percent_of_length", 100 * d.p90_error / characteristic_length},
-                            {"seen_samples", d.seen_samples},
-                            {"complete_samples", d.complete_samples}});
-             return b;
-           }()},
-          {"alignment", {{"scale", alignment.s}, {"translation", {alignment.t.x(), alignment.t.y(), alignment.t.z()}}}}};
+  return {
+      {"points", points},
+      {"characteristic_length", characteristic_length},
+      {"accuracy",
+       {{"median", median_error},
+        {"p90", p90_error},
+        {"mean", mean_error},
+        {"rms", rms_error},
+        {"rms_percent_of_length", 100 * rms_error / characteristic_length},
+        {"median_percent_of_length", 100 * median_fraction()},
+        {"p90_percent_of_length", 100 * p90_fraction()},
+        {"within_1_percent_of_length", within_1_percent}}},
+      {"sigma",
+       {{"exceeded", sigma_exceeded < 0 ? nlohmann::json() : nlohmann::json(sigma_exceeded)},
+        {"exceeded_outside_region",
+         sigma_exceeded_outside < 0 ? nlohmann::json() : nlohmann::json(sigma_exceeded_outside)},
+        {"median", median_sigma}}},
+      {"completeness",
+       {{"fraction", completeness},
+        {"fraction_everywhere", completeness_everywhere},
+        {"seen_everywhere", seen_samples_everywhere},
+        {"surface_samples", surface_samples},
+        {"seen_by_2_cameras", seen_samples},
+        {"complete_samples", complete_samples},
+        {"sample_spacing", sample_spacing}}},
+      {"breakdown",
+       [&] {
+         nlohmann::json b = nlohmann::json::array();
+         for (const auto& d : breakdown)
+           b.push_back({{"part", d.name},
+                        {"points", d.points},
+                        {"median_percent_of_length", 100 * d.median_error / characteristic_length},
+                        {"p90_percent_of_length", 100 * d.p90_error / characteristic_length},
+                        {"seen_samples", d.seen_samples},
+                        {"complete_samples", d.complete_samples}});
+         return b;
+       }()},
+      {"alignment", {{"scale", alignment.s}, {"translation", {alignment.t.x(), alignment.t.y(), alignment.t.z()}}}}};
 }
 
 DenseEvaluation EvaluateDense(const io::OrientedPointCloud& cloud, const core::Reconstruction& estimate,
@@ -221,10 +223,15 @@ DenseEvaluation EvaluateDense(const io::OrientedPointCloud& cloud, const core::R
     const bool inside = opt.region.isEmpty() || opt.region.contains(c.point);
     part_of[k] = (inside ? 0 : 2) + (c.face >= 0 && horizontal(mesh.Normal(c.face)) ? 0 : 1);
   });
-  ev.breakdown = {{"points inside, horizontal surface"}, {"points inside, vertical/slanted surface"},
-                  {"points outside region, horizontal"}, {"points outside region, vertical/slanted"},
-                  {"samples horizontal"}, {"samples vertical/slanted"},
-                  {"samples seen by 2-3 cameras"}, {"samples seen by 4-7 cameras"}, {"samples seen by 8+ cameras"}};
+  ev.breakdown = {{"points inside, horizontal surface"},
+                  {"points inside, vertical/slanted surface"},
+                  {"points outside region, horizontal"},
+                  {"points outside region, vertical/slanted"},
+                  {"samples horizontal"},
+                  {"samples vertical/slanted"},
+                  {"samples seen by 2-3 cameras"},
+                  {"samples seen by 4-7 cameras"},
+                  {"samples seen by 8+ cameras"}};
   for (int part = 0; part < 4; ++part) {
     std::vector<double> d;
     for (size_t k = 0; k < dist.size(); ++k)

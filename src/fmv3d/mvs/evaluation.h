@@ -23,12 +23,12 @@
 namespace fmv3d::mvs {
 
 struct DenseEvaluationOptions {
-  double completeness_fraction = 0.01;  // of the characteristic length
-  int min_cameras = 2;                  // true cameras that must see a surface sample
-  size_t max_surface_samples = 1500000; // sample spacing grows on large scenes to stay below this
-  double min_spacing_fraction = 0.0025; // finest sample spacing, of the characteristic length
-  size_t max_accuracy_points = 3000000; // evenly thinned beyond this
-  int render_max_size = 800;            // truth depth maps for the visibility test, longer side
+  double completeness_fraction = 0.01;   // of the characteristic length
+  int min_cameras = 2;                   // true cameras that must see a surface sample
+  size_t max_surface_samples = 1500000;  // sample spacing grows on large scenes to stay below this
+  double min_spacing_fraction = 0.0025;  // finest sample spacing, of the characteristic length
+  size_t max_accuracy_points = 3000000;  // evenly thinned beyond this
+  int render_max_size = 800;             // truth depth maps for the visibility test, longer side
   // Completeness counts only surface inside this box (e.g. truth.json "bounds": the modelled area, not the
   // coarse backdrop ring synth adds for the horizon); empty box = everywhere.
   Eigen::AlignedBox3d region;
@@ -49,10 +49,10 @@ struct DenseEvaluation {
   size_t points = 0;
   double characteristic_length = 0;
   double median_error = 0, p90_error = 0, mean_error = 0, rms_error = 0;  // truth units
-  double within_1_percent = 0;                              // share of points within 1% of the length
+  double within_1_percent = 0;                                            // share of points within 1% of the length
   size_t surface_samples = 0, seen_samples = 0, complete_samples = 0;
-  double completeness = 0;                      // in the region
-  double completeness_everywhere = 0;           // all the seen surface (the region's when it is everywhere)
+  double completeness = 0;             // in the region
+  double completeness_everywhere = 0;  // all the seen surface (the region's when it is everywhere)
   size_t seen_samples_everywhere = 0;
   double sample_spacing = 0;
   // Stated σ (truth units) against the true error, when the cloud has one: share exceeded, all points and

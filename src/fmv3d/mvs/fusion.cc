@@ -110,8 +110,7 @@ cv::Mat OccludingEdgeMask(const cv::Mat& depth, int radius_px, double depth_jump
 
 FusionView MakeFusionView(const ViewGeometry& geom, const DepthMap& map, const cv::Mat& color,
                           std::vector<uint32_t> neighbours) {
-  if (map.width() != geom.width || map.height() != geom.height || color.cols != geom.width ||
-      color.rows != geom.height)
+  if (map.width() != geom.width || map.height() != geom.height || color.cols != geom.width || color.rows != geom.height)
     throw Error("fusion: depth map of '" + geom.name + "' does not match its view's size");
   FusionView v;
   v.geom = geom;
@@ -124,9 +123,9 @@ FusionView MakeFusionView(const ViewGeometry& geom, const DepthMap& map, const c
     for (int x = 0; x < map.width(); ++x) {
       const cv::Vec3f n = map.normal.at<cv::Vec3f>(y, x);
       const Eigen::Vector3f w = Rt * Eigen::Vector3f(n[0], n[1], n[2]);
-      v.normal.at<Vec3s8>(y, x) = Vec3s8(static_cast<schar>(std::lround(127 * w.x())),
-                                         static_cast<schar>(std::lround(127 * w.y())),
-                                         static_cast<schar>(std::lround(127 * w.z())));
+      v.normal.at<Vec3s8>(y, x) =
+          Vec3s8(static_cast<schar>(std::lround(127 * w.x())), static_cast<schar>(std::lround(127 * w.y())),
+                 static_cast<schar>(std::lround(127 * w.z())));
     }
   return v;
 }
@@ -249,9 +248,8 @@ void FuseMaps(const std::map<uint32_t, FusionView>& maps, const FusionOptions& o
           const Eigen::Vector3d n = p.normal.cast<double>();
           for (const Hit& h : hits)
             if (h.fresh)
-              s2 += std::pow((h.view->geom.Unproject({h.x + 0.5, h.y + 0.5}, h.view->depth.at<float>(h.y, h.x)) - pos)
-                                 .dot(n),
-                             2);
+              s2 += std::pow(
+                  (h.view->geom.Unproject({h.x + 0.5, h.y + 0.5}, h.view->depth.at<float>(h.y, h.x)) - pos).dot(n), 2);
           p.scatter = static_cast<float>(std::sqrt(s2 / (fresh - 1)));
         }
         p.color = io::Rgb8(static_cast<uint8_t>(std::lround(col.x())), static_cast<uint8_t>(std::lround(col.y())),
@@ -262,8 +260,8 @@ void FuseMaps(const std::map<uint32_t, FusionView>& maps, const FusionOptions& o
           hit_px.clear();
           for (const Hit& h : hits) {
             hit_views.push_back(&h.view->geom);
-            hit_px.push_back(h.view->texture.empty() ? 1.0
-                                                     : static_cast<double>(h.view->texture.at<cv::float16_t>(h.y, h.x)));
+            hit_px.push_back(
+                h.view->texture.empty() ? 1.0 : static_cast<double>(h.view->texture.at<cv::float16_t>(h.y, h.x)));
           }
           p.sigma = static_cast<float>(NormalUncertainty(pos, p.normal.cast<double>(), hit_views, hit_px));
         }
@@ -421,7 +419,8 @@ size_t FuseDepthMapsToPly(std::map<uint32_t, FusionView> views, const FusionOpti
     for (size_t i = 0; i < sigma_of.size(); ++i) {
       if (!in.read(rec, kFixed)) throw Error(scratch.string() + ": truncated");
       const size_t n = static_cast<uint8_t>(rec[kFixed - 1]);
-      if (n > 0 && !in.read(rec + kFixed, static_cast<std::streamsize>(4 * n))) throw Error(scratch.string() + ": truncated");
+      if (n > 0 && !in.read(rec + kFixed, static_cast<std::streamsize>(4 * n)))
+        throw Error(scratch.string() + ": truncated");
       if (!Keep(sigma_of[i], opt, st)) continue;
       if (opt.write_sigma) {  // between the colour and the visibility list, as io::WritePointCloudPly puts it
         out.write(rec, static_cast<std::streamsize>(kFixed - 1));

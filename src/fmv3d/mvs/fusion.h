@@ -60,27 +60,27 @@
 namespace fmv3d::mvs {
 
 struct FusionOptions {
-  int min_views = 3;                  // consistent views per point, the reference included
-  double max_depth_error = 0.01;      // relative depth difference for agreement
-  double max_reproj_error_px = 2.0;   // forward–backward reprojection error for agreement, reference pixels
+  int min_views = 3;                 // consistent views per point, the reference included
+  double max_depth_error = 0.01;     // relative depth difference for agreement
+  double max_reproj_error_px = 2.0;  // forward–backward reprojection error for agreement, reference pixels
   double max_normal_error_deg = 15;
-  double visibility_margin = 0.03;    // relative depth beyond which a source "sees through" the point
+  double visibility_margin = 0.03;  // relative depth beyond which a source "sees through" the point
   bool visibility_filter = true;
-  int edge_erosion_px = 4;            // 0 = off; about PatchMatch's window radius
-  double edge_depth_jump = 0.05;      // relative depth step that makes an occluding edge
+  int edge_erosion_px = 4;               // 0 = off; about PatchMatch's window radius
+  double edge_depth_jump = 0.05;         // relative depth step that makes an occluding edge
   double max_relative_uncertainty = 10;  // 0 = off; drop points with σ_n > this · the median σ_n (above)
-  bool write_sigma = true;            // compute and write each point's stated σ (above)
-  double sigma_coverage = 3;          // stated σ = this × the measured per-point standard deviation
+  bool write_sigma = true;               // compute and write each point's stated σ (above)
+  double sigma_coverage = 3;             // stated σ = this × the measured per-point standard deviation
   void Check() const;
 };
 
 // One view's map in compact form (fusion holds all of them: ~13 bytes per pixel with the texture map).
 struct FusionView {
   ViewGeometry geom;
-  cv::Mat depth;   // CV_32F, 0 = none
-  cv::Mat normal;  // CV_8SC3, world-frame unit normal · 127
-  cv::Mat color;   // CV_8UC3 BGR, at the map's size
-  cv::Mat texture; // CV_16F, TexturePrecisionMap of the colour (empty: every pixel counts as 1 pixel)
+  cv::Mat depth;                     // CV_32F, 0 = none
+  cv::Mat normal;                    // CV_8SC3, world-frame unit normal · 127
+  cv::Mat color;                     // CV_8UC3 BGR, at the map's size
+  cv::Mat texture;                   // CV_16F, TexturePrecisionMap of the colour (empty: every pixel counts as 1 pixel)
   std::vector<uint32_t> neighbours;  // image ids to check
 };
 
@@ -89,14 +89,14 @@ FusionView MakeFusionView(const ViewGeometry& geom, const DepthMap& map, const c
                           std::vector<uint32_t> neighbours);
 
 struct FusionStats {
-  size_t candidates = 0;          // pixels with depth examined
-  size_t rejected_support = 0;    // too few consistent views
-  size_t rejected_visibility = 0; // free-space conflicts
-  size_t edge_pixels = 0;         // pixels removed on the foreground side of depth discontinuities
-  size_t rejected_uncertainty = 0;  // fused points dropped by the uncertainty filter
-  double median_uncertainty = 0;    // median σ_n of the fused points before that filter (world units)
-  double max_uncertainty = 0;       // the threshold applied (0 when the filter is off)
-  double sigma_scale = 0;           // world units per unit of σ_n (stated σ, above); 0 when not measured
+  size_t candidates = 0;                  // pixels with depth examined
+  size_t rejected_support = 0;            // too few consistent views
+  size_t rejected_visibility = 0;         // free-space conflicts
+  size_t edge_pixels = 0;                 // pixels removed on the foreground side of depth discontinuities
+  size_t rejected_uncertainty = 0;        // fused points dropped by the uncertainty filter
+  double median_uncertainty = 0;          // median σ_n of the fused points before that filter (world units)
+  double max_uncertainty = 0;             // the threshold applied (0 when the filter is off)
+  double sigma_scale = 0;                 // world units per unit of σ_n (stated σ, above); 0 when not measured
   std::map<int, size_t> views_histogram;  // number of consistent views → points
 };
 

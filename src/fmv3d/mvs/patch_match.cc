@@ -31,7 +31,11 @@ constexpr int kMaxSamples = 64;  // (2·radius/step + 1)² for the allowed optio
 constexpr int kLanes = 4;        // the NCC works on groups of 4 samples (SSE2 width; GCC/Clang vector types)
 typedef float V4f __attribute__((vector_size(16)));
 typedef int V4i __attribute__((vector_size(16)));
-inline V4f Load4(const float* p) { V4f v; __builtin_memcpy(&v, p, sizeof v); return v; }
+inline V4f Load4(const float* p) {
+  V4f v;
+  __builtin_memcpy(&v, p, sizeof v);
+  return v;
+}
 inline V4f Splat(float f) { return V4f{f, f, f, f}; }
 inline float Sum4(V4f v) { return (v[0] + v[1]) + (v[2] + v[3]); }
 
@@ -47,22 +51,22 @@ struct Rng {
     return z ^ (z >> 31);
   }
   float Uniform() { return static_cast<float>(Next() >> 40) * (1.0f / 16777216.0f); }  // [0, 1)
-  float Symmetric() { return 2 * Uniform() - 1; }                                       // [-1, 1)
+  float Symmetric() { return 2 * Uniform() - 1; }                                      // [-1, 1)
 };
 
 struct Source {
   const float* img = nullptr;
   int w = 0, h = 0;
-  size_t stride = 0;               // floats per row
+  size_t stride = 0;  // floats per row
   Eigen::Matrix3f K;
-  Eigen::Matrix3f R;               // reference camera frame → source camera frame
+  Eigen::Matrix3f R;  // reference camera frame → source camera frame
   Eigen::Vector3f t;
   // Plane-induced homography ref pixels → source pixels for the plane n·X + c = 0 (X in the reference frame):
   // H = K_s (R − t nᵀ/c) K⁻¹ = A + b · (nᵀ K⁻¹ / (−c)); A and b are fixed per level.
   Eigen::Matrix3f A;
   Eigen::Vector3f b;
-  const DepthMap* map = nullptr;   // geometric pass only (at the source's working resolution)
-  Eigen::Matrix3f map_K, map_Kinv; // intrinsics of that map
+  const DepthMap* map = nullptr;    // geometric pass only (at the source's working resolution)
+  Eigen::Matrix3f map_K, map_Kinv;  // intrinsics of that map
 };
 
 // One resolution level of the problem.
@@ -92,7 +96,8 @@ class Solver {
     spatial_.resize(n_samples_);
     for (int j = 0; j < side_; ++j)
       for (int i = 0; i < side_; ++i) {
-        const float dx = static_cast<float>(-r + i * opt.window_step), dy = static_cast<float>(-r + j * opt.window_step);
+        const float dx = static_cast<float>(-r + i * opt.window_step),
+                    dy = static_cast<float>(-r + j * opt.window_step);
         spatial_[j * side_ + i] = -(dx * dx + dy * dy) / static_cast<float>(2 * opt.sigma_spatial * opt.sigma_spatial);
       }
     inv_2sc2_ = static_cast<float>(1.0 / (2 * opt.sigma_color * opt.sigma_color));
@@ -210,10 +215,10 @@ class Solver {
       const float* r2 = s.img + static_cast<size_t>(iy[2]) * st + static_cast<size_t>(ix[2]);
       const float* r3 = s.img + static_cast<size_t>(iy[3]) * st + static_cast<size_t>(ix[3]);
       const __m128 z = _mm_setzero_ps();
-      const __m128 top01 = _mm_loadh_pi(_mm_loadl_pi(z, reinterpret_cast<const __m64*>(r0)),
-                                        reinterpret_cast<const __m64*>(r1));
-      const __m128 top23 = _mm_loadh_pi(_mm_loadl_pi(z, reinterpret_cast<const __m64*>(r2)),
-                                        reinterpret_cast<const __m64*>(r3));
+      const __m128 top01 =
+          _mm_loadh_pi(_mm_loadl_pi(z, reinterpret_cast<const __m64*>(r0)), reinterpret_cast<const __m64*>(r1));
+      const __m128 top23 =
+          _mm_loadh_pi(_mm_loadl_pi(z, reinterpret_cast<const __m64*>(r2)), reinterpret_cast<const __m64*>(r3));
       const __m128 bot01 = _mm_loadh_pi(_mm_loadl_pi(z, reinterpret_cast<const __m64*>(r0 + st)),
                                         reinterpret_cast<const __m64*>(r1 + st));
       const __m128 bot23 = _mm_loadh_pi(_mm_loadl_pi(z, reinterpret_cast<const __m64*>(r2 + st)),
@@ -273,7 +278,8 @@ class Solver {
   // is then >= bound (not the exact cost), so callers that keep only costs < bound get identical results.
   float Cost(const RefPatch& rp, int x, int y, float d, const Eigen::Vector3f& n, float* photo,
              float bound = std::numeric_limits<float>::infinity()) const {
-    *photo = kMaxCost; PMC(g_cost_calls);
+    *photo = kMaxCost;
+    PMC(g_cost_calls);
     if (!(d >= dmin_ && d <= dmax_)) return kMaxCost + 1;
     const Eigen::Vector3f X = d * Ray(x, y);
     const float c = n.dot(X);
@@ -302,9 +308,13 @@ class Solver {
     for (int i = 0; i < ns; ++i) {
       const Source& s = L_.sources[i];
       const Eigen::Matrix3f H = s.A + s.b * nKinv;
-      costs[i] = Ncc(rp, x, y, H, s); PMC(g_ncc_calls);
+      costs[i] = Ncc(rp, x, y, H, s);
+      PMC(g_ncc_calls);
       totals[i] += costs[i];
-      if (i + 1 < ns && k_smallest_sum(order) / static_cast<float>(k) >= bound) { PMC(g_pruned); return bound; }
+      if (i + 1 < ns && k_smallest_sum(order) / static_cast<float>(k) >= bound) {
+        PMC(g_pruned);
+        return bound;
+      }
     }
     // Mean of the best top_k totals (per-pixel view selection).
     const float sum_t = k_smallest_sum(order);
@@ -385,7 +395,10 @@ class Solver {
     int n_tried = 0;
     auto trial = [&](float d, const Eigen::Vector3f& n) {
       for (int k = 0; k < n_tried; ++k)
-        if (std::abs(d - tried_d[k]) <= 1e-5f * d && n.dot(tried_n[k]) >= 0.99999f) { PMC(g_dedup); return; }
+        if (std::abs(d - tried_d[k]) <= 1e-5f * d && n.dot(tried_n[k]) >= 0.99999f) {
+          PMC(g_dedup);
+          return;
+        }
       PMC(g_trials);
       if (n_tried < 16) tried_d[n_tried] = d, tried_n[n_tried++] = n;
       float photo;
@@ -467,8 +480,9 @@ Level MakeLevel(const PatchMatchInput& in, double factor) {
   auto resize = [&](const cv::Mat& img) {
     if (factor == 1.0) return img;
     cv::Mat out;
-    cv::resize(img, out, cv::Size(std::max(8, static_cast<int>(std::lround(img.cols * factor))),
-                                  std::max(8, static_cast<int>(std::lround(img.rows * factor)))),
+    cv::resize(img, out,
+               cv::Size(std::max(8, static_cast<int>(std::lround(img.cols * factor))),
+                        std::max(8, static_cast<int>(std::lround(img.rows * factor)))),
                0, 0, cv::INTER_AREA);
     return out;
   };
@@ -557,7 +571,8 @@ DepthMap RunPatchMatch(const PatchMatchInput& in, const PatchMatchOptions& opt, 
     for (int r = 0; r < opt.iterations; ++r) cs.Iterate(r);
     for (int y = 0; y < fine.h; ++y)
       for (int x = 0; x < fine.w; ++x) {
-        const int cx = std::min(coarse.w - 1, x * coarse.w / fine.w), cy = std::min(coarse.h - 1, y * coarse.h / fine.h);
+        const int cx = std::min(coarse.w - 1, x * coarse.w / fine.w),
+                  cy = std::min(coarse.h - 1, y * coarse.h / fine.h);
         const size_t i = static_cast<size_t>(y) * fine.w + x, j = static_cast<size_t>(cy) * coarse.w + cx;
         // The coarse plane, re-intersected with this pixel's ray.
         const Eigen::Vector3f& n = cs.normal_[j];

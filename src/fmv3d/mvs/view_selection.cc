@@ -84,8 +84,7 @@ std::vector<uint32_t> SelectReferenceViews(const core::Reconstruction& rec,
       const double d = v.norm();
       if (d < 0.5 * d_obs || d > 2 * d_obs || v.dot(mean_dir) < cos_cone * d) continue;
       Eigen::Vector2d uv;
-      if (g.Project(p.xyz, &uv) && uv.x() >= 0 && uv.y() >= 0 && uv.x() < g.width && uv.y() < g.height)
-        seen[i] = true;
+      if (g.Project(p.xyz, &uv) && uv.x() >= 0 && uv.y() >= 0 && uv.x() < g.width && uv.y() < g.height) seen[i] = true;
     }
     const auto k = static_cast<uint32_t>(need.size());
     int n_seen = 0;
@@ -195,13 +194,11 @@ std::map<uint32_t, ReferenceSelection> SelectViews(const core::Reconstruction& r
             if (ratio < 0.5 || ratio > 2 || a.dot(b) < std::cos(options.max_angle_deg * kDeg) * a.norm() * b.norm())
               continue;
             Eigen::Vector2d uv;
-            if (!src.Project(X, &uv) || uv.x() < 0 || uv.y() < 0 || uv.x() > src.width || uv.y() > src.height)
-              continue;
+            if (!src.Project(X, &uv) || uv.x() < 0 || uv.y() < 0 || uv.x() > src.width || uv.y() > src.height) continue;
           }
         } else {
           Eigen::Vector2d uv;
-          if (!src.Project(X, &uv) || uv.x() < 0 || uv.y() < 0 || uv.x() > src.width || uv.y() > src.height)
-            continue;
+          if (!src.Project(X, &uv) || uv.x() < 0 || uv.y() < 0 || uv.x() > src.width || uv.y() > src.height) continue;
         }
         const Eigen::Vector3d a = cr - X, b = cj - X;
         const double alpha = std::atan2(a.cross(b).norm(), a.dot(b));

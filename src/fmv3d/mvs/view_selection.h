@@ -46,7 +46,7 @@ struct Neighbour {
 };
 
 struct ReferenceSelection {
-  std::vector<Neighbour> neighbours;  // best first; empty when the view has no usable neighbour
+  std::vector<Neighbour> neighbours;    // best first; empty when the view has no usable neighbour
   double depth_min = 0, depth_max = 0;  // camera-frame z range to search; 0 when unknown
   bool from_sparse_points = false;      // false: stand-in points were used
   std::string problem;                  // why the view cannot be used (empty when it can)

@@ -224,8 +224,8 @@ CoverageReport ComputeWorkspaceCoverage(const fs::path& root, const CoverageOpti
     }
     const cv::Mat frame = io::ReadImage(frame_path);
     const core::Camera cam = Scaled(rec.cameras.at(im.camera_id), options.max_size);
-    ViewCoverage vc = ComputeViewCoverage(frame, cam, im.pose, has_mesh ? &mesh : nullptr,
-                                          cloud.empty() ? nullptr : &cloud, spacing);
+    ViewCoverage vc =
+        ComputeViewCoverage(frame, cam, im.pose, has_mesh ? &mesh : nullptr, cloud.empty() ? nullptr : &cloud, spacing);
     vc.image_id = id;
     vc.name = im.name;
     if (vc.mesh >= 0) mesh_shares.push_back(vc.mesh);
@@ -239,7 +239,8 @@ CoverageReport ComputeWorkspaceCoverage(const fs::path& root, const CoverageOpti
   std::vector<size_t> order(out.views.size());
   for (size_t i = 0; i < order.size(); ++i) order[i] = i;
   auto key = [&](const ViewCoverage& v) { return v.mesh >= 0 ? v.mesh : v.dense; };
-  std::stable_sort(order.begin(), order.end(), [&](size_t a, size_t b) { return key(out.views[a]) < key(out.views[b]); });
+  std::stable_sort(order.begin(), order.end(),
+                   [&](size_t a, size_t b) { return key(out.views[a]) < key(out.views[b]); });
   const size_t n_pictures = std::min(order.size(), static_cast<size_t>(options.worst_views));
   if (n_pictures > 0 && (has_mesh || !cloud.empty())) {
     const fs::path dir = ws.report_dir() / "coverage";

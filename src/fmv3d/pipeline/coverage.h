@@ -33,8 +33,8 @@ namespace fmv3d::pipeline {
 cv::Mat SkyMask(const cv::Mat& bgr, double max_gradient = 0.012, double min_brightness = 0.45);
 
 struct CoverageOptions {
-  int max_size = 480;  // working size of a view, longer side, pixels
-  int worst_views = 3; // views drawn for the report (lowest mesh coverage, else dense)
+  int max_size = 480;   // working size of a view, longer side, pixels
+  int worst_views = 3;  // views drawn for the report (lowest mesh coverage, else dense)
   void Check() const;
 };
 

@@ -173,8 +173,8 @@ nlohmann::json RunDemo(const DemoOptions& o) {
   const align::CompareResult cmp = align::CompareToCad(c);
   demo["mesh_vs_cad"] = cmp.ToJson();
   // The textured model from a viewpoint the reconstruction never saw, against the true frame there.
-  const HeldOutResult held = RenderHeldOut(o.output, core::Workspace(r.workspace).mesh_dir() / "textured.obj", cmp.transform,
-                                           synth::SynthOptions().render, o.output / "heldout");
+  const HeldOutResult held = RenderHeldOut(o.output, core::Workspace(r.workspace).mesh_dir() / "textured.obj",
+                                           cmp.transform, synth::SynthOptions().render, o.output / "heldout");
   demo["held_out_view"] = {{"between_frames", held.between},
                            {"psnr_db", held.psnr_db},
                            {"covered_percent", 100 * held.covered_fraction},
@@ -195,15 +195,16 @@ nlohmann::json RunDemo(const DemoOptions& o) {
   timing["evaluation"] = {{"wall_s", eval_wall}, {"cpu_s", eval_cpu}};
   timing["total"] = {{"wall_s", total_wall + eval_wall}, {"cpu_s", total_cpu + eval_cpu}};
   demo["seconds"] = timing;
-  demo["options"] = {{"max_features", o.max_features},       {"pairs", o.sequential_pairs ? "sequential" : "exhaustive"},
-                     {"pair_overlap", o.pair_overlap},       {"dense_max_size", o.dense_max_size},
-                     {"dense_sources", o.dense_sources},     {"dense_iterations", o.dense_iterations},
-                     {"dense_geometric_pass", o.dense_geometric}};
+  demo["options"] = {
+      {"max_features", o.max_features},           {"pairs", o.sequential_pairs ? "sequential" : "exhaustive"},
+      {"pair_overlap", o.pair_overlap},           {"dense_max_size", o.dense_max_size},
+      {"dense_sources", o.dense_sources},         {"dense_iterations", o.dense_iterations},
+      {"dense_geometric_pass", o.dense_geometric}};
   core::WriteJson(o.output / "demo.json", demo);
   WriteReport(r.workspace);
 
-  std::printf("\nfmv3d demo: %d-frame synthetic orbit (%dx%d) around a %.0f m building\n", o.frames, o.width,
-              o.height, height);
+  std::printf("\nfmv3d demo: %d-frame synthetic orbit (%dx%d) around a %.0f m building\n", o.frames, o.width, o.height,
+              height);
   std::printf("  %-44s %zu / %d\n", "registered frames", model.images.size(), o.frames);
   std::printf("  %-44s %.4f %%\n", "camera centre RMSE (of the orbit's extent)", 100 * ev.centre_rmse_fraction);
   std::printf("  %-44s %.4f deg\n", "median relative rotation error", ev.median_rotation_error_deg);
@@ -216,8 +217,9 @@ nlohmann::json RunDemo(const DemoOptions& o) {
   for (const auto& [name, e] : rows)
     std::printf("    %-10s %8.3f %8.3f %8.3f %8.3f %8.3f\n", name, 100 * e->mean, 100 * e->std, 100 * e->rms,
                 100 * e->p50, 100 * e->p90);
-  std::printf("  %-44s %.1f %%\n", cmp.completeness_from_faces ? "completeness (seen surface within 1% of H, mesh)"
-                                                               : "completeness (seen surface within 1% of height)",
+  std::printf("  %-44s %.1f %%\n",
+              cmp.completeness_from_faces ? "completeness (seen surface within 1% of H, mesh)"
+                                          : "completeness (seen surface within 1% of height)",
               100 * cmp.completeness);
   std::printf("  %-44s %.1f dB over %.0f %% of the frame\n", "held-out view PSNR (textured model vs truth)",
               held.psnr_db, 100 * held.covered_fraction);
@@ -227,8 +229,9 @@ nlohmann::json RunDemo(const DemoOptions& o) {
   std::printf("    %-12s %8.1f %8.1f\n    %-12s %8.1f %8.1f\n", "evaluation", eval_wall, eval_cpu, "total",
               total_wall + eval_wall, total_cpu + eval_cpu);
   std::printf("\n  report:  %s\n  compare: %s\n  model:   %s\n  table:   %s\n",
-              (core::Workspace(r.workspace).report_dir() / "report.html").c_str(), (c.output_dir / "compare.html").c_str(),
-              (core::Workspace(r.workspace).mesh_dir() / "model.glb").c_str(), (o.output / "demo.json").c_str());
+              (core::Workspace(r.workspace).report_dir() / "report.html").c_str(),
+              (c.output_dir / "compare.html").c_str(), (core::Workspace(r.workspace).mesh_dir() / "model.glb").c_str(),
+              (o.output / "demo.json").c_str());
   return demo;
 }
 

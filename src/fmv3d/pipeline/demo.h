@@ -29,12 +29,12 @@ struct DemoOptions {
   std::filesystem::path output = "demo";
   int frames = 30;
   int width = 960, height = 540;
-  int dense_max_size = 480;  // dense working resolution (longer side): keeps the demo to minutes on 2 cores
-  int max_features = 8000;   // SIFT features per frame
+  int dense_max_size = 480;       // dense working resolution (longer side): keeps the demo to minutes on 2 cores
+  int max_features = 8000;        // SIFT features per frame
   bool sequential_pairs = false;  // each frame with the next pair_overlap (+ loop closure) instead of all
   int pair_overlap = 4;
-  int dense_sources = 4;     // PatchMatch source views per reference
-  int dense_iterations = 3;  // PatchMatch photometric rounds
+  int dense_sources = 4;         // PatchMatch source views per reference
+  int dense_iterations = 3;      // PatchMatch photometric rounds
   bool dense_geometric = false;  // PatchMatch's geometric pass: on the demo it cost 1/3 of dense for no accuracy
   uint64_t seed = 1;
   void Check() const;
@@ -44,8 +44,8 @@ struct DemoOptions {
 // flight (not a frame of the video), the true frame rendered there from scene.obj as `fmv3d synth` renders
 // frames, and the textured model (OBJ, mapped into the world by model_to_world) rendered unshaded from it.
 struct HeldOutResult {
-  double psnr_db = 0;           // over the pixels the model covers, 8-bit RGB
-  double covered_fraction = 0;  // of the frame's pixels
+  double psnr_db = 0;                // over the pixels the model covers, 8-bit RGB
+  double covered_fraction = 0;       // of the frame's pixels
   std::vector<std::string> between;  // the two flight frames it lies between
 };
 // `frame_options`: how synth rendered the flight's frames (sun, noise; its noise seed is replaced). Writes

@@ -92,7 +92,8 @@ struct Builder {
     nodes[id].count = k;
     // The rest into octants: split on x, then each half on y, then each quarter on z.
     const Eigen::Vector3f c = cell.center();
-    auto first = pts.begin() + static_cast<std::ptrdiff_t>(begin + k), last = pts.begin() + static_cast<std::ptrdiff_t>(end);
+    auto first = pts.begin() + static_cast<std::ptrdiff_t>(begin + k),
+         last = pts.begin() + static_cast<std::ptrdiff_t>(end);
     auto mx = std::partition(first, last, [&](const TilePoint& p) { return p.position.x() < c.x(); });
     std::vector<decltype(first)> bounds = {first};
     for (auto [a, b] : {std::pair{first, mx}, std::pair{mx, last}}) {
@@ -105,7 +106,8 @@ struct Builder {
     }
     // Octant index o = 4·(x high) + 2·(y high) + (z high); bounds[o], bounds[o + 1] delimit it.
     for (int oct = 0; oct < 8; ++oct) {
-      const size_t b = static_cast<size_t>(bounds[oct] - pts.begin()), e = static_cast<size_t>(bounds[oct + 1] - pts.begin());
+      const size_t b = static_cast<size_t>(bounds[oct] - pts.begin()),
+                   e = static_cast<size_t>(bounds[oct + 1] - pts.begin());
       if (b == e) continue;
       // Low half [min, centre], high half [centre, max]: exact bounds, no rounding outside the parent.
       Eigen::AlignedBox3f child(cell.min(), c);
@@ -122,8 +124,7 @@ struct Builder {
 
 PointOctree BuildPointOctree(std::vector<TilePoint> points, const OctreeOptions& options) {
   options.Check();
-  points.erase(std::remove_if(points.begin(), points.end(),
-                              [](const TilePoint& p) { return !p.position.allFinite(); }),
+  points.erase(std::remove_if(points.begin(), points.end(), [](const TilePoint& p) { return !p.position.allFinite(); }),
                points.end());
   PointOctree tree;
   tree.points = std::move(points);

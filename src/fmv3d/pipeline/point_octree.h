@@ -26,13 +26,13 @@ struct TilePoint {
 };
 
 struct OctreeNode {
-  size_t begin = 0, count = 0;   // its own points: points[begin, begin + count)
-  size_t subtree_end = 0;        // its and its descendants' points: points[begin, subtree_end)
-  Eigen::AlignedBox3f bounds;    // of the subtree's points
-  Eigen::AlignedBox3f cell;      // the octree cell (a cube)
+  size_t begin = 0, count = 0;  // its own points: points[begin, begin + count)
+  size_t subtree_end = 0;       // its and its descendants' points: points[begin, subtree_end)
+  Eigen::AlignedBox3f bounds;   // of the subtree's points
+  Eigen::AlignedBox3f cell;     // the octree cell (a cube)
   int level = 0;
-  std::string name;              // "0" for the root, then one octant digit per level ("0", "03", "037", ...)
-  std::vector<int> children;     // indices into PointOctree::nodes
+  std::string name;           // "0" for the root, then one octant digit per level ("0", "03", "037", ...)
+  std::vector<int> children;  // indices into PointOctree::nodes
 };
 
 struct PointOctree {

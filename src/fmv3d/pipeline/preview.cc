@@ -13,8 +13,7 @@ namespace fmv3d::pipeline {
 
 using core::Median;
 
-View SceneView(const core::Reconstruction& rec, const std::vector<Eigen::Vector3d>& points, int width,
-               int height) {
+View SceneView(const core::Reconstruction& rec, const std::vector<Eigen::Vector3d>& points, int width, int height) {
   if (points.empty()) throw Error("preview: nothing to show (no points)");
   Eigen::Vector3d target;
   for (int k = 0; k < 3; ++k) {
@@ -104,10 +103,9 @@ void DrawCameras(cv::Mat& image, const core::Reconstruction& rec, const View& vi
     const Eigen::Vector3d C = im.pose.Centre();
     // Frustum corners at depth `size` through the image corners.
     const double hw = 0.5 * c.width / c.fx(), hh = 0.5 * c.height / c.fy();
-    const Eigen::Vector3d corners[4] = {C + size * Rt * Eigen::Vector3d(-hw, -hh, 1),
-                                        C + size * Rt * Eigen::Vector3d(hw, -hh, 1),
-                                        C + size * Rt * Eigen::Vector3d(hw, hh, 1),
-                                        C + size * Rt * Eigen::Vector3d(-hw, hh, 1)};
+    const Eigen::Vector3d corners[4] = {
+        C + size * Rt * Eigen::Vector3d(-hw, -hh, 1), C + size * Rt * Eigen::Vector3d(hw, -hh, 1),
+        C + size * Rt * Eigen::Vector3d(hw, hh, 1), C + size * Rt * Eigen::Vector3d(-hw, hh, 1)};
     cv::Point2d pc, pk[4];
     if (!project(C, &pc)) continue;
     bool ok = true;

@@ -80,8 +80,7 @@ std::vector<Stage> ReconstructStages(const ReconstructOptions& o) {
                       const auto s = features::RunMatchStage(root, o.match);
                       return nlohmann::json{{"pairs_tried", s.pairs_tried}, {"pairs_verified", s.pairs_verified}};
                     }});
-  stages.push_back({"sparse",
-                    [ws] { return std::vector<fs::path>{features::MatchesSummaryPath(ws.matches_dir())}; },
+  stages.push_back({"sparse", [ws] { return std::vector<fs::path>{features::MatchesSummaryPath(ws.matches_dir())}; },
                     ws.sparse_dir() / "images.txt", [o, root] { return sfm::RunSparseStage(root, o.sparse); }});
   // Terrain products need telemetry (KLV, DJI SRT, EXIF GPS): without it these stages say so and write
   // nothing (their markers stay absent, so adding telemetry later and re-running makes them).
@@ -103,8 +102,7 @@ std::vector<Stage> ReconstructStages(const ReconstructOptions& o) {
   };
   // georef runs before dense: when the image-only model disagrees with the flight it replaces WS/sparse with the
   // telemetry-initialised model (geo/georef.h), which the dense cloud, mesh and DSM must then be built on.
-  stages.push_back({"georef", [ws] { return std::vector<fs::path>{ws.sparse_dir() / "images.txt"}; },
-                    ws.georef_json(),
+  stages.push_back({"georef", [ws] { return std::vector<fs::path>{ws.sparse_dir() / "images.txt"}; }, ws.georef_json(),
                     with_telemetry("georef", [o, root] {
                       // Unusable telemetry must not cost the user the model: the georeferenced products are
                       // skipped instead (dsm and ortho then say so).
@@ -121,8 +119,7 @@ std::vector<Stage> ReconstructStages(const ReconstructOptions& o) {
                     ws.mesh_dir() / "poisson.ply", [o, root] { return surface::RunMeshStage(root, o.mesh); }});
   // report/texture.json is written after the OBJ, GLB and PLY: it marks the stage complete.
   stages.push_back({"texture", [ws] { return std::vector<fs::path>{ws.mesh_dir() / "poisson.ply"}; },
-                    ws.report_dir() / "texture.json",
-                    [o, root] { return surface::RunTextureStage(root, o.texture); }});
+                    ws.report_dir() / "texture.json", [o, root] { return surface::RunTextureStage(root, o.texture); }});
   // 3D Tiles of the dense cloud and the textured mesh, for the console (tiles_stage.h).
   stages.push_back({"tiles",
                     [ws] {
@@ -133,7 +130,8 @@ std::vector<Stage> ReconstructStages(const ReconstructOptions& o) {
                     [ws] {
                       return std::vector<fs::path>{ws.georef_json(), ws.mesh_dir() / "poisson.ply"};
                     },
-                    ws.geo_dir() / "dsm.json", with_telemetry("dsm", [o, root] { return geo::RunDsmStage(root, o.dsm); })});
+                    ws.geo_dir() / "dsm.json",
+                    with_telemetry("dsm", [o, root] { return geo::RunDsmStage(root, o.dsm); })});
   stages.push_back({"ortho",
                     [ws] {
                       return std::vector<fs::path>{ws.geo_dir() / "dsm.json", ws.report_dir() / "texture.json"};

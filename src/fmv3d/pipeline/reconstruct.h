@@ -1,6 +1,7 @@
 // `fmv3d reconstruct INPUT... -o WS`: the whole chain frames → features → match → sparse → dense → mesh →
-// texture (→ georef → dsm → ortho when the frames carry telemetry) in one workspace (DESIGN.md "The data flow"), resumable (stage_runner.h), with
-// WS/project.json (inputs, options, versions) and WS/report/report.json + report.html at the end.
+// texture (→ georef → dsm → ortho when the frames carry telemetry) in one workspace (DESIGN.md "The data flow"),
+// resumable (stage_runner.h), with WS/project.json (inputs, options, versions) and WS/report/report.json + report.html
+// at the end.
 #pragma once
 
 #include <filesystem>
@@ -26,7 +27,7 @@ namespace fmv3d::pipeline {
 struct ReconstructOptions {
   std::vector<std::filesystem::path> inputs;
   std::filesystem::path workspace;
-  ingest::IngestOptions frames;           // .workspace and .prior are filled from the fields above / below
+  ingest::IngestOptions frames;  // .workspace and .prior are filled from the fields above / below
   calib::PriorOptions prior;
   features::SiftOptions sift;
   features::MatchStageOptions match;
@@ -36,14 +37,15 @@ struct ReconstructOptions {
   surface::TextureStageOptions texture;
   geo::GeorefOptions georef;  // georef / dsm / ortho run only when the frames carry telemetry
   geo::DsmOptions dsm;
-  RunnerOptions runner;               // --from / --until
-  bool report = true;                 // write report/report.html (renders take a few seconds)
-  bool fast = false;                  // set by ApplyFastPreset (recorded in project.json)
+  RunnerOptions runner;  // --from / --until
+  bool report = true;    // write report/report.html (renders take a few seconds)
+  bool fast = false;     // set by ApplyFastPreset (recorded in project.json)
   // `--fast`: the video-speed preset (bench/RESULTS.md has its time and accuracy next to the defaults).
-  // 5000 SIFT features (not 8000), sequential pairs with the next 5 frames (not 10); dense as the demo runs it — half the default working size (480 px), 4 sources, 3 rounds, no
-  // geometric pass — with depth maps only for the reference views that cover every sparse point 8 times
-  // (video keyframes see each surface point ~20-30 times; the rest stay stereo sources); Poisson one octree
-  // level coarser than the point density allows; texture colours from the same kind of cover.
+  // 5000 SIFT features (not 8000), sequential pairs with the next 5 frames (not 10); dense as the demo runs it — half
+  // the default working size (480 px), 4 sources, 3 rounds, no geometric pass — with depth maps only for the reference
+  // views that cover every sparse point 8 times (video keyframes see each surface point ~20-30 times; the rest stay
+  // stereo sources); Poisson one octree level coarser than the point density allows; texture colours from the same kind
+  // of cover.
   void ApplyFastPreset();
   // Throws fmv3d::Error naming the bad option (no inputs, missing file, stage options).
   void Check() const;

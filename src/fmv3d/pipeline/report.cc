@@ -43,10 +43,14 @@ void WritePng(const fs::path& path, const cv::Mat& image) {
 std::string Escape(const std::string& s) {
   std::string o;
   for (char c : s) {
-    if (c == '<') o += "&lt;";
-    else if (c == '>') o += "&gt;";
-    else if (c == '&') o += "&amp;";
-    else o += c;
+    if (c == '<')
+      o += "&lt;";
+    else if (c == '>')
+      o += "&gt;";
+    else if (c == '&')
+      o += "&amp;";
+    else
+      o += c;
   }
   return o;
 }
@@ -89,8 +93,11 @@ nlohmann::json WriteReport(const fs::path& root) {
     const io::FramesIndex index = io::ReadFramesIndex(ws.frames_json());
     nlohmann::json cams = nlohmann::json::array();
     for (const auto& c : index.cameras)
-      cams.push_back({{"id", c.camera.id}, {"width", c.camera.width}, {"height", c.camera.height},
-                      {"focal_prior_px", c.camera.f}, {"prior", c.prior_source}});
+      cams.push_back({{"id", c.camera.id},
+                      {"width", c.camera.width},
+                      {"height", c.camera.height},
+                      {"focal_prior_px", c.camera.f},
+                      {"prior", c.prior_source}});
     report["frames"] = {{"count", index.frames.size()}, {"cameras", cams}};
   }
   report["features"] = ReadIfPresent(ws.features_dir() / "features.json");
@@ -169,11 +176,12 @@ nlohmann::json WriteReport(const fs::path& root) {
     for (const auto& c : report["frames"]["cameras"])
       row("camera " + Num(c["id"]), Num(c["width"]) + "x" + Num(c["height"]) + ", focal prior " +
                                         Num(c["focal_prior_px"], 1) + " px (" + Num(c["prior"]) + ")");
-  if (report["features"].is_object()) row("keypoints (total)", Num(report["features"].value("total_keypoints", nlohmann::json())));
+  if (report["features"].is_object())
+    row("keypoints (total)", Num(report["features"].value("total_keypoints", nlohmann::json())));
   if (report["sparse"].is_object()) {
     const auto& s = report["sparse"];
-    row("registered frames", Num(s.value("registered_images", nlohmann::json())) + " / " +
-                                 Num(s.value("total_images", nlohmann::json())));
+    row("registered frames",
+        Num(s.value("registered_images", nlohmann::json())) + " / " + Num(s.value("total_images", nlohmann::json())));
     row("sparse points", Num(s.value("points", nlohmann::json())));
     row("mean track length", Num(s.value("mean_track_length", nlohmann::json()), 2));
     row("mean reprojection error (px)", Num(s.value("mean_reprojection_error_px", nlohmann::json()), 3));

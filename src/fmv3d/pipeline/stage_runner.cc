@@ -41,8 +41,12 @@ std::vector<StageResult> RunStages(const std::vector<Stage>& stages, const Runne
   core::AppendProgressEvent({{"event", "stages"}, {"stages", names}});
   const int count = static_cast<int>(stages.size());
   auto event = [count](const std::string& name, const char* state, int index, double seconds) {
-    core::AppendProgressEvent(
-        {{"event", "stage"}, {"stage", name}, {"state", state}, {"index", index}, {"count", count}, {"seconds", seconds}});
+    core::AppendProgressEvent({{"event", "stage"},
+                               {"stage", name},
+                               {"state", state},
+                               {"index", index},
+                               {"count", count},
+                               {"seconds", seconds}});
   };
   for (int i = 0; i < static_cast<int>(stages.size()); ++i) {
     if (until >= 0 && i > until) break;
@@ -52,8 +56,8 @@ std::vector<StageResult> RunStages(const std::vector<Stage>& stages, const Runne
     const bool forced = from >= 0 && i >= from;
     const fs::path running = options.state_dir.empty() ? fs::path() : options.state_dir / (stage.name + ".running");
     const bool interrupted = !running.empty() && fs::exists(running);
-    if (interrupted) spdlog::info("[{}/{}] {}: interrupted in an earlier run, running again", i + 1, stages.size(),
-                                  stage.name);
+    if (interrupted)
+      spdlog::info("[{}/{}] {}: interrupted in an earlier run, running again", i + 1, stages.size(), stage.name);
     if (!forced && !interrupted && core::Workspace::UpToDate({stage.marker}, stage.inputs())) {
       spdlog::info("[{}/{}] {}: up to date, skipped", i + 1, stages.size(), stage.name);
       r.skipped = true;

@@ -17,10 +17,10 @@
 namespace fmv3d::pipeline {
 
 struct Stage {
-  std::string name;                                // "frames", "features", ... (also --until / --from)
+  std::string name;                                            // "frames", "features", ... (also --until / --from)
   std::function<std::vector<std::filesystem::path>()> inputs;  // evaluated when the stage is reached
-  std::filesystem::path marker;                   // the output that proves the stage finished
-  std::function<nlohmann::json()> run;            // runs the stage, returns its summary
+  std::filesystem::path marker;                                // the output that proves the stage finished
+  std::function<nlohmann::json()> run;                         // runs the stage, returns its summary
 };
 
 struct StageResult {
@@ -32,8 +32,8 @@ struct StageResult {
 };
 
 struct RunnerOptions {
-  std::string from;   // force re-running from this stage on (empty: resume by timestamps)
-  std::string until;  // stop after this stage (empty: all)
+  std::string from;                 // force re-running from this stage on (empty: resume by timestamps)
+  std::string until;                // stop after this stage (empty: all)
   std::filesystem::path state_dir;  // where the running flags live (empty: none, timestamps only)
 };
 

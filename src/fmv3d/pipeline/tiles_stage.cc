@@ -71,7 +71,7 @@ Eigen::Matrix4d EnuToEcef(double lat_deg, double lon_deg, double h) {
   const double sl = std::sin(lat), cl = std::cos(lat), so = std::sin(lon), co = std::cos(lon);
   const double N = a / std::sqrt(1 - e2 * sl * sl);
   Eigen::Matrix4d M = Eigen::Matrix4d::Identity();
-  M.block<3, 1>(0, 0) << -so, co, 0;             // east
+  M.block<3, 1>(0, 0) << -so, co, 0;              // east
   M.block<3, 1>(0, 1) << -sl * co, -sl * so, cl;  // north
   M.block<3, 1>(0, 2) << cl * co, cl * so, sl;    // up
   M.block<3, 1>(0, 3) << (N + h) * cl * co, (N + h) * cl * so, (N * (1 - e2) + h) * sl;
@@ -146,11 +146,14 @@ nlohmann::json RunTilesStage(const fs::path& ws, const TilesOptions& options) {
     const Eigen::AlignedBox3d box = io::GlbBoundsZUp(glb);
     core::EnsureDirectory(tmp / "mesh");
     core::WriteTextFile(tmp / "mesh" / "model.b3dm", io::EncodeB3dm(glb));
-    children.push_back({{"boundingVolume", io::BoxVolume(box)}, {"geometricError", 0}, {"content", {{"uri", "mesh/model.b3dm"}}}});
+    children.push_back(
+        {{"boundingVolume", io::BoxVolume(box)}, {"geometricError", 0}, {"content", {{"uri", "mesh/model.b3dm"}}}});
     all.extend(box);
     mesh = true;
   }
-  nlohmann::json root = {{"boundingVolume", io::BoxVolume(all)}, {"geometricError", root_error}, {"refine", "ADD"},
+  nlohmann::json root = {{"boundingVolume", io::BoxVolume(all)},
+                         {"geometricError", root_error},
+                         {"refine", "ADD"},
                          {"children", children}};
   const nlohmann::json transform = RootTransform(ws);
   if (!transform.is_null()) root["transform"] = transform;
@@ -164,7 +167,7 @@ nlohmann::json RunTilesStage(const fs::path& ws, const TilesOptions& options) {
   const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   spdlog::info("tiles: {} points in {} tiles over {} levels{}{}, {:.1f} s", tree.points.size(), tree.nodes.size(),
                levels, mesh ? " + the mesh" : "", transform.is_null() ? "" : ", georeferenced (ECEF)", seconds);
-  return {{"points", tree.points.size()}, {"tiles", tree.nodes.size()}, {"levels", levels}, {"mesh", mesh},
+  return {{"points", tree.points.size()},          {"tiles", tree.nodes.size()}, {"levels", levels}, {"mesh", mesh},
           {"georeferenced", !transform.is_null()}, {"seconds", seconds}};
 }
 

@@ -85,7 +85,8 @@ void HandleUpload(Context& ctx, const httplib::Request& req, httplib::Response& 
         fs::path target = uploads / name;
         std::error_code ec;
         for (int k = 1; fs::exists(target, ec); ++k)
-          target = uploads / (fs::path(name).stem().string() + "-" + std::to_string(k) + fs::path(name).extension().string());
+          target = uploads /
+                   (fs::path(name).stem().string() + "-" + std::to_string(k) + fs::path(name).extension().string());
         current_final = target;
         current = fs::path(target).concat(".part");
         partial.push_back(current);
@@ -147,8 +148,10 @@ void HandleEvents(Context& ctx, const httplib::Request&, httplib::Response& res)
 
 void RegisterApiRoutes(httplib::Server& http, Context& ctx) {
   http.Get("/api/health", [&ctx](const httplib::Request&, httplib::Response& res) {
-    SendJson(res, 200, {{"version", FMV3D_VERSION}, {"ws_root", ctx.ws_root.string()},
-                        {"token_required", !ctx.options.token.empty()}});
+    SendJson(res, 200,
+             {{"version", FMV3D_VERSION},
+              {"ws_root", ctx.ws_root.string()},
+              {"token_required", !ctx.options.token.empty()}});
   });
   http.Get("/api/workspaces", [&ctx](const httplib::Request&, httplib::Response& res) {
     Guard(res, [&] {
@@ -197,9 +200,8 @@ void RegisterApiRoutes(httplib::Server& http, Context& ctx) {
       SendJson(res, 202, ctx.jobs->Start(dir.filename().string(), dir, inputs, r));
     });
   });
-  http.Get("/api/jobs", [&ctx](const httplib::Request&, httplib::Response& res) {
-    SendJson(res, 200, ctx.jobs->List());
-  });
+  http.Get("/api/jobs",
+           [&ctx](const httplib::Request&, httplib::Response& res) { SendJson(res, 200, ctx.jobs->List()); });
   http.Get(R"(/api/jobs/([^/]+))", [&ctx](const httplib::Request& req, httplib::Response& res) {
     const auto job = ctx.jobs->Get(req.matches[1], true);
     if (!job) return SendError(res, 404, "no job '" + std::string(req.matches[1]) + "'");
@@ -254,7 +256,8 @@ void RegisterApiRoutes(httplib::Server& http, Context& ctx) {
     });
   });
   // Unknown API paths answer JSON, not the front end's page.
-  http.Get(R"(/api/.*)", [](const httplib::Request&, httplib::Response& res) { SendError(res, 404, "no such endpoint"); });
+  http.Get(R"(/api/.*)",
+           [](const httplib::Request&, httplib::Response& res) { SendError(res, 404, "no such endpoint"); });
 }
 
 }  // namespace fmv3d::server

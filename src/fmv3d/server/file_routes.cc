@@ -23,10 +23,14 @@ std::string NoAssetsPage(const Context& ctx) {
   std::string where = ctx.options.asset_dir.empty() ? std::string("(none given)") : ctx.options.asset_dir.string();
   std::string escaped;
   for (char c : where) {
-    if (c == '<') escaped += "&lt;";
-    else if (c == '>') escaped += "&gt;";
-    else if (c == '&') escaped += "&amp;";
-    else escaped += c;
+    if (c == '<')
+      escaped += "&lt;";
+    else if (c == '>')
+      escaped += "&gt;";
+    else if (c == '&')
+      escaped += "&amp;";
+    else
+      escaped += c;
   }
   std::string page = kNoAssetsPage;
   page.replace(page.find("%s"), 2, escaped);

@@ -138,7 +138,8 @@ nlohmann::json GeoJson(const fs::path& ws) {
       if (height <= 0) continue;
       nlohmann::json quad = nlohmann::json::array();
       const double W = cam->second.width, H = cam->second.height;
-      for (const auto& uv : {Eigen::Vector2d(0, 0), Eigen::Vector2d(W, 0), Eigen::Vector2d(W, H), Eigen::Vector2d(0, H)}) {
+      for (const auto& uv :
+           {Eigen::Vector2d(0, 0), Eigen::Vector2d(W, 0), Eigen::Vector2d(W, H), Eigen::Vector2d(0, H)}) {
         const Eigen::Vector3d ray_cam((uv.x() - cam->second.u0) / cam->second.fx(),
                                       (uv.y() - cam->second.v0) / cam->second.fy(), 1.0);
         const Eigen::Vector3d d = Rs * (R.transpose() * ray_cam);
@@ -172,7 +173,9 @@ nlohmann::json ProfileJson(const fs::path& ws, const LatLon& from, const LatLon&
     const Eigen::Vector3d p = a + f * (b - a);
     const geo::GeoPoint g = frame.UtmToGeodetic({p.x(), p.y(), 0});
     const auto v = Sample(h, grid.Col(p.x()), grid.Row(p.y()));
-    points.push_back({{"lat", g.lat}, {"lon", g.lon}, {"distance_m", f * length},
+    points.push_back({{"lat", g.lat},
+                      {"lon", g.lon},
+                      {"distance_m", f * length},
                       {"height_m", v ? nlohmann::json(*v) : nlohmann::json()}});
   }
   return {{"points", points}};

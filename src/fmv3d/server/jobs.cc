@@ -14,9 +14,7 @@ namespace fmv3d::server {
 namespace fs = std::filesystem;
 
 namespace {
-double Now() {
-  return std::chrono::duration<double>(std::chrono::system_clock::now().time_since_epoch()).count();
-}
+double Now() { return std::chrono::duration<double>(std::chrono::system_clock::now().time_since_epoch()).count(); }
 bool Finished(JobState s) { return s == JobState::kDone || s == JobState::kFailed || s == JobState::kStopped; }
 
 // Reads what was appended to `path` since `*offset`, splits it into complete lines (the rest waits in *partial).
@@ -51,11 +49,16 @@ std::vector<std::string> ReadNewLines(const fs::path& path, uint64_t* offset, st
 
 const char* JobStateName(JobState s) {
   switch (s) {
-    case JobState::kQueued: return "queued";
-    case JobState::kRunning: return "running";
-    case JobState::kDone: return "done";
-    case JobState::kFailed: return "failed";
-    case JobState::kStopped: return "stopped";
+    case JobState::kQueued:
+      return "queued";
+    case JobState::kRunning:
+      return "running";
+    case JobState::kDone:
+      return "done";
+    case JobState::kFailed:
+      return "failed";
+    case JobState::kStopped:
+      return "stopped";
   }
   return "queued";
 }

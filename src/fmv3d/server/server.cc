@@ -12,9 +12,7 @@ namespace fmv3d::server {
 
 namespace fs = std::filesystem;
 
-bool IsLoopbackHost(const std::string& host) {
-  return host == "127.0.0.1" || host == "::1" || host == "localhost";
-}
+bool IsLoopbackHost(const std::string& host) { return host == "127.0.0.1" || host == "::1" || host == "localhost"; }
 
 void ServerOptions::Check() const {
   std::error_code ec;
@@ -79,8 +77,7 @@ void Guard(httplib::Response& res, const std::function<void()>& handler) {
 
 fs::path WorkspaceDir(const Context& ctx, const std::string& name) {
   if (!IsValidWorkspaceName(name))
-    throw RequestError(400, "bad workspace name (one path component of [A-Za-z0-9._ -], not starting with '.')",
-                       "ws");
+    throw RequestError(400, "bad workspace name (one path component of [A-Za-z0-9._ -], not starting with '.')", "ws");
   std::string why;
   const auto dir = ResolveInside(ctx.ws_root, name, &why);
   std::error_code ec;
@@ -91,14 +88,27 @@ fs::path WorkspaceDir(const Context& ctx, const std::string& name) {
 
 namespace {
 std::string ContentType(const fs::path& p) {
-  static const std::pair<const char*, const char*> types[] = {
-      {".html", "text/html; charset=utf-8"}, {".js", "text/javascript"}, {".mjs", "text/javascript"},
-      {".css", "text/css"}, {".json", "application/json"}, {".map", "application/json"},
-      {".png", "image/png"}, {".jpg", "image/jpeg"}, {".jpeg", "image/jpeg"}, {".svg", "image/svg+xml"},
-      {".ico", "image/x-icon"}, {".webp", "image/webp"}, {".wasm", "application/wasm"},
-      {".woff2", "font/woff2"}, {".glb", "model/gltf-binary"}, {".tif", "image/tiff"}, {".tiff", "image/tiff"},
-      {".txt", "text/plain; charset=utf-8"}, {".log", "text/plain; charset=utf-8"},
-      {".jsonl", "text/plain; charset=utf-8"}, {".mtl", "text/plain; charset=utf-8"}};
+  static const std::pair<const char*, const char*> types[] = {{".html", "text/html; charset=utf-8"},
+                                                              {".js", "text/javascript"},
+                                                              {".mjs", "text/javascript"},
+                                                              {".css", "text/css"},
+                                                              {".json", "application/json"},
+                                                              {".map", "application/json"},
+                                                              {".png", "image/png"},
+                                                              {".jpg", "image/jpeg"},
+                                                              {".jpeg", "image/jpeg"},
+                                                              {".svg", "image/svg+xml"},
+                                                              {".ico", "image/x-icon"},
+                                                              {".webp", "image/webp"},
+                                                              {".wasm", "application/wasm"},
+                                                              {".woff2", "font/woff2"},
+                                                              {".glb", "model/gltf-binary"},
+                                                              {".tif", "image/tiff"},
+                                                              {".tiff", "image/tiff"},
+                                                              {".txt", "text/plain; charset=utf-8"},
+                                                              {".log", "text/plain; charset=utf-8"},
+                                                              {".jsonl", "text/plain; charset=utf-8"},
+                                                              {".mtl", "text/plain; charset=utf-8"}};
   const std::string ext = p.extension().string();
   for (const auto& [e, t] : types)
     if (ext == e) return t;
@@ -165,11 +175,13 @@ Server::Server(ServerOptions options) : impl_(std::make_unique<Impl>()) {
     if (!protected_path || token.empty()) return httplib::Server::HandlerResponse::Unhandled;
     std::string given;
     const std::string auth = req.get_header_value("Authorization");
-    if (auth.rfind("Bearer ", 0) == 0) given = auth.substr(7);
-    else if (req.has_param("token")) given = req.get_param_value("token");
+    if (auth.rfind("Bearer ", 0) == 0)
+      given = auth.substr(7);
+    else if (req.has_param("token"))
+      given = req.get_param_value("token");
     if (given.empty() || !ConstantTimeEquals(given, token)) {
-      SendError(res, 401, given.empty() ? "this server needs a token (Authorization: Bearer T or ?token=T)"
-                                        : "wrong token");
+      SendError(res, 401,
+                given.empty() ? "this server needs a token (Authorization: Bearer T or ?token=T)" : "wrong token");
       return httplib::Server::HandlerResponse::Handled;
     }
     return httplib::Server::HandlerResponse::Unhandled;

@@ -19,8 +19,8 @@ struct ServerOptions {
   std::filesystem::path ws_root = ".";
   std::filesystem::path asset_dir;  // the built web/ (may be missing: "/" then says how to build it)
   std::string host = "127.0.0.1";
-  int port = 8080;                  // 0: any free port (tests)
-  std::string token;                // empty: none (loopback only)
+  int port = 8080;    // 0: any free port (tests)
+  std::string token;  // empty: none (loopback only)
   size_t max_upload_bytes = size_t{2048} << 20;
   std::filesystem::path executable;  // the fmv3d binary jobs run (default: this process's own, /proc/self/exe)
   int threads = 16;                  // worker pool

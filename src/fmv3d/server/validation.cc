@@ -12,8 +12,8 @@ namespace fmv3d::server {
 namespace fs = std::filesystem;
 
 const std::vector<std::string>& StageNames() {
-  static const std::vector<std::string> names = {"frames", "features", "match", "sparse", "georef", "dense", "mesh",
-                                                 "texture", "tiles", "dsm", "ortho", "report"};
+  static const std::vector<std::string> names = {"frames", "features", "match", "sparse", "georef", "dense",
+                                                 "mesh",   "texture",  "tiles", "dsm",    "ortho",  "report"};
   return names;
 }
 
@@ -84,7 +84,8 @@ nlohmann::json ParseObject(std::string_view body) {
 
 std::string StageField(const nlohmann::json& j, const char* field) {
   if (!j.contains(field) || j[field].is_null()) return {};
-  if (!j[field].is_string()) throw RequestError(400, std::string("'") + field + "' must be a stage name (string)", field);
+  if (!j[field].is_string())
+    throw RequestError(400, std::string("'") + field + "' must be a stage name (string)", field);
   const std::string s = j[field].get<std::string>();
   if (s.empty()) return {};
   if (!IsStageName(s)) {
@@ -164,9 +165,8 @@ int ParseBoundedInt(std::string_view text, int lo, int hi, const std::string& fi
   int v = 0;
   const auto [ptr, ec] = std::from_chars(text.data(), text.data() + text.size(), v);
   if (ec != std::errc() || ptr != text.data() + text.size() || v < lo || v > hi)
-    throw RequestError(400, "'" + field + "' must be an integer in [" + std::to_string(lo) + ", " +
-                                std::to_string(hi) + "]",
-                       field);
+    throw RequestError(
+        400, "'" + field + "' must be an integer in [" + std::to_string(lo) + ", " + std::to_string(hi) + "]", field);
   return v;
 }
 

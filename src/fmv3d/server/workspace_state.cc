@@ -14,11 +14,16 @@ namespace fs = std::filesystem;
 
 const char* StageStateName(StageState s) {
   switch (s) {
-    case StageState::kPending: return "pending";
-    case StageState::kDone: return "done";
-    case StageState::kStale: return "stale";
-    case StageState::kRunning: return "running";
-    case StageState::kFailed: return "failed";
+    case StageState::kPending:
+      return "pending";
+    case StageState::kDone:
+      return "done";
+    case StageState::kStale:
+      return "stale";
+    case StageState::kRunning:
+      return "running";
+    case StageState::kFailed:
+      return "failed";
   }
   return "pending";
 }
@@ -134,10 +139,10 @@ nlohmann::json DescribeWorkspace(const fs::path& ws) {
 }
 
 nlohmann::json WorkspaceFiles(const fs::path& ws) {
-  return {{"sparse_ply", IfExists(ws, "sparse/sparse.ply")},    {"fused_ply", IfExists(ws, "dense/fused.ply")},
-          {"mesh_glb", IfExists(ws, "mesh/model.glb")},         {"tileset", IfExists(ws, "tiles/tileset.json")},
-          {"ortho", IfExists(ws, "geo/ortho.tif")},             {"dsm", IfExists(ws, "geo/dsm.tif")},
-          {"hillshade", IfExists(ws, "geo/hillshade.png")},     {"report_html", IfExists(ws, "report/report.html")}};
+  return {{"sparse_ply", IfExists(ws, "sparse/sparse.ply")}, {"fused_ply", IfExists(ws, "dense/fused.ply")},
+          {"mesh_glb", IfExists(ws, "mesh/model.glb")},      {"tileset", IfExists(ws, "tiles/tileset.json")},
+          {"ortho", IfExists(ws, "geo/ortho.tif")},          {"dsm", IfExists(ws, "geo/dsm.tif")},
+          {"hillshade", IfExists(ws, "geo/hillshade.png")},  {"report_html", IfExists(ws, "report/report.html")}};
 }
 
 }  // namespace fmv3d::server

@@ -160,9 +160,14 @@ BundleAdjustmentSummary BundleAdjust(core::Reconstruction* rec, const BundleAdju
   // otherwise mean as many allocations. Declared before the problem, so it is destroyed after it.
   std::unique_ptr<ceres::LossFunction> shared_loss;
   switch (options.loss) {
-    case BundleAdjustmentOptions::Loss::kCauchy: shared_loss.reset(new ceres::CauchyLoss(options.loss_scale_px)); break;
-    case BundleAdjustmentOptions::Loss::kHuber: shared_loss.reset(new ceres::HuberLoss(options.loss_scale_px)); break;
-    default: break;
+    case BundleAdjustmentOptions::Loss::kCauchy:
+      shared_loss.reset(new ceres::CauchyLoss(options.loss_scale_px));
+      break;
+    case BundleAdjustmentOptions::Loss::kHuber:
+      shared_loss.reset(new ceres::HuberLoss(options.loss_scale_px));
+      break;
+    default:
+      break;
   }
   std::vector<std::unique_ptr<ceres::Manifold>> subset_manifolds;
   std::unique_ptr<ceres::CostFunction> gauge_prior;
@@ -219,8 +224,8 @@ BundleAdjustmentSummary BundleAdjust(core::Reconstruction* rec, const BundleAdju
     for (const auto& [id, c] : config.centre_priors) {
       const auto it = poses.find(id);
       if (it == poses.end() || !variable.count(id) || config.constant_images.count(id)) continue;
-      prior_costs.emplace_back(new ceres::AutoDiffCostFunction<CentrePrior, 3, 4, 3>(
-          new CentrePrior(c, config.centre_prior_sigma)));
+      prior_costs.emplace_back(
+          new ceres::AutoDiffCostFunction<CentrePrior, 3, 4, 3>(new CentrePrior(c, config.centre_prior_sigma)));
       problem.AddResidualBlock(prior_costs.back().get(), prior_loss.get(), it->second.q.data(), it->second.t.data());
       ++centre_prior_count;
     }
@@ -295,8 +300,8 @@ BundleAdjustmentSummary BundleAdjust(core::Reconstruction* rec, const BundleAdju
 
   ceres::Solver::Options sopts;
   const int num_var_images = static_cast<int>(variable.size());
-  sopts.linear_solver_type = num_var_images <= options.dense_schur_max_images ? ceres::DENSE_SCHUR
-                                                                                : ceres::SPARSE_SCHUR;
+  sopts.linear_solver_type =
+      num_var_images <= options.dense_schur_max_images ? ceres::DENSE_SCHUR : ceres::SPARSE_SCHUR;
   auto ordering = std::make_shared<ceres::ParameterBlockOrdering>();
   for (auto& X : pts) ordering->AddElementToGroup(X.data(), 0);
   for (auto& [id, b] : poses) {
@@ -328,14 +333,15 @@ BundleAdjustmentSummary BundleAdjust(core::Reconstruction* rec, const BundleAdju
   ceres::Solver::Summary summary;
   ceres::Solve(sopts, &problem, &summary);
   out.final_rms_px = rms();
-  spdlog::debug("BA: {} var images, {} points, {} residuals, {} iterations; setup {:.3f} s, solve {:.3f} s "
-                "(pre {:.3f}, jac {:.3f}, res {:.3f}, lin {:.3f}), rms {:.3f} s",
-                variable.size(), point_ids.size(), residual_obs.size(), summary.iterations.size(),
-                std::chrono::duration<double>(t_setup - start).count(), summary.total_time_in_seconds,
-                summary.preprocessor_time_in_seconds, summary.jacobian_evaluation_time_in_seconds,
-                summary.residual_evaluation_time_in_seconds, summary.linear_solver_time_in_seconds,
-                std::chrono::duration<double>(std::chrono::steady_clock::now() - t_setup).count() -
-                    summary.total_time_in_seconds);
+  spdlog::debug(
+      "BA: {} var images, {} points, {} residuals, {} iterations; setup {:.3f} s, solve {:.3f} s "
+      "(pre {:.3f}, jac {:.3f}, res {:.3f}, lin {:.3f}), rms {:.3f} s",
+      variable.size(), point_ids.size(), residual_obs.size(), summary.iterations.size(),
+      std::chrono::duration<double>(t_setup - start).count(), summary.total_time_in_seconds,
+      summary.preprocessor_time_in_seconds, summary.jacobian_evaluation_time_in_seconds,
+      summary.residual_evaluation_time_in_seconds, summary.linear_solver_time_in_seconds,
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - t_setup).count() -
+          summary.total_time_in_seconds);
   out.num_residuals = static_cast<int>(residual_obs.size());
   out.num_iterations = static_cast<int>(summary.iterations.size());
   out.success = summary.IsSolutionUsable();

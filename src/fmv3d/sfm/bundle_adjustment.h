@@ -38,7 +38,7 @@ struct BundleAdjustmentOptions {
   // dense factorisation (6n + 3 unknowns, n³ flops) only costs as much past a few hundred images. Measured on a
   // 61-image 960x540 video model (424k residuals): dense 4.7 CPU-s vs sparse 6.2 for 6 iterations.
   int dense_schur_max_images = 200;
-  int num_threads = 0;              // 0: core::NumThreads()
+  int num_threads = 0;  // 0: core::NumThreads()
   // After solving: the posterior covariance of each camera's free intrinsics (Ceres Covariance, sparse QR of the
   // whole Jacobian), scaled by the residual variance σ² = SSE / (residuals − parameters).
   bool compute_intrinsics_covariance = false;
@@ -47,9 +47,9 @@ struct BundleAdjustmentOptions {
 
 // Which part of the model to adjust. Empty variable_images means all images.
 struct BundleAdjustmentConfig {
-  std::set<uint32_t> variable_images;  // images whose poses move (local BA: the new image and its neighbours)
-  std::set<uint32_t> constant_images;  // images whose poses stay fixed even if in variable_images
-  std::set<uint32_t> constant_cameras; // cameras whose intrinsics stay fixed whatever the options say
+  std::set<uint32_t> variable_images;           // images whose poses move (local BA: the new image and its neighbours)
+  std::set<uint32_t> constant_images;           // images whose poses stay fixed even if in variable_images
+  std::set<uint32_t> constant_cameras;          // cameras whose intrinsics stay fixed whatever the options say
   uint32_t gauge_image1 = 0, gauge_image2 = 0;  // 0: choose the two lowest image ids
   // Soft priors on camera centres in the model's frame (e.g. telemetry positions in local metres): residual
   // (C − prior) / centre_prior_sigma per axis, Huber loss beyond centre_prior_huber σ. With priors on at least

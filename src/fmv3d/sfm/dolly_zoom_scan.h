@@ -20,11 +20,11 @@ struct DollyZoomScanOptions {
 };
 
 struct DollyZoomScanResult {
-  double best_factor = 1;          // 1: the starting focal explains the views best
-  core::Reconstruction best;       // the model at the best candidate (empty when no BA succeeded)
-  double rms_at_start_px = 0;      // rms at the starting focal ...
-  double rms_next_px = 0;          // ... and at the next candidate (0 when it failed)
-  std::string curve;               // "focal:rms" per candidate, for the log
+  double best_factor = 1;      // 1: the starting focal explains the views best
+  core::Reconstruction best;   // the model at the best candidate (empty when no BA succeeded)
+  double rms_at_start_px = 0;  // rms at the starting focal ...
+  double rms_next_px = 0;      // ... and at the next candidate (0 when it failed)
+  std::string curve;           // "focal:rms" per candidate, for the log
 };
 
 // options: the BA of each candidate (its focal and distortion flags are overridden: both held).

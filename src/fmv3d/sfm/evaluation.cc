@@ -25,17 +25,18 @@ nlohmann::json SparseEvaluation::ToJson() const {
           {"median_relative_rotation_error_deg", median_rotation_error_deg},
           {"focal_relative_error_percent", 100 * focal_relative_error},
           {"principal_point_error_px", principal_point_error_px},
-          {"systematic_rotation_error_deg", {systematic_rotation_deg.x(), systematic_rotation_deg.y(), systematic_rotation_deg.z()}},
+          {"systematic_rotation_error_deg",
+           {systematic_rotation_deg.x(), systematic_rotation_deg.y(), systematic_rotation_deg.z()}},
           {"systematic_rotation_error_definition",
            "mean over cameras of each camera's absolute rotation error (after the similarity), in its own axes: "
            "x = pitch (image rows), y = yaw (columns), z = roll"},
-          {"alignment", {{"scale", alignment.s},
-                         {"q_wxyz", {alignment.q.w(), alignment.q.x(), alignment.q.y(), alignment.q.z()}},
-                         {"t", {alignment.t.x(), alignment.t.y(), alignment.t.z()}}}}};
+          {"alignment",
+           {{"scale", alignment.s},
+            {"q_wxyz", {alignment.q.w(), alignment.q.x(), alignment.q.y(), alignment.q.z()}},
+            {"t", {alignment.t.x(), alignment.t.y(), alignment.t.z()}}}}};
 }
 
-double MedianRelativeRotationErrorDeg(const std::vector<core::Pose>& estimate,
-                                      const std::vector<core::Pose>& truth) {
+double MedianRelativeRotationErrorDeg(const std::vector<core::Pose>& estimate, const std::vector<core::Pose>& truth) {
   std::vector<double> errs;
   for (size_t i = 0; i < estimate.size(); ++i)
     for (size_t j = i + 1; j < estimate.size(); ++j) {

@@ -20,16 +20,16 @@ namespace fmv3d::sfm {
 
 struct SparseEvaluation {
   int num_truth_images = 0;
-  int num_matched = 0;        // our images found in the truth by name
-  double centre_rmse = 0;     // same units as the truth
-  double extent = 0;          // max pairwise distance of the matched true centres
+  int num_matched = 0;              // our images found in the truth by name
+  double centre_rmse = 0;           // same units as the truth
+  double extent = 0;                // max pairwise distance of the matched true centres
   double centre_rmse_fraction = 0;  // centre_rmse / extent
   double median_rotation_error_deg = 0;
   double max_centre_error_fraction = 0;
-  double focal_relative_error = 0;  // worst over matched cameras
+  double focal_relative_error = 0;      // worst over matched cameras
   double principal_point_error_px = 0;  // worst over matched cameras: distance between the principal points
   Eigen::Vector3d systematic_rotation_deg = Eigen::Vector3d::Zero();  // see ToJson
-  core::Sim3 alignment;             // ours → truth
+  core::Sim3 alignment;                                               // ours → truth
   nlohmann::json ToJson() const;
 };
 

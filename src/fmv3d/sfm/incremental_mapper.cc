@@ -60,7 +60,7 @@ struct PairCandidate {
   double median_angle_deg = 0;
   int num_good = 0;
   double focal_scale = 1;  // chosen multiple of the guessed focal (1 when the focal is known)
-  core::Pose pose2;  // pose of image 2 with image 1 at the origin, unit baseline
+  core::Pose pose2;        // pose of image 2 with image 1 at the origin, unit baseline
 };
 
 // Why an image of the pool is not (yet) in the model; turned into a sentence only for MapperResult::left_out.
@@ -79,9 +79,9 @@ struct RegistrationFailure {
 
 // One step of the growth loop.
 enum class GrowthStep {
-  kRegistered,      // an image was registered (and triangulated, locally adjusted)
-  kNoCandidate,     // no image left that sees enough of the model or deserves another trial
-  kAllFailed,       // every candidate was tried and failed
+  kRegistered,   // an image was registered (and triangulated, locally adjusted)
+  kNoCandidate,  // no image left that sees enough of the model or deserves another trial
+  kAllFailed,    // every candidate was tried and failed
 };
 
 class ModelBuilder {
@@ -244,8 +244,8 @@ void ModelBuilder::ChooseFocal(const std::vector<PairCandidate>& cands) {
   narrow_field_ = narrow(r.focal);
   std::string curve;
   for (size_t i = 0; i < r.focals.size(); ++i) curve += fmt::format(" {:.0f}:{:.3f}", r.focals[i], r.scores[i]);
-  spdlog::info("focal scan on {} pairs: {:.1f} px ({:.2f} x the guess){}{}", pairs.size(), r.focal,
-               init_focal_scale_, r.plateau ? ", plateau: a lower bound, held until the final test" : "",
+  spdlog::info("focal scan on {} pairs: {:.1f} px ({:.2f} x the guess){}{}", pairs.size(), r.focal, init_focal_scale_,
+               r.plateau ? ", plateau: a lower bound, held until the final test" : "",
                narrow_field_ ? ", narrow field: distortion fixed" : "");
   spdlog::debug("focal scan (f: px²):{}", curve);
 }
@@ -289,8 +289,8 @@ void ModelBuilder::EvaluatePair(PairCandidate* c) const {
   cv::Mat mask;
   cv::Mat E;
   try {
-    E = cv::findEssentialMat(p1, p2, cv::Mat::eye(3, 3, CV_64F), cv::RANSAC, 0.9999,
-                             opt_.tri_max_error_px / f, 5000, mask);
+    E = cv::findEssentialMat(p1, p2, cv::Mat::eye(3, 3, CV_64F), cv::RANSAC, 0.9999, opt_.tri_max_error_px / f, 5000,
+                             mask);
   } catch (const cv::Exception&) {
     return;
   }
@@ -380,9 +380,9 @@ bool ModelBuilder::Initialize() {
   for (auto& c : cands) EvaluatePair(&c);
   // Strict first (enough angle, not planar), then relax the angle and finally accept planar pairs.
   const std::vector<std::pair<double, bool>> passes = {
-      {opt_.init_min_tri_angle_deg, false},       {opt_.init_min_tri_angle_deg / 2, false},
-      {opt_.init_min_tri_angle_deg / 4, false},   {opt_.init_min_tri_angle_deg / 2, true},
-      {opt_.init_min_tri_angle_deg / 8, true},    {opt_.init_min_tri_angle_deg / 32, true}};
+      {opt_.init_min_tri_angle_deg, false},     {opt_.init_min_tri_angle_deg / 2, false},
+      {opt_.init_min_tri_angle_deg / 4, false}, {opt_.init_min_tri_angle_deg / 2, true},
+      {opt_.init_min_tri_angle_deg / 8, true},  {opt_.init_min_tri_angle_deg / 32, true}};
   std::set<const features::VerifiedPair*> tried;
   for (const auto& [min_angle, allow_planar] : passes) {
     std::vector<const PairCandidate*> ok;
@@ -400,11 +400,11 @@ bool ModelBuilder::Initialize() {
       triangulator_.set_min_angle_deg(tri_min_angle_deg);
       filter_.min_angle_deg = std::min(opt_.filter_min_angle_deg, tri_min_angle_deg);
       if (TryInitialPair(*c)) {
-        spdlog::info("initial pair {} + {}: {} points, median angle {:.2f}°, H ratio {:.2f}, focal {:.1f}, "
-                     "min angle {:.2f}°",
-                     images_.at(c->pair->image_id1)->name, images_.at(c->pair->image_id2)->name,
-                     rec_.points.size(), c->median_angle_deg, c->h_ratio, rec_.cameras.begin()->second.f,
-                     triangulator_.options().min_angle_deg);
+        spdlog::info(
+            "initial pair {} + {}: {} points, median angle {:.2f}°, H ratio {:.2f}, focal {:.1f}, "
+            "min angle {:.2f}°",
+            images_.at(c->pair->image_id1)->name, images_.at(c->pair->image_id2)->name, rec_.points.size(),
+            c->median_angle_deg, c->h_ratio, rec_.cameras.begin()->second.f, triangulator_.options().min_angle_deg);
         t_->init += Seconds(start);
         images_at_last_global_ = 2;
         return true;
@@ -435,8 +435,8 @@ bool ModelBuilder::TryRegister(uint32_t image_id) {
   const auto start = Clock::now();
   const MapperImage& mi = *images_.at(image_id);
   const Correspondences2D3D c = Correspondences(image_id);
-  core::Camera cam = rec_.cameras.count(mi.camera_id) ? rec_.cameras.at(mi.camera_id)
-                                                       : input_.cameras.at(mi.camera_id).camera;
+  core::Camera cam =
+      rec_.cameras.count(mi.camera_id) ? rec_.cameras.at(mi.camera_id) : input_.cameras.at(mi.camera_id).camera;
   geometry::AbsolutePoseOptions po;
   po.max_error_px = opt_.abs_pose_max_error_px;
   po.min_inliers = opt_.abs_pose_min_inliers;
@@ -498,9 +498,10 @@ int ModelBuilder::RelocaliseImages() {
     if (dc < 0.01 * extent && da < 1.0 * kDeg) continue;  // the same pose, better supported: nothing wrong
     int obs = 0;
     for (int64_t pid : im.point3d_ids) obs += pid != core::kNoPoint3D;
-    spdlog::info("sparse: {} re-registered: its pose explained {} of {} 2D-3D correspondences ({} observations), "
-                 "one {:.3g} away ({:.2f}°) explains {}",
-                 im.name, support, p2.size(), obs, dc, da / kDeg, r.num_inliers);
+    spdlog::info(
+        "sparse: {} re-registered: its pose explained {} of {} 2D-3D correspondences ({} observations), "
+        "one {:.3g} away ({:.2f}°) explains {}",
+        im.name, support, p2.size(), obs, dc, da / kDeg, r.num_inliers);
     DetachImage(&rec_, id);
     im.pose = r.pose;
     for (size_t i = 0; i < c.keypoint_point.size(); ++i) {
@@ -569,8 +570,7 @@ BundleAdjustmentSummary ModelBuilder::GlobalBundleAdjust(bool final_pass) {
   ++num_global_ba_;
   t_->global_ba += Seconds(start);
   spdlog::debug("global BA ({} images, {} points): rms {:.3f} → {:.3f} px in {} iterations, {:.2f} s",
-                rec_.images.size(), rec_.points.size(), s.initial_rms_px, s.final_rms_px, s.num_iterations,
-                s.seconds);
+                rec_.images.size(), rec_.points.size(), s.initial_rms_px, s.final_rms_px, s.num_iterations, s.seconds);
   FilterPoints(nullptr);
   images_at_last_global_ = rec_.images.size();
   return s;
@@ -627,8 +627,10 @@ void ModelBuilder::DollyZoomFocalScan() {
   // release it to bundle adjustment from here, as for any guess.
   if (r.best_factor == 1 && r.rms_at_start_px > 0 && r.rms_next_px > 1.2 * r.rms_at_start_px) {
     focal_fixed_ = focal_from_plateau_ = false;
-    spdlog::info("focal: the error rises from the scan's lower bound on ({:.3f} → {:.3f} px): no plateau, the focal "
-                 "is refined from here", r.rms_at_start_px, r.rms_next_px);
+    spdlog::info(
+        "focal: the error rises from the scan's lower bound on ({:.3f} → {:.3f} px): no plateau, the focal "
+        "is refined from here",
+        r.rms_at_start_px, r.rms_next_px);
   }
   if (r.best_factor != 1 && !r.best.images.empty()) {
     rec_ = std::move(r.best);
@@ -654,8 +656,7 @@ GrowthStep ModelBuilder::RegisterNextImage() {
     }
     // A frame that failed is retried only after the model offers it clearly more points.
     auto f = visible_at_failure_.find(id);
-    if (f != visible_at_failure_.end() &&
-        (vis < 1.25 * f->second + 5 || trials_[id] >= opt_.max_registration_trials))
+    if (f != visible_at_failure_.end() && (vis < 1.25 * f->second + 5 || trials_[id] >= opt_.max_registration_trials))
       continue;
     cands.emplace_back(-score, id);
   }
@@ -797,13 +798,14 @@ MapperResult RunIncrementalMapper(const MapperInput& input, const MapperOptions&
                   {"invalid_matches_skipped", graph.NumSkipped()},
                   {"models", result.models.size()},
                   {"relocalised_images", relocalised},
-                  {"seconds", {{"initial_pair", timings.init},
-                               {"absolute_pose", timings.registration},
-                               {"triangulation", timings.triangulation},
-                               {"local_ba", timings.local_ba},
-                               {"global_ba", timings.global_ba},
-                               {"filtering", timings.filtering},
-                               {"total", Seconds(start)}}}};
+                  {"seconds",
+                   {{"initial_pair", timings.init},
+                    {"absolute_pose", timings.registration},
+                    {"triangulation", timings.triangulation},
+                    {"local_ba", timings.local_ba},
+                    {"global_ba", timings.global_ba},
+                    {"filtering", timings.filtering},
+                    {"total", Seconds(start)}}}};
   return result;
 }
 

@@ -32,8 +32,8 @@ struct MapperImage {
   uint32_t id = 0;
   uint32_t camera_id = 1;
   std::string name;
-  std::vector<Eigen::Vector2d> keypoints;             // pixels, fmv3d convention
-  std::vector<Eigen::Matrix<uint8_t, 3, 1>> colors;   // optional, same size as keypoints
+  std::vector<Eigen::Vector2d> keypoints;            // pixels, fmv3d convention
+  std::vector<Eigen::Matrix<uint8_t, 3, 1>> colors;  // optional, same size as keypoints
 };
 
 struct MapperCamera {
@@ -77,7 +77,7 @@ struct MapperOptions {
   // 61-keyframe 960x540 clip and a 40-frame orbit, 1.5 instead of 1.1 (COLMAP's) gave the same final accuracy
   // at about half the global BA work (the final BA still converges the whole model).
   double global_ba_growth_ratio = 1.5;
-  int global_ba_every_image_below = 12; // ... and after every image while the model is small
+  int global_ba_every_image_below = 12;  // ... and after every image while the model is small
   // Intermediate global BAs: near the optimum is enough. 5 instead of 10 left the final accuracy of the clip
   // and the orbit above unchanged (the final BA converges the whole model) at ~20% less global BA work.
   int global_ba_max_iterations = 5;
@@ -94,9 +94,9 @@ struct MapperOptions {
   double self_calibration_min_delta_chi2 = 1000;
   // Focal. A guessed prior is replaced by a scan over focal candidates on the strongest pairs (focal_scan.h).
   int focal_scan_pairs = 5;
-  int focal_dolly_min_images = 15;     // telephoto: multi-view focal scan once the model has this many images
-  double focal_dolly_max_factor = 64;  // ... over the two-view lower bound times 1 .. this (steps of √2)
-  bool fix_known_focal = false;     // a trusted prior (calibration, telemetry, --focal) stays fixed in BA
+  int focal_dolly_min_images = 15;       // telephoto: multi-view focal scan once the model has this many images
+  double focal_dolly_max_factor = 64;    // ... over the two-view lower bound times 1 .. this (steps of √2)
+  bool fix_known_focal = false;          // a trusted prior (calibration, telemetry, --focal) stays fixed in BA
   double narrow_field_max_radius = 0.1;  // half-diagonal / f below this: k1, k2 unobservable, held at the prior
   bool refine_tangential = false;
   double ba_loss_scale_px = 1.0;
@@ -108,10 +108,10 @@ struct MapperOptions {
 };
 
 struct MapperResult {
-  std::vector<core::Reconstruction> models;     // largest first
+  std::vector<core::Reconstruction> models;                          // largest first
   std::vector<std::vector<NestedModelTestResult>> self_calibration;  // per model: the final tests, in order
-  std::map<uint32_t, std::string> left_out;     // image id → reason it is not in the largest model
-  nlohmann::json stats;                         // counts and timings per stage
+  std::map<uint32_t, std::string> left_out;  // image id → reason it is not in the largest model
+  nlohmann::json stats;                      // counts and timings per stage
 };
 
 // Never throws on bad data (too few matches, unrelated images): such images are left out with a reason.

@@ -27,7 +27,7 @@ void DetachImage(core::Reconstruction* rec, uint32_t image_id);
 // 2D–3D correspondences of an image (registered or not) with the model: through the correspondence graph, each
 // keypoint matched to a keypoint that belongs to a 3D point (each point once per keypoint).
 struct Correspondences2D3D {
-  std::vector<Eigen::Vector2d> points2d;                   // pixels
+  std::vector<Eigen::Vector2d> points2d;  // pixels
   std::vector<Eigen::Vector3d> points3d;
   std::vector<std::pair<uint32_t, uint64_t>> keypoint_point;  // (keypoint index, point id) per correspondence
 };

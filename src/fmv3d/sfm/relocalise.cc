@@ -114,7 +114,8 @@ int RemoveObservation(core::Reconstruction* rec, uint64_t pid, uint32_t image_id
 }
 
 void DeletePoint(core::Reconstruction* rec, uint64_t pid) {
-  for (const auto& el : rec->points.at(pid).track) rec->images.at(el.image_id).point3d_ids[el.point2d_idx] = core::kNoPoint3D;
+  for (const auto& el : rec->points.at(pid).track)
+    rec->images.at(el.image_id).point3d_ids[el.point2d_idx] = core::kNoPoint3D;
   rec->points.erase(pid);
 }
 
@@ -316,7 +317,8 @@ RelocaliseStats RelocaliseImages(core::Reconstruction* rec, const std::vector<Re
                  " needed)";
         return;
       }
-      const core::Camera& cam = rec->cameras.count(c.camera_id) ? rec->cameras.at(c.camera_id) : cameras.at(c.camera_id);
+      const core::Camera& cam =
+          rec->cameras.count(c.camera_id) ? rec->cameras.at(c.camera_id) : cameras.at(c.camera_id);
       at.pose = geometry::EstimateAbsolutePose(p2, p3, cam, o.pose);
       if (!at.pose.success)
         at.why = "absolute pose failed on " + std::to_string(p2.size()) + " 2D-3D matches (" +
@@ -373,8 +375,8 @@ RelocaliseStats RelocaliseImages(core::Reconstruction* rec, const std::vector<Re
       double lo = 0, hi = 0;
       if (!DepthRange(*rec, id, &lo, &hi)) continue;
       for (uint32_t nb : Neighbours(*rec, id, o.guided_neighbours)) {
-        const auto matches = GuidedMatches(*rec, id, nb, *feats.at(id), *feats.at(nb), lo, hi,
-                                           o.guided_max_epipolar_px, o.guided_ratio);
+        const auto matches =
+            GuidedMatches(*rec, id, nb, *feats.at(id), *feats.at(nb), lo, hi, o.guided_max_epipolar_px, o.guided_ratio);
         const auto& im1 = rec->images.at(id);
         const auto& im2 = rec->images.at(nb);
         const auto& cam1 = rec->cameras.at(im1.camera_id);
@@ -417,7 +419,8 @@ RelocaliseStats RelocaliseImages(core::Reconstruction* rec, const std::vector<Re
     // An image whose observations were all filtered out is not registered after all.
     for (uint32_t id : added) {
       const auto& ids = rec->images.at(id).point3d_ids;
-      const int obs = static_cast<int>(std::count_if(ids.begin(), ids.end(), [](int64_t p) { return p != core::kNoPoint3D; }));
+      const int obs =
+          static_cast<int>(std::count_if(ids.begin(), ids.end(), [](int64_t p) { return p != core::kNoPoint3D; }));
       if (obs >= o.pose.min_inliers / 2) continue;
       for (int64_t pid : ids)
         if (pid != core::kNoPoint3D) RemoveObservation(rec, static_cast<uint64_t>(pid), id);

@@ -40,7 +40,7 @@ struct RelocaliseOptions {
   double guided_ratio = 0.9;          // ratio test among the candidates on the epipolar segment
   double tri_min_angle_deg = 1.5;
   double tri_max_error_px = 4;
-  double filter_max_error_px = 4;     // after the adjustment
+  double filter_max_error_px = 4;  // after the adjustment
   int max_rounds = 4;
   int ba_max_iterations = 30;
   void Check() const;

@@ -7,40 +7,60 @@ namespace fmv3d::sfm {
 
 const char* ToString(IntrinsicGroup group) {
   switch (group) {
-    case IntrinsicGroup::kFocal: return "focal";
-    case IntrinsicGroup::kPrincipalPoint: return "principal_point";
-    case IntrinsicGroup::kAspect: return "aspect";
-    case IntrinsicGroup::kTangential: return "tangential";
+    case IntrinsicGroup::kFocal:
+      return "focal";
+    case IntrinsicGroup::kPrincipalPoint:
+      return "principal_point";
+    case IntrinsicGroup::kAspect:
+      return "aspect";
+    case IntrinsicGroup::kTangential:
+      return "tangential";
   }
   return "?";
 }
 
 const char* ToString(NestedModelDecision decision) {
   switch (decision) {
-    case NestedModelDecision::kFreed: return "freed";
-    case NestedModelDecision::kNotSignificant: return "held: not significant";
-    case NestedModelDecision::kUndetermined: return "held: not determined by the data";
-    case NestedModelDecision::kFailed: return "held: test failed";
+    case NestedModelDecision::kFreed:
+      return "freed";
+    case NestedModelDecision::kNotSignificant:
+      return "held: not significant";
+    case NestedModelDecision::kUndetermined:
+      return "held: not determined by the data";
+    case NestedModelDecision::kFailed:
+      return "held: test failed";
   }
   return "?";
 }
 
 std::vector<core::IntrinsicIndex> Parameters(IntrinsicGroup group) {
   switch (group) {
-    case IntrinsicGroup::kFocal: return {core::kF};
-    case IntrinsicGroup::kPrincipalPoint: return {core::kU0, core::kV0};
-    case IntrinsicGroup::kAspect: return {core::kAspect};
-    case IntrinsicGroup::kTangential: return {core::kP1, core::kP2};
+    case IntrinsicGroup::kFocal:
+      return {core::kF};
+    case IntrinsicGroup::kPrincipalPoint:
+      return {core::kU0, core::kV0};
+    case IntrinsicGroup::kAspect:
+      return {core::kAspect};
+    case IntrinsicGroup::kTangential:
+      return {core::kP1, core::kP2};
   }
   return {};
 }
 
 void SetRefine(IntrinsicGroup group, bool refine, BundleAdjustmentOptions* o) {
   switch (group) {
-    case IntrinsicGroup::kFocal: o->refine_focal = refine; break;
-    case IntrinsicGroup::kPrincipalPoint: o->refine_principal_point = refine; break;
-    case IntrinsicGroup::kAspect: o->refine_aspect = refine; break;
-    case IntrinsicGroup::kTangential: o->refine_tangential = refine; break;
+    case IntrinsicGroup::kFocal:
+      o->refine_focal = refine;
+      break;
+    case IntrinsicGroup::kPrincipalPoint:
+      o->refine_principal_point = refine;
+      break;
+    case IntrinsicGroup::kAspect:
+      o->refine_aspect = refine;
+      break;
+    case IntrinsicGroup::kTangential:
+      o->refine_tangential = refine;
+      break;
   }
 }
 
@@ -48,15 +68,23 @@ double CornerDisplacementPerUnit(const core::Camera& c, core::IntrinsicIndex p) 
   // A point at the image corner: normalised (x, y) = half the image over the focal.
   const double x = 0.5 * c.width / c.fx(), y = 0.5 * c.height / c.fy(), r2 = x * x + y * y;
   switch (p) {
-    case core::kF: return std::hypot(c.aspect * x, y);  // u = f·s·x + u0, v = f·y + v0
-    case core::kAspect: return c.f * x;
+    case core::kF:
+      return std::hypot(c.aspect * x, y);  // u = f·s·x + u0, v = f·y + v0
+    case core::kAspect:
+      return c.f * x;
     case core::kU0:
-    case core::kV0: return 1;
-    case core::kK1: return c.f * std::sqrt(r2) * r2;
-    case core::kK2: return c.f * std::sqrt(r2) * r2 * r2;
-    case core::kP1: return c.f * std::hypot(2 * x * y, r2 + 2 * y * y);
-    case core::kP2: return c.f * std::hypot(r2 + 2 * x * x, 2 * x * y);
-    default: return 0;
+    case core::kV0:
+      return 1;
+    case core::kK1:
+      return c.f * std::sqrt(r2) * r2;
+    case core::kK2:
+      return c.f * std::sqrt(r2) * r2 * r2;
+    case core::kP1:
+      return c.f * std::hypot(2 * x * y, r2 + 2 * y * y);
+    case core::kP2:
+      return c.f * std::hypot(r2 + 2 * x * x, 2 * x * y);
+    default:
+      return 0;
   }
 }
 
@@ -83,8 +111,8 @@ NestedModelTestResult TestNestedModel(core::Reconstruction* rec, const BundleAdj
   r.num_observations = s0.num_residuals;
   r.dof = std::max(1.0, 2 * n - 6.0 * rec->images.size() - 3.0 * rec->points.size());
   r.delta_chi2 = (ss0 - ss1) / std::max(ss0 / r.dof, 1e-12);
-  r.threshold = test_options.min_delta_chi2 > 0 ? test_options.min_delta_chi2
-                                                : r.num_parameters * std::log(std::max(2.0, 2 * n));
+  r.threshold =
+      test_options.min_delta_chi2 > 0 ? test_options.min_delta_chi2 : r.num_parameters * std::log(std::max(2.0, 2 * n));
   r.rms_held_px = s0.final_rms_px;
   r.rms_freed_px = s1.final_rms_px;
   const uint32_t cid = held.cameras.begin()->first;

@@ -36,15 +36,15 @@ void SetRefine(IntrinsicGroup group, bool refine, BundleAdjustmentOptions* optio
 double CornerDisplacementPerUnit(const core::Camera& camera, core::IntrinsicIndex parameter);
 
 struct NestedModelTestOptions {
-  double min_delta_chi2 = 0;           // > 0: free when Δχ² exceeds this (question 1 by a fixed threshold)
-  bool require_determined = true;      // question 2 (needs the covariance; skipped when false)
+  double min_delta_chi2 = 0;       // > 0: free when Δχ² exceeds this (question 1 by a fixed threshold)
+  bool require_determined = true;  // question 2 (needs the covariance; skipped when false)
 };
 
 enum class NestedModelDecision {
-  kFreed,          // both questions answered yes
-  kNotSignificant, // Δχ² below the price of the extra parameters
-  kUndetermined,   // significant, but a parameter's posterior σ exceeds the shift the data ask for
-  kFailed,         // a fit failed or the covariance could not be computed (rank-deficient): held
+  kFreed,           // both questions answered yes
+  kNotSignificant,  // Δχ² below the price of the extra parameters
+  kUndetermined,    // significant, but a parameter's posterior σ exceeds the shift the data ask for
+  kFailed,          // a fit failed or the covariance could not be computed (rank-deficient): held
 };
 const char* ToString(NestedModelDecision decision);
 
@@ -52,20 +52,21 @@ struct NestedModelTestResult {
   IntrinsicGroup group = IntrinsicGroup::kFocal;
   NestedModelDecision decision = NestedModelDecision::kFailed;
   int num_observations = 0;
-  int num_parameters = 0;       // extra parameters freed
-  double dof = 0;               // 2 · observations − pose and point parameters
+  int num_parameters = 0;  // extra parameters freed
+  double dof = 0;          // 2 · observations − pose and point parameters
   double delta_chi2 = 0;
-  double threshold = 0;         // Δχ² needed: k · ln(2 · observations), or the fixed threshold
+  double threshold = 0;  // Δχ² needed: k · ln(2 · observations), or the fixed threshold
   double rms_held_px = 0, rms_freed_px = 0;
   std::vector<core::IntrinsicIndex> parameters;
   std::vector<double> held_values, freed_values, sigmas;  // per parameter; sigmas empty without covariance
-  double max_sigma_px = 0;      // the largest 1σ corner displacement of a freed parameter
-  core::Camera held, freed;     // the first camera of each fit
+  double max_sigma_px = 0;                                // the largest 1σ corner displacement of a freed parameter
+  core::Camera held, freed;                               // the first camera of each fit
   bool freed_decision() const { return decision == NestedModelDecision::kFreed; }
 };
 
 // Fits the model with the group held (options as given, group forced off) and then freed from the held optimum,
-// with a plain squared loss. *rec becomes the freed fit on kFreed and is left unchanged otherwise. options: the intrinsics refined in both models, iteration budget and tolerance.
+// with a plain squared loss. *rec becomes the freed fit on kFreed and is left unchanged otherwise. options: the
+// intrinsics refined in both models, iteration budget and tolerance.
 NestedModelTestResult TestNestedModel(core::Reconstruction* rec, const BundleAdjustmentConfig& config,
                                       BundleAdjustmentOptions options, IntrinsicGroup group,
                                       const NestedModelTestOptions& test_options);

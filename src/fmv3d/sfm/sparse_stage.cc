@@ -68,14 +68,16 @@ nlohmann::json RelocaliseLeftOut(const MapperInput& input, const std::vector<fea
       for (int64_t pid : rec.images.at(id).point3d_ids) {
         if (pid == core::kNoPoint3D) continue;
         auto& track = rec.points.at(static_cast<uint64_t>(pid)).track;
-        track.erase(std::remove_if(track.begin(), track.end(), [id](const core::TrackElement& e) { return e.image_id == id; }),
-                    track.end());
+        track.erase(
+            std::remove_if(track.begin(), track.end(), [id](const core::TrackElement& e) { return e.image_id == id; }),
+            track.end());
       }
       rec.images.erase(id);
     }
     for (auto it = rec.points.begin(); it != rec.points.end();) {
       if (it->second.track.size() < 2) {
-        for (const auto& el : it->second.track) rec.images.at(el.image_id).point3d_ids[el.point2d_idx] = core::kNoPoint3D;
+        for (const auto& el : it->second.track)
+          rec.images.at(el.image_id).point3d_ids[el.point2d_idx] = core::kNoPoint3D;
         it = rec.points.erase(it);
       } else {
         ++it;
@@ -115,8 +117,9 @@ nlohmann::json ToJson(const NestedModelTestResult& r) {
           {"freed", r.freed_decision()},
           {"delta_chi2", r.delta_chi2},
           {"delta_chi2_needed", r.threshold},
-          {"criterion", "free when delta_chi2 > k ln(n) (BIC; k extra parameters, n residuals) and each freed "
-                        "parameter moves by more than its posterior sigma (BA covariance)"},
+          {"criterion",
+           "free when delta_chi2 > k ln(n) (BIC; k extra parameters, n residuals) and each freed "
+           "parameter moves by more than its posterior sigma (BA covariance)"},
           {"extra_parameters", r.num_parameters},
           {"observations", r.num_observations},
           {"corner_displacement_1sigma_px", r.max_sigma_px},
@@ -194,7 +197,8 @@ nlohmann::json RunSparseStage(const core::Workspace& ws, const SparseStageOption
   core::EnsureDirectory(ws.sparse_dir());
   core::EnsureDirectory(ws.report_dir());
   // Stale sub-models of an earlier run must not survive next to the new ones.
-  for (int k = 1; fs::exists(ws.sparse_dir() / std::to_string(k)); ++k) fs::remove_all(ws.sparse_dir() / std::to_string(k));
+  for (int k = 1; fs::exists(ws.sparse_dir() / std::to_string(k)); ++k)
+    fs::remove_all(ws.sparse_dir() / std::to_string(k));
   for (size_t m = 0; m < result.models.size(); ++m) {
     const fs::path dir = m == 0 ? ws.sparse_dir() : ws.sparse_dir() / std::to_string(m);
     core::EnsureDirectory(dir);
@@ -211,8 +215,15 @@ nlohmann::json RunSparseStage(const core::Workspace& ws, const SparseStageOption
       for (const auto& t : result.self_calibration[m]) calibration.push_back(ToJson(t));
     nlohmann::json cams = nlohmann::json::array();
     for (const auto& [id, c] : rec.cameras)
-      cams.push_back({{"id", id}, {"f", c.f}, {"aspect", c.aspect}, {"u0", c.u0}, {"v0", c.v0}, {"k1", c.k1},
-                      {"k2", c.k2}, {"p1", c.p1}, {"p2", c.p2}});
+      cams.push_back({{"id", id},
+                      {"f", c.f},
+                      {"aspect", c.aspect},
+                      {"u0", c.u0},
+                      {"v0", c.v0},
+                      {"k1", c.k1},
+                      {"k2", c.k2},
+                      {"p1", c.p1},
+                      {"p2", c.p2}});
     report["models"].push_back({{"registered_images", rec.images.size()},
                                 {"points", rec.points.size()},
                                 {"mean_track_length", rec.MeanTrackLength()},
@@ -236,8 +247,7 @@ nlohmann::json RunSparseStage(const core::Workspace& ws, const SparseStageOption
                        {"write", std::chrono::duration<double>(Clock::now() - write_start).count()},
                        {"total", std::chrono::duration<double>(Clock::now() - start).count()}};
   core::WriteJson(ws.report_dir() / "sparse.json", report);
-  if (!best)
-    throw Error(ws.name() + ": no model could be reconstructed (see report/sparse.json for the reasons)");
+  if (!best) throw Error(ws.name() + ": no model could be reconstructed (see report/sparse.json for the reasons)");
   spdlog::info("sparse: {} / {} images registered, {} points, mean track {:.2f}, reprojection {:.3f} px",
                best->images.size(), input.images.size(), best->points.size(), best->MeanTrackLength(),
                best->MeanReprojectionError());

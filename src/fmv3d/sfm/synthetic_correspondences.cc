@@ -42,7 +42,7 @@ SyntheticScene MakeSyntheticScene(const SyntheticSceneOptions& o) {
   for (int c = 0; c < o.num_cameras; ++c) {
     if (orbit) {
       const double a = o.orbit_arc_deg >= 360 ? 2 * M_PI * c / o.num_cameras
-                                               : o.orbit_arc_deg * M_PI / 180 * c / std::max(1, o.num_cameras - 1);
+                                              : o.orbit_arc_deg * M_PI / 180 * c / std::max(1, o.num_cameras - 1);
       const double s = o.orbit_radius / 10;  // the default orbit's wobble, scaled
       const Eigen::Vector3d centre(o.orbit_radius * std::cos(a), o.orbit_radius * std::sin(a),
                                    o.orbit_height + 0.5 * s * std::sin(3 * a));

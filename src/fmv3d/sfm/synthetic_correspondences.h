@@ -16,7 +16,7 @@ struct SyntheticSceneOptions {
   int num_cameras = 40;
   int num_points = 2000;
   int width = 1280, height = 720;
-  double focal = 1000;   // true focal (pixels)
+  double focal = 1000;  // true focal (pixels)
   double k1 = -0.08, k2 = 0;
   double u0_offset = 0, v0_offset = 0;  // true principal point minus the image centre
   double noise_px = 0.5;
@@ -27,7 +27,7 @@ struct SyntheticSceneOptions {
   // Orbit: cameras on an arc of this radius and height around the scene (a disc of radius 3, height ±1.5),
   // looking at its centre. A large radius with a long focal gives telephoto (near-affine) views.
   double orbit_radius = 10, orbit_height = 3, orbit_arc_deg = 360;
-  int max_pair_gap = 0;             // > 0: only pairs (i, j) with |i − j| ≤ gap (sequential matching)
+  int max_pair_gap = 0;  // > 0: only pairs (i, j) with |i − j| ≤ gap (sequential matching)
   uint64_t seed = 1;
 };
 

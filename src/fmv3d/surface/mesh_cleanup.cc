@@ -44,10 +44,14 @@ size_t ComponentSelection::kept_faces() const {
 
 const char* ToString(ComponentDecision d) {
   switch (d) {
-    case ComponentDecision::kKept: return "kept";
-    case ComponentDecision::kTooFewPoints: return "too few points";
-    case ComponentDecision::kTooSmall: return "too small";
-    case ComponentDecision::kTooSparse: return "too sparse";
+    case ComponentDecision::kKept:
+      return "kept";
+    case ComponentDecision::kTooFewPoints:
+      return "too few points";
+    case ComponentDecision::kTooSmall:
+      return "too small";
+    case ComponentDecision::kTooSparse:
+      return "too sparse";
   }
   return "?";
 }

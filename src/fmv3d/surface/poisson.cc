@@ -88,7 +88,8 @@ double SpacingFromTree(const open3d::geometry::KDTreeFlann& tree, const std::vec
 }
 
 // Spacing around each query point (as SpacingFromTree, per point).
-std::vector<double> LocalSpacings(const open3d::geometry::KDTreeFlann& tree, const std::vector<Eigen::Vector3d>& queries) {
+std::vector<double> LocalSpacings(const open3d::geometry::KDTreeFlann& tree,
+                                  const std::vector<Eigen::Vector3d>& queries) {
   constexpr int kK = 7;
   std::vector<double> out(queries.size(), 0);
   tbb::parallel_for(tbb::blocked_range<size_t>(0, queries.size(), 2048), [&](const tbb::blocked_range<size_t>& r) {
@@ -169,7 +170,8 @@ ColoredMesh ReconstructPoisson(const io::OrientedPointCloud& cloud, const Poisso
     for (size_t i : kept) pc.colors_.push_back(cloud.colors[i].cast<double>() / 255.0);
   }
   st["points_outside_bounds"] = cloud.size() - kept.size();
-  if (pc.points_.size() < 16) throw Error("poisson: too few points (" + std::to_string(pc.points_.size()) + ") for a surface");
+  if (pc.points_.size() < 16)
+    throw Error("poisson: too few points (" + std::to_string(pc.points_.size()) + ") for a surface");
   const open3d::geometry::KDTreeFlann tree(pc);
   const double spacing = SpacingFromTree(tree, pc.points_, 20000);
   Eigen::AlignedBox3d kept_box;  // Open3D's cube is 1.1 × the largest extent of the points it is given
@@ -265,10 +267,13 @@ ColoredMesh ReconstructPoisson(const io::OrientedPointCloud& cloud, const Poisso
         d = d.is_null() ? 1 : d.get<int>() + 1;
       }
     }
-    st["components"] = {{"found", sel.components.size()}, {"kept", sel.kept()},  {"kept_area", kept_area},
-                        {"dropped_area", dropped_area}, {"dropped", dropped}};
-    spdlog::info("poisson: {} of {} connected pieces kept ({:.1f}% of their area)", sel.kept(),
-                 sel.components.size(), 100 * kept_area / std::max(kept_area + dropped_area, 1e-300));
+    st["components"] = {{"found", sel.components.size()},
+                        {"kept", sel.kept()},
+                        {"kept_area", kept_area},
+                        {"dropped_area", dropped_area},
+                        {"dropped", dropped}};
+    spdlog::info("poisson: {} of {} connected pieces kept ({:.1f}% of their area)", sel.kept(), sel.components.size(),
+                 100 * kept_area / std::max(kept_area + dropped_area, 1e-300));
   }
 
   // 5. Crop to the working box (the points' robust bounds, enlarged); a watertight surface stays closed.

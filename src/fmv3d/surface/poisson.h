@@ -27,16 +27,16 @@
 namespace fmv3d::surface {
 
 struct PoissonOptions {
-  int depth = 0;                    // octree depth; 0 = from the point density
-  double cell_to_spacing = 2.0;     // automatic depth: finest cell width / median point spacing
+  int depth = 0;                 // octree depth; 0 = from the point density
+  double cell_to_spacing = 2.0;  // automatic depth: finest cell width / median point spacing
   int min_depth = 6, max_depth = 12;
-  bool linear_fit = true;           // iso-vertices placed by linear interpolation (more accurate)
-  double density_quantile = 0.02;   // share of the lowest-density vertices trimmed (0..0.9)
-  double max_point_distance = 3.0;  // trim vertices farther than this × spacing from every point; 0 = off
+  bool linear_fit = true;                 // iso-vertices placed by linear interpolation (more accurate)
+  double density_quantile = 0.02;         // share of the lowest-density vertices trimmed (0..0.9)
+  double max_point_distance = 3.0;        // trim vertices farther than this × spacing from every point; 0 = off
   SurfaceKind kind = SurfaceKind::kOpen;  // kWatertight: no trimming (steps 2 and 3)
-  ComponentOptions components;      // step 4
-  double crop_margin = 0.02;        // bounding-box enlargement, fraction of its diagonal
-  int target_faces = 0;             // quadric decimation target; 0 = none
+  ComponentOptions components;            // step 4
+  double crop_margin = 0.02;              // bounding-box enlargement, fraction of its diagonal
+  int target_faces = 0;                   // quadric decimation target; 0 = none
   // Threads of the Poisson solver; 0 = automatic: 1, or core::NumThreads() when OMP_WAIT_POLICY=passive.
   // Open3D's solver runs on OpenMP, whose waiting threads spin: on a loaded machine two threads ran 10–15×
   // slower than one (a 20k-point sphere: 5 s vs 50–77 s); with passive waiting they help.
@@ -49,8 +49,8 @@ struct PoissonOptions {
 // duplicates do not fool), estimated on at most `max_queries` evenly spread points. 0 for < 7 points.
 double MedianPointSpacing(const std::vector<Eigen::Vector3d>& points, size_t max_queries = 20000);
 
-// Depth whose finest cell is nearest (in log scale) to cell_to_spacing × spacing for Open3D's reconstruction cube (1.1 × the
-// largest extent of the points), clamped to [min_depth, max_depth].
+// Depth whose finest cell is nearest (in log scale) to cell_to_spacing × spacing for Open3D's reconstruction cube (1.1
+// × the largest extent of the points), clamped to [min_depth, max_depth].
 int AutomaticDepth(const Eigen::AlignedBox3d& bounds, double spacing, const PoissonOptions& options);
 
 // Requires normals. `stats` (optional) receives the spacing, depth and the vertex/face counts after each

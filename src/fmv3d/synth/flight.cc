@@ -83,8 +83,8 @@ std::vector<core::Pose> MakeFlight(const Scene& scene, const core::Camera& camer
     double best = std::numeric_limits<double>::infinity();
     for (int s = 1; s <= n; ++s) {
       const int per_strip = (n + s - 1) / s;
-      const double aspect = std::abs(std::log(((s - 1) * step_across + step_across) /
-                                              ((per_strip - 1) * step_along + step_along)));
+      const double aspect =
+          std::abs(std::log(((s - 1) * step_across + step_across) / ((per_strip - 1) * step_along + step_along)));
       if (aspect < best) best = aspect, strips = s;
     }
     int k = 0;
@@ -163,8 +163,8 @@ std::vector<core::Pose> MakeFlight(const Scene& scene, const core::Camera& camer
       for (int j = 0; j < 2; ++j) rv[a] += amp[a][j] * std::sin(freq[a][j] * k + phase[a][j]);
     }
     const Eigen::Vector3d dp(normal(), normal(), normal());
-    const Eigen::Matrix3d jitter = Eigen::AngleAxisd(rv.norm(), rv.norm() > 0 ? rv.normalized() : Eigen::Vector3d::UnitX())
-                                       .toRotationMatrix();
+    const Eigen::Matrix3d jitter =
+        Eigen::AngleAxisd(rv.norm(), rv.norm() > 0 ? rv.normalized() : Eigen::Vector3d::UnitX()).toRotationMatrix();
     // Jitter is applied in the camera frame (the gimbal wobbles around the commanded attitude).
     // Position jitter is specified for a 100 m stand-off and scales with the distance to the target, so
     // small scenes (the chessboard) are not shaken out of view.

@@ -26,14 +26,14 @@
 namespace fmv3d::synth {
 
 struct FlightOptions {
-  std::string path = "orbit";                // orbit | grid | pass | oblique
+  std::string path = "orbit";  // orbit | grid | pass | oblique
   int frames = 48;
-  std::optional<double> altitude;            // metres (world z); default per scene
-  std::optional<double> radius;              // orbit radius / grid half-size / pass stand-off, metres
-  std::optional<Eigen::Vector3d> look_at;    // default: the scene's target
+  std::optional<double> altitude;                         // metres (world z); default per scene
+  std::optional<double> radius;                           // orbit radius / grid half-size / pass stand-off, metres
+  std::optional<Eigen::Vector3d> look_at;                 // default: the scene's target
   std::optional<std::pair<double, double>> grid_overlap;  // grid: (forward, side), each in [0, 0.95]
-  double jitter_deg = 0.4;                   // attitude jitter (1 sigma), degrees
-  double position_jitter = 0.3;              // metres (1 sigma) at >= 100 m from the target, less when closer
+  double jitter_deg = 0.4;                                // attitude jitter (1 sigma), degrees
+  double position_jitter = 0.3;  // metres (1 sigma) at >= 100 m from the target, less when closer
   uint64_t seed = 1;
   void Check() const;
 };

@@ -155,10 +155,9 @@ io::TexturedMesh MakeBuilding(const BuildingSpec& s, double tpm) {
   fs.seed = s.style_seed;
   const int facade = b.Material(s.name + "_facade", {0.7f, 0.75f, 0.8f}, tpm > 0 ? FacadeTexture(fs) : cv::Mat());
   const double slope_len = std::hypot(d2, zr - ze);
-  const int roof = b.Material(s.name + "_roof", {0.3f, 0.3f, 0.55f},
-                              tpm > 0 ? RoofTexture(s.width, pitched ? 2 * slope_len : s.depth, pitched, tpm,
-                                                    s.style_seed + 101)
-                                      : cv::Mat());
+  const int roof = b.Material(
+      s.name + "_roof", {0.3f, 0.3f, 0.55f},
+      tpm > 0 ? RoofTexture(s.width, pitched ? 2 * slope_len : s.depth, pitched, tpm, s.style_seed + 101) : cv::Mat());
   const int base_mat = b.Material(s.name + "_base", {0.4f, 0.4f, 0.4f}, cv::Mat());
   if (tpm <= 0) {
     b.m.materials[facade].texture_file = s.name + "_facade.png";
@@ -181,7 +180,8 @@ io::TexturedMesh MakeBuilding(const BuildingSpec& s, double tpm) {
     // Ridge along the building's x axis; gables on the short (x = ±w/2) walls 1 and 3.
     const int re = b.V(world(w2, 0, zr)), rw = b.V(world(-w2, 0, zr));
     const double ve = (ze - zb) / total;
-    const double ug1 = (lens[0] + lens[1] / 2) / perimeter, ug3 = (lens[0] + lens[1] + lens[2] + lens[3] / 2) / perimeter;
+    const double ug1 = (lens[0] + lens[1] / 2) / perimeter,
+                 ug3 = (lens[0] + lens[1] + lens[2] + lens[3] / 2) / perimeter;
     b.Tri(eave[1], eave[2], re, b.T(lens[0] / perimeter, ve), b.T((lens[0] + lens[1]) / perimeter, ve), b.T(ug1, 1),
           facade, world(1, 0, 0) - world(0, 0, 0));
     b.Tri(eave[3], eave[0], rw, b.T((perimeter - lens[3]) / perimeter, ve), b.T(1.0, ve), b.T(ug3, 1), facade,
@@ -266,12 +266,13 @@ Scene MakeScene(const std::string& name, const SceneOptions& o) {
       const double r = std::hypot(x, y);
       return 14.0 * (Fbm(x / 160, y / 160, 21, 5) - 0.5) * (0.35 + 0.65 * SmoothStep(60, 160, r));
     };
-    struct Lot { double x, y, w, d, eave, ridge, heading; };
-    const Lot lots[] = {{0, 0, 20, 12, 24, 30, 0},         {-58, 38, 30, 18, 15, 15, 12},
-                        {52, -36, 16, 16, 12, 16, -20},    {-46, -52, 40, 14, 9, 9, 35},
-                        {62, 48, 12, 10, 8, 11, 70},       {4, 74, 22, 22, 42, 42, 5},
-                        {-88, -6, 14, 24, 18, 23, -8},     {30, 20, 10, 8, 6, 9, 50},
-                        {96, -8, 26, 12, 20, 20, 95},      {-20, -92, 18, 10, 11, 14, 15}};
+    struct Lot {
+      double x, y, w, d, eave, ridge, heading;
+    };
+    const Lot lots[] = {{0, 0, 20, 12, 24, 30, 0},     {-58, 38, 30, 18, 15, 15, 12}, {52, -36, 16, 16, 12, 16, -20},
+                        {-46, -52, 40, 14, 9, 9, 35},  {62, 48, 12, 10, 8, 11, 70},   {4, 74, 22, 22, 42, 42, 5},
+                        {-88, -6, 14, 24, 18, 23, -8}, {30, 20, 10, 8, 6, 9, 50},     {96, -8, 26, 12, 20, 20, 95},
+                        {-20, -92, 18, 10, 11, 14, 15}};
     int k = 0;
     for (const Lot& l : lots) {
       BuildingSpec s;
@@ -316,8 +317,11 @@ Scene MakeScene(const std::string& name, const SceneOptions& o) {
   } else {
     throw Error("unknown scene '" + name + "' (expected building, town, terrain, board or sand)");
   }
-  scene.ground_extent = Eigen::AlignedBox2d(Eigen::Vector2d(-extent / 2, -extent / 2), Eigen::Vector2d(extent / 2, extent / 2));
-  struct Apron { double x, y, c, s, hw, hd; };  // building footprints grown by 4 m: paved
+  scene.ground_extent =
+      Eigen::AlignedBox2d(Eigen::Vector2d(-extent / 2, -extent / 2), Eigen::Vector2d(extent / 2, extent / 2));
+  struct Apron {
+    double x, y, c, s, hw, hd;
+  };  // building footprints grown by 4 m: paved
   std::vector<Apron> aprons;
   for (const auto& s : scene.buildings) {
     const double hd = s.heading_deg * M_PI / 180;

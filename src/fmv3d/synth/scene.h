@@ -26,12 +26,12 @@ namespace fmv3d::synth {
 
 struct BuildingSpec {
   std::string name = "building";
-  double width = 20, depth = 12;           // footprint along the building's x and y axes, metres
-  double eave_height = 24;                 // top of the walls above the base
-  double ridge_height = 30;                // roof ridge above the base (= eave_height: flat roof)
+  double width = 20, depth = 12;                   // footprint along the building's x and y axes, metres
+  double eave_height = 24;                         // top of the walls above the base
+  double ridge_height = 30;                        // roof ridge above the base (= eave_height: flat roof)
   Eigen::Vector3d base = Eigen::Vector3d::Zero();  // centre of the footprint at ground level
-  double heading_deg = 0;                  // rotation of the building's x axis from world x (counter-clockwise)
-  double sink = 0;                         // walls extend this far below the base (into sloping ground)
+  double heading_deg = 0;                          // rotation of the building's x axis from world x (counter-clockwise)
+  double sink = 0;                                 // walls extend this far below the base (into sloping ground)
   double floor_height = 3;
   uint64_t style_seed = 1;
 };

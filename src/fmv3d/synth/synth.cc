@@ -82,7 +82,8 @@ nlohmann::json SynthOptions::ToJson() const {
   if (exif_gps) j["exif_gps"] = true;
   if (gpmf) j["gpmf"] = gpmf_gps9 ? "GPS9" : "GPS5";
   if (HasTelemetry()) {
-    j["geo_origin"] = {{"lat", klv_options.origin.lat}, {"lon", klv_options.origin.lon}, {"alt", klv_options.origin.alt}};
+    j["geo_origin"] = {
+        {"lat", klv_options.origin.lat}, {"lon", klv_options.origin.lon}, {"alt", klv_options.origin.alt}};
     j["gps_noise"] = klv_options.gps_noise;
     j["attitude_noise"] = klv_options.attitude_noise;
   }
@@ -116,7 +117,9 @@ std::vector<Eigen::Vector3d> SampleSurface(const io::TexturedMesh& mesh, int n) 
       cum[i] = total;  // only the modelled area carries truth points
       continue;
     }
-    total += 0.5 * (mesh.vertices[f.v[1]] - mesh.vertices[f.v[0]]).cross(mesh.vertices[f.v[2]] - mesh.vertices[f.v[0]]).norm();
+    total +=
+        0.5 *
+        (mesh.vertices[f.v[1]] - mesh.vertices[f.v[0]]).cross(mesh.vertices[f.v[2]] - mesh.vertices[f.v[0]]).norm();
     cum[i] = total;
   }
   std::vector<Eigen::Vector3d> pts;
@@ -189,14 +192,17 @@ SynthResult RunSynth(const SynthOptions& o) {
       const size_t per_payload = static_cast<size_t>(std::max(1L, std::lround(o.fps)));
       if (o.gpmf && k % per_payload == 0) {
         const size_t last = std::min(poses.size(), k + per_payload);
-        video->WriteGpmf(telemetry::gpmf::EncodePayload(MakeGpmfPayload(result.klv, poses, k, last, o.fps, o.gpmf_gps9)),
-                         static_cast<int64_t>(k), static_cast<int64_t>(last - k));
+        video->WriteGpmf(
+            telemetry::gpmf::EncodePayload(MakeGpmfPayload(result.klv, poses, k, last, o.fps, o.gpmf_gps9)),
+            static_cast<int64_t>(k), static_cast<int64_t>(last - k));
       }
     } else {
       const fs::path path = frames_dir / FrameName(static_cast<int>(k), o.format);
       std::vector<int> params;
-      if (o.format == "jpg") params = {cv::IMWRITE_JPEG_QUALITY, o.jpeg_quality};
-      else params = {cv::IMWRITE_PNG_COMPRESSION, 3};
+      if (o.format == "jpg")
+        params = {cv::IMWRITE_JPEG_QUALITY, o.jpeg_quality};
+      else
+        params = {cv::IMWRITE_PNG_COMPRESSION, 3};
       if (o.exif_gps) {
         std::vector<uint8_t> jpeg;
         if (!cv::imencode(".jpg", frame.image, jpeg, params)) throw Error(path.string() + ": cannot encode frame");
@@ -279,7 +285,8 @@ SynthResult RunSynth(const SynthOptions& o) {
   nlohmann::json j;
   j["scene"] = scene.name;
   j["characteristic_length"] = scene.characteristic_length;
-  j["bounds"] = {{"min", {box.min().x(), box.min().y(), box.min().z()}}, {"max", {box.max().x(), box.max().y(), box.max().z()}}};
+  j["bounds"] = {{"min", {box.min().x(), box.min().y(), box.min().z()}},
+                 {"max", {box.max().x(), box.max().y(), box.max().z()}}};
   j["world_bounds"] = {{"min", {world_box.min().x(), world_box.min().y(), world_box.min().z()}},
                        {"max", {world_box.max().x(), world_box.max().y(), world_box.max().z()}}};
   j["seed"] = o.flight.seed;
@@ -287,20 +294,26 @@ SynthResult RunSynth(const SynthOptions& o) {
   j["frames"] = result.frames;
   j["format"] = o.format;
   j["video"] = o.IsVideo() ? video_path.filename().string() : "";
-  j["frame_names"] = std::string("flight-NNNNNN.") + (o.format == "jpg" ? "jpg" : "png") +
-                     " (6 digits, from 0 in decode order)";
-  j["camera"] = {{"width", camera.width}, {"height", camera.height}, {"f", camera.f}, {"aspect", camera.aspect},
-                 {"u0", camera.u0}, {"v0", camera.v0}, {"k1", camera.k1}, {"k2", camera.k2},
-                 {"p1", camera.p1}, {"p2", camera.p2}};
-  j["flight"] = {{"path", o.flight.path}, {"altitude", geo.altitude}, {"radius", geo.radius},
+  j["frame_names"] =
+      std::string("flight-NNNNNN.") + (o.format == "jpg" ? "jpg" : "png") + " (6 digits, from 0 in decode order)";
+  j["camera"] = {{"width", camera.width}, {"height", camera.height}, {"f", camera.f},   {"aspect", camera.aspect},
+                 {"u0", camera.u0},       {"v0", camera.v0},         {"k1", camera.k1}, {"k2", camera.k2},
+                 {"p1", camera.p1},       {"p2", camera.p2}};
+  j["flight"] = {{"path", o.flight.path},
+                 {"altitude", geo.altitude},
+                 {"radius", geo.radius},
                  {"look_at", {geo.look_at.x(), geo.look_at.y(), geo.look_at.z()}}};
   j["world"] = "metres, z up, ground around z = 0; poses world-to-camera (x_cam = R X + t)";
   j["depth"] = "camera-frame z along the optical axis, metres; 0 = nothing";
   j["truth_points"] = rec.points.size();
   j["buildings"] = nlohmann::json::array();
   for (const auto& b : scene.buildings)
-    j["buildings"].push_back({{"name", b.name}, {"base", {b.base.x(), b.base.y(), b.base.z()}}, {"width", b.width},
-                              {"depth", b.depth}, {"eave_height", b.eave_height}, {"ridge_height", b.ridge_height},
+    j["buildings"].push_back({{"name", b.name},
+                              {"base", {b.base.x(), b.base.y(), b.base.z()}},
+                              {"width", b.width},
+                              {"depth", b.depth},
+                              {"eave_height", b.eave_height},
+                              {"ridge_height", b.ridge_height},
                               {"heading_deg", b.heading_deg}});
   if (o.HasTelemetry()) {
     const GeoPoint& g = o.klv_options.origin;

@@ -41,7 +41,7 @@ struct SynthOptions {
   std::string scene = "building";
   FlightOptions flight;
   int width = 1280, height = 720;
-  std::optional<double> focal;                // pixels; default: 60° horizontal field of view
+  std::optional<double> focal;                   // pixels; default: 60° horizontal field of view
   std::array<double, 4> distortion{0, 0, 0, 0};  // k1 k2 p1 p2
   std::array<double, 2> principal_offset{0, 0};  // true principal point minus the image centre, pixels
   // Sun, exposure, noise (default 1.5 DN), supersampling.
@@ -50,19 +50,19 @@ struct SynthOptions {
     r.noise_sigma = 1.5;
     return r;
   }();
-  std::string format = "png";                 // png | jpg | mp4 | ts
+  std::string format = "png";  // png | jpg | mp4 | ts
   int jpeg_quality = 92;
   double fps = 10;
-  double detail = 1.0;                        // scene texture resolution multiplier
-  int truth_points = 3000;                    // surface points sampled for points3D.txt (0: none)
-  bool write_scene = true;                    // scene.obj + textures
+  double detail = 1.0;      // scene texture resolution multiplier
+  int truth_points = 3000;  // surface points sampled for points3D.txt (0: none)
+  bool write_scene = true;  // scene.obj + textures
   bool write_depth = false;
-  bool klv = false;                           // MPEG-TS with ST 0601 telemetry (needs format ts)
-  bool exif_gps = false;                      // JPEG frames with EXIF GPS + DJI XMP (needs format jpg)
-  bool gpmf = false;                          // MP4 with a GPMF telemetry track (needs format mp4)
-  bool gpmf_gps9 = false;                     // the GPMF track carries GPS9 instead of GPS5
-  KlvTelemetryOptions klv_options;            // geo origin, GPS / attitude noise of every telemetry kind (fps and
-                                              // seed are set from this struct's fps and flight.seed)
+  bool klv = false;                 // MPEG-TS with ST 0601 telemetry (needs format ts)
+  bool exif_gps = false;            // JPEG frames with EXIF GPS + DJI XMP (needs format jpg)
+  bool gpmf = false;                // MP4 with a GPMF telemetry track (needs format mp4)
+  bool gpmf_gps9 = false;           // the GPMF track carries GPS9 instead of GPS5
+  KlvTelemetryOptions klv_options;  // geo origin, GPS / attitude noise of every telemetry kind (fps and
+                                    // seed are set from this struct's fps and flight.seed)
   std::filesystem::path output;
 
   void Check() const;

@@ -13,9 +13,9 @@
 namespace fmv3d::synth {
 namespace {
 
-constexpr double kA = 6378137.0;                // WGS84 semi-major axis
-constexpr double kF = 1 / 298.257223563;        // flattening
-constexpr double kE2 = kF * (2 - kF);           // first eccentricity squared
+constexpr double kA = 6378137.0;          // WGS84 semi-major axis
+constexpr double kF = 1 / 298.257223563;  // flattening
+constexpr double kE2 = kF * (2 - kF);     // first eccentricity squared
 constexpr double kDeg = M_PI / 180;
 
 // Rotation whose rows are the local East, North, Up unit vectors in ECEF.
@@ -73,8 +73,10 @@ Eigen::Vector3d GeodeticToEnu(const GeoPoint& p, const GeoPoint& origin) {
 }
 
 void KlvTelemetryOptions::Check() const {
-  if (!(std::abs(origin.lat) <= 85)) throw Error(fmt::format("synth: geo origin latitude {} must be in [-85, 85]", origin.lat));
-  if (!(std::abs(origin.lon) <= 180)) throw Error(fmt::format("synth: geo origin longitude {} must be in [-180, 180]", origin.lon));
+  if (!(std::abs(origin.lat) <= 85))
+    throw Error(fmt::format("synth: geo origin latitude {} must be in [-85, 85]", origin.lat));
+  if (!(std::abs(origin.lon) <= 180))
+    throw Error(fmt::format("synth: geo origin longitude {} must be in [-180, 180]", origin.lon));
   if (!(origin.alt >= -400 && origin.alt <= 9000))
     throw Error(fmt::format("synth: geo origin altitude {} must be in [-400, 9000] m", origin.alt));
   if (!(gps_noise >= 0 && gps_noise <= 1000)) throw Error("synth: --gps-noise must be in [0, 1000] metres");
@@ -83,8 +85,9 @@ void KlvTelemetryOptions::Check() const {
   if (!(std::abs(geoid_undulation) < 200)) throw Error("synth: geoid undulation must be within ±200 m");
 }
 
-std::vector<telemetry::klv::St0601Record> MakeKlvTelemetry(const std::vector<core::Pose>& poses, const core::Camera& camera,
-                                                    double ground_z, const KlvTelemetryOptions& o) {
+std::vector<telemetry::klv::St0601Record> MakeKlvTelemetry(const std::vector<core::Pose>& poses,
+                                                           const core::Camera& camera, double ground_z,
+                                                           const KlvTelemetryOptions& o) {
   o.Check();
   Normal normal(o.seed);
   std::vector<telemetry::klv::St0601Record> out;

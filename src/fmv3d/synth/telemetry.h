@@ -36,8 +36,8 @@ Eigen::Vector3d GeodeticToEnu(const GeoPoint& p, const GeoPoint& origin);
 
 struct KlvTelemetryOptions {
   GeoPoint origin{38.1600, -77.3500, 60.0};  // somewhere in Virginia (near the KWIVER sample videos)
-  double gps_noise = 3;        // metres, 1 sigma per axis
-  double attitude_noise = 1;   // degrees, 1 sigma per platform angle
+  double gps_noise = 3;                      // metres, 1 sigma per axis
+  double attitude_noise = 1;                 // degrees, 1 sigma per platform angle
   double fps = 10;
   uint64_t start_unix_us = 1717243200000000ull;  // 2024-06-01T12:00:00Z
   uint64_t seed = 1;
@@ -50,8 +50,8 @@ struct KlvTelemetryOptions {
 // One record per pose (the frame's time is k / fps). Frame centre: where the optical axis meets the plane
 // z = ground_z (omitted when it points above the horizon).
 std::vector<telemetry::klv::St0601Record> MakeKlvTelemetry(const std::vector<core::Pose>& poses,
-                                                    const core::Camera& camera, double ground_z,
-                                                    const KlvTelemetryOptions& options);
+                                                           const core::Camera& camera, double ground_z,
+                                                           const KlvTelemetryOptions& options);
 
 // Photo metadata of one frame as a DJI drone writes it (`fmv3d synth --exif-gps`), from its ST 0601 record
 // (so the same noise model holds): EXIF GPS at the record's noisy position, altitude = its true altitude (MSL,

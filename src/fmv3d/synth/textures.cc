@@ -59,10 +59,10 @@ cv::Mat GroundTexture(int n, const Eigen::AlignedBox2d& extent, uint64_t seed,
   // Smooth fields shared by all land covers.
   const cv::Mat warp_x = FractalField(n, n, px(150), 0.5, seed + 1);
   const cv::Mat warp_y = FractalField(n, n, px(150), 0.5, seed + 2);
-  const cv::Mat tone = FractalField(n, n, px(60), 0.62, seed + 3);    // broad colour variation
-  const cv::Mat patch = FractalField(n, n, px(8), 0.7, seed + 4);     // bushes, tree crowns, patches
-  const cv::Mat grain = FractalField(n, n, px(1.5), 0.8, seed + 5);   // fine grain, down to the texel
-  const cv::Mat rock = FractalField(n, n, px(4), 0.75, seed + 6);     // boulders and rock texture
+  const cv::Mat tone = FractalField(n, n, px(60), 0.62, seed + 3);   // broad colour variation
+  const cv::Mat patch = FractalField(n, n, px(8), 0.7, seed + 4);    // bushes, tree crowns, patches
+  const cv::Mat grain = FractalField(n, n, px(1.5), 0.8, seed + 5);  // fine grain, down to the texel
+  const cv::Mat rock = FractalField(n, n, px(4), 0.75, seed + 6);    // boulders and rock texture
   std::vector<double> road_sin0(n), road_cos0(n);
   for (int col = 0; col < n; ++col) {
     const double x = extent.min().x() + (col + 0.5) * mpt;
@@ -141,9 +141,10 @@ cv::Mat GroundTexture(int n, const Eigen::AlignedBox2d& extent, uint64_t seed,
       }
       if (paved && paved(x, y)) {
         const double jx = x - std::floor(x / 1.2) * 1.2, jy = y - std::floor(y / 1.2) * 1.2;
-        const Vec3 tile = Vec3(150, 155, 160) * (0.9f + 0.2f * static_cast<float>(LatticeRandom(
-                                                     static_cast<int64_t>(std::floor(x / 1.2)),
-                                                     static_cast<int64_t>(std::floor(y / 1.2)), seed + 11)));
+        const Vec3 tile =
+            Vec3(150, 155, 160) *
+            (0.9f + 0.2f * static_cast<float>(LatticeRandom(static_cast<int64_t>(std::floor(x / 1.2)),
+                                                            static_cast<int64_t>(std::floor(y / 1.2)), seed + 11)));
         c = (jx < 0.06 || jy < 0.06) ? Vec3(105, 110, 115) : tile;
       }
       // Steep slopes turn to rock; boulders everywhere.
@@ -164,11 +165,11 @@ cv::Mat GroundTexture(int n, const Eigen::AlignedBox2d& extent, uint64_t seed,
 cv::Mat LowTextureGround(int n, const Eigen::AlignedBox2d& extent, uint64_t seed) {
   const double mpt = extent.sizes().x() / n;  // metres per texel
   auto px = [&](double metres) { return metres / mpt; };
-  const cv::Mat tone = FractalField(n, n, px(80), 0.6, seed + 1);   // broad, slow colour change
+  const cv::Mat tone = FractalField(n, n, px(80), 0.6, seed + 1);     // broad, slow colour change
   const cv::Mat cover = FractalField(n, n, px(120), 0.55, seed + 2);  // sand / grass / water regions
-  const cv::Mat tuft = FractalField(n, n, px(1.2), 0.7, seed + 3);   // grass tufts
-  const cv::Mat grain = FractalField(n, n, px(0.6), 0.8, seed + 4);  // sand grain down to the texel
-  const cv::Mat warp = FractalField(n, n, px(40), 0.5, seed + 5);    // bends the ripples
+  const cv::Mat tuft = FractalField(n, n, px(1.2), 0.7, seed + 3);    // grass tufts
+  const cv::Mat grain = FractalField(n, n, px(0.6), 0.8, seed + 4);   // sand grain down to the texel
+  const cv::Mat warp = FractalField(n, n, px(40), 0.5, seed + 5);     // bends the ripples
   cv::Mat out(n, n, CV_8UC3);
   tbb::parallel_for(0, n, [&](int row) {
     const double y = extent.max().y() - (row + 0.5) * mpt;

@@ -47,16 +47,15 @@ Eigen::Matrix3d CameraToEnuFromSt0601(const St0601Attitude& a) {
   return EnuFromNed() * ned_from_body * body_from_sensor * SensorFromCamera();
 }
 
-St0601Attitude St0601FromCameraToEnu(const Eigen::Matrix3d& camera_to_enu, double heading, double pitch,
-                                     double roll) {
+St0601Attitude St0601FromCameraToEnu(const Eigen::Matrix3d& camera_to_enu, double heading, double pitch, double roll) {
   St0601Attitude a;
   a.platform_heading = Wrap360(heading);
   a.platform_pitch = pitch;
   a.platform_roll = roll;
   const Eigen::Matrix3d ned_from_body = Rz(heading) * Ry(pitch) * Rx(roll);
   // body_from_sensor = Rz(az) Ry(el) Rx(roll): read the Z-Y-X angles off its entries.
-  const Eigen::Vector3d zyx = ZyxAngles(ned_from_body.transpose() * EnuFromNed().transpose() * camera_to_enu *
-                                        SensorFromCamera().transpose());
+  const Eigen::Vector3d zyx =
+      ZyxAngles(ned_from_body.transpose() * EnuFromNed().transpose() * camera_to_enu * SensorFromCamera().transpose());
   a.sensor_relative_azimuth = Wrap360(zyx[0]);
   a.sensor_relative_elevation = zyx[1];
   a.sensor_relative_roll = Wrap360(zyx[2]);

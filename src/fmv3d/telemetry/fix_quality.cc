@@ -8,13 +8,20 @@ namespace fmv3d::telemetry {
 
 const char* FixRejectionText(FixRejection r) {
   switch (r) {
-    case FixRejection::kNone: return "kept";
-    case FixRejection::kNoPosition: return "no position";
-    case FixRejection::kZeroFix: return "(0, 0) fix";
-    case FixRejection::kOutOfRange: return "out of range";
-    case FixRejection::kNoLock: return "no lock";
-    case FixRejection::kPoorDop: return "DOP too large";
-    case FixRejection::kPoorAccuracy: return "accuracy too poor";
+    case FixRejection::kNone:
+      return "kept";
+    case FixRejection::kNoPosition:
+      return "no position";
+    case FixRejection::kZeroFix:
+      return "(0, 0) fix";
+    case FixRejection::kOutOfRange:
+      return "out of range";
+    case FixRejection::kNoLock:
+      return "no lock";
+    case FixRejection::kPoorDop:
+      return "DOP too large";
+    case FixRejection::kPoorAccuracy:
+      return "accuracy too poor";
   }
   return "?";
 }
@@ -40,8 +47,10 @@ FixRejection ScreenFix(const TelemetrySample& s, const FixQualityOptions& o) {
 }
 
 void FixCounts::Add(FixRejection r) {
-  if (r == FixRejection::kNone) ++kept;
-  else ++rejected[static_cast<size_t>(r)];
+  if (r == FixRejection::kNone)
+    ++kept;
+  else
+    ++rejected[static_cast<size_t>(r)];
 }
 
 size_t FixCounts::Rejected() const {

@@ -18,17 +18,28 @@ uint64_t BigEndian(const uint8_t* p, size_t n) {
 // One element of type t at p (TypeSize(t) bytes available); NaN for non-numeric types.
 double Element(char t, const uint8_t* p) {
   switch (t) {
-    case 'b': return static_cast<int8_t>(p[0]);
-    case 'B': return p[0];
-    case 'c': return static_cast<char>(p[0]);
-    case 's': return static_cast<int16_t>(BigEndian(p, 2));
-    case 'S': return static_cast<uint16_t>(BigEndian(p, 2));
-    case 'l': return static_cast<int32_t>(BigEndian(p, 4));
-    case 'L': return static_cast<uint32_t>(BigEndian(p, 4));
-    case 'j': return static_cast<double>(static_cast<int64_t>(BigEndian(p, 8)));
-    case 'J': return static_cast<double>(BigEndian(p, 8));
-    case 'q': return static_cast<int32_t>(BigEndian(p, 4)) / 65536.0;
-    case 'Q': return static_cast<double>(static_cast<int64_t>(BigEndian(p, 8))) / 4294967296.0;
+    case 'b':
+      return static_cast<int8_t>(p[0]);
+    case 'B':
+      return p[0];
+    case 'c':
+      return static_cast<char>(p[0]);
+    case 's':
+      return static_cast<int16_t>(BigEndian(p, 2));
+    case 'S':
+      return static_cast<uint16_t>(BigEndian(p, 2));
+    case 'l':
+      return static_cast<int32_t>(BigEndian(p, 4));
+    case 'L':
+      return static_cast<uint32_t>(BigEndian(p, 4));
+    case 'j':
+      return static_cast<double>(static_cast<int64_t>(BigEndian(p, 8)));
+    case 'J':
+      return static_cast<double>(BigEndian(p, 8));
+    case 'q':
+      return static_cast<int32_t>(BigEndian(p, 4)) / 65536.0;
+    case 'Q':
+      return static_cast<double>(static_cast<int64_t>(BigEndian(p, 8))) / 4294967296.0;
     case 'f': {
       const uint32_t u = static_cast<uint32_t>(BigEndian(p, 4));
       float f;
@@ -41,7 +52,8 @@ double Element(char t, const uint8_t* p) {
       std::memcpy(&d, &u, 8);
       return d;
     }
-    default: return std::numeric_limits<double>::quiet_NaN();
+    default:
+      return std::numeric_limits<double>::quiet_NaN();
   }
 }
 
@@ -133,7 +145,8 @@ class Parser {
       return;
     }
     if (device && h.key == "DVNM" && h.type == 'c') device->name = Text(h.data, h.size());
-    if (device && h.key == "DVID" && h.type == 'L' && h.size() >= 4) device->id = static_cast<uint32_t>(BigEndian(h.data, 4));
+    if (device && h.key == "DVID" && h.type == 'L' && h.size() >= 4)
+      device->id = static_cast<uint32_t>(BigEndian(h.data, 4));
     if (!stream) return;
     if (Sticky(h, stream)) return;
     Data(h, *device, *stream);
@@ -168,9 +181,8 @@ class Parser {
     } else if (k == "STMP") {
       const auto v = Numbers(h);
       if (!v.empty() && v[0] >= 0 && v[0] < 1.8e19) s->stmp_us = static_cast<uint64_t>(v[0]);
-    } else if (k == "TSMP" || k == "TICK" || k == "TOCK" || k == "EMPT" || k == "TMPC" || k == "ORIN" ||
-               k == "ORIO" || k == "MTRX" || k == "TIMO" || k == "DVID" || k == "DVNM" || k == "RMRK" ||
-               k == "MTYP" || k == "QUAN") {
+    } else if (k == "TSMP" || k == "TICK" || k == "TOCK" || k == "EMPT" || k == "TMPC" || k == "ORIN" || k == "ORIO" ||
+               k == "MTRX" || k == "TIMO" || k == "DVID" || k == "DVNM" || k == "RMRK" || k == "MTYP" || k == "QUAN") {
       // Timing, temperature, orientation matrices, remarks: not needed for telemetry samples.
     } else {
       return false;
@@ -257,12 +269,29 @@ class Parser {
 
 size_t TypeSize(char t) {
   switch (t) {
-    case 'b': case 'B': case 'c': return 1;
-    case 's': case 'S': return 2;
-    case 'l': case 'L': case 'f': case 'q': case 'F': return 4;
-    case 'd': case 'j': case 'J': case 'Q': return 8;
-    case 'G': case 'U': return 16;
-    default: return 0;
+    case 'b':
+    case 'B':
+    case 'c':
+      return 1;
+    case 's':
+    case 'S':
+      return 2;
+    case 'l':
+    case 'L':
+    case 'f':
+    case 'q':
+    case 'F':
+      return 4;
+    case 'd':
+    case 'j':
+    case 'J':
+    case 'Q':
+      return 8;
+    case 'G':
+    case 'U':
+      return 16;
+    default:
+      return 0;
   }
 }
 

@@ -22,19 +22,19 @@ namespace fmv3d::telemetry::gpmf {
 // One data entry of a stream (e.g. GPS5, ACCL, GYRO, CORI, or a device's own key), decoded to numbers with
 // its stream's SCAL applied (value / scale, one scale for all elements or one per element).
 struct Stream {
-  std::string device;                // DVNM of the enclosing DEVC ("" when absent)
-  uint32_t device_id = 0;            // DVID (when numeric)
-  std::string key;                   // the data's FourCC
-  std::string name;                  // STNM
-  std::vector<std::string> units;    // SIUN or UNIT: one per element, or one for all
-  std::string type;                  // for complex ('?') data: its TYPE with arrays expanded, e.g. "lllllllSS"
-  size_t elements = 0;               // numbers per sample
-  std::vector<double> values;        // samples × elements (non-numeric elements, e.g. FourCC, are NaN)
-  std::optional<double> gps_fix;     // GPSF: 0 no lock, 2 2D, 3 3D
-  std::optional<double> gps_dop;     // GPSP / 100
-  std::string gps_utc;               // GPSU "yymmddhhmmss.sss"
-  std::string altitude_system;       // GPSA, e.g. "MSLV" (mean sea level) or "WGS8" (ellipsoid)
-  std::optional<uint64_t> stmp_us;   // STMP, microseconds
+  std::string device;               // DVNM of the enclosing DEVC ("" when absent)
+  uint32_t device_id = 0;           // DVID (when numeric)
+  std::string key;                  // the data's FourCC
+  std::string name;                 // STNM
+  std::vector<std::string> units;   // SIUN or UNIT: one per element, or one for all
+  std::string type;                 // for complex ('?') data: its TYPE with arrays expanded, e.g. "lllllllSS"
+  size_t elements = 0;              // numbers per sample
+  std::vector<double> values;       // samples × elements (non-numeric elements, e.g. FourCC, are NaN)
+  std::optional<double> gps_fix;    // GPSF: 0 no lock, 2 2D, 3 3D
+  std::optional<double> gps_dop;    // GPSP / 100
+  std::string gps_utc;              // GPSU "yymmddhhmmss.sss"
+  std::string altitude_system;      // GPSA, e.g. "MSLV" (mean sea level) or "WGS8" (ellipsoid)
+  std::optional<uint64_t> stmp_us;  // STMP, microseconds
   size_t samples() const { return elements ? values.size() / elements : 0; }
   double at(size_t sample, size_t element) const { return values[sample * elements + element]; }
 };

@@ -34,9 +34,10 @@ enum class PositionKind { kNone, kGps5, kGps9, kOther };
 PositionKind KindOf(const gpmf::Stream& s) {
   if (s.key == "GPS5" && s.elements >= 3) return PositionKind::kGps5;
   if (s.key == "GPS9" && s.elements >= 9) return PositionKind::kGps9;
-  if (s.elements < 3 || s.key == "ACCL" || s.key == "GYRO" || s.key == "CORI" || s.key == "GRAV") return PositionKind::kNone;
-  const bool units = s.units.size() >= 3 && Lower(s.units[0]) == "deg" && Lower(s.units[1]) == "deg" &&
-                     Lower(s.units[2]) == "m";
+  if (s.elements < 3 || s.key == "ACCL" || s.key == "GYRO" || s.key == "CORI" || s.key == "GRAV")
+    return PositionKind::kNone;
+  const bool units =
+      s.units.size() >= 3 && Lower(s.units[0]) == "deg" && Lower(s.units[1]) == "deg" && Lower(s.units[2]) == "m";
   const std::string name = Lower(s.name);
   const bool named = name.find("lat") != std::string::npos && name.find("lon") != std::string::npos;
   return units || named ? PositionKind::kOther : PositionKind::kNone;
@@ -46,7 +47,8 @@ PositionKind KindOf(const gpmf::Stream& s) {
 std::optional<double> ParseGpsu(const std::string& s) {
   int yy, mo, dd, hh, mi;
   double ss;
-  if (s.size() < 12 || std::sscanf(s.c_str(), "%2d%2d%2d%2d%2d%lf", &yy, &mo, &dd, &hh, &mi, &ss) != 6) return std::nullopt;
+  if (s.size() < 12 || std::sscanf(s.c_str(), "%2d%2d%2d%2d%2d%lf", &yy, &mo, &dd, &hh, &mi, &ss) != 6)
+    return std::nullopt;
   if (mo < 1 || mo > 12 || dd < 1 || dd > 31 || hh > 23 || mi > 59 || !(ss >= 0 && ss < 61)) return std::nullopt;
   // Days from 1970 of 20yy-mo-dd (civil calendar).
   int64_t y = 2000 + yy - (mo <= 2);

@@ -42,9 +42,9 @@ struct GpmfTelemetry {
   FixCounts fixes;                       // position fixes kept / dropped by ScreenFix
   gpmf::ParseStats parse;
   size_t payloads = 0;
-  std::map<std::string, size_t> stream_samples;  // data key → samples read (GPS5, ACCL, GYRO, CORI, ...)
+  std::map<std::string, size_t> stream_samples;     // data key → samples read (GPS5, ACCL, GYRO, CORI, ...)
   std::map<std::string, std::string> stream_names;  // data key → STNM
-  std::vector<std::string> devices;      // DVNM of every device seen
+  std::vector<std::string> devices;                 // DVNM of every device seen
 };
 
 GpmfTelemetry TelemetryFromGpmf(const std::vector<GpmfPayload>& payloads, const FixQualityOptions& fix = {});

@@ -40,8 +40,8 @@ std::string Gpsu(double unix_seconds) {
   std::tm tm{};
   gmtime_r(&t, &tm);
   char buf[32];
-  std::snprintf(buf, sizeof buf, "%02d%02d%02d%02d%02d%06.3f", tm.tm_year % 100, tm.tm_mon + 1, tm.tm_mday,
-                tm.tm_hour, tm.tm_min, tm.tm_sec + (unix_seconds - std::floor(unix_seconds)));
+  std::snprintf(buf, sizeof buf, "%02d%02d%02d%02d%02d%06.3f", tm.tm_year % 100, tm.tm_mon + 1, tm.tm_mday, tm.tm_hour,
+                tm.tm_min, tm.tm_sec + (unix_seconds - std::floor(unix_seconds)));
   return buf;
 }
 
@@ -78,8 +78,8 @@ std::vector<uint8_t> EncodePayload(const PayloadContent& c) {
       Text(&strm, "TYPE", "lllllllSS");
       for (uint32_t s : {10000000u, 10000000u, 1000u, 1000u, 100u, 1u, 1000u, 100u, 1u}) PutBE(&scal, s, 4);
       Entry(&strm, "SCAL", 'l', 4, 9, scal);
-      Entry(&strm, "UNIT", 'c', 3, 9, {'d', 'e', 'g', 'd', 'e', 'g', 'm', 0, 0, 'm', '/', 's', 'm', '/', 's',
-                                        'd', 0, 0, 's', 0, 0, 0, 0, 0, 0, 0, 0});
+      Entry(&strm, "UNIT", 'c', 3, 9, {'d', 'e', 'g', 'd', 'e', 'g', 'm', 0, 0, 'm', '/', 's', 'm', '/',
+                                       's', 'd', 0,   0,   's', 0,   0,   0, 0, 0,   0,   0,   0});
       Entry(&strm, "GPS9", '?', 32, c.gps.size(), data);
     } else {
       Text(&strm, "STNM", "GPS (Lat., Long., Alt., 2D speed, 3D speed)");

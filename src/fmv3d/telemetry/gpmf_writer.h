@@ -23,8 +23,8 @@ struct PayloadContent {
   std::string device_name = "fmv3d synth";
   std::vector<GpsFix> gps;
   bool gps9 = false;
-  double gps_fix = 3;   // GPSF / GPS9 fix: 0, 2 or 3
-  double gps_dop = 1;   // GPSP / 100, GPS9 DOP
+  double gps_fix = 3;                              // GPSF / GPS9 fix: 0, 2 or 3
+  double gps_dop = 1;                              // GPSP / 100, GPS9 DOP
   std::vector<std::array<double, 4>> orientation;  // CORI (w, x, y, z), unit quaternions
 };
 

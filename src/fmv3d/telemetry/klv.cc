@@ -285,8 +285,7 @@ nlohmann::json ToJson(const Item& item) {
   else
     j["key"] = {{"integer", item.tag}, {"string", item.name}};
   j["value"] = item.value;
-  if (!item.parsed)
-    j["value-unparsed-bytes"] = Base64(ByteSpan(item.unparsed.data(), item.unparsed.size()));
+  if (!item.parsed) j["value-unparsed-bytes"] = Base64(ByteSpan(item.unparsed.data(), item.unparsed.size()));
   return j;
 }
 

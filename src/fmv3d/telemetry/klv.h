@@ -82,7 +82,7 @@ struct Item {
   uint64_t tag = 0;          // local-set tag (0 for universal-set items)
   std::optional<UlKey> key;  // universal-set key
   std::string name;
-  nlohmann::json value;          // null when absent/error/unparsed
+  nlohmann::json value;           // null when absent/error/unparsed
   std::vector<uint8_t> unparsed;  // raw bytes kept when `value` could not be decoded
   bool parsed = true;
 };
@@ -94,7 +94,7 @@ struct Packet {
   Standard standard = Standard::kUnknown;
   std::string name;  // "MISB ST0601 Local Set", ...
   std::vector<Item> items;
-  int stream_index = -1;              // container stream, -1 for a raw buffer
+  int stream_index = -1;               // container stream, -1 for a raw buffer
   std::optional<double> time_seconds;  // presentation time in the container, when known
   // Finds the first item with this local-set tag / universal key (nullptr if absent).
   const Item* Find(uint64_t tag) const;
@@ -102,12 +102,12 @@ struct Packet {
 };
 
 struct ParseStats {
-  size_t packets = 0;          // packets decoded and kept
-  size_t bad_checksum = 0;     // ST 0601 packets whose checksum did not match (skipped)
-  size_t malformed = 0;        // truncated / inconsistent packets (skipped)
-  size_t unknown_keys = 0;     // top-level packets of an unrecognised standard (kept, undecoded)
-  size_t bad_items = 0;        // items whose length did not fit their type (kept as raw bytes)
-  size_t skipped_bytes = 0;    // bytes skipped while resynchronising on the KLV key prefix
+  size_t packets = 0;        // packets decoded and kept
+  size_t bad_checksum = 0;   // ST 0601 packets whose checksum did not match (skipped)
+  size_t malformed = 0;      // truncated / inconsistent packets (skipped)
+  size_t unknown_keys = 0;   // top-level packets of an unrecognised standard (kept, undecoded)
+  size_t bad_items = 0;      // items whose length did not fit their type (kept as raw bytes)
+  size_t skipped_bytes = 0;  // bytes skipped while resynchronising on the KLV key prefix
   void Add(const ParseStats& o);
 };
 

@@ -41,8 +41,7 @@ const Spec kSpecs[] = {
     {"Transport Stream ID", Kind::kUint},
     {"Item Designator ID", Kind::kBytes},
     {"Version", Kind::kUint},
-    {"Country Coding Method Version Date for 'Classifying Country' and 'Releasing Instructions'",
-     Kind::kString},
+    {"Country Coding Method Version Date for 'Classifying Country' and 'Releasing Instructions'", Kind::kString},
     {"Country Coding Method Version Date for 'Object Country Codes'", Kind::kString},
 };
 constexpr uint64_t kNumSpecs = sizeof(kSpecs) / sizeof(kSpecs[0]);
@@ -60,31 +59,28 @@ std::optional<std::string> Utf16Ascii(ByteSpan s) {
 
 }  // namespace
 
-std::string St0102TagName(uint64_t tag) {
-  return tag > 0 && tag < kNumSpecs ? kSpecs[tag].name : "Unknown Tag";
-}
+std::string St0102TagName(uint64_t tag) { return tag > 0 && tag < kNumSpecs ? kSpecs[tag].name : "Unknown Tag"; }
 
 std::string St0102EnumName(uint64_t tag, uint64_t value) {
-  static const std::vector<const char*> kClass = {"", "Unclassified", "Restricted", "Confidential", "Secret",
-                                                  "Top Secret"};
-  static const std::vector<const char*> kMethod = {
-      "",
-      "ISO-3166 Two Letter",
-      "ISO-3166 Three Letter",
-      "FIPS 10-4 Two Letter",
-      "FIPS 10-4 Four Letter",
-      "ISO-3166 Numeric",
-      "1059 Two Letter",
-      "1059 Three Letter",
-      "Omitted Value",
-      "Omitted Value",
-      "FIPS 10-4 Mixed",
-      "ISO 3166 Mixed",
-      "STANAG 1059 Mixed",
-      "GENC Two Letter",
-      "GENC Three Letter",
-      "GENC Numeric",
-      "GENC Mixed"};
+  static const std::vector<const char*> kClass = {"",       "Unclassified", "Restricted", "Confidential",
+                                                  "Secret", "Top Secret"};
+  static const std::vector<const char*> kMethod = {"",
+                                                   "ISO-3166 Two Letter",
+                                                   "ISO-3166 Three Letter",
+                                                   "FIPS 10-4 Two Letter",
+                                                   "FIPS 10-4 Four Letter",
+                                                   "ISO-3166 Numeric",
+                                                   "1059 Two Letter",
+                                                   "1059 Three Letter",
+                                                   "Omitted Value",
+                                                   "Omitted Value",
+                                                   "FIPS 10-4 Mixed",
+                                                   "ISO 3166 Mixed",
+                                                   "STANAG 1059 Mixed",
+                                                   "GENC Two Letter",
+                                                   "GENC Three Letter",
+                                                   "GENC Numeric",
+                                                   "GENC Mixed"};
   const std::vector<const char*>* names = tag == 1 ? &kClass : (tag == 2 || tag == 12) ? &kMethod : nullptr;
   if (!names || value >= names->size()) return "";
   return (*names)[value];

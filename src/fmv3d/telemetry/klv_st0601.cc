@@ -14,17 +14,17 @@ const UlKey kSt0601Key = {0x06, 0x0E, 0x2B, 0x34, 0x02, 0x0B, 0x01, 0x01,
 namespace {
 
 enum class Kind {
-  kUint,      // raw unsigned integer, 1..8 bytes (length = max, 0 = any up to 8)
-  kInt,       // raw signed integer
-  kUintMap,   // unsigned mapped onto [a, b], fixed length
-  kIntMap,    // signed mapped onto [-b, b], fixed length, 0x80.. = error -> null
-  kImapb,     // ST 1201 IMAPB(a, b), variable length
+  kUint,     // raw unsigned integer, 1..8 bytes (length = max, 0 = any up to 8)
+  kInt,      // raw signed integer
+  kUintMap,  // unsigned mapped onto [a, b], fixed length
+  kIntMap,   // signed mapped onto [-b, b], fixed length, 0x80.. = error -> null
+  kImapb,    // ST 1201 IMAPB(a, b), variable length
   kString,
-  kEnum,      // uint8 with names
+  kEnum,  // uint8 with names
   kChecksum,
-  kSt0102,    // nested security set
-  kNested,    // nested set with the ST 0601 dictionary (ST 1607 segment / amend)
-  kBytes,     // kept raw (pack or sub-standard we do not decode)
+  kSt0102,  // nested security set
+  kNested,  // nested set with the ST 0601 dictionary (ST 1607 segment / amend)
+  kBytes,   // kept raw (pack or sub-standard we do not decode)
 };
 
 struct TagSpec {
@@ -303,25 +303,36 @@ std::string St0601TagName(uint64_t tag) {
 
 std::string St0601EnumName(uint64_t tag, uint64_t value) {
   static const std::vector<const char*> kIcing = {"Detector Off", "No Icing Detected", "Icing Detected"};
-  static const std::vector<const char*> kFov = {
-      "Ultranarrow", "Narrow", "Medium", "Wide", "Ultrawide", "Narrow Medium", "2x Ultranarrow",
-      "4x Ultranarrow", "Continuous Zoom"};
-  static const std::vector<const char*> kMode = {"Other", "Operational", "Training",
-                                                 "Exercise", "Maintenance", "Test"};
+  static const std::vector<const char*> kFov = {"Ultranarrow",    "Narrow",         "Medium",
+                                                "Wide",           "Ultrawide",      "Narrow Medium",
+                                                "2x Ultranarrow", "4x Ultranarrow", "Continuous Zoom"};
+  static const std::vector<const char*> kMode = {"Other", "Operational", "Training", "Exercise", "Maintenance", "Test"};
   static const std::vector<const char*> kStatus = {
-      "Active", "Pre-flight", "Pre-flight Taxiing", "Run-up", "Take-off", "Ingress", "Manual Operation",
-      "Automated Orbit", "Transitioning", "Egress", "Landing", "Landed Taxiing", "Landed Parked"};
+      "Active",  "Pre-flight",       "Pre-flight Taxiing", "Run-up",        "Take-off",
+      "Ingress", "Manual Operation", "Automated Orbit",    "Transitioning", "Egress",
+      "Landing", "Landed Taxiing",   "Landed Parked"};
   static const std::vector<const char*> kControl = {
-      "Off", "Home Position", "Uncontrolled", "Manual Control", "Calibrating", "Auto - Holding Position",
-      "Auto - Tracking"};
+      "Off",         "Home Position",           "Uncontrolled",   "Manual Control",
+      "Calibrating", "Auto - Holding Position", "Auto - Tracking"};
   const std::vector<const char*>* names = nullptr;
   switch (tag) {
-    case 34: names = &kIcing; break;
-    case 63: names = &kFov; break;
-    case 77: names = &kMode; break;
-    case 125: names = &kStatus; break;
-    case 126: names = &kControl; break;
-    default: return "";
+    case 34:
+      names = &kIcing;
+      break;
+    case 63:
+      names = &kFov;
+      break;
+    case 77:
+      names = &kMode;
+      break;
+    case 125:
+      names = &kStatus;
+      break;
+    case 126:
+      names = &kControl;
+      break;
+    default:
+      return "";
   }
   return value < names->size() ? (*names)[value] : "";
 }

@@ -13,7 +13,6 @@ namespace fmv3d::telemetry::klv {
 
 namespace {
 
-
 void PutBigEndian(uint64_t v, size_t bytes, std::vector<uint8_t>* out) {
   for (size_t i = 0; i < bytes; ++i) out->push_back(static_cast<uint8_t>(v >> (8 * (bytes - 1 - i))));
 }
@@ -31,7 +30,9 @@ class SetBuilder {
     PutBigEndian(v, n, &b);
     Raw(tag, b);
   }
-  void UintMap(uint64_t tag, double v, size_t n, double lo, double hi) { Uint(tag, EncodeUnsignedMapped(v, n, lo, hi), n); }
+  void UintMap(uint64_t tag, double v, size_t n, double lo, double hi) {
+    Uint(tag, EncodeUnsignedMapped(v, n, lo, hi), n);
+  }
   void IntMap(uint64_t tag, double v, size_t n, double range) {
     Uint(tag, static_cast<uint64_t>(EncodeSignedMapped(v, n, range)), n);  // two's complement, truncated to n
   }

@@ -66,13 +66,20 @@ std::optional<double> ToNumber(const std::string& v) {
 }
 
 const std::pair<const char*, std::optional<double> DjiXmp::*> kFieldMap[] = {
-    {"GimbalYawDegree", &DjiXmp::gimbal_yaw},     {"GimbalPitchDegree", &DjiXmp::gimbal_pitch},
-    {"GimbalRollDegree", &DjiXmp::gimbal_roll},   {"FlightYawDegree", &DjiXmp::flight_yaw},
-    {"FlightPitchDegree", &DjiXmp::flight_pitch}, {"FlightRollDegree", &DjiXmp::flight_roll},
-    {"RelativeAltitude", &DjiXmp::relative_altitude}, {"AbsoluteAltitude", &DjiXmp::absolute_altitude},
-    {"GpsLatitude", &DjiXmp::latitude},           {"GpsLongitude", &DjiXmp::longitude},
-    {"GpsLongtitude", &DjiXmp::longitude},        {"RtkFlag", &DjiXmp::rtk_flag},
-    {"RtkStdLon", &DjiXmp::rtk_std_lon},          {"RtkStdLat", &DjiXmp::rtk_std_lat},
+    {"GimbalYawDegree", &DjiXmp::gimbal_yaw},
+    {"GimbalPitchDegree", &DjiXmp::gimbal_pitch},
+    {"GimbalRollDegree", &DjiXmp::gimbal_roll},
+    {"FlightYawDegree", &DjiXmp::flight_yaw},
+    {"FlightPitchDegree", &DjiXmp::flight_pitch},
+    {"FlightRollDegree", &DjiXmp::flight_roll},
+    {"RelativeAltitude", &DjiXmp::relative_altitude},
+    {"AbsoluteAltitude", &DjiXmp::absolute_altitude},
+    {"GpsLatitude", &DjiXmp::latitude},
+    {"GpsLongitude", &DjiXmp::longitude},
+    {"GpsLongtitude", &DjiXmp::longitude},
+    {"RtkFlag", &DjiXmp::rtk_flag},
+    {"RtkStdLon", &DjiXmp::rtk_std_lon},
+    {"RtkStdLat", &DjiXmp::rtk_std_lat},
     {"RtkStdHgt", &DjiXmp::rtk_std_hgt},
 };
 
@@ -85,8 +92,10 @@ DjiXmp ParseDjiXmp(const std::string& xmp) {
   for (const auto& [name, member] : kFieldMap) {
     const auto it = fields.find(name);
     if (it == fields.end() || d.*member) continue;
-    if (auto v = ToNumber(it->second)) d.*member = *v;
-    else ++d.malformed;
+    if (auto v = ToNumber(it->second))
+      d.*member = *v;
+    else
+      ++d.malformed;
   }
   return d;
 }
@@ -100,7 +109,8 @@ std::string EncodeDjiXmp(const DjiXmp& d) {
     attrs += buf;
   }
   return "<?xpacket begin=\"\xEF\xBB\xBF\" id=\"W5M0MpCehiHzreSzNTczkc9d\"?>\n"
-         "<x:xmpmeta xmlns:x=\"adobe:ns:meta/\">\n <rdf:RDF xmlns:rdf=\"http://www.w3.org/1999/02/22-rdf-syntax-ns#\">\n"
+         "<x:xmpmeta xmlns:x=\"adobe:ns:meta/\">\n <rdf:RDF "
+         "xmlns:rdf=\"http://www.w3.org/1999/02/22-rdf-syntax-ns#\">\n"
          "  <rdf:Description rdf:about=\"\" xmlns:drone-dji=\"http://www.dji.com/drone-dji/1.0/\"" +
          attrs + ">\n  </rdf:Description>\n </rdf:RDF>\n</x:xmpmeta>\n<?xpacket end=\"w\"?>";
 }
@@ -129,8 +139,10 @@ PhotoTelemetry TelemetryFromPhoto(const io::ExifInfo& exif, const PhotoTelemetry
   }
   const std::optional<double> alt = x.absolute_altitude ? x.absolute_altitude : g.altitude;
   if (alt) {
-    if (o.altitude_datum == AltitudeDatum::kEllipsoid) s.sensor_altitude_hae = alt;
-    else s.sensor_altitude_msl = alt;  // kAuto: EXIF's definition and DJI's documentation (see the header)
+    if (o.altitude_datum == AltitudeDatum::kEllipsoid)
+      s.sensor_altitude_hae = alt;
+    else
+      s.sensor_altitude_msl = alt;  // kAuto: EXIF's definition and DJI's documentation (see the header)
   }
   s.sensor_relative_altitude = x.relative_altitude;
   s.gimbal_yaw = x.gimbal_yaw;

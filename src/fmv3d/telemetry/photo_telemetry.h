@@ -60,9 +60,9 @@ struct PhotoTelemetryOptions {
 };
 
 struct PhotoTelemetry {
-  std::optional<TelemetrySample> sample;  // set when the photo has a position that passed ScreenFix
+  std::optional<TelemetrySample> sample;               // set when the photo has a position that passed ScreenFix
   FixRejection rejection = FixRejection::kNoPosition;  // kNone when `sample` is set
-  DjiXmp dji;                              // what the XMP held (for dumps and warnings)
+  DjiXmp dji;                                          // what the XMP held (for dumps and warnings)
 };
 
 PhotoTelemetry TelemetryFromPhoto(const io::ExifInfo& exif, const PhotoTelemetryOptions& options);

@@ -27,9 +27,9 @@ struct TelemetrySample {
   std::string source;  // "ST0601", "EG0104", "DJI-SRT", "GPMF", "EXIF", "EXIF+DJI-XMP"
 
   std::optional<double> sensor_latitude, sensor_longitude;
-  std::optional<double> sensor_altitude_msl;  // ST 0601 tag 15 "true altitude" (MSL); EG0104 device altitude
-                                              // (MSL); DJI abs_alt / GPS altitude
-  std::optional<double> sensor_altitude_hae;  // ST 0601 tag 75 / 104 (height above WGS84 ellipsoid)
+  std::optional<double> sensor_altitude_msl;       // ST 0601 tag 15 "true altitude" (MSL); EG0104 device altitude
+                                                   // (MSL); DJI abs_alt / GPS altitude
+  std::optional<double> sensor_altitude_hae;       // ST 0601 tag 75 / 104 (height above WGS84 ellipsoid)
   std::optional<double> sensor_relative_altitude;  // DJI rel_alt / BAROMETER: above the take-off point
 
   std::optional<double> platform_heading, platform_pitch, platform_roll;
@@ -37,7 +37,7 @@ struct TelemetrySample {
   // angle_to_north - platform_heading (wrapped to [0, 360)); the raw EG0104 angles are kept too.
   std::optional<double> sensor_relative_azimuth, sensor_relative_elevation, sensor_relative_roll;
   std::optional<double> sensor_angle_to_north, sensor_obliquity;  // EG0104 only
-  std::optional<double> gimbal_yaw, gimbal_pitch, gimbal_roll;     // DJI gb_yaw/gb_pitch/gb_roll (absolute)
+  std::optional<double> gimbal_yaw, gimbal_pitch, gimbal_roll;    // DJI gb_yaw/gb_pitch/gb_roll (absolute)
 
   std::optional<double> horizontal_fov, vertical_fov;
   std::optional<double> slant_range;
@@ -72,8 +72,7 @@ std::vector<klv::Packet> ReadVideoKlv(const std::filesystem::path& path, Telemet
 std::optional<TelemetrySample> SampleFromPacket(const klv::Packet& p);
 
 // ReadVideoKlv + SampleFromPacket, sorted by time (stable).
-std::vector<TelemetrySample> ReadVideoTelemetry(const std::filesystem::path& path,
-                                                TelemetryStats* stats = nullptr);
+std::vector<TelemetrySample> ReadVideoTelemetry(const std::filesystem::path& path, TelemetryStats* stats = nullptr);
 
 // Telemetry at time t (seconds) from samples sorted by time: linear in positions, altitudes, angles (with
 // wrap-around at 360 / longitude at +/-180), FOV, ranges and the timestamp; nearest sample for discrete

@@ -39,8 +39,12 @@ nlohmann::json FixesJson(const FixCounts& c) {
 }
 
 nlohmann::json ExifJson(const io::ExifInfo& e) {
-  nlohmann::json j = {{"make", e.make}, {"model", e.model}, {"focal_mm", e.focal_mm}, {"focal_35mm", e.focal_35mm},
-                      {"datetime_original", e.datetime_original}, {"xmp_bytes", e.xmp.size()}};
+  nlohmann::json j = {{"make", e.make},
+                      {"model", e.model},
+                      {"focal_mm", e.focal_mm},
+                      {"focal_35mm", e.focal_35mm},
+                      {"datetime_original", e.datetime_original},
+                      {"xmp_bytes", e.xmp.size()}};
   nlohmann::json g = nlohmann::json::object();
   Put(&g, "latitude", e.gps.latitude);
   Put(&g, "longitude", e.gps.longitude);
@@ -81,9 +85,12 @@ nlohmann::json GpmfJson(const GpmfTelemetry& g) {
     const auto it = g.stream_names.find(key);
     if (it != g.stream_names.end()) streams[key]["name"] = it->second;
   }
-  return {{"payloads", g.payloads},       {"devices", g.devices},
-          {"streams", streams},           {"fixes", FixesJson(g.fixes)},
-          {"entries", g.parse.entries},   {"malformed", g.parse.malformed},
+  return {{"payloads", g.payloads},
+          {"devices", g.devices},
+          {"streams", streams},
+          {"fixes", FixesJson(g.fixes)},
+          {"entries", g.parse.entries},
+          {"malformed", g.parse.malformed},
           {"unsupported", g.parse.unsupported}};
 }
 
