@@ -163,6 +163,33 @@ TEST(Jobs, RunFromAnUploadWithLiveProgressThenResumeAndStop) {
   ASSERT_TRUE(again.WaitFor([](const auto& ev) { return !ev.empty(); }, std::chrono::seconds(10)));
   EXPECT_EQ(again.events()[0].first, "snapshot");
   EXPECT_EQ(again.events()[0].second.size(), 2u);
+
+  // A server started afresh on the same root rebuilds both jobs from the workspace's job files, and numbers
+  // its next job after them.
+  RunningServer restarted(o);
+  auto c2 = restarted.Client();
+  const auto history = Json(c2->Get("/api/jobs"));
+  ASSERT_EQ(history.size(), 2u) << history.dump(1);
+  EXPECT_EQ(history[0]["id"], id);
+  EXPECT_EQ(history[0]["state"], "done");
+  EXPECT_EQ(history[0]["exit_code"], 0);
+  EXPECT_EQ(history[1]["id"], id2);
+  EXPECT_EQ(history[1]["state"], "stopped");
+  EXPECT_EQ(history[0]["started"], job["started"]);
+  for (const auto& st : history[0]["stages"]) {
+    if (st["name"] == "sparse" || st["name"] == "report") {
+      EXPECT_EQ(st["state"], "done") << st["name"];
+    }
+  }
+  const auto old = Json(c2->Get("/api/jobs/" + id));
+  EXPECT_FALSE(old["log"].empty());
+  EXPECT_EQ(old["log"].back(), job["log"].back());
+  EXPECT_EQ(Json(c2->Get("/api/workspaces/flight"))["job"]["id"], id2);
+  r = c2->Post("/api/workspaces/flight/jobs", R"({"from": "dense", "fast": true})", "application/json");
+  ASSERT_EQ(r->status, 202) << r->body;
+  const std::string id3 = Json(r)["id"];
+  EXPECT_GT(std::stoi(id3), std::max(std::stoi(id), std::stoi(id2)));
+  c2->Post("/api/jobs/" + id3 + "/stop", "", "application/json");
 }
 
 }  // namespace

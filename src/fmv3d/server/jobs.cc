@@ -2,6 +2,7 @@
 
 #include <signal.h>
 
+#include <algorithm>
 #include <chrono>
 #include <fstream>
 
@@ -133,7 +134,7 @@ nlohmann::json JobManager::Start(const std::string& workspace, const fs::path& w
   job->log.push_back("$ " + cmd);
   nlohmann::json j = ToJson(*job, false);
   jobs_.push_back(std::move(job));
-  hub_->Publish("job", j);
+  Publish("job", j);
   return j;
 }
 
@@ -216,7 +217,7 @@ JobManager::StageProgress* JobManager::FindStage(Job& job, const std::string& na
 void JobManager::HandleLogLine(Job& job, const std::string& line) {
   job.log.push_back(line);
   while (job.log.size() > options_.log_lines) job.log.pop_front();
-  hub_->Publish("log", {{"job", job.id}, {"line", line}});
+  Publish("log", {{"job", job.id}, {"line", line}});
 }
 
 void JobManager::HandleProgressLine(Job& job, const std::string& line) {
@@ -229,7 +230,7 @@ void JobManager::HandleProgressLine(Job& job, const std::string& line) {
       if (n.is_string()) stages.push_back({n.get<std::string>()});
     stages.push_back({"report"});
     job.stages = std::move(stages);
-    hub_->Publish("job", ToJson(job, false));
+    Publish("job", ToJson(job, false));
   } else if (type == "stage" && e.contains("stage") && e["stage"].is_string() && e.contains("state") &&
              e["state"].is_string()) {
     const std::string name = e["stage"].get<std::string>(), state = e["state"].get<std::string>();
@@ -240,13 +241,13 @@ void JobManager::HandleProgressLine(Job& job, const std::string& line) {
       s->eta_s = 0;
       if (s->total > 0) s->done = s->total;
     }
-    hub_->Publish("job", ToJson(job, false));
+    Publish("job", ToJson(job, false));
   } else if (type == "progress" && !job.stage.empty()) {
     StageProgress* s = FindStage(job, job.stage);
     s->done = e.value("done", 0.0);
     s->total = e.value("total", 0.0);
     s->eta_s = e.value("eta_s", 0.0);
-    hub_->Publish("progress", {{"job", job.id},
+    Publish("progress", {{"job", job.id},
                                {"stage", job.stage},
                                {"label", e.value("label", std::string())},
                                {"done", s->done},
@@ -277,7 +278,98 @@ void JobManager::Poll(Job& job) {
   job.state = job.stop_requested > 0 ? JobState::kStopped : *code == 0 ? JobState::kDone : JobState::kFailed;
   for (auto& s : job.stages)
     if (s.state == "running") s.state = job.state == JobState::kStopped ? "stopped" : "failed";
-  hub_->Publish("job", ToJson(job, false));
+  const nlohmann::json record = ToJson(job, false);
+  try {
+    core::WriteJson(fs::path(job.log_path).replace_extension(".json"), record);
+  } catch (const Error&) {
+    // The workspace went away or is read-only: the job is still reported for this server's life.
+  }
+  Publish("job", record);
+}
+
+void JobManager::Publish(const std::string& type, const nlohmann::json& data) {
+  if (!replaying_) hub_->Publish(type, data);
+}
+
+std::unique_ptr<JobManager::Job> JobManager::RestoreJob(const std::string& workspace, const fs::path& log_path) {
+  // ID-TIME.log: both parts decimal.
+  const std::string stem = log_path.stem().string();
+  const size_t dash = stem.find('-');
+  const auto digits = [](const std::string& t) {
+    return !t.empty() && t.size() <= 12 && t.find_first_not_of("0123456789") == std::string::npos;
+  };
+  if (dash == std::string::npos || !digits(stem.substr(0, dash)) || !digits(stem.substr(dash + 1))) return nullptr;
+  auto job = std::make_unique<Job>();
+  job->id = std::to_string(std::stoll(stem.substr(0, dash)));
+  job->workspace = workspace;
+  job->started = std::stod(stem.substr(dash + 1));
+  job->log_path = log_path;
+  job->progress_path = fs::path(log_path).replace_extension(".progress.jsonl");
+  for (const auto& name : StageNames()) job->stages.push_back({name});
+  for (const auto& line : ReadNewLines(job->progress_path, &job->progress_offset, &job->progress_partial))
+    HandleProgressLine(*job, line);
+  // The log's tail (ReadNewLines reads 4 MB at a time; the deque keeps the last log_lines).
+  for (uint64_t before = ~0ull; before != job->log_offset;) {
+    before = job->log_offset;
+    for (const auto& line : ReadNewLines(job->log_path, &job->log_offset, &job->log_partial)) HandleLogLine(*job, line);
+  }
+  const fs::path record_path = fs::path(log_path).replace_extension(".json");
+  const nlohmann::json record =
+      fs::exists(record_path) ? nlohmann::json::parse(core::ReadTextFile(record_path), nullptr, false) : nullptr;
+  std::error_code ec;
+  const auto mtime = fs::last_write_time(log_path, ec);
+  const double log_time =
+      ec ? job->started
+         : std::chrono::duration<double>(mtime - fs::file_time_type::clock::now()).count() + Now();
+  if (record.is_object()) {
+    const std::string state = record.value("state", std::string());
+    job->state = state == "done" ? JobState::kDone : state == "failed" ? JobState::kFailed : JobState::kStopped;
+    if (record.contains("exit_code") && record["exit_code"].is_number_integer())
+      job->exit_code = record["exit_code"].get<int>();
+    job->finished = record.contains("finished") && record["finished"].is_number() ? record["finished"].get<double>()
+                                                                                  : log_time;
+    if (record.contains("started") && record["started"].is_number()) job->started = record["started"].get<double>();
+    if (record.contains("stage") && record["stage"].is_string()) job->stage = record["stage"].get<std::string>();
+    if (record.contains("stages") && record["stages"].is_array()) {
+      job->stages.clear();
+      for (const auto& st : record["stages"])
+        if (st.is_object() && st.contains("name") && st["name"].is_string())
+          job->stages.push_back({st["name"].get<std::string>(), st.value("state", std::string("pending")),
+                                 st.value("done", 0.0), st.value("total", 0.0), st.value("eta_s", 0.0)});
+    }
+  } else {
+    job->state = JobState::kStopped;
+    job->finished = std::max(log_time, job->started);
+    HandleLogLine(*job, "(the server stopped while this job ran; its end was not recorded)");
+  }
+  for (auto& s : job->stages)
+    if (s.state == "running") s.state = job->state == JobState::kFailed ? "failed" : "stopped";
+  return job;
+}
+
+void JobManager::RestoreHistory(const std::vector<std::pair<std::string, fs::path>>& workspaces) {
+  std::lock_guard<std::mutex> lock(mutex_);
+  replaying_ = true;
+  std::vector<std::unique_ptr<Job>> restored;
+  for (const auto& [name, dir] : workspaces) {
+    std::error_code ec;
+    for (fs::directory_iterator it(dir / "jobs", ec), end; !ec && it != end; it.increment(ec)) {
+      if (it->path().extension() != ".log" || !it->is_regular_file(ec)) continue;
+      try {
+        if (auto job = RestoreJob(name, it->path())) restored.push_back(std::move(job));
+      } catch (const std::exception&) {
+        // An unreadable or foreign file in jobs/ is not history.
+      }
+    }
+  }
+  replaying_ = false;
+  std::sort(restored.begin(), restored.end(), [](const auto& a, const auto& b) {
+    return std::stoll(a->id) != std::stoll(b->id) ? std::stoll(a->id) < std::stoll(b->id) : a->started < b->started;
+  });
+  for (auto& job : restored) {
+    next_id_ = std::max<long long>(next_id_, std::stoll(job->id) + 1);
+    jobs_.push_back(std::move(job));
+  }
 }
 
 void JobManager::MonitorLoop() {

@@ -2,7 +2,8 @@
 // never a shell), one at a time per workspace. The child writes its log (stdout + stderr) to WS/jobs/ID.log and
 // its progress events to WS/jobs/ID.progress.jsonl (core/progress_log.h); one monitor thread tails both, keeps
 // each job's state, and publishes `job`, `progress` and `log` events (events.h). Stop = SIGTERM, then SIGKILL
-// after the grace period. Jobs live as long as the server; the workspace's files are the lasting record.
+// after the grace period. When a job ends its JOB record is written beside them (WS/jobs/ID-TIME.json), so a
+// restarted server rebuilds the finished jobs from these files (RestoreHistory) and numbers new ones after them.
 #pragma once
 
 #include <sys/types.h>
@@ -57,6 +58,10 @@ class JobManager {
   nlohmann::json List() const;  // every job, oldest first
   std::optional<nlohmann::json> Get(const std::string& id, bool with_log) const;
   std::optional<nlohmann::json> Stop(const std::string& id);
+  // Rebuilds the jobs of earlier server runs from each workspace's job files (name, folder): ID-TIME.log, its
+  // .progress.jsonl and the .json record written when the job ended. A job without a record (the server died
+  // while it ran) is "stopped" with no exit code. New ids continue after the highest id seen. Call before any Start.
+  void RestoreHistory(const std::vector<std::pair<std::string, std::filesystem::path>>& workspaces);
   // The workspace's latest job (null when none) and the stage states it overrides (running / failed).
   nlohmann::json LatestFor(const std::string& workspace) const;
   std::map<std::string, std::string> StageOverrides(const std::string& workspace) const;
@@ -84,6 +89,8 @@ class JobManager {
   nlohmann::json ToJson(const Job& job, bool with_log) const;
   void MonitorLoop();
   void Poll(Job& job);  // with mutex_ held
+  void Publish(const std::string& type, const nlohmann::json& data);  // not while replaying history
+  std::unique_ptr<Job> RestoreJob(const std::string& workspace, const std::filesystem::path& log_path);
   void HandleProgressLine(Job& job, const std::string& line);
   void HandleLogLine(Job& job, const std::string& line);
   StageProgress* FindStage(Job& job, const std::string& name);
@@ -93,6 +100,7 @@ class JobManager {
   mutable std::mutex mutex_;
   std::vector<std::unique_ptr<Job>> jobs_;
   int next_id_ = 1;
+  bool replaying_ = false;
   std::atomic<bool> quit_{false};
   std::thread monitor_;
 };

@@ -7,6 +7,7 @@
 #include "fmv3d/core/error.h"
 #include "fmv3d/server/routes.h"
 #include "fmv3d/server/validation.h"
+#include "fmv3d/server/workspace_state.h"
 
 namespace fmv3d::server {
 
@@ -154,6 +155,9 @@ Server::Server(ServerOptions options) : impl_(std::make_unique<Impl>()) {
   ctx.hub = &impl_->hub;
   impl_->jobs = std::make_unique<JobManager>(JobManagerOptions{options.executable}, &impl_->hub);
   ctx.jobs = impl_->jobs.get();
+  std::vector<std::pair<std::string, fs::path>> workspaces;
+  for (const auto& name : ListWorkspaces(ctx.ws_root)) workspaces.emplace_back(name, ctx.ws_root / name);
+  impl_->jobs->RestoreHistory(workspaces);
 
   httplib::Server& http = impl_->http;
   const int threads = options.threads;
