@@ -1,5 +1,6 @@
 // `fmv3d compare RECON.ply --cad MODEL.obj --length H -o OUTDIR`: distance of a reconstruction to its CAD
-// model (align/compare.h) → OUTDIR/compare.json, histograms.png, top.png, side.png, compare.html.
+// model (align/compare.h) → OUTDIR/compare.json, histograms.png, top.png, side.png, compare.html, cad_error.ply
+// (the CAD coloured by the error, align/error_mesh.h; the console shows it when OUTDIR is WS/report/compare).
 #include <fmt/format.h>
 
 #include <iostream>

@@ -113,11 +113,18 @@ TEST(CompareToCad, CompletenessOverTheSurfaceTheCamerasSee) {
   EXPECT_LT(all.completeness, 0.75);
   EXPECT_GT(seen.completeness, 0.95);
   EXPECT_LT(seen.surface_samples, all.surface_samples);
-  for (const char* name : {"compare.json", "compare.html", "histograms.png", "top.png", "side.png"})
+  for (const char* name : {"compare.json", "compare.html", "histograms.png", "top.png", "side.png", "cad_error.ply"})
     EXPECT_TRUE(std::filesystem::exists(dir / "out" / name)) << name;
   const auto j = core::ReadJson(dir / "out/compare.json");
   EXPECT_NEAR(j.at("completeness_percent").get<double>(), 100 * seen.completeness, 1e-9);
   EXPECT_NEAR(j.at("error").at("total").at("rms_percent").get<double>(), 100 * seen.total.rms, 1e-9);
+  // The CAD coloured by the error: the reconstructed south half known, the north half not.
+  const auto& em = j.at("error_mesh");
+  EXPECT_EQ(em.at("file"), "cad_error.ply");
+  EXPECT_GT(em.at("triangles").get<int>(), 1000);
+  EXPECT_GT(em.at("covered_percent").get<double>(), 25);
+  EXPECT_LT(em.at("covered_percent").get<double>(), 75);
+  EXPECT_NEAR(em.at("scale_percent").get<double>(), 100 * seen.total.p90, 1e-9);
 }
 
 TEST(CompareToCad, AMeshIsCompleteWhereItsFacesAreNotOnlyAtItsVertices) {

@@ -20,6 +20,7 @@ TEST(PlyStream, MatchesTheWholeCloudReaderAndSkipsVisibilityLists) {
     cloud.normals.push_back(Eigen::Vector3f(1, i % 3, 2).normalized());
     cloud.colors.emplace_back(uint8_t(i), uint8_t(i / 4), uint8_t(200));
     cloud.visibility.push_back(std::vector<uint32_t>(i % 5, static_cast<uint32_t>(i)));
+    cloud.sigma.push_back(0.001f * (1 + i % 11));
   }
   WritePointCloudPly(cloud, tmp / "c.ply");
   const OrientedPointCloud whole = ReadPointCloudPly(tmp / "c.ply");
@@ -33,6 +34,7 @@ TEST(PlyStream, MatchesTheWholeCloudReaderAndSkipsVisibilityLists) {
         EXPECT_EQ(v.rgb[0], whole.colors[i][0]);
         EXPECT_EQ(v.rgb[2], whole.colors[i][2]);
         EXPECT_EQ(v.views, whole.visibility[i].size());
+        EXPECT_EQ(v.sigma, whole.sigma[i]);
         ++i;
       }));
   EXPECT_EQ(announced, 1000u);

@@ -54,6 +54,34 @@ TEST(Tiles3d, PntsRoundTripAndLayout) {
     EXPECT_EQ(back.normals[i], t.normals[i]);
     EXPECT_EQ(back.views[i], t.views[i]);
   }
+  EXPECT_TRUE(back.sigma.empty());
+}
+
+TEST(Tiles3d, PntsSigmaInTheBatchTable) {
+  PntsTile t;
+  for (int i = 0; i < 13; ++i) {
+    t.positions.emplace_back(i, 0, 0);
+    t.views.push_back(static_cast<uint8_t>(i));
+    t.sigma.push_back(0.01f * (i + 1));
+  }
+  const std::string bytes = EncodePnts(t);
+  const uint32_t json_len = U32(bytes, 12), bin_len = U32(bytes, 16), bt_json = U32(bytes, 20), bt_bin = U32(bytes, 24);
+  const auto bt = nlohmann::json::parse(bytes.substr(28 + json_len + bin_len, bt_json));
+  EXPECT_EQ(bt["sigma"]["componentType"], "FLOAT");
+  EXPECT_EQ(bt["sigma"]["type"], "SCALAR");
+  EXPECT_EQ(bt["sigma"]["byteOffset"], 16);  // after 13 view bytes padded to 8
+  EXPECT_EQ(bt_bin, 16u + 56u);              // 13 floats padded to 8
+  const PntsTile back = DecodePnts(bytes);
+  ASSERT_EQ(back.sigma.size(), 13u);
+  for (int i = 0; i < 13; ++i) EXPECT_EQ(back.sigma[i], t.sigma[i]);
+  EXPECT_EQ(back.views, t.views);
+  // σ alone: at offset 0.
+  t.views.clear();
+  const PntsTile only = DecodePnts(EncodePnts(t));
+  EXPECT_EQ(only.sigma, t.sigma);
+  EXPECT_TRUE(only.views.empty());
+  t.sigma.pop_back();
+  EXPECT_THROW(EncodePnts(t), Error);
 }
 
 TEST(Tiles3d, PntsWithoutOptionalAttributesAndEmpty) {

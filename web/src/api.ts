@@ -16,6 +16,7 @@ export interface Job {
 export interface WorkspaceFiles {
   sparse_ply: string | null; fused_ply: string | null; mesh_glb: string | null; tileset: string | null;
   ortho: string | null; dsm: string | null; hillshade: string | null; report_html: string | null;
+  compare?: string | null; cad_error?: string | null;
 }
 export interface Workspace {
   name: string; stages: { name: string; state: StageState }[]; georeferenced: boolean; frames: number;

@@ -1,5 +1,6 @@
 // Measurement on the 3D view: distance (3D, with its horizontal and vertical parts), height difference along the
 // model's up axis, and planimetric area of a polygon (clicks on the drawn model; double-click closes the polygon).
+// In metres when the model frame's scale is known (the georeference's similarity), else in the model's own units.
 import * as THREE from 'three';
 import { h, fmtNumber } from './dom';
 
@@ -12,9 +13,12 @@ export class Measurer {
   private labels: { el: HTMLElement; at: THREE.Vector3 }[] = [];
   private out: HTMLElement | null = null;
   private raycaster = new THREE.Raycaster();
+  /** The last finished measurement: its value (metres, m² or model units) and the picked model points. */
+  last: { mode: MeasureMode; value: number; points: THREE.Vector3[] } | null = null;
 
   constructor(scene: THREE.Scene, private overlay: HTMLElement, private camera: THREE.PerspectiveCamera,
-              private pickables: () => THREE.Object3D[], private up: () => THREE.Vector3, private changed: () => void) {
+              private pickables: () => THREE.Object3D[], private up: () => THREE.Vector3, private changed: () => void,
+              private metresPerUnit: () => number | null = () => null) {
     scene.add(this.group);
   }
 
@@ -27,6 +31,7 @@ export class Measurer {
 
   private clear(): void {
     this.pts = [];
+    this.last = null;
     for (const c of [...this.group.children]) { this.group.remove(c); ((c as THREE.Line).geometry)?.dispose(); }
     for (const l of this.labels) l.el.remove();
     this.labels = [];
@@ -78,14 +83,18 @@ export class Measurer {
     const up = this.up().clone().normalize();
     if ((this.mode === 'distance' || this.mode === 'height') && this.pts.length === 2) {
       const [a, b] = this.pts;
+      const k = this.metresPerUnit() ?? 1, u = this.unit();
       const d = b.clone().sub(a);
-      const dv = d.dot(up);
-      const dh = Math.sqrt(Math.max(0, d.lengthSq() - dv * dv));
+      const dv = d.dot(up) * k;
+      const len = d.length() * k;
+      const dh = Math.sqrt(Math.max(0, len * len - dv * dv));
       const text = this.mode === 'distance'
-        ? `${fmtNumber(d.length(), 2)} (horizontal ${fmtNumber(dh, 2)}, vertical ${fmtNumber(dv, 2)})`
-        : `height difference ${fmtNumber(dv, 2)}`;
-      this.label(a.clone().add(b).multiplyScalar(0.5), this.mode === 'distance' ? fmtNumber(d.length(), 2) : `Δh ${fmtNumber(dv, 2)}`);
-      if (this.out) { this.out.textContent = text; this.out.dataset.value = String(this.mode === 'distance' ? d.length() : dv); }
+        ? `${fmtNumber(len, 2)} ${u} (horizontal ${fmtNumber(dh, 2)}, vertical ${fmtNumber(dv, 2)})`
+        : `height difference ${fmtNumber(dv, 2)} ${u}`;
+      this.label(a.clone().add(b).multiplyScalar(0.5), this.mode === 'distance' ? `${fmtNumber(len, 2)} ${u}` : `Δh ${fmtNumber(dv, 2)} ${u}`);
+      const value = this.mode === 'distance' ? len : dv;
+      this.last = { mode: this.mode, value, points: [a.clone(), b.clone()] };
+      if (this.out) { this.out.textContent = text; this.out.dataset.value = String(value); }
     }
     this.changed();
   }
@@ -102,14 +111,21 @@ export class Measurer {
       area += x0 * y1 - x1 * y0;
       perim += this.pts[i].distanceTo(this.pts[(i + 1) % this.pts.length]);
     }
-    area = Math.abs(area) / 2;
+    const k = this.metresPerUnit() ?? 1, u = this.unit();
+    area = (Math.abs(area) / 2) * k * k;
+    perim *= k;
+    const corners = this.pts.map((p) => p.clone());
     this.pts.push(this.pts[0].clone());
     this.redraw();
     const c = this.pts.slice(0, -1).reduce((s, p) => s.add(p), new THREE.Vector3()).multiplyScalar(1 / (this.pts.length - 1));
-    this.label(c, `${fmtNumber(area, 1)} m²`);
-    if (this.out) { this.out.textContent = `area ${fmtNumber(area, 2)} (planimetric), perimeter ${fmtNumber(perim, 2)}`; this.out.dataset.value = String(area); }
+    this.label(c, `${fmtNumber(area, 1)} ${u}²`);
+    this.last = { mode: 'area', value: area, points: corners };
+    if (this.out) { this.out.textContent = `area ${fmtNumber(area, 2)} ${u}² (planimetric), perimeter ${fmtNumber(perim, 2)} ${u}`; this.out.dataset.value = String(area); }
     this.pts = [];
   }
+
+  /** Metres when the model's scale is known (a georeferenced workspace), else the model's own units. */
+  private unit(): string { return this.metresPerUnit() === null ? 'units' : 'm'; }
 
   private label(at: THREE.Vector3, text: string): void {
     const el = h('div', { class: 'overlay measure-label' }, text);

@@ -8,7 +8,7 @@ export interface PointTile {
   colors: Uint8Array | null;        // rgb, 0-255
   normals: Int8Array | null;        // xyz, normalised to [-127, 127]
   views: Float32Array | null;       // number of views that saw each point (from the batch table), when present
-  confidence: Float32Array | null;  // per-point confidence (batch table), when present
+  sigma: Float32Array | null;       // per-point stated σ along the normal (batch table "sigma"), when present
 }
 
 const HEADER = 28;
@@ -85,7 +85,7 @@ export function parsePnts(buf: ArrayBuffer): PointTile {
   }
 
   // Batch table: per-point properties, either JSON arrays or binary references.
-  let views: Float32Array | null = null, confidence: Float32Array | null = null;
+  let views: Float32Array | null = null, sigma: Float32Array | null = null;
   if (btJsonLen > 0) {
     const bt = JSON.parse(dec.decode(new Uint8Array(buf, btJsonOff, btJsonLen)).trim() || '{}') as Record<string, unknown>;
     const prop = (names: string[]): Float32Array | null => {
@@ -116,9 +116,9 @@ export function parsePnts(buf: ArrayBuffer): PointTile {
       return null;
     };
     views = prop(['views', 'num_views', 'NUM_VIEWS', 'visibility', 'n_views']);
-    confidence = prop(['confidence', 'CONFIDENCE', 'score']);
+    sigma = prop(['sigma', 'SIGMA']);
   }
-  return { count, positions, center: globalVec('RTC_CENTER') ?? [0, 0, 0], colors, normals, views, confidence };
+  return { count, positions, center: globalVec('RTC_CENTER') ?? [0, 0, 0], colors, normals, views, sigma };
 }
 
 /** The glTF binary inside a `.b3dm` tile. */

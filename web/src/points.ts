@@ -1,4 +1,5 @@
-// The point material shared by the sparse cloud and the point tiles: colour / normal / number-of-views modes chosen
+// The point material shared by the sparse cloud and the point tiles: colour / normal / number of views / height /
+// confidence (the stated σ along the normal: green small, red at sigmaMax and above) modes chosen
 // by a uniform, and points sized in world units (the tile's point spacing) so a dense cloud reads as a surface.
 import * as THREE from 'three';
 
@@ -10,7 +11,7 @@ export interface PointUniforms {
   sizeScale: { value: number };   // user's multiplier on the spacing
   minPx: { value: number };
   viewsMax: { value: number };
-  confidenceMax: { value: number };
+  sigmaMax: { value: number };     // σ at the red end of the confidence ramp (a high percentile of the tiles' σ)
   heightRange: { value: THREE.Vector2 };
   up: { value: THREE.Vector3 };
 }
@@ -18,17 +19,17 @@ export interface PointUniforms {
 export function createPointUniforms(): PointUniforms {
   return {
     mode: { value: PointMode.Color }, projScale: { value: 500 }, sizeScale: { value: 1.4 }, minPx: { value: 1.5 },
-    viewsMax: { value: 2 }, confidenceMax: { value: 1 }, heightRange: { value: new THREE.Vector2(0, 1) }, up: { value: new THREE.Vector3(0, 0, 1) },
+    viewsMax: { value: 2 }, sigmaMax: { value: 0 }, heightRange: { value: new THREE.Vector2(0, 1) }, up: { value: new THREE.Vector3(0, 0, 1) },
   };
 }
 
 const vertex = /* glsl */ `
-  uniform float mode, projScale, sizeScale, minPx, spacing, viewsMax, confidenceMax, fixedPx, hasColor;
+  uniform float mode, projScale, sizeScale, minPx, spacing, viewsMax, sigmaMax, fixedPx, hasColor;
   uniform vec2 heightRange;
   uniform vec3 up;
   attribute vec3 color;
   attribute float views;
-  attribute float confidence;
+  attribute float sigma;
   varying vec3 vColor;
   vec3 ramp(float t) {
     t = clamp(t, 0.0, 1.0);
@@ -44,7 +45,7 @@ const vertex = /* glsl */ `
     else if (mode < 1.5) vColor = normalize(mat3(modelMatrix) * normal + 1e-6) * 0.5 + 0.5;
     else if (mode < 2.5) vColor = ramp((views - 2.0) / max(viewsMax - 2.0, 1.0));
     else if (mode < 3.5) vColor = ramp((dot(world.xyz, up) - heightRange.x) / max(heightRange.y - heightRange.x, 1e-6));
-    else vColor = ramp(1.0 - confidence / max(confidenceMax, 1e-6));
+    else vColor = ramp(sigma / max(sigmaMax, 1e-12));
   }`;
 
 const fragment = /* glsl */ `

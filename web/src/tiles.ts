@@ -45,7 +45,7 @@ export class TilesetLayer {
   hasPoints = false;
   hasMeshes = false;
   hasViews = false;
-  hasConfidence = false;
+  hasSigma = false;
   showPoints = true;
   showMeshes = true;
   private loaded = new Set<TileNode>();
@@ -216,7 +216,7 @@ export class TilesetLayer {
       if (t.colors) g.setAttribute('color', new THREE.BufferAttribute(t.colors, 3, true));
       if (t.normals) g.setAttribute('normal', new THREE.BufferAttribute(t.normals, 3, true));
       if (t.views) { g.setAttribute('views', new THREE.BufferAttribute(t.views, 1)); this.hasViews = true; }
-      if (t.confidence) { g.setAttribute('confidence', new THREE.BufferAttribute(t.confidence, 1)); this.hasConfidence = true; }
+      if (t.sigma) { g.setAttribute('sigma', new THREE.BufferAttribute(t.sigma, 1)); this.hasSigma = true; }
       g.computeBoundingSphere();
       const spacing = estimateSpacing(n, t.count);
       const pts = new THREE.Points(g, createPointMaterial(this.uniforms, spacing, !!t.colors));
@@ -226,7 +226,11 @@ export class TilesetLayer {
       n.points = t.count;
       this.hasPoints = true;
       if (t.views) for (const v of t.views) if (v > this.uniforms.viewsMax.value) this.uniforms.viewsMax.value = v;
-      if (t.confidence) for (const v of t.confidence) if (v > this.uniforms.confidenceMax.value) this.uniforms.confidenceMax.value = v;
+      if (t.sigma) {
+        // The ramp ends at the 90th percentile of σ over the tiles loaded so far (a few wild points do not flatten it).
+        const s = Float32Array.from(t.sigma.filter((v) => isFinite(v) && v > 0)).sort();
+        if (s.length) this.uniforms.sigmaMax.value = Math.max(this.uniforms.sigmaMax.value, s[Math.floor(0.9 * (s.length - 1))]);
+      }
       obj = pts;
     } else {
       const glb = new TextDecoder().decode(new Uint8Array(buf, 0, 4)) === 'b3dm' ? b3dmGlb(buf) : buf;

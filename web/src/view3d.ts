@@ -1,9 +1,12 @@
 // 3D view: camera frusta coloured by reprojection error (click one to see its frame), the sparse points, the dense
-// cloud streamed from the workspace's 3D Tiles, the textured mesh (GLB), orbit controls, distance / height / area
-// measurement and "fit view". window.fmv3d.stats() reports what is drawn.
+// cloud streamed from the workspace's 3D Tiles (coloured by colour / normal / number of views / confidence / height),
+// the textured mesh (GLB), the CAD model coloured by a comparison's errors (report/compare/cad_error.ply), orbit or
+// fly navigation, distance / height / area measurement and "fit view". window.fmv3d.stats() reports what is drawn.
 import * as THREE from 'three';
 import { OrbitControls } from 'three/examples/jsm/controls/OrbitControls.js';
 import { GLTFLoader } from 'three/examples/jsm/loaders/GLTFLoader.js';
+import { PLYLoader } from 'three/examples/jsm/loaders/PLYLoader.js';
+import { FlyControls } from './fly';
 import { api, fileURL, type Camera, type Workspace } from './api';
 import { h, fmtNumber, ramp, rampCss } from './dom';
 import { TilesetLayer, unlit } from './tiles';
@@ -15,11 +18,15 @@ export interface ViewStats {
   workspace: string | null; drawnPoints: number; sparsePoints: number; densePoints: number; cameras: number;
   meshTriangles: number; tilesDrawn: number; tilesLoaded: number; loadedPoints: number; loadedBytes: number;
   pending: number; firstPictureMs: number | null; firstPictureSinceLoadMs: number | null; ready: boolean; canvas: { width: number; height: number };
+  cadTriangles: number; cadCoveredPercent: number | null; navigation: 'orbit' | 'fly'; metresPerUnit: number | null;
+  cameraErrorRange: [number, number] | null;
 }
+export interface Measured { mode: string; value: number; points: { x: number; y: number }[] }
 declare global {
   interface Window {
     fmv3d?: { stats: () => ViewStats; fitView: () => void; idle: () => Promise<void>;
-      cameraOnScreen: (i: number) => { x: number; y: number } | null };
+      cameraOnScreen: (i: number) => { x: number; y: number } | null; setNavigation: (m: 'orbit' | 'fly') => void;
+      cameraPose: () => { position: number[]; direction: number[] }; measured: () => Measured | null };
   }
 }
 
@@ -34,6 +41,11 @@ class View3d {
   private scene = new THREE.Scene();
   private camera = new THREE.PerspectiveCamera(50, 1, 0.01, 1e5);
   private controls: OrbitControls;
+  private fly: FlyControls;
+  private navigation: 'orbit' | 'fly' = 'orbit';
+  private cad: THREE.Object3D | null = null;
+  private cadTriangles = 0;
+  private cadInfo: { scale: number; covered: number | null; radius: number | null } | null = null;
   private uniforms = createPointUniforms();
   private tiles: TilesetLayer | null = null;
   private sparse: THREE.Points | null = null;
@@ -78,14 +90,18 @@ class View3d {
     this.controls.addEventListener('change', () => { this.needsRender = true; });
     this.controls.addEventListener('start', () => { this.userMoved = true; });
     this.measurer = new Measurer(this.scene, this.canvasBox, this.camera, () => this.pickables(), () => this.up,
-      () => { this.needsRender = true; });
+      () => { this.needsRender = true; }, () => this.metresPerUnit());
+    this.fly = new FlyControls(this.camera, this.renderer.domElement, () => this.up, () => { this.needsRender = true; this.userMoved = true; });
     this.renderer.domElement.addEventListener('click', (e) => this.onClick(e));
     this.resizeObs = new ResizeObserver(() => this.resize());
     this.resizeObs.observe(this.canvasBox);
     this.resize();
     window.fmv3d = { stats: () => this.stats(), fitView: () => this.fitView(), idle: () => this.idle(),
-      cameraOnScreen: (i) => this.cameraOnScreen(i) };
+      cameraOnScreen: (i) => this.cameraOnScreen(i), setNavigation: (m) => this.setNavigation(m),
+      cameraPose: () => ({ position: this.camera.position.toArray(), direction: this.camera.getWorldDirection(new THREE.Vector3()).toArray() }),
+      measured: () => this.measured() };
     this.buildSide();
+    (this.side.querySelector("#show-cad") as HTMLInputElement).disabled = true;
     void this.load();
     this.loop();
   }
@@ -122,9 +138,77 @@ class View3d {
         this.scene.add(g);
       } catch (e) { console.warn('mesh', e); }
     }
+    if (files?.cad_error && files?.compare) await this.loadCad(files.compare, files.cad_error).catch((e) => console.warn('CAD', e));
     this.updateLegend();
     this.ready = true;
     this.needsRender = true;
+  }
+
+  /** The CAD model coloured by the comparison's per-vertex error, brought from the CAD frame into the model frame. */
+  private async loadCad(compareJson: string, ply: string): Promise<void> {
+    const cmp = await (await fetch(fileURL(this.ws, compareJson))).json() as {
+      transform?: { scale: number; rotation: number[][]; translation: number[] };
+      error_mesh?: { scale_percent: number; covered_percent?: number; radius_percent?: number }; length?: number };
+    if (!cmp.transform) throw new Error('compare.json has no transform');
+    const geo = await new PLYLoader().loadAsync(fileURL(this.ws, ply));
+    geo.computeVertexNormals();
+    // compare.json's transform maps the reconstruction (model frame) into the CAD frame: x_cad = s R x + t.
+    const { scale: sc, rotation: R, translation: t } = cmp.transform;
+    const toCad = new THREE.Matrix4().set(
+      sc * R[0][0], sc * R[0][1], sc * R[0][2], t[0],
+      sc * R[1][0], sc * R[1][1], sc * R[1][2], t[1],
+      sc * R[2][0], sc * R[2][1], sc * R[2][2], t[2], 0, 0, 0, 1);
+    const mesh = new THREE.Mesh(geo, new THREE.MeshLambertMaterial({ vertexColors: true, side: THREE.DoubleSide }));
+    mesh.matrixAutoUpdate = false;
+    mesh.matrix.copy(toCad.invert());
+    mesh.matrixWorldNeedsUpdate = true;
+    mesh.visible = this.checked('#show-cad');
+    this.cad = mesh;
+    this.cadTriangles = (geo.index?.count ?? geo.getAttribute('position').count) / 3;
+    this.cadInfo = { scale: cmp.error_mesh?.scale_percent ?? 1, covered: cmp.error_mesh?.covered_percent ?? null, radius: cmp.error_mesh?.radius_percent ?? null };
+    this.scene.add(mesh);
+    const box = this.side.querySelector('#show-cad') as HTMLInputElement | null;
+    if (box) box.disabled = false;
+  }
+
+  /** Metres per model unit: the scale of the tileset's root transform (the georeference), else unknown. */
+  private metresPerUnit(): number | null {
+    const m = this.tiles?.rootTransform;
+    if (!m || new THREE.Vector3().setFromMatrixPosition(m).length() < 1e6) return null;
+    return new THREE.Vector3().setFromMatrixColumn(m, 0).length();
+  }
+
+  private setNavigation(mode: 'orbit' | 'fly'): void {
+    this.navigation = mode;
+    const sel = this.side.querySelector('#nav-mode') as HTMLSelectElement | null;
+    if (sel && sel.value !== mode) sel.value = mode;
+    const radius = Math.max(this.camera.position.distanceTo(this.controls.target), 1e-6);
+    this.fly.enabled = mode === 'fly';
+    this.controls.enabled = mode === 'orbit';
+    if (mode === 'fly') {
+      // About a tenth of the viewing distance per second.
+      this.fly.speed = radius / 4;
+      this.renderer.domElement.focus();
+    } else {
+      // Orbit again about the point the view looks at, as far as the view was from the old target.
+      this.controls.target.copy(this.camera.position).addScaledVector(this.camera.getWorldDirection(new THREE.Vector3()), radius);
+      this.controls.update();
+    }
+    const help = this.side.querySelector('#nav-help');
+    if (help) help.textContent = mode === 'fly'
+      ? 'W/S or ↑/↓ forward and back, A/D or ←/→ sideways, E/Q up and down, drag to look, wheel: speed, Shift: faster.'
+      : 'Drag to orbit, right-drag to pan, wheel to zoom.';
+    this.needsRender = true;
+  }
+
+  private measured(): Measured | null {
+    const m = this.measurer.last;
+    if (!m) return null;
+    const r = this.renderer.domElement.getBoundingClientRect();
+    return { mode: m.mode, value: m.value, points: m.points.map((p) => {
+      const q = p.clone().project(this.camera);
+      return { x: r.left + (q.x * 0.5 + 0.5) * r.width, y: r.top + (-q.y * 0.5 + 0.5) * r.height };
+    }) };
   }
 
   private checked(sel: string): boolean { return (this.side.querySelector(sel) as HTMLInputElement | null)?.checked ?? false; }
@@ -263,6 +347,8 @@ class View3d {
       h('option', { value: String(PointMode.Views) }, 'number of views'), h('option', { value: String(PointMode.Confidence) }, 'confidence'),
       h('option', { value: String(PointMode.Height) }, 'height'));
     mode.addEventListener('change', () => { this.uniforms.mode.value = Number(mode.value); this.updateLegend(); this.needsRender = true; });
+    const nav = h('select', { id: 'nav-mode' }, h('option', { value: 'orbit' }, 'orbit'), h('option', { value: 'fly' }, 'fly (first person)'));
+    nav.addEventListener('change', () => this.setNavigation(nav.value as 'orbit' | 'fly'));
     const size = h('input', { type: 'range', min: '0.3', max: '4', step: '0.1', value: String(this.uniforms.sizeScale.value) });
     size.addEventListener('input', () => { this.uniforms.sizeScale.value = Number(size.value); this.needsRender = true; });
     const measureBtns = (['distance', 'height', 'area'] as MeasureMode[]).map((m) =>
@@ -274,9 +360,13 @@ class View3d {
       check('show-sparse', 'sparse points', true, (v) => { if (this.sparse) this.sparse.visible = v; }),
       check('show-dense', 'dense cloud (3D Tiles)', true, (v) => { if (this.tiles) this.tiles.showPoints = v; }),
       check('show-mesh', 'textured mesh', false, (v) => { if (this.mesh) this.mesh.visible = v; if (this.tiles) this.tiles.showMeshes = v; }),
+      check('show-cad', 'CAD model (comparison error)', true, (v) => { if (this.cad) this.cad.visible = v; this.updateLegend(); }),
       h('label', {}, 'points coloured by ', mode),
       h('label', {}, 'point size ', size),
       h('div', { id: 'legend', class: 'legend' }),
+      h('h3', {}, 'Navigation'),
+      h('label', {}, 'controls ', nav),
+      h('p', { id: 'nav-help', class: 'muted small' }, 'Drag to orbit, right-drag to pan, wheel to zoom.'),
       h('h3', {}, 'Measure'),
       h('div', { class: 'row' }, ...measureBtns, h('button', { class: 'small', onclick: () => this.setMeasure('off') }, 'clear')),
       h('div', { id: 'measure-out', class: 'measure-out' }),
@@ -293,20 +383,32 @@ class View3d {
     const lg = this.side.querySelector('#legend');
     if (!lg) return;
     const emax = (this as { emax?: number }).emax ?? 1;
-    const bar = (lo: string, hi: string, what: string) =>
-      h('div', { class: 'ramp-legend' }, h('span', {}, lo), h('span', { class: 'ramp' }), h('span', {}, hi), h('span', { class: 'muted' }, ' ' + what));
+    const bar = (lo: string, hi: string, what: string, cls = 'ramp', id = '') =>
+      h('div', { class: 'ramp-legend', ...(id ? { id } : {}) }, h('span', {}, lo), h('span', { class: cls }), h('span', {}, hi), h('span', { class: 'muted' }, ' ' + what));
     const parts: Node[] = [];
-    if (this.cameras.length) parts.push(bar('0', `${fmtNumber(emax, 2)} px`, 'camera reprojection RMS'));
+    if (this.cameras.length) parts.push(bar('0', `${fmtNumber(emax, 2)} px`, 'camera reprojection RMS', 'ramp', 'legend-cameras'));
     const m = this.uniforms.mode.value;
-    const noAttr = (what: string) => parts.push(h('p', { class: 'muted' }, `The point tiles carry no ${what}.`));
+    const noAttr = (what: string) => parts.push(h('p', { class: 'muted', id: 'legend-missing' }, `The point tiles carry no ${what}.`));
     if (m === PointMode.Views) {
-      if (this.uniforms.viewsMax.value > 2) parts.push(bar('2', String(Math.round(this.uniforms.viewsMax.value)), 'views per point'));
+      if (this.tiles?.hasViews) parts.push(bar('2', String(Math.round(this.uniforms.viewsMax.value)), 'views per point', 'ramp', 'legend-points'));
       else noAttr('per-point number of views (batch table "views")');
     }
-    if (m === PointMode.Confidence && this.uniforms.confidenceMax.value <= 1 && !this.tiles?.hasConfidence) noAttr('per-point confidence (batch table "confidence")');
+    if (m === PointMode.Confidence) {
+      const k = this.metresPerUnit();
+      const s = this.uniforms.sigmaMax.value * (k ?? 1);
+      if (this.tiles?.hasSigma) parts.push(bar('0', `≥ ${fmtNumber(s, 3)} ${k === null ? 'units' : 'm'}`, 'stated σ along the normal (green: confident)', 'ramp', 'legend-points'));
+      else noAttr('per-point uncertainty (batch table "sigma")');
+    }
     if (m === PointMode.Height) {
       const r = this.uniforms.heightRange.value;
-      parts.push(bar(fmtNumber(r.x, 1), fmtNumber(r.y, 1), 'height (m)'));
+      const k = this.metresPerUnit();
+      parts.push(bar('0', `${fmtNumber((r.y - r.x) * (k ?? 1), 1)} ${k === null ? 'units' : 'm'}`, 'height above the framed base', 'ramp', 'legend-points'));
+    }
+    if (this.cad?.visible && this.cadInfo) {
+      const sc = this.cadInfo.scale;
+      parts.push(bar(`−${fmtNumber(sc, 2)}`, `+${fmtNumber(sc, 2)} % of H`, 'CAD: signed distance of the reconstruction (blue inside, red outside)', 'ramp diverging', 'legend-cad'));
+      parts.push(h('p', { class: 'muted' }, h('span', { class: 'swatch grey' }), ` no reconstructed point within ${this.cadInfo.radius === null ? '–' : fmtNumber(this.cadInfo.radius, 2) + ' % of H'}` +
+        (this.cadInfo.covered === null ? '' : ` (${fmtNumber(100 - this.cadInfo.covered, 1)}% of the CAD's vertices)`)));
     }
     lg.replaceChildren(...parts);
     void rampCss;
@@ -324,7 +426,8 @@ class View3d {
   private loop = (): void => {
     if (this.disposed) return;
     this.raf = requestAnimationFrame(this.loop);
-    const busy = this.tiles?.busy() ?? false;
+    this.fly.update();
+    const busy = (this.tiles?.busy() ?? false) || this.fly.moving();
     if (!this.needsRender && !busy) return;
     this.needsRender = false;
     const size = this.renderer.getDrawingBufferSize(new THREE.Vector2());
@@ -362,6 +465,9 @@ class View3d {
       loadedBytes: ts?.loadedBytes ?? 0, pending: ts?.pending ?? 0, firstPictureMs: this.firstPictureMs,
       firstPictureSinceLoadMs: this.firstPictureSinceLoadMs,
       ready: this.ready && !(this.tiles?.busy() ?? false), canvas: { width: c.width, height: c.height },
+      cadTriangles: this.cad?.visible ? this.cadTriangles : 0, cadCoveredPercent: this.cadInfo?.covered ?? null,
+      navigation: this.navigation, metresPerUnit: this.metresPerUnit(),
+      cameraErrorRange: this.cameras.length ? [0, (this as { emax?: number }).emax ?? 1] : null,
     };
   }
 
@@ -382,6 +488,7 @@ class View3d {
     cancelAnimationFrame(this.raf);
     this.resizeObs.disconnect();
     this.controls.dispose();
+    this.fly.dispose();
     this.measurer.dispose();
     this.scene.traverse((o) => {
       const m = o as THREE.Mesh;

@@ -8,6 +8,7 @@
 #include <fstream>
 
 #include "fmv3d/align/compare_plots.h"
+#include "fmv3d/align/error_mesh.h"
 #include "fmv3d/core/error.h"
 #include "fmv3d/core/files.h"
 #include "fmv3d/core/logging.h"
@@ -349,6 +350,23 @@ CompareResult CompareToCad(const io::OrientedPointCloud& recon_in, const io::Tex
     j["crop_margin_percent"] = 100 * o.crop_margin;
     j["ground_cut_percent"] = 100 * o.ground_cut;
     if (!o.cameras.empty()) j["cameras"] = o.cameras.string();
+    // The CAD coloured by the errors around each of its points (error_mesh.h): edges of two sample spacings,
+    // errors from the points within the completeness distance (or two spacings), colours saturating at the
+    // 90th percentile of |signed distance|.
+    ErrorMeshOptions eo;
+    eo.max_edge = 2 * spacing;
+    eo.radius = std::max(o.completeness_threshold * H, 2 * spacing);
+    eo.scale = std::max(res.total.p90, 1e-6);
+    eo.length = H;
+    const ErrorMesh em = BuildErrorMesh(cad, pts.positions, ed, eo);
+    WriteErrorMeshPly(em, o.output_dir / "cad_error.ply");
+    j["error_mesh"] = {{"file", "cad_error.ply"},
+                       {"frame", "cad"},
+                       {"vertices", em.vertices.size()},
+                       {"triangles", em.triangles.size()},
+                       {"covered_percent", 100 * em.covered_fraction},
+                       {"radius_percent", 100 * eo.radius / H},
+                       {"scale_percent", 100 * eo.scale}};
     core::WriteJson(o.output_dir / "compare.json", j);
     WriteCompareHtml(j, o.output_dir / "compare.html");
   }

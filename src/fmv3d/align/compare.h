@@ -16,7 +16,8 @@
 //      on its faces every sample_spacing·H, so a coarse but faithful mesh is not counted as holes); with `cameras` (a
 //      COLMAP model in the CAD frame) only samples that at least min_views cameras see (depth test against the CAD
 //      rendered by render::Renderer) count.
-//   5. Outputs in output_dir: compare.json (everything below), histograms.png (X, Y, Z error histograms in
+//   5. Outputs in output_dir: compare.json (everything below), cad_error.ply (the CAD coloured by the error,
+//      error_mesh.h), histograms.png (X, Y, Z error histograms in
 //      one plot), top.png and side.png (the CAD with the points coloured by error), compare.html.
 //
 // The transform for a reconstruction made from a synthetic flight is the sparse model's alignment to the

@@ -96,7 +96,7 @@ double Value(Type t, const char* p) {
 struct Property {
   Type type = Type::kBad;        // scalar type, or the list's item type
   Type count_type = Type::kBad;  // set for lists
-  int slot = -1;                 // 0-2 position, 3-5 normal, 6-8 colour, 9 the visibility list, -1 ignored
+  int slot = -1;  // 0-2 position, 3-5 normal, 6-8 colour, 9 the visibility list, 10 sigma, -1 ignored
 };
 
 // Buffered little reader: Take(n) returns a pointer to the next n bytes.
@@ -173,6 +173,7 @@ bool StreamPlyVertices(const std::filesystem::path& path, const std::function<vo
       for (int s = 0; s < 9; ++s)
         if (name == kSlots[s] && p.count_type == Type::kBad) p.slot = s;
       if (name == "visibility" && p.count_type != Type::kBad) p.slot = 9;
+      if (name == "sigma" && p.count_type == Type::kBad) p.slot = 10;
       props.push_back(p);
     }
   }
@@ -196,6 +197,8 @@ bool StreamPlyVertices(const std::filesystem::path& path, const std::function<vo
         v.position[p.slot] = static_cast<float>(x);
       else if (p.slot < 6)
         v.normal[p.slot - 3] = static_cast<float>(x);
+      else if (p.slot == 10)
+        v.sigma = static_cast<float>(x);
       else
         v.rgb[p.slot - 6] = static_cast<uint8_t>(x);
     }

@@ -46,7 +46,7 @@ std::string Assemble(const char magic[4], const std::string& ft_json, const std:
 std::string EncodePnts(const PntsTile& t) {
   const size_t n = t.positions.size();
   if ((!t.colors.empty() && t.colors.size() != n) || (!t.normals.empty() && t.normals.size() != n) ||
-      (!t.views.empty() && t.views.size() != n))
+      (!t.views.empty() && t.views.size() != n) || (!t.sigma.empty() && t.sigma.size() != n))
     throw Error("EncodePnts: attribute sizes differ from the point count");
   std::string bin;
   nlohmann::json ft = {{"POINTS_LENGTH", n},
@@ -63,12 +63,20 @@ std::string EncodePnts(const PntsTile& t) {
   }
   bin.append(Pad8(bin.size()) - bin.size(), '\0');
   const std::string ft_json = PaddedJson(ft, kHeader);
-  if (t.views.empty()) return Assemble("pnts", ft_json, bin, "", "", "");
-  const std::string bt_json =
-      PaddedJson({{"views", {{"byteOffset", 0}, {"componentType", "UNSIGNED_BYTE"}, {"type", "SCALAR"}}}},
-                 kHeader + ft_json.size() + bin.size());
-  std::string bt_bin(t.views.begin(), t.views.end());
-  bt_bin.append(Pad8(bt_bin.size()) - bt_bin.size(), '\0');
+  if (t.views.empty() && t.sigma.empty()) return Assemble("pnts", ft_json, bin, "", "", "");
+  nlohmann::json bt = nlohmann::json::object();
+  std::string bt_bin;
+  if (!t.views.empty()) {
+    bt["views"] = {{"byteOffset", 0}, {"componentType", "UNSIGNED_BYTE"}, {"type", "SCALAR"}};
+    bt_bin.assign(t.views.begin(), t.views.end());
+    bt_bin.append(Pad8(bt_bin.size()) - bt_bin.size(), '\0');
+  }
+  if (!t.sigma.empty()) {
+    bt["sigma"] = {{"byteOffset", bt_bin.size()}, {"componentType", "FLOAT"}, {"type", "SCALAR"}};
+    bt_bin.append(reinterpret_cast<const char*>(t.sigma.data()), n * 4);
+    bt_bin.append(Pad8(bt_bin.size()) - bt_bin.size(), '\0');
+  }
+  const std::string bt_json = PaddedJson(bt, kHeader + ft_json.size() + bin.size());
   return Assemble("pnts", ft_json, bin, bt_json, bt_bin, "");
 }
 
@@ -125,6 +133,16 @@ PntsTile DecodePnts(const std::string& bytes) {
       if (off > bt_bin || n > bt_bin - off) throw Error("pnts: batch table 'views' out of range");
       const char* p = bytes.data() + bt_at + bt_json + off;
       t.views.assign(reinterpret_cast<const uint8_t*>(p), reinterpret_cast<const uint8_t*>(p) + n);
+    }
+    if (bt.contains("sigma")) {
+      const auto& v = bt["sigma"];
+      if (!v.is_object() || v.value("componentType", "") != "FLOAT" || !v.contains("byteOffset") ||
+          !v["byteOffset"].is_number_unsigned())
+        throw Error("pnts: batch table 'sigma' is not a FLOAT reference");
+      const size_t off = v["byteOffset"].get<size_t>();
+      if (off > bt_bin || n > (bt_bin - off) / 4) throw Error("pnts: batch table 'sigma' out of range");
+      t.sigma.resize(n);
+      std::memcpy(t.sigma.data(), bytes.data() + bt_at + bt_json + off, n * 4);
     }
   }
   if (ft.contains("RTC_CENTER")) {

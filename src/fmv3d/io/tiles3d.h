@@ -5,7 +5,8 @@
 //
 // Our .pnts carry POSITION (float32 x3, relative to RTC_CENTER), RGB (uint8 x3) and NORMAL (float32 x3) when
 // the cloud has them — the semantics every 3D Tiles client reads (CesiumJS, 3DTilesRendererJS, loaders.gl) — and,
-// when known, a batch table property "views" (UNSIGNED_BYTE SCALAR: how many images saw the point, capped at 255).
+// when known, batch table properties "views" (UNSIGNED_BYTE SCALAR: how many images saw the point, capped at 255)
+// and "sigma" (FLOAT SCALAR: the point's stated uncertainty along its normal, model units; at an 8-byte offset).
 #pragma once
 
 #include <Eigen/Core>
@@ -24,6 +25,7 @@ struct PntsTile {
   std::vector<Eigen::Matrix<uint8_t, 3, 1>> colors;  // empty or one per point
   std::vector<Eigen::Vector3f> normals;              // empty or one per point
   std::vector<uint8_t> views;                        // empty or one per point (batch table "views")
+  std::vector<float> sigma;                          // empty or one per point (batch table "sigma")
 };
 
 // Throws fmv3d::Error when the attribute sizes disagree.

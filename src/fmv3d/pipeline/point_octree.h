@@ -5,7 +5,7 @@
 // picture of the whole cloud, and each level adds detail where there is any.
 //
 // The points are reordered in place so that every node's own points, and every subtree's, are contiguous:
-// memory is the points themselves (28 bytes each) plus one byte per point during a subsample; time is
+// memory is the points themselves (32 bytes each) plus one byte per point during a subsample; time is
 // O(N · depth).
 #pragma once
 
@@ -23,6 +23,7 @@ struct TilePoint {
   Eigen::Vector3f normal;  // zero when the cloud has none
   uint8_t rgb[3] = {0, 0, 0};
   uint8_t views = 0;  // images that see the point (0: unknown)
+  float sigma = 0;    // stated uncertainty along the normal, model units (0: unknown)
 };
 
 struct OctreeNode {

@@ -40,10 +40,11 @@ nlohmann::json WritePointTiles(const PointOctree& tree, const fs::path& dir) {
     const Eigen::Vector3f rtc = tile.rtc_center.cast<float>();
     tile.positions.reserve(node.count);
     tile.colors.reserve(node.count);
-    bool normals = false, views = false;
+    bool normals = false, views = false, sigma = false;
     for (size_t i = node.begin; i < node.begin + node.count; ++i) {
       normals = normals || !tree.points[i].normal.isZero();
       views = views || tree.points[i].views > 0;
+      sigma = sigma || tree.points[i].sigma > 0;
     }
     for (size_t i = node.begin; i < node.begin + node.count; ++i) {
       const TilePoint& p = tree.points[i];
@@ -51,6 +52,7 @@ nlohmann::json WritePointTiles(const PointOctree& tree, const fs::path& dir) {
       tile.colors.emplace_back(p.rgb[0], p.rgb[1], p.rgb[2]);
       if (normals) tile.normals.push_back(p.normal);
       if (views) tile.views.push_back(p.views);
+      if (sigma) tile.sigma.push_back(p.sigma);
     }
     const std::string uri = "points/" + node.name + ".pnts";
     core::WriteTextFile(dir / uri, io::EncodePnts(tile));
@@ -108,7 +110,7 @@ nlohmann::json RunTilesStage(const fs::path& ws, const TilesOptions& options) {
   const auto t0 = std::chrono::steady_clock::now();
   const fs::path fused = ws / "dense" / "fused.ply";
   if (!fs::exists(fused)) throw Error(ws.string() + ": dense/fused.ply is missing; run `fmv3d dense` first");
-  // Streamed straight into the compact tile points (28 bytes each) when the PLY allows; else read whole.
+  // Streamed straight into the compact tile points (32 bytes each) when the PLY allows; else read whole.
   std::vector<TilePoint> points;
   const bool streamed = io::StreamPlyVertices(
       fused, [&points](size_t n) { points.reserve(n); },
@@ -118,6 +120,7 @@ nlohmann::json RunTilesStage(const fs::path& ws, const TilesOptions& options) {
         p.normal = v.normal;
         std::copy(v.rgb, v.rgb + 3, p.rgb);
         p.views = v.views;
+        p.sigma = v.sigma;
         points.push_back(p);
       });
   if (!streamed) {
@@ -129,6 +132,7 @@ nlohmann::json RunTilesStage(const fs::path& ws, const TilesOptions& options) {
       if (cloud.has_colors()) std::copy(cloud.colors[i].data(), cloud.colors[i].data() + 3, points[i].rgb);
       if (cloud.has_visibility())
         points[i].views = static_cast<uint8_t>(std::min<size_t>(cloud.visibility[i].size(), 255));
+      if (cloud.has_sigma()) points[i].sigma = cloud.sigma[i];
     }
   }
   if (points.empty()) throw Error(fused.string() + ": no points to tile");

@@ -9,8 +9,8 @@
 // Everything is in the model frame (that of WS/sparse); when georeferenced, the root's `transform` maps it to
 // ECEF (georef.json's similarity into ENU, then ENU at the origin into ECEF on WGS84; an MSL origin height is
 // raised by the EGM96 undulation when PROJ's grid is installed).
-// fused.ply is streamed into 28-byte tile points (io/ply_stream.h; other PLY flavours are read whole), so a
-// 10 M-point cloud costs ~400 MB. Geometric error: a node's subsample spacing on a surface, cell size / √budget,
+// fused.ply is streamed into 32-byte tile points (io/ply_stream.h; other PLY flavours are read whole), so a
+// 10 M-point cloud costs ~450 MB. Point tiles carry the batch table "views" and "sigma" when fused.ply has them. Geometric error: a node's subsample spacing on a surface, cell size / √budget,
 // times 2; halving per level, 0 for leaves and the mesh. The tileset is written to WS/tiles.tmp and renamed, so
 // WS/tiles is never half-made.
 #pragma once

@@ -29,7 +29,8 @@ std::vector<StageStatus> StageStates(const std::filesystem::path& ws);
 
 // {"name", "stages": [{"name", "state"}], "georeferenced", "frames", "registered"} (no "job").
 nlohmann::json DescribeWorkspace(const std::filesystem::path& ws);
-// {"sparse_ply", "fused_ply", "mesh_glb", "tileset", "ortho", "dsm", "hillshade", "report_html"}: paths relative to
+// {"sparse_ply", "fused_ply", "mesh_glb", "tileset", "ortho", "dsm", "hillshade", "report_html", "compare",
+// "cad_error"}: paths relative to
 // the workspace, null when absent.
 nlohmann::json WorkspaceFiles(const std::filesystem::path& ws);
 // The inputs recorded in WS/project.json (absolute paths), empty when none.
