@@ -23,7 +23,13 @@ import { api, fileURL, type Geo } from './api';
 import { h, fmtNumber } from './dom';
 import { lineChart } from './plots';
 
-declare global { interface Window { fmv3dMap?: { ready: () => boolean; layers: () => string[] }; } }
+export interface MapFeatures { track: number; footprints: number; trackDrawn: number; footprintsDrawn: number }
+declare global {
+  interface Window {
+    fmv3dMap?: { ready: () => boolean; layers: () => string[]; features: () => MapFeatures;
+      bounds: () => [number, number, number, number] | null; profile: () => { points: number; valid: number } | null };
+  }
+}
 
 /** The proj4 definition of a WGS84 UTM zone code (326zz north, 327zz south), or null. */
 export function utmDef(epsg: number): string | null {
@@ -55,7 +61,11 @@ export function mountMap(el: HTMLElement, ws: string | null): () => void {
   let map: OlMap | null = null;
   let ready = false;
   const layerNames: string[] = [];
-  window.fmv3dMap = { ready: () => ready, layers: () => layerNames };
+  let features: () => MapFeatures = () => ({ track: 0, footprints: 0, trackDrawn: 0, footprintsDrawn: 0 });
+  let bounds: [number, number, number, number] | null = null;
+  let profile: { points: number; valid: number } | null = null;
+  window.fmv3dMap = { ready: () => ready, layers: () => layerNames, features: () => features(), bounds: () => bounds,
+    profile: () => profile };
 
   (async () => {
     let geo: Geo;
@@ -128,6 +138,15 @@ export function mountMap(el: HTMLElement, ws: string | null): () => void {
       view: new View({ projection: viewProj }),
     });
     map.getView().fit(extent, { padding: [20, 20, 20, 20] });
+    bounds = geo.bounds_wgs84;
+    // What the vector layer holds, and how much of it is drawn: visible layer, inside the current view.
+    features = () => {
+      const all = vec.getFeatures();
+      const viewExtent = map!.getView().calculateExtent(map!.getSize());
+      const shown = vecLayer.getVisible() ? vec.getFeaturesInExtent(viewExtent) : [];
+      const count = (fs: Feature[], kind: string) => fs.filter((f) => f.get('kind') === kind).length;
+      return { track: count(all, 'track'), footprints: count(all, 'footprint'), trackDrawn: count(shown, 'track'), footprintsDrawn: count(shown, 'footprint') };
+    };
 
     const utmCode = projOk && utmDef(geo.epsg) ? code : ensureProjection(utmZoneOf(geo.origin.lon, geo.origin.lat));
     map.on('pointermove', (ev) => {
@@ -152,7 +171,7 @@ export function mountMap(el: HTMLElement, ws: string | null): () => void {
         const [a, b] = [line.getFirstCoordinate(), line.getLastCoordinate()];
         map!.removeInteraction(draw!); draw = null; drawBtn.classList.remove('active');
         setTimeout(() => dblZoom?.setActive(true), 600);
-        await showProfile(ws, transform(a, viewProj, 'EPSG:4326'), transform(b, viewProj, 'EPSG:4326'), profileBox);
+        profile = await showProfile(ws, transform(a, viewProj, 'EPSG:4326'), transform(b, viewProj, 'EPSG:4326'), profileBox);
       });
       map!.addInteraction(draw);
     });
@@ -202,15 +221,17 @@ function hillshadeStyle([lo, hi]: [number, number]) {
   return { color: ['case', valid, ['color', r, g, b, 1], ['color', 0, 0, 0, 0]] } as never;
 }
 
-async function showProfile(ws: string, from: number[], to: number[], box: HTMLElement): Promise<void> {
+/** Samples the DSM along the line and plots it; returns how many samples came back and how many hit the DSM. */
+async function showProfile(ws: string, from: number[], to: number[], box: HTMLElement): Promise<{ points: number; valid: number } | null> {
   box.replaceChildren(h('p', { class: 'muted' }, 'sampling the DSM…'));
   try {
     const p = await api.profile(ws, [from[1], from[0]], [to[1], to[0]], 200);
     const pts = p.points.filter((q) => q.height_m !== null);
-    if (pts.length === 0) { box.replaceChildren(h('p', { class: 'muted' }, 'The line does not cross the DSM.')); return; }
+    if (pts.length === 0) { box.replaceChildren(h('p', { class: 'muted' }, 'The line does not cross the DSM.')); return { points: p.points.length, valid: 0 }; }
     const hs = pts.map((q) => q.height_m!);
     box.replaceChildren(
       h('h3', {}, `Height profile: ${fmtNumber(p.points[p.points.length - 1].distance_m, 1)} m, heights ${fmtNumber(Math.min(...hs), 1)}–${fmtNumber(Math.max(...hs), 1)} m`),
       lineChart(pts.map((q) => [q.distance_m, q.height_m!]), { xLabel: 'distance along the line (m)', yLabel: 'height (m)', width: 900, height: 220 }));
-  } catch (e) { box.replaceChildren(h('p', { class: 'error' }, String(e))); }
+    return { points: p.points.length, valid: pts.length };
+  } catch (e) { box.replaceChildren(h('p', { class: 'error' }, String(e))); return null; }
 }

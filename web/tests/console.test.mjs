@@ -59,6 +59,16 @@ async function waitFor(page, fn, arg, timeout, what) {
   try { await page.waitForFunction(fn, arg, { timeout, polling: 200 }); }
   catch (e) { throw new Error(`timed out waiting for ${what}`); }
 }
+/** Mean colour of the pixels that differ from the background. */
+function meanColour(img, bg, tol = 12) {
+  let n = 0; const m = [0, 0, 0];
+  for (let i = 0; i < img.width * img.height; i++) {
+    const r = img.data[4 * i], g = img.data[4 * i + 1], b = img.data[4 * i + 2];
+    if (Math.abs(r - bg[0]) <= tol && Math.abs(g - bg[1]) <= tol && Math.abs(b - bg[2]) <= tol) continue;
+    m[0] += r; m[1] += g; m[2] += b; n++;
+  }
+  return n ? m.map((v) => v / n) : [0, 0, 0];
+}
 async function shot(page, name, selector) {
   const file = path.join(outDir, `${name}.png`);
   const buf = selector ? await page.locator(selector).screenshot({ path: file }) : await page.screenshot({ path: file });
@@ -75,6 +85,12 @@ try {
     '--klv', '--seed', '5', '-o', inputs]);
   run(['-q', 'reconstruct', path.join(inputs, 'flight.ts'), '-o', ws, '--fast']);
   if (!fs.existsSync(path.join(ws, 'tiles', 'tileset.json'))) run(['-q', 'tiles', ws]);
+  }
+  // A CAD comparison in the workspace: the building's CAD model, aligned through the truth cameras.
+  if (!fs.existsSync(path.join(ws, 'report', 'compare', 'cad_error.ply'))) {
+    run(['-q', 'evaluate-sparse', ws, '--truth', path.join(inputs, 'truth')]);
+    run(['-q', 'compare', path.join(ws, 'dense', 'fused.ply'), '--cad', path.join(here, '../../data/scenes/building.obj'),
+      '--length', '30', '--transform', path.join(ws, 'report', 'sparse_eval.json'), '-o', path.join(ws, 'report', 'compare')]);
   }
   fs.rmSync(path.join(root, 'fromthepage'), { recursive: true, force: true });
 
@@ -142,27 +158,139 @@ try {
     assert(cov >= 0.30, `the model covers ${(100 * cov).toFixed(1)}% of the canvas after fit view (< 30%)`);
   });
 
-  await check('3D view: colour modes, mesh layer and a camera frame', async () => {
-    await page.selectOption('#point-mode', '1');
-    await page.evaluate(() => window.fmv3d.idle());
-    await shot(page, '3d-normals', '#view3d-canvas');
+  const BG = [0x15, 0x18, 0x1d];
+  await check('3D view: the dense cloud in every colour mode, each with its legend', async () => {
+    await page.uncheck('#show-cad');
+    const means = {};
+    for (const [value, name] of [['0', 'colour'], ['1', 'normal'], ['2', 'views'], ['4', 'confidence'], ['3', 'height']]) {
+      await page.selectOption('#point-mode', value);
+      await page.evaluate(() => window.fmv3d.idle());
+      const img = await shot(page, `3d-${name}`, '#view3d-canvas');
+      const cov = coverage(img, BG), colours = distinctColours(img);
+      means[name] = meanColour(img, BG);
+      const missing = await page.$('#legend-missing');
+      const legend = await page.$('#legend-points');
+      log(`  ${name}: ${(100 * cov).toFixed(1)}% covered, ${colours} colours, mean ${means[name].map((v) => v.toFixed(0)).join(',')}`);
+      assert(cov >= 0.3 && colours > 20, `${name} mode draws nothing (${(100 * cov).toFixed(1)}%, ${colours} colours)`);
+      assert(!missing, `${name} mode: ${missing && await missing.textContent()}`);
+      if (name !== 'colour' && name !== 'normal') assert(legend, `${name} mode has no colour bar`);
+    }
+    for (const name of ['normal', 'views', 'confidence', 'height']) {
+      const d = Math.hypot(...means[name].map((v, k) => v - means.colour[k]));
+      assert(d > 8, `${name} mode looks like colour mode (mean colour differs by ${d.toFixed(1)})`);
+    }
     await page.selectOption('#point-mode', '0');
+  });
+
+  await check('3D view: the CAD model with the comparison\'s error colours and its colour bar', async () => {
+    await page.check('#show-cad');
+    await page.uncheck('#show-dense');
+    await page.uncheck('#show-sparse');
+    await page.evaluate(() => window.fmv3d.idle());
+    const stats = await page.evaluate(() => window.fmv3d.stats());
+    log(`  CAD: ${stats.cadTriangles} triangles, ${stats.cadCoveredPercent?.toFixed(1)}% of its vertices near a point`);
+    assert(stats.cadTriangles > 1000, `no CAD model drawn (${stats.cadTriangles} triangles)`);
+    const legend = await page.textContent('#legend-cad');
+    assert(/% of H/.test(legend), `no CAD colour bar: "${legend}"`);
+    const img = await shot(page, '3d-cad', '#view3d-canvas');
+    // Error colours: reds and blues, not just the grey of unknown vertices.
+    let warm = 0, cold = 0;
+    for (let i = 0; i < img.width * img.height; i++) {
+      const r = img.data[4 * i], g = img.data[4 * i + 1], b = img.data[4 * i + 2];
+      if (r > b + 30 && r > g + 20) warm++;
+      if (b > r + 30 && b > g + 10) cold++;
+    }
+    log(`  CAD pixels: ${warm} red-ish, ${cold} blue-ish`);
+    assert(warm > 200 && cold > 200, `the CAD shows no error colours (${warm} red, ${cold} blue pixels)`);
+    await shot(page, '3d-cad-view');
+    await page.check('#show-dense');
+    await page.check('#show-sparse');
+    await page.uncheck('#show-cad');
+  });
+
+  await check('3D view: mesh layer, and cameras coloured by error open their frame on click', async () => {
     await page.check('#show-mesh');
     await page.uncheck('#show-dense');
     await page.evaluate(() => window.fmv3d.idle());
     const img = await shot(page, '3d-mesh', '#view3d-canvas');
-    log(`  mesh-only coverage ${(100 * coverage(img, [0x15, 0x18, 0x1d])).toFixed(1)}%`);
+    log(`  mesh-only coverage ${(100 * coverage(img, BG)).toFixed(1)}%`);
     await page.check('#show-dense');
     await page.uncheck('#show-mesh');
-    // Click a camera drawn on the canvas: its frame shows in the side panel.
-    const n = await page.evaluate(() => window.fmv3d.stats().cameras);
-    let at = null;
-    for (let i = 0; i < n && !at; i++) at = await page.evaluate((k) => window.fmv3d.cameraOnScreen(k), i);
+    const cams = await page.evaluate(async () => (await (await fetch('api/workspaces/demo/cameras')).json()));
+    const range = await page.evaluate(() => window.fmv3d.stats().cameraErrorRange);
+    const worst = Math.max(...cams.map((c) => c.reprojection_rms_px ?? 0));
+    assert(range && range[1] >= worst - 1e-9, `the frusta's colour scale ${JSON.stringify(range)} does not reach the worst camera (${worst} px)`);
+    assert(await page.$('#legend-cameras'), 'no colour bar for the cameras');
+    // Click a camera drawn on the canvas: its frame shows in the side panel, with its own error.
+    let at = null, k = 0;
+    for (; k < cams.length && !at; k++) at = await page.evaluate((i) => window.fmv3d.cameraOnScreen(i), k);
     assert(at, 'no camera is on the canvas');
     await page.mouse.click(at.x, at.y);
     await waitFor(page, () => { const im = document.querySelector('#frame-panel img'); return im && im.complete && im.naturalWidth > 0; },
       null, 15000, 'the clicked camera\'s frame');
+    const panel = await page.textContent('#frame-panel');
+    const cam = cams[k - 1];
+    assert(panel.includes(cam.name), `the panel shows "${panel.slice(0, 80)}", not camera ${cam.name}`);
+    assert(panel.includes(cam.reprojection_rms_px.toFixed(2)), `the panel does not show ${cam.name}'s error ${cam.reprojection_rms_px}`);
     await shot(page, '3d-camera-frame');
+  });
+
+  await check('3D view: measure distance, height and area on the model, in metres', async () => {
+    await page.evaluate(() => window.fmv3d.fitView());
+    await page.evaluate(() => window.fmv3d.idle());
+    const box = await page.locator('#view3d-canvas').boundingBox();
+    const px = (fx, fy) => ({ x: box.x + box.width * fx, y: box.y + box.height * fy });
+    const near = (p, q) => Math.hypot(p.x - q.x, p.y - q.y) < 8;
+    const k = await page.evaluate(() => window.fmv3d.stats().metresPerUnit);
+    assert(k > 0, `no metric scale on a georeferenced workspace (${k})`);
+    for (const [mode, clicks] of [['distance', [[0.3, 0.5], [0.7, 0.5]]], ['height', [[0.5, 0.45], [0.3, 0.7]]],
+      ['area', [[0.35, 0.35], [0.65, 0.35], [0.65, 0.65], [0.35, 0.65]]]]) {
+      await page.click(`[data-measure="${mode}"]`);
+      const pts = clicks.map(([fx, fy]) => px(fx, fy));
+      for (const p of pts) { await page.mouse.click(p.x, p.y); await page.waitForTimeout(350); }
+      if (mode === 'area') await page.mouse.dblclick(pts[0].x + 1, pts[0].y + 1);
+      await page.evaluate(() => window.fmv3d.idle());
+      const m = await page.evaluate(() => window.fmv3d.measured());
+      const out = await page.textContent('#measure-out');
+      log(`  ${mode}: ${out}`);
+      assert(m && m.mode === mode, `no ${mode} measured ("${out}")`);
+      // Every picked point lies on the model under its click.
+      pts.forEach((p, i) => assert(near(m.points[i], p), `${mode}: point ${i} picked at ${JSON.stringify(m.points[i])}, clicked ${JSON.stringify(p)}`));
+      assert(/ m/.test(out), `${mode} is not in metres: "${out}"`);
+      if (mode === 'distance') assert(m.value > 1 && m.value < 1000, `distance ${m.value} m`);
+      if (mode === 'height') assert(Math.abs(m.value) < 1000, `height ${m.value} m`);
+      if (mode === 'area') assert(m.value > 1, `area ${m.value} m²`);
+      await shot(page, `3d-measure-${mode}`);
+    }
+    await page.click('[data-measure="distance"]');
+    await page.click('button:text-is("clear")');
+  });
+
+  await check('3D view: fly controls move and turn the camera, orbit comes back', async () => {
+    await page.selectOption('#nav-mode', 'fly');
+    const before = await page.evaluate(() => window.fmv3d.cameraPose());
+    await page.locator('#view3d-canvas').focus();
+    await page.keyboard.down('w');
+    await page.waitForTimeout(600);
+    await page.keyboard.up('w');
+    const moved = await page.evaluate(() => window.fmv3d.cameraPose());
+    const d = before.position.map((v, i) => moved.position[i] - v);
+    const along = d.reduce((s, v, i) => s + v * before.direction[i], 0), len = Math.hypot(...d);
+    log(`  W for 0.6 s moved ${len.toFixed(3)} units, ${(along / len).toFixed(3)} of it forward`);
+    assert(len > 0 && along / len > 0.95, `W did not move the camera forward (moved ${len}, forward share ${along / len})`);
+    const box = await page.locator('#view3d-canvas').boundingBox();
+    await page.mouse.move(box.x + box.width / 2, box.y + box.height / 2);
+    await page.mouse.down();
+    await page.mouse.move(box.x + box.width / 2 + 120, box.y + box.height / 2 + 40, { steps: 6 });
+    await page.mouse.up();
+    const turned = await page.evaluate(() => window.fmv3d.cameraPose());
+    const cos = turned.direction.reduce((s, v, i) => s + v * moved.direction[i], 0);
+    assert(cos < 0.99, `dragging did not turn the view (cos ${cos})`);
+    await shot(page, '3d-fly');
+    await page.selectOption('#nav-mode', 'orbit');
+    const st = await page.evaluate(() => window.fmv3d.stats());
+    assert(st.navigation === 'orbit', 'orbit controls did not come back');
+    await page.evaluate(() => window.fmv3d.fitView());
   });
 
   await check('map view shows the orthophoto', async () => {
@@ -171,7 +299,20 @@ try {
     const layers = await page.evaluate(() => window.fmv3dMap.layers());
     assert(layers.includes('orthophoto'), `no orthophoto layer (layers: ${layers.join(', ')})`);
     await page.waitForTimeout(1500);
-    await shot(page, 'map');
+    const f = await page.evaluate(() => window.fmv3dMap.features());
+    log(`  map features ${JSON.stringify(f)}`);
+    assert(f.trackDrawn > 0 && f.footprintsDrawn > 0, `the flight track / frame footprints are not drawn (${JSON.stringify(f)})`);
+    const withVectors = await shot(page, 'map');
+    // The track and footprints change the picture: toggled off, fewer pixels are of their colours.
+    const tinted = (img) => { let n = 0; for (let i = 0; i < img.width * img.height; i++) {
+      const r = img.data[4 * i], g = img.data[4 * i + 1], b = img.data[4 * i + 2];
+      if ((r > 200 && g > 140 && g < 200 && b < 60) || (b > 180 && g > 150 && r < 120)) n++; } return n; };
+    await page.uncheck('#layer-track\\ and\\ footprints');
+    await page.waitForTimeout(800);
+    const without = await shot(page, 'map-no-vectors');
+    await page.check('#layer-track\\ and\\ footprints');
+    log(`  track/footprint-coloured pixels: ${tinted(withVectors)} with the layer, ${tinted(without)} without`);
+    assert(tinted(withVectors) > tinted(without) + 200, 'the track and footprints do not show on the map');
     // The ortho alone: hillshade and vectors off.
     for (const id of ['#layer-DSM\\ hillshade', '#layer-track\\ and\\ footprints']) if (await page.$(id)) await page.uncheck(id);
     await page.waitForTimeout(1500);
@@ -186,11 +327,26 @@ try {
     const box = await page.locator('#map').boundingBox();
     await page.mouse.move(box.x + box.width * 0.5, box.y + box.height * 0.5);
     const coords = await page.textContent('#map-coords');
-    assert(/WGS84 -?\d+\.\d+°, -?\d+\.\d+°.*UTM \d+[NS] E \d+/.test(coords), `coordinates: "${coords}"`);
+    const m = /WGS84 (-?\d+\.\d+)°, (-?\d+\.\d+)°.*UTM (\d+)([NS]) E (\d+\.\d) N (\d+\.\d)/.exec(coords);
+    assert(m, `coordinates: "${coords}"`);
+    const [w, s, e, n] = await page.evaluate(() => window.fmv3dMap.bounds());
+    const lat = Number(m[1]), lon = Number(m[2]), E = Number(m[5]);
+    assert(lat > s - 0.01 && lat < n + 0.01 && lon > w - 0.01 && lon < e + 0.01, `cursor at ${lat}, ${lon}: outside the workspace ${[w, s, e, n]}`);
+    assert(Number(m[3]) === Math.floor((lon + 180) / 6) + 1 && m[4] === (lat >= 0 ? 'N' : 'S'), `UTM zone ${m[3]}${m[4]} for ${lat}, ${lon}`);
+    // 100 px to the right: longitude and easting grow, by the same ground distance.
+    await page.mouse.move(box.x + box.width * 0.5 + 100, box.y + box.height * 0.5);
+    const m2 = /WGS84 (-?\d+\.\d+)°, (-?\d+\.\d+)°.*E (\d+\.\d)/.exec(await page.textContent('#map-coords'));
+    const dE = Number(m2[3]) - E, dLonM = (Number(m2[2]) - lon) * 111320 * Math.cos((lat * Math.PI) / 180);
+    log(`  ${coords}; 100 px right: ΔE ${dE.toFixed(2)} m, Δlon ${dLonM.toFixed(2)} m`);
+    assert(dE > 0 && Math.abs(dE - dLonM) < 0.05 * dE + 0.5, `easting moved ${dE} m, longitude ${dLonM} m`);
     await page.click('#draw-profile');
     await page.mouse.click(box.x + box.width * 0.35, box.y + box.height * 0.5);
     await page.mouse.click(box.x + box.width * 0.65, box.y + box.height * 0.5);
     await waitFor(page, () => document.querySelector('#profile svg polyline'), null, 20000, 'the profile plot');
+    const prof = await page.evaluate(() => window.fmv3dMap.profile());
+    const head = await page.textContent('#profile h3');
+    log(`  profile ${JSON.stringify(prof)}: ${head}`);
+    assert(prof && prof.valid >= 0.5 * prof.points && prof.points >= 100, `the profile has ${JSON.stringify(prof)} samples on the DSM`);
     await shot(page, 'map-profile');
   });
 
