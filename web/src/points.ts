@@ -43,7 +43,7 @@ const vertex = /* glsl */ `
     gl_PointSize = clamp(px, minPx, 24.0);
     if (mode < 0.5) vColor = hasColor > 0.5 ? color : vec3(0.8);
     else if (mode < 1.5) vColor = normalize(mat3(modelMatrix) * normal + 1e-6) * 0.5 + 0.5;
-    else if (mode < 2.5) vColor = ramp((views - 2.0) / max(viewsMax - 2.0, 1.0));
+    else if (mode < 2.5) vColor = ramp(1.0 - (views - 2.0) / max(viewsMax - 2.0, 1.0));
     else if (mode < 3.5) vColor = ramp((dot(world.xyz, up) - heightRange.x) / max(heightRange.y - heightRange.x, 1e-6));
     else vColor = ramp(sigma / max(sigmaMax, 1e-12));
   }`;

@@ -45,6 +45,7 @@ class View3d {
   private navigation: 'orbit' | 'fly' = 'orbit';
   private cad: THREE.Object3D | null = null;
   private cadTriangles = 0;
+  private cameraErrors: [number, number] | null = null;
   private cadInfo: { scale: number; covered: number | null; radius: number | null } | null = null;
   private uniforms = createPointUniforms();
   private tiles: TilesetLayer | null = null;
@@ -236,8 +237,10 @@ class View3d {
     const finite = nn.filter(isFinite).sort((a, b) => a - b);
     const span = new THREE.Box3().setFromPoints(centers).getSize(new THREE.Vector3()).length() || 1;
     const depth = Math.min(finite.length ? finite[Math.floor(finite.length / 2)] * 0.8 : span * 0.05, span * 0.08) || 1;
+    // The colour scale spans the cameras' own errors (the legend gives its ends in pixels), so the worst cameras
+    // stand out whatever the model's overall accuracy.
     const errs = cams.map((c) => c.reprojection_rms_px ?? 0);
-    const emax = Math.max(1, ...errs);
+    const emin = Math.min(...errs), emax = Math.max(emin + 0.05, ...errs);
     const pos: number[] = [], col: number[] = [];
     cams.forEach((c, i) => {
       const q = new THREE.Quaternion(c.rotation[1], c.rotation[2], c.rotation[3], c.rotation[0]).invert();
@@ -249,7 +252,7 @@ class View3d {
       // A tick on the image's top edge shows which way is up in the frame.
       const top = k[0].clone().add(k[1]).multiplyScalar(0.5);
       segs.push([top, top.clone().add(k[0].clone().sub(k[3]).multiplyScalar(0.15))]);
-      const [r, g, b] = ramp(errs[i] / emax);
+      const [r, g, b] = ramp((errs[i] - emin) / (emax - emin));
       for (const [a, bb] of segs) { pos.push(a.x, a.y, a.z, bb.x, bb.y, bb.z); col.push(r, g, b, r, g, b); }
     });
     const geo = new THREE.BufferGeometry();
@@ -257,7 +260,7 @@ class View3d {
     geo.setAttribute('color', new THREE.Float32BufferAttribute(col, 3));
     this.frusta = new THREE.LineSegments(geo, new THREE.LineBasicMaterial({ vertexColors: true }));
     this.scene.add(this.frusta);
-    (this as { emax?: number }).emax = emax;
+    this.cameraErrors = [emin, emax];
     this.needsRender = true;
   }
 
@@ -272,16 +275,20 @@ class View3d {
     this.needsRender = true;
   }
 
-  /** Frames the model: the dense cloud when it is drawn, else the sparse points, the mesh, or the cameras. */
+  /** Frames what is shown: the dense cloud, else the sparse points, the mesh, the CAD model, or the cameras. */
   fitView(): void {
     let xyz: ArrayLike<number> | null = null;
-    const dense = this.tiles?.samplePoints(200_000);
+    const boxOf = (o: THREE.Object3D | null): number[] | null => {
+      if (!o?.visible) return null;
+      o.updateMatrixWorld(true);
+      const b = new THREE.Box3().setFromObject(o);
+      return b.isEmpty() ? null : [b.min.x, b.min.y, b.min.z, b.max.x, b.max.y, b.max.z];
+    };
+    const dense = this.tiles?.showPoints ? this.tiles.samplePoints(200_000) : null;
     if (dense && dense.length >= 30) xyz = dense;
-    else if (this.sparseXYZ && this.sparseXYZ.length >= 30) xyz = this.sparseXYZ;
-    else if (this.mesh) {
-      const b = new THREE.Box3().setFromObject(this.mesh);
-      if (!b.isEmpty()) xyz = [b.min.x, b.min.y, b.min.z, b.max.x, b.max.y, b.max.z];
-    } else if (this.cameras.length) xyz = this.cameras.flatMap((c) => c.center);
+    else if (this.sparse?.visible && this.sparseXYZ && this.sparseXYZ.length >= 30) xyz = this.sparseXYZ;
+    else xyz = boxOf(this.mesh) ?? boxOf(this.cad);
+    if (!xyz && this.cameras.length) xyz = this.cameras.flatMap((c) => c.center);
     if (!xyz) return;
     const f = robustFrame(xyz, this.up);
     if (!f) return;
@@ -382,15 +389,14 @@ class View3d {
   private updateLegend(): void {
     const lg = this.side.querySelector('#legend');
     if (!lg) return;
-    const emax = (this as { emax?: number }).emax ?? 1;
     const bar = (lo: string, hi: string, what: string, cls = 'ramp', id = '') =>
       h('div', { class: 'ramp-legend', ...(id ? { id } : {}) }, h('span', {}, lo), h('span', { class: cls }), h('span', {}, hi), h('span', { class: 'muted' }, ' ' + what));
     const parts: Node[] = [];
-    if (this.cameras.length) parts.push(bar('0', `${fmtNumber(emax, 2)} px`, 'camera reprojection RMS', 'ramp', 'legend-cameras'));
+    if (this.cameraErrors) parts.push(bar(`${fmtNumber(this.cameraErrors[0], 2)}`, `${fmtNumber(this.cameraErrors[1], 2)} px`, 'camera reprojection RMS', 'ramp', 'legend-cameras'));
     const m = this.uniforms.mode.value;
     const noAttr = (what: string) => parts.push(h('p', { class: 'muted', id: 'legend-missing' }, `The point tiles carry no ${what}.`));
     if (m === PointMode.Views) {
-      if (this.tiles?.hasViews) parts.push(bar('2', String(Math.round(this.uniforms.viewsMax.value)), 'views per point', 'ramp', 'legend-points'));
+      if (this.tiles?.hasViews) parts.push(bar(`${Math.round(this.uniforms.viewsMax.value)}`, '2', 'views per point (green: many)', 'ramp', 'legend-points'));
       else noAttr('per-point number of views (batch table "views")');
     }
     if (m === PointMode.Confidence) {
@@ -467,7 +473,7 @@ class View3d {
       ready: this.ready && !(this.tiles?.busy() ?? false), canvas: { width: c.width, height: c.height },
       cadTriangles: this.cad?.visible ? this.cadTriangles : 0, cadCoveredPercent: this.cadInfo?.covered ?? null,
       navigation: this.navigation, metresPerUnit: this.metresPerUnit(),
-      cameraErrorRange: this.cameras.length ? [0, (this as { emax?: number }).emax ?? 1] : null,
+      cameraErrorRange: this.cameraErrors,
     };
   }
 

@@ -186,6 +186,8 @@ try {
     await page.check('#show-cad');
     await page.uncheck('#show-dense');
     await page.uncheck('#show-sparse');
+    await page.uncheck('#show-cameras');
+    await page.click('#fit-view');
     await page.evaluate(() => window.fmv3d.idle());
     const stats = await page.evaluate(() => window.fmv3d.stats());
     log(`  CAD: ${stats.cadTriangles} triangles, ${stats.cadCoveredPercent?.toFixed(1)}% of its vertices near a point`);
@@ -200,12 +202,16 @@ try {
       if (r > b + 30 && r > g + 20) warm++;
       if (b > r + 30 && b > g + 10) cold++;
     }
-    log(`  CAD pixels: ${warm} red-ish, ${cold} blue-ish`);
+    const cov = coverage(img, BG);
+    log(`  CAD pixels: ${warm} red-ish, ${cold} blue-ish; fit view puts it over ${(100 * cov).toFixed(1)}% of the canvas`);
+    assert(cov >= 0.2, `fit view on the CAD alone covers ${(100 * cov).toFixed(1)}% of the canvas`);
     assert(warm > 200 && cold > 200, `the CAD shows no error colours (${warm} red, ${cold} blue pixels)`);
     await shot(page, '3d-cad-view');
     await page.check('#show-dense');
     await page.check('#show-sparse');
+    await page.check('#show-cameras');
     await page.uncheck('#show-cad');
+    await page.click('#fit-view');
   });
 
   await check('3D view: mesh layer, and cameras coloured by error open their frame on click', async () => {
