@@ -72,6 +72,14 @@ TEST_F(Api, HealthAndWorkspaces) {
   EXPECT_EQ(one["files"]["dsm"], "geo/dsm.tif");
   EXPECT_TRUE(one["files"]["fused_ply"].is_null());
   EXPECT_TRUE(one["files"]["tileset"].is_null());
+  EXPECT_TRUE(one["files"]["cad_error"].is_null());
+  // A CAD comparison written into the workspace is listed with its coloured CAD.
+  std::filesystem::create_directories(tmp_ / "root" / "ws1" / "report" / "compare");
+  core::WriteTextFile(tmp_ / "root" / "ws1" / "report" / "compare" / "compare.json", "{}");
+  core::WriteTextFile(tmp_ / "root" / "ws1" / "report" / "compare" / "cad_error.ply", "ply\n");
+  const auto again = Json(client_->Get("/api/workspaces/ws1"));
+  EXPECT_EQ(again["files"]["compare"], "report/compare/compare.json");
+  EXPECT_EQ(again["files"]["cad_error"], "report/compare/cad_error.ply");
   EXPECT_EQ(client_->Get("/api/workspaces/nope")->status, 404);
   EXPECT_EQ(client_->Get("/api/workspaces/evil")->status, 404);
   EXPECT_EQ(client_->Get("/api/workspaces/.hidden")->status, 400);

@@ -24,6 +24,11 @@ async function render(ws: string, root: HTMLElement): Promise<void> {
     return;
   }
   const info = await api.workspace(ws).catch(() => null);
+  // A CAD comparison made after the run's report (fmv3d compare ... -o WS/report/compare) is read from its own file.
+  if (!isObj(report.compare) && info?.files?.compare) {
+    const c = await fetch(fileURL(ws, info.files.compare)).then((r) => (r.ok ? r.json() as Promise<J> : null)).catch(() => null);
+    if (c) report = { ...report, compare: c };
+  }
   const [cams, sparse, georef] = await Promise.all([
     api.cameras(ws).catch(() => []), api.sparse(ws).catch(() => null),
     info?.georeferenced
@@ -48,6 +53,11 @@ async function render(ws: string, root: HTMLElement): Promise<void> {
     ['sparse points', sp.points], ['mean track length', sp.mean_track_length], ['reprojection error', sp.mean_reprojection_error_px, 'px'],
     ['dense points', dense?.points], ['mesh faces', mesh?.faces],
   ];
+  const cmp = isObj(report.compare) ? report.compare : null;
+  if (cmp) {
+    const tot = isObj(cmp.error) && isObj(cmp.error.total) ? cmp.error.total : {};
+    cards.push(['CAD: RMS signed distance', tot.rms_percent, '% of H'], ['CAD: completeness', cmp.completeness_percent, '%']);
+  }
   if (georef) {
     const rms = findNumber(georef, /rms|rmse/i);
     if (rms) cards.push([`georeference: ${rms.key.replace(/[._]/g, ' ')}`, rms.value, 'm']);
@@ -77,6 +87,18 @@ async function render(ws: string, root: HTMLElement): Promise<void> {
     fig('Sparse point reprojection errors', histogram(sparse.errors, { xLabel: 'reprojection error (px)', yLabel: 'points', color: '#81c784' }),
       `${sparse.count} points, median ${fmtNumber(median(sparse.errors), 3)} px`);
   }
+  // CAD comparison: RMS and 90th percentile of each error component.
+  if (cmp && isObj(cmp.error)) {
+    const err = cmp.error as J;
+    const bars: { label: string; value: number; color?: string }[] = [];
+    for (const k of ['x', 'y', 'z', 'total']) {
+      const e = isObj(err[k]) ? err[k] as J : null;
+      if (e && num(e.rms_percent) !== null) bars.push({ label: `${k === 'total' ? 'distance' : k.toUpperCase()} RMS`, value: e.rms_percent as number });
+      if (e && num(e.p90_abs_percent) !== null) bars.push({ label: `${k === 'total' ? 'distance' : k.toUpperCase()} |e| 90%`, value: e.p90_abs_percent as number, color: '#ffb74d' });
+    }
+    if (bars.length) fig('Errors against the CAD model', barChart(bars, { unit: ' %', xLabel: '% of H' }),
+      `${num(cmp.completeness_percent) !== null ? `completeness ${fmtNumber(cmp.completeness_percent as number, 1)}%, ` : ''}H = ${cmp.length ?? '?'}`);
+  }
   // Any numeric histogram-like arrays in the dense / mesh / comparison figures.
   for (const key of ['dense', 'mesh', 'texture', 'compare']) {
     const sec = report[key];
@@ -101,7 +123,10 @@ async function render(ws: string, root: HTMLElement): Promise<void> {
   sections.push(h('section', { class: 'tables' }, ...tables));
 
   // Pictures.
-  const pics = Array.isArray(report.pictures) ? report.pictures as { file: string; title: string }[] : [];
+  const pics = Array.isArray(report.pictures) ? [...report.pictures as { file: string; title: string }[]] : [];
+  if (cmp && info?.files?.compare) pics.push({ file: 'compare/histograms.png', title: 'CAD comparison: X, Y, Z error histograms' },
+    { file: 'compare/top.png', title: 'CAD comparison: top view, points coloured by distance' },
+    { file: 'compare/side.png', title: 'CAD comparison: side view' });
   if (pics.length) {
     sections.push(h('section', { class: 'pictures' }, h('h2', {}, 'Pictures'),
       ...pics.map((p) => h('figure', {}, h('img', { src: fileURL(ws, `report/${p.file}`), alt: p.title }), h('figcaption', {}, p.title)))));

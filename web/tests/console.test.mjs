@@ -95,16 +95,19 @@ try {
   fs.rmSync(path.join(root, 'fromthepage'), { recursive: true, force: true });
 
   const port = await freePort();
-  server = spawn(fmv3d, ['serve', root, '--port', String(port), '--host', '127.0.0.1', '--assets', webDir],
-    { stdio: ['ignore', 'pipe', 'pipe'] });
   const serverLog = fs.createWriteStream(path.join(outDir, 'server.log'));
-  server.stdout.pipe(serverLog); server.stderr.pipe(serverLog);
   const base = `http://127.0.0.1:${port}/`;
-  for (let i = 0; ; i++) {
-    try { const r = await fetch(base + 'api/health'); if (r.ok) break; } catch { /* not up yet */ }
-    if (i > 100 || server.exitCode !== null) throw new Error(`fmv3d serve did not come up on ${base} (see server.log)`);
-    await new Promise((r) => setTimeout(r, 100));
-  }
+  const startServer = async () => {
+    server = spawn(fmv3d, ['serve', root, '--port', String(port), '--host', '127.0.0.1', '--assets', webDir],
+      { stdio: ['ignore', 'pipe', 'pipe'] });
+    server.stdout.pipe(serverLog, { end: false }); server.stderr.pipe(serverLog, { end: false });
+    for (let i = 0; ; i++) {
+      try { const r = await fetch(base + 'api/health'); if (r.ok) break; } catch { /* not up yet */ }
+      if (i > 100 || server.exitCode !== null) throw new Error(`fmv3d serve did not come up on ${base} (see server.log)`);
+      await new Promise((r) => setTimeout(r, 100));
+    }
+  };
+  await startServer();
   log(`fmv3d serve at ${base}`);
 
   const profile = fs.mkdtempSync(path.join(os.tmpdir(), 'fmv3d-chromium-'));
@@ -365,6 +368,7 @@ try {
     log(`  report: ${n} plots, ${marks} marks: ${title.slice(0, 300)}`);
     assert(n >= 3 && marks >= 10, `the report shows ${n} plots with ${marks} marks`);
     assert(/Time per stage/.test(title) && /reprojection/i.test(title), 'the stage times or reprojection plots are missing');
+    assert(/Errors against the CAD model/.test(title), 'the CAD comparison plot is missing');
     await page.screenshot({ path: path.join(outDir, 'report.png'), fullPage: true });
   });
 
@@ -384,6 +388,19 @@ try {
     await waitFor(page, (id) => document.querySelector(`.job[data-job="${id}"][data-state="done"]`), jobId, 15000, 'the finished job after a reload');
     const bars = await page.evaluate((id) => [...document.querySelectorAll(`.job[data-job="${id}"] .bar.done`)].length, jobId);
     assert(bars >= 4, `only ${bars} stage bars done after the reload`);
+  });
+
+  await check('the finished job is still listed after the server restarts', async () => {
+    assert(jobId, 'no job was started');
+    const stopped = new Promise((r) => server.once('exit', r));
+    server.kill('SIGTERM');
+    await stopped;
+    await startServer();
+    await page.goto(base + '#/jobs');
+    await waitFor(page, (id) => document.querySelector(`.job[data-job="${id}"][data-state="done"]`), jobId, 20000, 'the job after the restart');
+    const bars = await page.evaluate((id) => [...document.querySelectorAll(`.job[data-job="${id}"] .bar.done`)].length, jobId);
+    assert(bars >= 4, `only ${bars} stage bars done after the restart`);
+    await shot(page, 'jobs-after-restart');
   });
 
   await check('every request went to the loopback origin, no page error', async () => {
