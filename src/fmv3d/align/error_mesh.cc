@@ -41,8 +41,7 @@ ErrorMesh BuildErrorMesh(const io::TexturedMesh& cad, const std::vector<Eigen::V
   for (size_t f = 0; f < cad.faces.size(); ++f) {
     const auto& v = cad.faces[f].v;
     double longest = 0;
-    for (int k = 0; k < 3; ++k)
-      longest = std::max(longest, (cad.vertices[v[k]] - cad.vertices[v[(k + 1) % 3]]).norm());
+    for (int k = 0; k < 3; ++k) longest = std::max(longest, (cad.vertices[v[k]] - cad.vertices[v[(k + 1) % 3]]).norm());
     wanted[f] = std::max(1.0, std::ceil(longest / o.max_edge));
     total += wanted[f] * wanted[f];
   }

@@ -20,20 +20,20 @@
 namespace fmv3d::align {
 
 struct ErrorMeshOptions {
-  double max_edge = 0;              // CAD units, > 0: subdivision until every edge is at most this long ...
+  double max_edge = 0;               // CAD units, > 0: subdivision until every edge is at most this long ...
   size_t max_triangles = 1'000'000;  // ... unless that makes more triangles than this (then edges grow)
-  double radius = 0;                // CAD units, > 0: points within it of a vertex make its error
-  double scale = 0;                 // fraction of H, > 0: the colour saturates at ± this
-  double length = 0;                // H, > 0
-  void Check() const;               // throws fmv3d::Error naming the bad field
+  double radius = 0;                 // CAD units, > 0: points within it of a vertex make its error
+  double scale = 0;                  // fraction of H, > 0: the colour saturates at ± this
+  double length = 0;                 // H, > 0
+  void Check() const;                // throws fmv3d::Error naming the bad field
 };
 
 struct ErrorMesh {
   std::vector<Eigen::Vector3d> vertices;
   std::vector<Eigen::Vector3i> triangles;
-  std::vector<float> error;       // per vertex: signed distance, fraction of H; NaN when no point is near
-  std::vector<io::Rgb8> colors;   // per vertex: `error` on the diverging scale
-  double covered_fraction = 0;    // vertices with a known error
+  std::vector<float> error;      // per vertex: signed distance, fraction of H; NaN when no point is near
+  std::vector<io::Rgb8> colors;  // per vertex: `error` on the diverging scale
+  double covered_fraction = 0;   // vertices with a known error
 };
 
 // The diverging colour of a signed value (fraction of the scale; NaN → grey).

@@ -96,7 +96,7 @@ double Value(Type t, const char* p) {
 struct Property {
   Type type = Type::kBad;        // scalar type, or the list's item type
   Type count_type = Type::kBad;  // set for lists
-  int slot = -1;  // 0-2 position, 3-5 normal, 6-8 colour, 9 the visibility list, 10 sigma, -1 ignored
+  int slot = -1;                 // 0-2 position, 3-5 normal, 6-8 colour, 9 the visibility list, 10 sigma, -1 ignored
 };
 
 // Buffered little reader: Take(n) returns a pointer to the next n bytes.

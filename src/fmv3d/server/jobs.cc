@@ -248,11 +248,11 @@ void JobManager::HandleProgressLine(Job& job, const std::string& line) {
     s->total = e.value("total", 0.0);
     s->eta_s = e.value("eta_s", 0.0);
     Publish("progress", {{"job", job.id},
-                               {"stage", job.stage},
-                               {"label", e.value("label", std::string())},
-                               {"done", s->done},
-                               {"total", s->total},
-                               {"eta_s", s->eta_s}});
+                         {"stage", job.stage},
+                         {"label", e.value("label", std::string())},
+                         {"done", s->done},
+                         {"total", s->total},
+                         {"eta_s", s->eta_s}});
   }
 }
 
@@ -319,15 +319,14 @@ std::unique_ptr<JobManager::Job> JobManager::RestoreJob(const std::string& works
   std::error_code ec;
   const auto mtime = fs::last_write_time(log_path, ec);
   const double log_time =
-      ec ? job->started
-         : std::chrono::duration<double>(mtime - fs::file_time_type::clock::now()).count() + Now();
+      ec ? job->started : std::chrono::duration<double>(mtime - fs::file_time_type::clock::now()).count() + Now();
   if (record.is_object()) {
     const std::string state = record.value("state", std::string());
     job->state = state == "done" ? JobState::kDone : state == "failed" ? JobState::kFailed : JobState::kStopped;
     if (record.contains("exit_code") && record["exit_code"].is_number_integer())
       job->exit_code = record["exit_code"].get<int>();
-    job->finished = record.contains("finished") && record["finished"].is_number() ? record["finished"].get<double>()
-                                                                                  : log_time;
+    job->finished =
+        record.contains("finished") && record["finished"].is_number() ? record["finished"].get<double>() : log_time;
     if (record.contains("started") && record["started"].is_number()) job->started = record["started"].get<double>();
     if (record.contains("stage") && record["stage"].is_string()) job->stage = record["stage"].get<std::string>();
     if (record.contains("stages") && record["stages"].is_array()) {

@@ -88,7 +88,7 @@ class JobManager {
   };
   nlohmann::json ToJson(const Job& job, bool with_log) const;
   void MonitorLoop();
-  void Poll(Job& job);  // with mutex_ held
+  void Poll(Job& job);                                                // with mutex_ held
   void Publish(const std::string& type, const nlohmann::json& data);  // not while replaying history
   std::unique_ptr<Job> RestoreJob(const std::string& workspace, const std::filesystem::path& log_path);
   void HandleProgressLine(Job& job, const std::string& line);

@@ -139,10 +139,14 @@ nlohmann::json DescribeWorkspace(const fs::path& ws) {
 }
 
 nlohmann::json WorkspaceFiles(const fs::path& ws) {
-  return {{"sparse_ply", IfExists(ws, "sparse/sparse.ply")}, {"fused_ply", IfExists(ws, "dense/fused.ply")},
-          {"mesh_glb", IfExists(ws, "mesh/model.glb")},      {"tileset", IfExists(ws, "tiles/tileset.json")},
-          {"ortho", IfExists(ws, "geo/ortho.tif")},          {"dsm", IfExists(ws, "geo/dsm.tif")},
-          {"hillshade", IfExists(ws, "geo/hillshade.png")},  {"report_html", IfExists(ws, "report/report.html")},
+  return {{"sparse_ply", IfExists(ws, "sparse/sparse.ply")},
+          {"fused_ply", IfExists(ws, "dense/fused.ply")},
+          {"mesh_glb", IfExists(ws, "mesh/model.glb")},
+          {"tileset", IfExists(ws, "tiles/tileset.json")},
+          {"ortho", IfExists(ws, "geo/ortho.tif")},
+          {"dsm", IfExists(ws, "geo/dsm.tif")},
+          {"hillshade", IfExists(ws, "geo/hillshade.png")},
+          {"report_html", IfExists(ws, "report/report.html")},
           {"compare", IfExists(ws, "report/compare/compare.json")},
           {"cad_error", IfExists(ws, "report/compare/cad_error.ply")}};
 }
