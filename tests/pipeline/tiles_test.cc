@@ -120,6 +120,7 @@ void Collect(const nlohmann::json& tile, const fs::path& dir, double parent_erro
       for (size_t i = 0; i < t.positions.size(); ++i) {
         ++(*seen)[IdOf(t.colors[i].data())];
         if (has_views) EXPECT_EQ(t.views[i], 2 + IdOf(t.colors[i].data()) % 5);
+        if (!t.sigma.empty()) EXPECT_EQ(t.sigma[i], 0.001f * (1 + IdOf(t.colors[i].data()) % 7));
         const Eigen::Vector3d p = t.rtc_center + t.positions[i].cast<double>();
         for (int k = 0; k < 3; ++k) EXPECT_LE(std::abs(p[k] - b[k].get<double>()), b[3 + 4 * k].get<double>() + 1e-3);
       }
@@ -139,6 +140,7 @@ TEST(TilesStage, WritesAParseableTilesetWithEveryPointOnce) {
     cloud.normals.push_back(p.normal);
     cloud.colors.emplace_back(p.rgb[0], p.rgb[1], p.rgb[2]);
     cloud.visibility.push_back(std::vector<uint32_t>(2 + IdOf(p.rgb) % 5, 1));  // 2-6 views
+    cloud.sigma.push_back(0.001f * (1 + IdOf(p.rgb) % 7));
   }
   fs::create_directories(ws / "dense");
   io::WritePointCloudPly(cloud, ws / "dense" / "fused.ply");
@@ -155,6 +157,8 @@ TEST(TilesStage, WritesAParseableTilesetWithEveryPointOnce) {
   Collect(tileset["root"], ws / "tiles", tileset["geometricError"].get<double>(), &seen, &tiles, &with_views);
   EXPECT_EQ(tiles, summary["tiles"].get<int>());
   EXPECT_EQ(with_views, tiles);  // fused.ply's visibility lists became every tile's "views"
+  // ... and its σ every tile's "sigma" (checked per point in Collect).
+  EXPECT_FALSE(io::DecodePnts(core::ReadTextFile(ws / "tiles" / "points" / "0.pnts")).sigma.empty());
   for (size_t i = 0; i < seen.size(); ++i) ASSERT_EQ(seen[i], 1) << "point " << i;
   EXPECT_FALSE(fs::exists(ws / "tiles.tmp"));
 }
