@@ -18,6 +18,7 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <chrono>
 #include <fstream>
 #include <map>
@@ -107,11 +108,12 @@ class Child {
   std::string buffer_, log_;
 };
 
-// Removes wall-clock figures from a stage summary: keys named "seconds…" (a number or a per-step object).
+// Removes time figures from a stage summary: keys that name seconds ("seconds…", "cpu_seconds_…"), a number or a
+// per-step object.
 void DropTimings(nlohmann::json* j) {
   if (j->is_object()) {
     for (auto it = j->begin(); it != j->end();) {
-      if (it.key().rfind("seconds", 0) == 0)
+      if (it.key().find("seconds") != std::string::npos)
         it = j->erase(it);
       else
         DropTimings(&it.value()), ++it;
@@ -213,10 +215,7 @@ fs::path* CrashSafety::video_ = nullptr;
 fs::path* CrashSafety::reference_ = nullptr;
 std::vector<StageTime>* CrashSafety::stages_ = new std::vector<StageTime>;
 
-// Disabled until a resumed run reproduces the uninterrupted run's files: a re-run sparse stage differs from the
-// first (multithreaded BA and matching are not bit-for-bit repeatable), so the byte comparison fails. Run with
-// --gtest_also_run_disabled_tests.
-TEST_F(CrashSafety, DISABLED_TwentyKillsAcrossEveryStageThenTheSameWorkspace) {
+TEST_F(CrashSafety, TwentyKillsAcrossEveryStageThenTheSameWorkspace) {
   ASSERT_GE(stages_->size(), 10u) << "the reference run should run every stage";
   const fs::path ws = *dir_ / "killed ws ñ";
   std::mt19937 rng(26);
@@ -248,10 +247,7 @@ TEST_F(CrashSafety, DISABLED_TwentyKillsAcrossEveryStageThenTheSameWorkspace) {
   EXPECT_EQ(Differences(*reference_, ws), "");
 }
 
-// Disabled until a resumed run reproduces the uninterrupted run's files: a re-run sparse stage differs from the
-// first (multithreaded BA and matching are not bit-for-bit repeatable), so the byte comparison fails. Run with
-// --gtest_also_run_disabled_tests.
-TEST_F(CrashSafety, DISABLED_SecondProcessRefusedAndKilledHolderLeavesNoStaleLock) {
+TEST_F(CrashSafety, SecondProcessRefusedAndKilledHolderLeavesNoStaleLock) {
   const fs::path ws = *dir_ / "locked ws";
   Child first(Args(ws));
   ASSERT_TRUE(first.WaitForLine(std::regex("\\] features \\.\\.\\.$"))) << first.log();
@@ -265,13 +261,23 @@ TEST_F(CrashSafety, DISABLED_SecondProcessRefusedAndKilledHolderLeavesNoStaleLoc
   EXPECT_EQ(Differences(*reference_, ws), "");
 }
 
-// Disabled: its 1.1 MB file-size limit sits too close to this flight's file sizes and the run failed before the
-// sparse stage it is meant to pass.
-TEST_F(CrashSafety, DISABLED_FileSizeLimitIsAClearErrorAndResumeCompletes) {
+// The largest file of the stages up to the depth maps of the reference run.
+uintmax_t LargestFileBeforeFusion(const fs::path& ws) {
+  uintmax_t largest = 0;
+  for (const char* dir : {"frames", "features", "matches", "sparse", "geo", "dense/maps"})
+    if (fs::is_directory(ws / dir))
+      for (const auto& e : fs::recursive_directory_iterator(ws / dir))
+        if (e.is_regular_file()) largest = std::max(largest, e.file_size());
+  return largest;
+}
+
+TEST_F(CrashSafety, FileSizeLimitIsAClearErrorAndResumeCompletes) {
   const fs::path ws = *dir_ / "full disk ws";
-  // 1.1 MB per file: the frames, features, matches and the sparse model (images.txt ~1.01 MB on this flight) fit;
-  // the depth maps (1.15 MB each at the --fast working size) do not.
-  Child limited(Args(ws), 1100000);
+  // A per-file limit that every file up to the depth maps fits and the fused cloud does not: the run fails in
+  // the dense stage, after sparse.
+  const uintmax_t limit = LargestFileBeforeFusion(*reference_) * 21 / 20;
+  ASSERT_GT(fs::file_size(*reference_ / "dense/fused.ply"), limit);
+  Child limited(Args(ws), static_cast<rlim_t>(limit));
   EXPECT_EQ(limited.Wait(), 1) << limited.log();
   EXPECT_NE(limited.log().find("File too large"), std::string::npos) << limited.log();
   // What finished before the failure is intact: every file present is the reference's.

@@ -63,6 +63,13 @@ TEST(FeatureIo, FeaturesRoundTrip) {
     EXPECT_EQ(g.colors[i], f.colors[i]);
   }
   EXPECT_TRUE(g.descriptors == f.descriptors);
+  EXPECT_EQ(g.contrast_threshold, 0.0);
+
+  // The contrast threshold the keypoints were found with is kept (a resumed run reports it unchanged).
+  auto faint = RandomFeatures(4, 5);
+  faint.contrast_threshold = 0.04 * 0.5 * 0.5;
+  WriteFeatures(faint, dir / "faint.feat");
+  EXPECT_EQ(ReadFeatures(dir / "faint.feat").contrast_threshold, 0.04 * 0.5 * 0.5);
 
   // Empty feature sets (a blank frame) are legal.
   FeatureSet empty;
@@ -106,6 +113,24 @@ TEST(FeatureIo, CorruptFeatureFilesThrowClearErrors) {
     io.write(reinterpret_cast<const char*>(&v), 4);
   }
   EXPECT_NE(ErrorOf([&] { ReadFeatures(path); }).find("version 99"), std::string::npos);
+  // Version 1 (no contrast threshold) is still read: the same bytes without those 8.
+  const auto v1 = RandomFeatures(6, 2);
+  WriteFeatures(v1, path);
+  {
+    std::ifstream in(path, std::ios::binary);
+    std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    in.close();
+    const size_t at = 8 + 4 + 4 + 4 + 4 + 4 + v1.image_name.size();
+    bytes.erase(at, 8);
+    const uint32_t one = 1;
+    bytes.replace(8, 4, reinterpret_cast<const char*>(&one), 4);
+    std::ofstream out(path, std::ios::binary | std::ios::trunc);
+    out << bytes;
+  }
+  const auto r1 = ReadFeatures(path);
+  EXPECT_EQ(r1.keypoints.size(), 6u);
+  EXPECT_EQ(r1.contrast_threshold, 0.0);
+  EXPECT_TRUE(r1.descriptors == v1.descriptors);
 }
 
 TEST(FeatureIo, MatchesRoundTripAndValidation) {

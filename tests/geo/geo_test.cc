@@ -2,6 +2,7 @@
 // synthetic models with known similarities (noise, an outlier, a straight track), DSM / orthophoto rasters on
 // a known mesh, GeoTIFF and LAS read back.
 #include <gtest/gtest.h>
+#include <proj.h>
 
 #include <Eigen/Geometry>
 #include <cmath>
@@ -58,19 +59,28 @@ int Pixel(const std::filesystem::path& path, int band, int r, int c) {
 namespace fs = std::filesystem;
 const GeoPoint kOrigin{38.16, -77.35, 60};
 
-TEST(Geodesy, ProjAgreesWithClosedFormEnu) {
+// LocalFrame's own ENU ↔ WGS84 against PROJ's cart + topocentric pipeline (EnuPipeline()) and synth's.
+TEST(Geodesy, EnuAgreesWithProjPipeline) {
   const LocalFrame frame(kOrigin);
+  PJ_CONTEXT* ctx = proj_context_create();
+  PJ* enu = proj_create(ctx, frame.EnuPipeline().c_str());
+  ASSERT_NE(enu, nullptr);
   const synth::GeoPoint so{kOrigin.lat, kOrigin.lon, kOrigin.alt};
-  for (const Eigen::Vector3d& enu :
-       {Eigen::Vector3d(0, 0, 0), Eigen::Vector3d(120, -340, 95), Eigen::Vector3d(-3000, 2500, 800)}) {
-    const auto g = synth::EnuToGeodetic(enu, so);
-    const Eigen::Vector3d back = frame.ToEnu({g.lat, g.lon, g.alt});
-    EXPECT_LT((back - enu).norm(), 1e-6) << enu.transpose();
-    const GeoPoint p = frame.ToGeodetic(enu);
-    EXPECT_NEAR(p.lat, g.lat, 1e-10);
-    EXPECT_NEAR(p.lon, g.lon, 1e-10);
-    EXPECT_NEAR(p.alt, g.alt, 1e-6);
+  for (const Eigen::Vector3d& e : {Eigen::Vector3d(0, 0, 0), Eigen::Vector3d(120, -340, 95),
+                                   Eigen::Vector3d(-3000, 2500, 800), Eigen::Vector3d(40000, -25000, -900)}) {
+    const PJ_COORD g = proj_trans(enu, PJ_INV, proj_coord(e.x(), e.y(), e.z(), 0));
+    const GeoPoint p = frame.ToGeodetic(e);
+    EXPECT_NEAR(p.lat, g.xyz.y, 1e-10) << e.transpose();
+    EXPECT_NEAR(p.lon, g.xyz.x, 1e-10) << e.transpose();
+    EXPECT_NEAR(p.alt, g.xyz.z, 1e-6) << e.transpose();
+    EXPECT_LT((frame.ToEnu(p) - e).norm(), 1e-6) << e.transpose();
+    const auto s = synth::EnuToGeodetic(e, so);
+    EXPECT_NEAR(p.lat, s.lat, 1e-12);
+    EXPECT_NEAR(p.alt, s.alt, 1e-8);
   }
+  proj_destroy(enu);
+  proj_context_destroy(ctx);
+  EXPECT_THROW(frame.ToGeodetic(Eigen::Vector3d(NAN, 0, 0)), Error);
 }
 
 // EGM96 from PROJ's grid (proj-data, a dependency of libproj): known values at (0, 0) and at synth's origin.

@@ -14,20 +14,11 @@ namespace fs = std::filesystem;
 
 void WriteCameraJson(const fs::path& path, const CalibrationResult& r) {
   const core::Camera& c = r.camera;
-  nlohmann::json j = {{"version", 1},
-                      {"model", "fmv3d-brown"},
-                      {"pixel_convention", "pixel centres at +0.5 (COLMAP)"},
-                      {"width", c.width},
-                      {"height", c.height},
-                      {"f", c.f},
-                      {"aspect", c.aspect},
-                      {"u0", c.u0},
-                      {"v0", c.v0},
-                      {"k1", c.k1},
-                      {"k2", c.k2},
-                      {"p1", c.p1},
-                      {"p2", c.p2},
-                      {"rms", r.rms}};
+  nlohmann::json j = core::CameraToJson(c);
+  j["version"] = 1;
+  j["model"] = "fmv3d-brown";
+  j["pixel_convention"] = "pixel centres at +0.5 (COLMAP)";
+  j["rms"] = r.rms;
   static const char* kNames[] = {"f", "aspect", "u0", "v0", "k1", "k2", "p1", "p2"};
   for (int i = 0; i < core::kNumIntrinsics; ++i) j["stddev"][kNames[i]] = r.stddev[i];
   j["images"] = nlohmann::json::array();
@@ -107,13 +98,7 @@ bool ScaleCamera(const core::Camera& c, int width, int height, core::Camera* out
   if (c.width <= 0 || c.height <= 0 || width <= 0 || height <= 0) return false;
   const double sx = double(width) / c.width, sy = double(height) / c.height;
   if (std::abs(sx / sy - 1) > 0.01) return false;
-  *out = c;
-  out->width = width;
-  out->height = height;
-  out->f = c.f * sy;
-  out->aspect = c.aspect * sx / sy;
-  out->u0 = c.u0 * sx;  // corner-origin convention: scaling about the image corner is exact
-  out->v0 = c.v0 * sy;
+  *out = c.Resized(width, height);
   return true;
 }
 

@@ -74,9 +74,7 @@ nlohmann::json SensorToJson(const SensorEntry& e) {
   if (e.width > 0) j["resolution"] = {e.width, e.height};
   if (e.calibration) {
     const auto& c = *e.calibration;
-    j["calibration"] = {{"width", c.width}, {"height", c.height}, {"f", c.f},   {"aspect", c.aspect},
-                        {"u0", c.u0},       {"v0", c.v0},         {"k1", c.k1}, {"k2", c.k2},
-                        {"p1", c.p1},       {"p2", c.p2}};
+    j["calibration"] = core::CameraToJson(c);
   }
   if (!e.note.empty()) j["note"] = e.note;
   return j;

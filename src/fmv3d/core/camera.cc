@@ -1,6 +1,7 @@
 #include "fmv3d/core/camera.h"
 
 #include <Eigen/LU>
+#include <algorithm>
 #include <cmath>
 #include <sstream>
 
@@ -124,6 +125,24 @@ void Camera::Validate() const {
   else if (!std::isfinite(u0) || !std::isfinite(v0)) why << "principal point is not finite";
   else if (!std::isfinite(k1 + k2 + p1 + p2)) why << "distortion coefficients are not finite";
   if (!why.str().empty()) throw Error("camera " + std::to_string(id) + ": " + why.str());
+}
+
+Camera Camera::Resized(int new_width, int new_height) const {
+  const double sx = static_cast<double>(new_width) / width, sy = static_cast<double>(new_height) / height;
+  Camera c = *this;
+  c.width = new_width;
+  c.height = new_height;
+  c.f = f * sy;
+  c.aspect = aspect * sx / sy;
+  c.u0 = u0 * sx;
+  c.v0 = v0 * sy;
+  return c;
+}
+
+Camera Camera::FitWithin(int max_side) const {
+  const double scale = std::min(1.0, static_cast<double>(max_side) / std::max(width, height));
+  return Resized(std::max(1, static_cast<int>(std::lround(width * scale))),
+                 std::max(1, static_cast<int>(std::lround(height * scale))));
 }
 
 }  // namespace fmv3d::core

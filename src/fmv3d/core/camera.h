@@ -75,6 +75,12 @@ struct Camera {
   // d(pixel)/d(camera-frame point), for Gauss–Newton refinements outside Ceres.
   Eigen::Matrix<double, 2, 3> ProjectJacobian(const Eigen::Vector3d& x_cam) const;
 
+  // The same lens sampled at width x height pixels: the intrinsics scale about the image corner (exact in the
+  // corner-origin pixel convention), and s_u absorbs a change of aspect ratio.
+  Camera Resized(int width, int height) const;
+  // Resized so that the longer side is at most max_side pixels (an image that small already is kept).
+  Camera FitWithin(int max_side) const;
+
   bool InImage(const Eigen::Vector2d& uv, double margin = 0) const {
     return uv.x() >= margin && uv.y() >= margin && uv.x() <= width - margin && uv.y() <= height - margin;
   }

@@ -13,4 +13,16 @@ void IntrinsicsFromJson(const nlohmann::json& j, Camera* c) {
   c->p2 = j.value("p2", 0.0);
 }
 
+nlohmann::json IntrinsicsToJson(const Camera& c) {
+  return {{"f", c.f},   {"aspect", c.aspect}, {"u0", c.u0}, {"v0", c.v0},
+          {"k1", c.k1}, {"k2", c.k2},         {"p1", c.p1}, {"p2", c.p2}};
+}
+
+nlohmann::json CameraToJson(const Camera& c) {
+  nlohmann::json j = IntrinsicsToJson(c);
+  j["width"] = c.width;
+  j["height"] = c.height;
+  return j;
+}
+
 }  // namespace fmv3d::core

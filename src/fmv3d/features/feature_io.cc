@@ -111,6 +111,7 @@ void WriteFeatures(const FeatureSet& f, const fs::path& path) {
   w.Put<uint32_t>(static_cast<uint32_t>(n));
   w.Put<uint32_t>(static_cast<uint32_t>(f.image_name.size()));
   w.Bytes(f.image_name.data(), f.image_name.size());
+  w.Put<double>(f.contrast_threshold);
   for (const auto& k : f.keypoints) {
     w.Put<float>(k.x);
     w.Put<float>(k.y);
@@ -127,7 +128,7 @@ FeatureSet ReadFeatures(const fs::path& path) {
   Reader r(path);
   r.Magic(kFeatMagic, "an fmv3d feature file");
   const auto version = r.Get<uint32_t>("version");
-  if (version != kFeatureFileVersion)
+  if (version != 1 && version != kFeatureFileVersion)
     throw Error(path.string() + ": feature file version " + std::to_string(version) + " not supported (expected " +
                 std::to_string(kFeatureFileVersion) + "; re-run `fmv3d features`)");
   FeatureSet f;
@@ -141,6 +142,11 @@ FeatureSet ReadFeatures(const fs::path& path) {
   r.CheckFits(name_len, 1, "name bytes");
   f.image_name.resize(name_len);
   r.Bytes(f.image_name.data(), name_len, "image name");
+  if (version >= 2) {
+    f.contrast_threshold = r.Get<double>("contrast threshold");
+    if (!(f.contrast_threshold >= 0 && f.contrast_threshold < 1))
+      throw Error(path.string() + ": corrupt file (contrast threshold " + std::to_string(f.contrast_threshold) + ")");
+  }
   r.CheckFits(n, 16 + 128 + 3, "keypoints");
   f.keypoints.resize(n);
   for (auto& k : f.keypoints) {

@@ -27,7 +27,7 @@
 
 namespace fmv3d::features {
 
-inline constexpr uint32_t kFeatureFileVersion = 1;
+inline constexpr uint32_t kFeatureFileVersion = 2;  // 2 adds the contrast threshold; 1 is still read
 inline constexpr uint32_t kMatchFileVersion = 1;
 
 // Written atomically (temporary + rename).

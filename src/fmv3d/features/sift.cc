@@ -195,7 +195,10 @@ FeaturesStageStats RunFeaturesStage(const core::Workspace& ws, const SiftOptions
       std::error_code ec;
       if (!force && fs::exists(out_path, ec) &&
           fs::last_write_time(out_path, ec) >= fs::last_write_time(image_path, ec) && !ec) {
-        counts[i] = ReadFeatures(out_path).keypoints.size();
+        const FeatureSet done = ReadFeatures(out_path);
+        counts[i] = done.keypoints.size();
+        if (done.contrast_threshold > 0) thresholds[i] = done.contrast_threshold;
+        adapted[i] = thresholds[i] < options.contrast_threshold;
         skipped[i] = 1;
       } else {
         const cv::Mat image = cv::imread(image_path.string(), cv::IMREAD_COLOR);
@@ -205,6 +208,7 @@ FeaturesStageStats RunFeaturesStage(const core::Workspace& ws, const SiftOptions
         adapted[i] = used < options.contrast_threshold;
         thresholds[i] = used;
         features.image_name = frame.name;
+        features.contrast_threshold = used;
         counts[i] = features.keypoints.size();
         WriteFeatures(features, out_path);
       }
@@ -232,8 +236,10 @@ FeaturesStageStats RunFeaturesStage(const core::Workspace& ws, const SiftOptions
     per_image.push_back({{"name", index.frames[i].name}, {"keypoints", counts[i]}});
     if (adapted[i]) per_image.back()["contrast_threshold"] = thresholds[i];
   }
+  // How many images an interrupted earlier run had done is logged, not written: the summary describes the features,
+  // which are the same whether or not the run was resumed.
+  if (num_skipped > 0) spdlog::info("features: {} of {} images were up to date from an earlier run", num_skipped, n);
   nlohmann::json summary = {{"images", n},
-                            {"skipped_up_to_date", num_skipped},
                             {"total_keypoints", stats.total_keypoints},
                             {"min_keypoints", stats.min_keypoints},
                             {"max_keypoints", stats.max_keypoints},

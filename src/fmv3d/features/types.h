@@ -25,6 +25,9 @@ struct FeatureSet {
   std::vector<Keypoint> keypoints;
   Descriptors descriptors;
   std::vector<Eigen::Matrix<uint8_t, 3, 1>> colors;  // RGB at each keypoint, for coloured sparse points
+  // The SIFT contrast threshold the keypoints were detected with (lowered on faint images); 0 when not recorded
+  // (feature files of version 1).
+  double contrast_threshold = 0;
 };
 
 // Which two-view model explains a verified pair best (COLMAP's "configuration" idea, simplified).

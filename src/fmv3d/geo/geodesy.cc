@@ -4,9 +4,11 @@
 #include <ogr_spatialref.h>
 #include <proj.h>
 
+#include <Eigen/Core>
 #include <cmath>
 
 #include "fmv3d/core/error.h"
+#include "fmv3d/geometry/wgs84.h"
 
 namespace fmv3d::geo {
 
@@ -43,13 +45,17 @@ std::optional<double> GeoidUndulation(double lat, double lon) {
   return n;
 }
 
+// ENU ↔ WGS84 is computed here rather than through PROJ's cart + topocentric pipeline: PROJ 9.1's inverse of that
+// pipeline reads an uninitialised stack value (valgrind), which made the georeference of one workspace differ in
+// its last digits from run to run. The math is the same (EnuPipeline() names the equivalent PROJ pipeline; the
+// unit tests hold the two within micrometres). UTM stays with PROJ.
 struct LocalFrame::Impl {
   PJ_CONTEXT* ctx = nullptr;
-  PJ* enu = nullptr;  // forward: (lon, lat, h) degrees → ENU metres
   PJ* utm = nullptr;  // forward: (lon, lat, h) degrees → (E, N, h)
   std::string enu_def, utm_def;
+  Eigen::Vector3d origin_ecef;
+  Eigen::Matrix3d ecef_to_enu;  // rows: east, north, up at the origin
   ~Impl() {
-    if (enu) proj_destroy(enu);
     if (utm) proj_destroy(utm);
     if (ctx) proj_context_destroy(ctx);
   }
@@ -84,20 +90,23 @@ LocalFrame::LocalFrame(const GeoPoint& origin, const UtmZone& zone)
   impl_->utm_def = fmt::format(
       "+proj=pipeline +step +proj=unitconvert +xy_in=deg +xy_out=rad +step +proj=utm +zone={}{} +ellps=WGS84",
       zone.zone, zone.north ? "" : " +south");
-  impl_->enu = impl_->Create(impl_->enu_def);
   impl_->utm = impl_->Create(impl_->utm_def);
+  impl_->origin_ecef = geometry::wgs84::GeodeticToEcef(origin.lat, origin.lon, origin.alt);
+  impl_->ecef_to_enu = geometry::wgs84::EnuFromEcef(origin.lat, origin.lon);
 }
 
 LocalFrame::~LocalFrame() = default;
 
 Eigen::Vector3d LocalFrame::ToEnu(const GeoPoint& p) const {
-  const PJ_COORD c = impl_->Trans(impl_->enu, PJ_FWD, p.lon, p.lat, p.alt);
-  return {c.xyz.x, c.xyz.y, c.xyz.z};
+  if (!(std::isfinite(p.lat) && std::isfinite(p.lon) && std::isfinite(p.alt)))
+    throw Error(fmt::format("geo: cannot transform ({}, {}, {})", p.lon, p.lat, p.alt));
+  return impl_->ecef_to_enu * (geometry::wgs84::GeodeticToEcef(p.lat, p.lon, p.alt) - impl_->origin_ecef);
 }
 
 GeoPoint LocalFrame::ToGeodetic(const Eigen::Vector3d& enu) const {
-  const PJ_COORD c = impl_->Trans(impl_->enu, PJ_INV, enu.x(), enu.y(), enu.z());
-  return {c.xyz.y, c.xyz.x, c.xyz.z};
+  if (!enu.allFinite()) throw Error(fmt::format("geo: cannot transform ({}, {}, {})", enu.x(), enu.y(), enu.z()));
+  const Eigen::Vector3d g = geometry::wgs84::EcefToGeodetic(impl_->origin_ecef + impl_->ecef_to_enu.transpose() * enu);
+  return {g.x(), g.y(), g.z()};
 }
 
 Eigen::Vector3d LocalFrame::GeodeticToUtm(const GeoPoint& p) const {
@@ -114,10 +123,13 @@ Eigen::Vector3d LocalFrame::EnuToUtm(const Eigen::Vector3d& enu) const { return 
 
 void LocalFrame::EnuToUtm(std::vector<Eigen::Vector3d>* points) const {
   if (points->empty()) return;
+  for (auto& p : *points) {
+    const GeoPoint g = ToGeodetic(p);
+    p = {g.lon, g.lat, g.alt};
+  }
   const size_t n = points->size(), stride = sizeof(Eigen::Vector3d);
   double* base = points->front().data();
   // Eigen::Vector3d is three packed doubles: x, y, z at stride 24 bytes.
-  proj_trans_generic(impl_->enu, PJ_INV, base, stride, n, base + 1, stride, n, base + 2, stride, n, nullptr, 0, 0);
   proj_trans_generic(impl_->utm, PJ_FWD, base, stride, n, base + 1, stride, n, base + 2, stride, n, nullptr, 0, 0);
   for (const auto& p : *points)
     if (!p.allFinite() || p.x() == HUGE_VAL) throw Error("PROJ: a point could not be transformed to UTM");

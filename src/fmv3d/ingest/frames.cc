@@ -1,7 +1,10 @@
 #include "fmv3d/ingest/frames.h"
 
 #include <spdlog/spdlog.h>
+#include <signal.h>
 #include <unistd.h>
+
+#include <cerrno>
 
 #include <algorithm>
 #include <cmath>
@@ -170,110 +173,88 @@ std::vector<telemetry::TelemetrySample> LoadTelemetry(const std::filesystem::pat
 }
 }  // namespace
 
-io::FramesIndex IngestFrames(const std::vector<fs::path>& inputs, const IngestOptions& options) {
-  options.Check();
-  const std::vector<fs::path> files = ExpandInputs(inputs);
-  const fs::path frames_dir = options.workspace / "frames";
-  core::EnsureDirectory(options.workspace);
-  StagingGuard staging{options.workspace / (".frames-staging-" + std::to_string(getpid()))};
-  {
-    std::error_code ec;
-    fs::remove_all(staging.dir, ec);
-  }
-  core::EnsureDirectory(staging.dir);
+namespace {
 
-  io::FramesIndex index;
-  std::vector<CameraGroup> groups;  // parallel to index.cameras
-  std::map<ImageCameraKey, uint32_t> image_cameras;
-  NameRegistry names;
-  std::vector<telemetry::TelemetryTrack> tracks;  // every video's whole telemetry → frames/telemetry.json
-  telemetry::FixCounts photo_fixes;               // photos with a position: kept / dropped
+// Metadata of a still image, read in parallel before the frames are added in input order.
+struct ImageMeta {
+  int width = 0, height = 0;
+  io::ExifInfo exif;
+  double sharpness = 0;
+};
 
-  auto add_camera = [&](CameraGroup g) {
-    io::CameraPrior c;
-    c.camera = GuessPrior(g.width, g.height);
-    c.camera.id = static_cast<uint32_t>(index.cameras.size() + 1);
-    c.prior_source = "guess";
-    c.source = g.source;
-    index.cameras.push_back(c);
-    groups.push_back(std::move(g));
-    return index.cameras.back().camera.id;
-  };
-
-  // Still images are decoded in parallel first (size, EXIF, sharpness); only this metadata is kept.
-  struct ImageMeta {
-    int width = 0, height = 0;
-    io::ExifInfo exif;
-    double sharpness = 0;
-  };
+// Size, EXIF and sharpness of every image among `files` (entries of other files stay empty). Rethrows the
+// first bad file in input order.
+std::vector<ImageMeta> ReadImageMetadata(const std::vector<fs::path>& files) {
   std::vector<ImageMeta> meta(files.size());
-  {
-    std::vector<size_t> images;
-    for (size_t i = 0; i < files.size(); ++i)
-      if (io::HasImageExtension(files[i])) images.push_back(i);
-    std::vector<std::exception_ptr> errors(files.size());
-    if (!images.empty()) {
-      core::Progress progress("read images", images.size());
-      tbb::parallel_for(size_t(0), images.size(), [&](size_t k) {
-        const size_t i = images[k];
-        try {
-          const cv::Mat img = ReadInputImage(files[i]);
-          meta[i] = {img.cols, img.rows, io::ReadExif(files[i]), Sharpness(img)};
-        } catch (...) {
-          errors[i] = std::current_exception();
-        }
-        progress.Add();
-      });
+  std::vector<size_t> images;
+  for (size_t i = 0; i < files.size(); ++i)
+    if (io::HasImageExtension(files[i])) images.push_back(i);
+  std::vector<std::exception_ptr> errors(files.size());
+  if (!images.empty()) {
+    core::Progress progress("read images", images.size());
+    tbb::parallel_for(size_t(0), images.size(), [&](size_t k) {
+      const size_t i = images[k];
+      try {
+        const cv::Mat img = ReadInputImage(files[i]);
+        meta[i] = {img.cols, img.rows, io::ReadExif(files[i]), Sharpness(img)};
+      } catch (...) {
+        errors[i] = std::current_exception();
+      }
+      progress.Add();
+    });
+  }
+  for (const auto& e : errors)
+    if (e) std::rethrow_exception(e);
+  return meta;
+}
+
+// Builds the frames index in a staging folder: photos are copied (GIF converted to PNG), videos decoded into
+// keyframes, telemetry attached to each frame; then cameras are given their priors.
+class FramesBuilder {
+ public:
+  FramesBuilder(const IngestOptions& options, const fs::path& staging) : options_(options), staging_(staging) {}
+
+  void AddPhoto(const fs::path& file, const ImageMeta& m) {
+    const io::ExifInfo& exif = m.exif;
+    const ImageCameraKey key{m.width, m.height, exif.make, exif.model, std::lround(exif.focal_mm * 100)};
+    auto it = image_cameras_.find(key);
+    uint32_t cam_id;
+    if (it == image_cameras_.end()) {
+      CameraGroup g;
+      g.width = m.width;
+      g.height = m.height;
+      g.source = file.parent_path().string();
+      g.exif = exif;
+      cam_id = AddCamera(g);
+      image_cameras_[key] = cam_id;
+    } else {
+      cam_id = it->second;
     }
-    for (const auto& e : errors)  // the first bad file in input order
-      if (e) std::rethrow_exception(e);
+    const bool convert = LowerExt(file) == ".gif";
+    const std::string stem = names_.Unique(file, file.stem().string());
+    const std::string name = stem + (convert ? std::string(".png") : file.extension().string());
+    if (convert) {
+      io::WriteImage(staging_ / name, ReadInputImage(file));
+    } else {
+      std::error_code ec;
+      fs::copy_file(file, staging_ / name, fs::copy_options::overwrite_existing, ec);
+      if (ec) throw Error(file.string() + ": cannot copy into the workspace (" + ec.message() + ")");
+    }
+    io::FrameRecord r;
+    r.name = name;
+    r.camera_id = cam_id;
+    r.source = file.string();
+    r.sharpness = m.sharpness;
+    const telemetry::PhotoTelemetry t = telemetry::TelemetryFromPhoto(exif, options_.telemetry);
+    photo_fixes_.Add(t.rejection);
+    if (t.sample) r.telemetry = telemetry::ToJson(*t.sample);
+    if (t.dji.malformed > 0)
+      spdlog::warn("{}: {} DJI XMP fields are not numbers (ignored)", file.string(), t.dji.malformed);
+    index_.frames.push_back(r);
   }
 
-  for (size_t file_i = 0; file_i < files.size(); ++file_i) {
-    const fs::path& file = files[file_i];
-    const bool is_image = io::HasImageExtension(file);
-    if (is_image) {
-      const ImageMeta& m = meta[file_i];
-      const io::ExifInfo& exif = m.exif;
-      const ImageCameraKey key{m.width, m.height, exif.make, exif.model, std::lround(exif.focal_mm * 100)};
-      auto it = image_cameras.find(key);
-      uint32_t cam_id;
-      if (it == image_cameras.end()) {
-        CameraGroup g;
-        g.width = m.width;
-        g.height = m.height;
-        g.source = file.parent_path().string();
-        g.exif = exif;
-        cam_id = add_camera(g);
-        image_cameras[key] = cam_id;
-      } else {
-        cam_id = it->second;
-      }
-      const bool convert = LowerExt(file) == ".gif";
-      const std::string stem = names.Unique(file, file.stem().string());
-      const std::string name = stem + (convert ? std::string(".png") : file.extension().string());
-      if (convert) {
-        io::WriteImage(staging.dir / name, ReadInputImage(file));
-      } else {
-        std::error_code ec;
-        fs::copy_file(file, staging.dir / name, fs::copy_options::overwrite_existing, ec);
-        if (ec) throw Error(file.string() + ": cannot copy into the workspace (" + ec.message() + ")");
-      }
-      io::FrameRecord r;
-      r.name = name;
-      r.camera_id = cam_id;
-      r.source = file.string();
-      r.sharpness = m.sharpness;
-      const telemetry::PhotoTelemetry t = telemetry::TelemetryFromPhoto(exif, options.telemetry);
-      photo_fixes.Add(t.rejection);
-      if (t.sample) r.telemetry = telemetry::ToJson(*t.sample);
-      if (t.dji.malformed > 0)
-        spdlog::warn("{}: {} DJI XMP fields are not numbers (ignored)", file.string(), t.dji.malformed);
-      index.frames.push_back(r);
-      continue;
-    }
-
-    // A video (or an unknown extension, which FFmpeg gets to try).
+  // A video (or an unknown extension, which FFmpeg gets to try): its keyframes.
+  void AddVideo(const fs::path& file) {
     std::unique_ptr<VideoReader> reader;
     try {
       reader = std::make_unique<VideoReader>(file);
@@ -288,16 +269,16 @@ io::FramesIndex IngestFrames(const std::vector<fs::path>& inputs, const IngestOp
     g.source = file.string();
     g.is_video = true;
     g.pixel_aspect = info.pixel_aspect;
-    const uint32_t cam_id = add_camera(g);
-    const std::string stem = names.Unique(file, file.stem().string());
-    KeyframeSelector selector(options.keyframes, info.fps);
+    const uint32_t cam_id = AddCamera(g);
+    const std::string stem = names_.Unique(file, file.stem().string());
+    KeyframeSelector selector(options_.keyframes, info.fps);
     spdlog::info("{}: {}x{} {} {:.2f} fps, ~{} frames; keyframe gap {}..{} frames", file.string(), info.width,
                  info.height, info.codec, info.fps, info.frame_count_hint, selector.min_gap(), selector.max_gap());
     if (info.interlaced)
       spdlog::warn("{}: interlaced video; frames are used as decoded (no deinterlacing), fast motion will comb",
                    file.string());
-    const std::vector<telemetry::TelemetrySample> samples = LoadTelemetry(file, options.telemetry.fix);
-    if (!samples.empty()) tracks.push_back({file.string(), samples});
+    const std::vector<telemetry::TelemetrySample> samples = LoadTelemetry(file, options_.telemetry.fix);
+    if (!samples.empty()) tracks_.push_back({file.string(), samples});
     core::Progress progress("decode " + stem, static_cast<size_t>(std::max<int64_t>(info.frame_count_hint, 0)));
     std::vector<Keyframe> kept;
     tbb::task_group writers;
@@ -319,14 +300,14 @@ io::FramesIndex IngestFrames(const std::vector<fs::path>& inputs, const IngestOp
           writers.wait();
           in_flight = 1;
         }
-        writers.run([path = staging.dir / r.name, image = k.image] { io::WriteImage(path, image); });
-        index.frames.push_back(r);
+        writers.run([path = staging_ / r.name, image = k.image] { io::WriteImage(path, image); });
+        index_.frames.push_back(r);
       }
       kept.clear();
     };
     VideoFrame frame;
     size_t n_video_frames = 0;
-    const size_t first = index.frames.size();
+    const size_t first = index_.frames.size();
     while (reader->Read(&frame)) {
       selector.Push(frame, &kept);
       flush();
@@ -341,16 +322,37 @@ io::FramesIndex IngestFrames(const std::vector<fs::path>& inputs, const IngestOp
       throw Error(file.string() + ": no decodable video frame" +
                   (reader->warning().empty() ? std::string() : " (" + reader->warning() + ")"));
     spdlog::info("{}: {} frames decoded, {} blurred, {} keyframes", file.string(), n_video_frames,
-                 selector.blurred_frames(), index.frames.size() - first);
+                 selector.blurred_frames(), index_.frames.size() - first);
   }
 
-  if (photo_fixes.Rejected() > 0)
-    spdlog::warn("{}; those photos carry no telemetry", photo_fixes.Summary("photo GPS fixes"));
-  if (photo_fixes.kept > 0) spdlog::info("{} photos with a GPS position", photo_fixes.kept);
+  // After every input: --max-frames, unused cameras dropped, priors; frames.json and telemetry.json written.
+  io::FramesIndex Finish() {
+    if (photo_fixes_.Rejected() > 0)
+      spdlog::warn("{}; those photos carry no telemetry", photo_fixes_.Summary("photo GPS fixes"));
+    if (photo_fixes_.kept > 0) spdlog::info("{} photos with a GPS position", photo_fixes_.kept);
+    if (options_.max_frames > 0 && static_cast<int>(index_.frames.size()) > options_.max_frames) Subsample();
+    DropUnusedCameras();
+    SetIntrinsicsPriors();
+    io::WriteFramesIndex(index_, staging_ / "frames.json");
+    if (!tracks_.empty()) telemetry::WriteTelemetryTracks(tracks_, staging_ / "telemetry.json");
+    return std::move(index_);
+  }
+
+ private:
+  uint32_t AddCamera(CameraGroup g) {
+    io::CameraPrior c;
+    c.camera = GuessPrior(g.width, g.height);
+    c.camera.id = static_cast<uint32_t>(index_.cameras.size() + 1);
+    c.prior_source = "guess";
+    c.source = g.source;
+    index_.cameras.push_back(c);
+    groups_.push_back(std::move(g));
+    return index_.cameras.back().camera.id;
+  }
 
   // --max-frames: an even subsample of everything kept.
-  if (options.max_frames > 0 && static_cast<int>(index.frames.size()) > options.max_frames) {
-    const size_t n = index.frames.size(), m = static_cast<size_t>(options.max_frames);
+  void Subsample() {
+    const size_t n = index_.frames.size(), m = static_cast<size_t>(options_.max_frames);
     std::vector<io::FrameRecord> chosen;
     std::vector<bool> keep(n, false);
     for (size_t i = 0; i < m; ++i) {
@@ -359,73 +361,129 @@ io::FramesIndex IngestFrames(const std::vector<fs::path>& inputs, const IngestOp
     }
     for (size_t i = 0; i < n; ++i) {
       if (keep[i]) {
-        chosen.push_back(index.frames[i]);
+        chosen.push_back(index_.frames[i]);
       } else {
         std::error_code ec;
-        fs::remove(staging.dir / index.frames[i].name, ec);
+        fs::remove(staging_ / index_.frames[i].name, ec);
       }
     }
-    spdlog::info("--max-frames {}: kept {} of {} frames", options.max_frames, chosen.size(), n);
-    index.frames = std::move(chosen);
+    spdlog::info("--max-frames {}: kept {} of {} frames", options_.max_frames, chosen.size(), n);
+    index_.frames = std::move(chosen);
   }
 
   // Cameras no frame refers to any more are dropped and the ids renumbered 1..n.
-  {
-    std::vector<uint32_t> remap(index.cameras.size() + 1, 0);
-    for (const auto& f : index.frames) remap[f.camera_id] = 1;
+  void DropUnusedCameras() {
+    std::vector<uint32_t> remap(index_.cameras.size() + 1, 0);
+    for (const auto& f : index_.frames) remap[f.camera_id] = 1;
     std::vector<io::CameraPrior> cams;
     std::vector<CameraGroup> grps;
-    for (size_t i = 0; i < index.cameras.size(); ++i) {
+    for (size_t i = 0; i < index_.cameras.size(); ++i) {
       if (!remap[i + 1]) continue;
       remap[i + 1] = static_cast<uint32_t>(cams.size() + 1);
-      cams.push_back(index.cameras[i]);
+      cams.push_back(index_.cameras[i]);
       cams.back().camera.id = remap[i + 1];
-      grps.push_back(groups[i]);
+      grps.push_back(groups_[i]);
     }
-    for (auto& f : index.frames) f.camera_id = remap[f.camera_id];
-    index.cameras = std::move(cams);
-    groups = std::move(grps);
+    for (auto& f : index_.frames) f.camera_id = remap[f.camera_id];
+    index_.cameras = std::move(cams);
+    groups_ = std::move(grps);
   }
 
-  // Intrinsics priors.
-  for (size_t i = 0; i < index.cameras.size(); ++i) {
-    std::string source = "guess";
-    core::Camera cam =
-        options.prior ? options.prior(groups[i], &source) : GuessPrior(groups[i].width, groups[i].height);
-    cam.id = index.cameras[i].camera.id;
-    if (cam.width != groups[i].width || cam.height != groups[i].height)
-      throw Error(groups[i].source + ": intrinsics prior has the wrong image size");
-    // Non-square pixels (e.g. DV/SD video, SAR 10:11): a pixel is pixel_aspect times wider than tall, so the
-    // horizontal focal in pixels is f / pixel_aspect. A calibration already measured it.
-    if (groups[i].pixel_aspect != 1.0 && source.rfind("calibration:", 0) != 0) cam.aspect /= groups[i].pixel_aspect;
-    if (source == "guess") FocalFromTelemetryHfov(index, static_cast<uint32_t>(i + 1), &cam, &source);
-    cam.Validate();
-    index.cameras[i].camera = cam;
-    index.cameras[i].prior_source = source;
+  void SetIntrinsicsPriors() {
+    for (size_t i = 0; i < index_.cameras.size(); ++i) {
+      std::string source = "guess";
+      core::Camera cam =
+          options_.prior ? options_.prior(groups_[i], &source) : GuessPrior(groups_[i].width, groups_[i].height);
+      cam.id = index_.cameras[i].camera.id;
+      if (cam.width != groups_[i].width || cam.height != groups_[i].height)
+        throw Error(groups_[i].source + ": intrinsics prior has the wrong image size");
+      // Non-square pixels (e.g. DV/SD video, SAR 10:11): a pixel is pixel_aspect times wider than tall, so the
+      // horizontal focal in pixels is f / pixel_aspect. A calibration already measured it.
+      if (groups_[i].pixel_aspect != 1.0 && source.rfind("calibration:", 0) != 0)
+        cam.aspect /= groups_[i].pixel_aspect;
+      if (source == "guess") FocalFromTelemetryHfov(index_, static_cast<uint32_t>(i + 1), &cam, &source);
+      cam.Validate();
+      index_.cameras[i].camera = cam;
+      index_.cameras[i].prior_source = source;
+    }
+    for (const auto& c : index_.cameras)
+      spdlog::info("camera {}: {}x{} f={:.1f} ({}) from {}", c.camera.id, c.camera.width, c.camera.height,
+                   c.camera.f, c.prior_source, c.source);
   }
-  for (const auto& c : index.cameras)
-    spdlog::info("camera {}: {}x{} f={:.1f} ({}) from {}", c.camera.id, c.camera.width, c.camera.height, c.camera.f,
-                 c.prior_source, c.source);
 
-  io::WriteFramesIndex(index, staging.dir / "frames.json");
-  if (!tracks.empty()) telemetry::WriteTelemetryTracks(tracks, staging.dir / "telemetry.json");
+  const IngestOptions& options_;
+  const fs::path staging_;
+  io::FramesIndex index_;
+  std::vector<CameraGroup> groups_;  // parallel to index_.cameras
+  std::map<ImageCameraKey, uint32_t> image_cameras_;
+  NameRegistry names_;
+  std::vector<telemetry::TelemetryTrack> tracks_;  // every video's whole telemetry → frames/telemetry.json
+  telemetry::FixCounts photo_fixes_;               // photos with a position: kept / dropped
+};
 
-  // Swap the complete staging folder in place of frames/.
+// Swaps the complete staging folder in place of frames/ (the old one restored when that fails).
+void ReplaceFramesFolder(const fs::path& workspace, StagingGuard* staging) {
+  const fs::path frames_dir = workspace / "frames";
   std::error_code ec;
-  const fs::path old = options.workspace / (".frames-old-" + std::to_string(getpid()));
+  const fs::path old = workspace / (".frames-old-" + std::to_string(getpid()));
   if (fs::exists(frames_dir, ec)) {
     fs::rename(frames_dir, old, ec);
     if (ec) throw Error(frames_dir.string() + ": cannot replace (" + ec.message() + ")");
   }
-  fs::rename(staging.dir, frames_dir, ec);
+  fs::rename(staging->dir, frames_dir, ec);
   if (ec) {
     std::error_code ec2;
     if (fs::exists(old, ec2)) fs::rename(old, frames_dir, ec2);
     throw Error(frames_dir.string() + ": cannot write (" + ec.message() + ")");
   }
-  staging.released = true;
+  staging->released = true;
   fs::remove_all(old, ec);
-  spdlog::info("{}: {} frames, {} cameras", frames_dir.string(), index.frames.size(), index.cameras.size());
+}
+
+// Removes the staging and old frames folders a killed run left behind (named by the process id that made them;
+// those of a process still alive are kept).
+void RemoveStaleStaging(const fs::path& workspace) {
+  std::error_code ec;
+  for (const auto& e : fs::directory_iterator(workspace, ec)) {
+    const std::string name = e.path().filename().string();
+    for (const std::string prefix : {".frames-staging-", ".frames-old-"}) {
+      if (name.rfind(prefix, 0) != 0) continue;
+      const std::string digits = name.substr(prefix.size());
+      if (digits.empty() || digits.find_first_not_of("0123456789") != std::string::npos) continue;
+      const pid_t pid = static_cast<pid_t>(std::stol(digits));
+      if (pid == getpid() || !(kill(pid, 0) != 0 && errno == ESRCH)) continue;
+      std::error_code rm;
+      fs::remove_all(e.path(), rm);
+    }
+  }
+}
+
+}  // namespace
+
+io::FramesIndex IngestFrames(const std::vector<fs::path>& inputs, const IngestOptions& options) {
+  options.Check();
+  const std::vector<fs::path> files = ExpandInputs(inputs);
+  core::EnsureDirectory(options.workspace);
+  RemoveStaleStaging(options.workspace);
+  StagingGuard staging{options.workspace / (".frames-staging-" + std::to_string(getpid()))};
+  {
+    std::error_code ec;
+    fs::remove_all(staging.dir, ec);
+  }
+  core::EnsureDirectory(staging.dir);
+
+  const std::vector<ImageMeta> meta = ReadImageMetadata(files);
+  FramesBuilder builder(options, staging.dir);
+  for (size_t i = 0; i < files.size(); ++i) {
+    if (io::HasImageExtension(files[i]))
+      builder.AddPhoto(files[i], meta[i]);
+    else
+      builder.AddVideo(files[i]);
+  }
+  io::FramesIndex index = builder.Finish();
+  ReplaceFramesFolder(options.workspace, &staging);
+  spdlog::info("{}: {} frames, {} cameras", (options.workspace / "frames").string(), index.frames.size(),
+               index.cameras.size());
   return index;
 }
 

@@ -21,15 +21,7 @@ void WriteFramesIndex(const FramesIndex& index, const std::filesystem::path& pat
     j["cameras"].push_back({{"id", k.id},
                             {"width", k.width},
                             {"height", k.height},
-                            {"prior",
-                             {{"f", k.f},
-                              {"aspect", k.aspect},
-                              {"u0", k.u0},
-                              {"v0", k.v0},
-                              {"k1", k.k1},
-                              {"k2", k.k2},
-                              {"p1", k.p1},
-                              {"p2", k.p2}}},
+                            {"prior", core::IntrinsicsToJson(k)},
                             {"prior_source", c.prior_source},
                             {"source", c.source}});
   }

@@ -3,100 +3,24 @@
 #include <algorithm>
 #include <cstring>
 #include <fstream>
+#include <optional>
 #include <sstream>
 #include <string>
 #include <vector>
 
 #include "fmv3d/core/error.h"
+#include "fmv3d/io/ply_scalar.h"
 
 namespace fmv3d::io {
 
 namespace {
 
-enum class Type { kI8, kU8, kI16, kU16, kI32, kU32, kF32, kF64, kBad };
-
-Type ParseType(const std::string& t) {
-  if (t == "char" || t == "int8") return Type::kI8;
-  if (t == "uchar" || t == "uint8") return Type::kU8;
-  if (t == "short" || t == "int16") return Type::kI16;
-  if (t == "ushort" || t == "uint16") return Type::kU16;
-  if (t == "int" || t == "int32") return Type::kI32;
-  if (t == "uint" || t == "uint32") return Type::kU32;
-  if (t == "float" || t == "float32") return Type::kF32;
-  if (t == "double" || t == "float64") return Type::kF64;
-  return Type::kBad;
-}
-
-size_t SizeOf(Type t) {
-  switch (t) {
-    case Type::kI8:
-    case Type::kU8:
-      return 1;
-    case Type::kI16:
-    case Type::kU16:
-      return 2;
-    case Type::kI32:
-    case Type::kU32:
-    case Type::kF32:
-      return 4;
-    case Type::kF64:
-      return 8;
-    default:
-      return 0;
-  }
-}
-
-double Value(Type t, const char* p) {
-  switch (t) {
-    case Type::kI8: {
-      int8_t v;
-      std::memcpy(&v, p, 1);
-      return v;
-    }
-    case Type::kU8: {
-      uint8_t v;
-      std::memcpy(&v, p, 1);
-      return v;
-    }
-    case Type::kI16: {
-      int16_t v;
-      std::memcpy(&v, p, 2);
-      return v;
-    }
-    case Type::kU16: {
-      uint16_t v;
-      std::memcpy(&v, p, 2);
-      return v;
-    }
-    case Type::kI32: {
-      int32_t v;
-      std::memcpy(&v, p, 4);
-      return v;
-    }
-    case Type::kU32: {
-      uint32_t v;
-      std::memcpy(&v, p, 4);
-      return v;
-    }
-    case Type::kF32: {
-      float v;
-      std::memcpy(&v, p, 4);
-      return v;
-    }
-    case Type::kF64: {
-      double v;
-      std::memcpy(&v, p, 8);
-      return v;
-    }
-    default:
-      return 0;
-  }
-}
+using ply::Scalar;
 
 struct Property {
-  Type type = Type::kBad;        // scalar type, or the list's item type
-  Type count_type = Type::kBad;  // set for lists
-  int slot = -1;                 // 0-2 position, 3-5 normal, 6-8 colour, 9 the visibility list, 10 sigma, -1 ignored
+  std::optional<Scalar> type;        // scalar type, or the list's item type
+  std::optional<Scalar> count_type;  // set for lists
+  int slot = -1;  // 0-2 position, 3-5 normal, 6-8 colour, 9 the visibility list, 10 sigma, -1 ignored
 };
 
 // Buffered little reader: Take(n) returns a pointer to the next n bytes.
@@ -162,18 +86,18 @@ bool StreamPlyVertices(const std::filesystem::path& path, const std::function<vo
       if (type == "list") {
         std::string ct, it;
         ss >> ct >> it >> name;
-        p.count_type = ParseType(ct);
-        p.type = ParseType(it);
-        if (p.count_type == Type::kBad) throw Error(path.string() + ": bad PLY list type '" + ct + "'");
+        p.count_type = ply::ScalarFromName(ct);
+        p.type = ply::ScalarFromName(it);
+        if (!p.count_type) throw Error(path.string() + ": bad PLY list type '" + ct + "'");
       } else {
         ss >> name;
-        p.type = ParseType(type);
+        p.type = ply::ScalarFromName(type);
       }
-      if (p.type == Type::kBad) throw Error(path.string() + ": bad PLY property type in '" + line + "'");
+      if (!p.type) throw Error(path.string() + ": bad PLY property type in '" + line + "'");
       for (int s = 0; s < 9; ++s)
-        if (name == kSlots[s] && p.count_type == Type::kBad) p.slot = s;
-      if (name == "visibility" && p.count_type != Type::kBad) p.slot = 9;
-      if (name == "sigma" && p.count_type == Type::kBad) p.slot = 10;
+        if (name == kSlots[s] && !p.count_type) p.slot = s;
+      if (name == "visibility" && p.count_type) p.slot = 9;
+      if (name == "sigma" && !p.count_type) p.slot = 10;
       props.push_back(p);
     }
   }
@@ -184,14 +108,14 @@ bool StreamPlyVertices(const std::filesystem::path& path, const std::function<vo
   PlyVertex v;
   for (size_t i = 0; i < count; ++i) {
     for (const Property& p : props) {
-      if (p.count_type != Type::kBad) {
-        const double n = Value(p.count_type, buf.Take(SizeOf(p.count_type)));
+      if (p.count_type) {
+        const double n = ply::Decode(*p.count_type, buf.Take(ply::SizeOf(*p.count_type)));
         if (n < 0 || n > 1e6) throw Error(path.string() + ": implausible PLY list length");
-        buf.Take(static_cast<size_t>(n) * SizeOf(p.type));
+        buf.Take(static_cast<size_t>(n) * ply::SizeOf(*p.type));
         if (p.slot == 9) v.views = static_cast<uint8_t>(std::min(n, 255.0));
         continue;
       }
-      const double x = Value(p.type, buf.Take(SizeOf(p.type)));
+      const double x = ply::Decode(*p.type, buf.Take(ply::SizeOf(*p.type)));
       if (p.slot < 0) continue;
       if (p.slot < 3)
         v.position[p.slot] = static_cast<float>(x);

@@ -9,6 +9,7 @@
 
 #include "fmv3d/core/error.h"
 #include "fmv3d/core/files.h"
+#include "fmv3d/io/ply_scalar.h"
 
 namespace fmv3d::io {
 
@@ -103,37 +104,14 @@ void WritePointCloudPly(const OrientedPointCloud& cloud, const fs::path& path) {
 
 namespace {
 
-enum class Type { kI8, kU8, kI16, kU16, kI32, kU32, kF32, kF64 };
+using Type = ply::Scalar;
 
 Type ParseType(const std::string& s, const std::string& file) {
-  if (s == "char" || s == "int8") return Type::kI8;
-  if (s == "uchar" || s == "uint8") return Type::kU8;
-  if (s == "short" || s == "int16") return Type::kI16;
-  if (s == "ushort" || s == "uint16") return Type::kU16;
-  if (s == "int" || s == "int32") return Type::kI32;
-  if (s == "uint" || s == "uint32") return Type::kU32;
-  if (s == "float" || s == "float32") return Type::kF32;
-  if (s == "double" || s == "float64") return Type::kF64;
+  if (const auto t = ply::ScalarFromName(s)) return *t;
   throw Error(file + ": unknown PLY property type '" + s + "'");
 }
 
-size_t SizeOf(Type t) {
-  switch (t) {
-    case Type::kI8:
-    case Type::kU8:
-      return 1;
-    case Type::kI16:
-    case Type::kU16:
-      return 2;
-    case Type::kI32:
-    case Type::kU32:
-    case Type::kF32:
-      return 4;
-    case Type::kF64:
-      return 8;
-  }
-  return 0;
-}
+using ply::SizeOf;
 
 struct Property {
   std::string name;
@@ -162,43 +140,7 @@ class ValueReader {
     if (!in_.read(reinterpret_cast<char*>(b), static_cast<std::streamsize>(n)))
       throw Error(file_ + ": truncated PLY data");
     if (format_ == 2) std::reverse(b, b + n);
-    switch (t) {
-      case Type::kI8:
-        return static_cast<int8_t>(b[0]);
-      case Type::kU8:
-        return b[0];
-      case Type::kI16: {
-        int16_t v;
-        std::memcpy(&v, b, 2);
-        return v;
-      }
-      case Type::kU16: {
-        uint16_t v;
-        std::memcpy(&v, b, 2);
-        return v;
-      }
-      case Type::kI32: {
-        int32_t v;
-        std::memcpy(&v, b, 4);
-        return v;
-      }
-      case Type::kU32: {
-        uint32_t v;
-        std::memcpy(&v, b, 4);
-        return v;
-      }
-      case Type::kF32: {
-        float v;
-        std::memcpy(&v, b, 4);
-        return v;
-      }
-      case Type::kF64: {
-        double v;
-        std::memcpy(&v, b, 8);
-        return v;
-      }
-    }
-    return 0;
+    return ply::Decode(t, reinterpret_cast<const char*>(b));
   }
 
  private:

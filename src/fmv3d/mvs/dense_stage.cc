@@ -36,11 +36,247 @@ std::string MapFileStem(const std::string& image_name) {
   return s;
 }
 
+namespace {
+
+using Clock = std::chrono::steady_clock;
+double SecondsSince(Clock::time_point t) { return std::chrono::duration<double>(Clock::now() - t).count(); }
+
+// Which views the stage works on: every registered view with a usable stereo neighbour is a source; the
+// references (those that get a depth map) are a cover of the sparse points among them.
+struct ViewPlan {
+  std::map<uint32_t, ViewGeometry> geoms;
+  std::map<uint32_t, ReferenceSelection> selection;            // every view's neighbours and depth range
+  std::map<uint32_t, ReferenceSelection> reference_selection;  // among the references alone, when a subset
+  std::vector<uint32_t> usable, references;
+  nlohmann::json skipped = nlohmann::json::array();
+  double seconds = 0;
+  // Fusion checks each reference against its neighbours among the references.
+  const std::map<uint32_t, ReferenceSelection>& fusion_selection() const {
+    return references.size() < usable.size() ? reference_selection : selection;
+  }
+};
+
+ViewPlan PlanViews(const fs::path& workspace, const core::Reconstruction& rec, const DenseStageOptions& options) {
+  ViewPlan plan;
+  for (const auto& [id, im] : rec.images) plan.geoms[id] = MakeViewGeometry(rec, id, options.max_size);
+  const auto t_sel = Clock::now();
+  plan.selection = SelectViews(rec, plan.geoms, options.selection);
+  plan.seconds = SecondsSince(t_sel);
+  for (const auto& [id, sel] : plan.selection) {
+    if (sel.problem.empty()) {
+      plan.usable.push_back(id);
+    } else {
+      spdlog::warn("dense: skipping view {}: {}", plan.geoms.at(id).name, sel.problem);
+      plan.skipped.push_back({{"image", plan.geoms.at(id).name}, {"reason", sel.problem}});
+    }
+  }
+  if (plan.usable.empty())
+    throw Error(workspace.string() + ": no registered view has a usable stereo neighbour (" +
+                (plan.selection.empty() ? std::string("empty model") : plan.selection.begin()->second.problem) + ")");
+  plan.references = SelectReferenceViews(rec, plan.geoms, plan.usable, options.references);
+  if (plan.references.size() < plan.usable.size()) {
+    std::map<uint32_t, ViewGeometry> ref_geoms;
+    for (uint32_t id : plan.references) ref_geoms[id] = plan.geoms.at(id);
+    plan.reference_selection = SelectViews(rec, ref_geoms, options.selection);
+    spdlog::info("dense: {} of {} views are references (each sparse point in {} of them)", plan.references.size(),
+                 plan.usable.size(), options.references.coverage);
+  }
+  return plan;
+}
+
+// The depth-map passes and the fusion of one workspace's references.
+class DenseRunner {
+ public:
+  DenseRunner(const core::Reconstruction& rec, const ViewPlan& plan, const fs::path& frames_dir,
+              const fs::path& maps_dir, const DenseStageOptions& options)
+      : plan_(plan),
+        maps_dir_(maps_dir),
+        options_(options),
+        cache_(rec, plan.geoms, frames_dir,
+               static_cast<size_t>(std::max(options.cache_views, options.max_sources + 2))) {
+    for (const auto& [pid, p] : rec.points)
+      for (const auto& te : p.track) seeds_[te.image_id].push_back(p.xyz);
+  }
+
+  fs::path MapPath(uint32_t id, const char* suffix) const {
+    return maps_dir_ / (MapFileStem(plan_.geoms.at(id).name) + suffix);
+  }
+  double load_seconds() const { return cache_.load_seconds(); }
+
+  // Photometric PatchMatch of every reference; returns the seconds spent in PatchMatch.
+  double PhotometricPass() {
+    double pm_seconds = 0;
+    core::Progress progress("dense: photometric depth maps", plan_.references.size());
+    for (uint32_t id : plan_.references) {
+      PatchMatchInput in;
+      const auto ref = cache_.Get(id);
+      std::vector<std::shared_ptr<const View>> holds;
+      for (uint32_t s : SourcesOf(id)) holds.push_back(cache_.Get(s));
+      in.ref = ref.get();
+      for (const auto& h : holds) in.sources.push_back(h.get());
+      in.depth_min = plan_.selection.at(id).depth_min;
+      in.depth_max = plan_.selection.at(id).depth_max;
+      if (auto it = seeds_.find(id); it != seeds_.end()) in.seeds = it->second;
+      PatchMatchStats st;
+      const DepthMap map = RunPatchMatch(in, options_.patch_match, &st);
+      pm_seconds += st.seconds;
+      WriteDepthMap(map, options_.geometric ? MapPath(id, ".photometric.dmap") : MapPath(id, ".dmap"));
+      spdlog::debug("dense: {} photometric: {} valid pixels in {:.2f} s", plan_.geoms.at(id).name, st.valid_pixels,
+                    st.seconds);
+      progress.Add();
+    }
+    return pm_seconds;
+  }
+
+  // Geometric-consistency PatchMatch started from the photometric maps; returns the seconds in PatchMatch.
+  double GeometricPass() {
+    double pm_seconds = 0;
+    core::Progress progress("dense: geometric depth maps", plan_.references.size());
+    const std::set<uint32_t> reference_set(plan_.references.begin(), plan_.references.end());
+    for (uint32_t id : plan_.references) {
+      const DepthMap init = ReadDepthMap(MapPath(id, ".photometric.dmap"));
+      PatchMatchInput in;
+      const auto ref = cache_.Get(id);
+      std::vector<std::shared_ptr<const View>> holds;
+      std::vector<DepthMap> src_maps;
+      const auto src_ids = SourcesOf(id);
+      src_maps.reserve(src_ids.size());
+      for (uint32_t s : src_ids) {
+        holds.push_back(cache_.Get(s));
+        src_maps.push_back(reference_set.count(s) ? ReadDepthMap(MapPath(s, ".photometric.dmap")) : DepthMap{});
+      }
+      in.ref = ref.get();
+      for (size_t k = 0; k < holds.size(); ++k) {
+        in.sources.push_back(holds[k].get());
+        in.source_maps.push_back(src_maps[k].empty() ? nullptr : &src_maps[k]);
+      }
+      in.depth_min = plan_.selection.at(id).depth_min;
+      in.depth_max = plan_.selection.at(id).depth_max;
+      in.init = &init;
+      PatchMatchStats st;
+      const DepthMap map = RunPatchMatch(in, options_.patch_match, &st);
+      pm_seconds += st.seconds;
+      WriteDepthMap(map, MapPath(id, ".dmap"));
+      progress.Add();
+    }
+    if (!options_.keep_photometric)
+      for (uint32_t id : plan_.references) fs::remove(MapPath(id, ".photometric.dmap"));
+    return pm_seconds;
+  }
+
+  struct Fused {
+    size_t points = 0, valid_pixels = 0, total_pixels = 0;
+    FusionStats stats;
+  };
+  // Fuses the depth maps straight into `ply` (previews written while the maps are read). The cloud is never held
+  // in memory: it would be the largest part of the stage's memory otherwise.
+  Fused Fuse(const fs::path& ply) {
+    Fused out;
+    std::map<uint32_t, FusionView> fviews;
+    std::map<uint32_t, std::set<uint32_t>> links;
+    for (uint32_t id : plan_.references)
+      for (const auto& nb : plan_.fusion_selection().at(id).neighbours) {
+        links[id].insert(nb.image_id);
+        links[nb.image_id].insert(id);  // symmetric: a view checks every view that chose it too
+      }
+    core::Progress progress("dense: loading maps for fusion", plan_.references.size());
+    for (uint32_t id : plan_.references) {
+      const DepthMap map = ReadDepthMap(MapPath(id, ".dmap"));
+      if (options_.previews && !options_.fuse_only)
+        WriteDepthPreview(map, MapPath(id, ".depth.png"), MapPath(id, ".normal.png"));
+      out.valid_pixels += static_cast<size_t>(map.CountValid());
+      out.total_pixels += map.depth.total();
+      const auto view = cache_.Get(id);
+      FusionView fv = MakeFusionView(plan_.geoms.at(id), map, view->color,
+                                     std::vector<uint32_t>(links[id].begin(), links[id].end()));
+      if (options_.fusion.max_relative_uncertainty > 0)
+        fv.texture = TexturePrecisionMap(view->color, options_.patch_match.window_radius);
+      fviews.emplace(id, std::move(fv));
+      progress.Add();
+    }
+    progress.Finish();
+    out.points = FuseDepthMapsToPly(std::move(fviews), options_.fusion, ply, &out.stats);
+    return out;
+  }
+
+ private:
+  std::vector<uint32_t> SourcesOf(uint32_t id) const {
+    std::vector<uint32_t> s;
+    for (const auto& nb : plan_.selection.at(id).neighbours) {
+      if (static_cast<int>(s.size()) >= options_.max_sources) break;
+      s.push_back(nb.image_id);
+    }
+    return s;
+  }
+
+  const ViewPlan& plan_;
+  const fs::path maps_dir_;
+  const DenseStageOptions& options_;
+  ViewCache cache_;
+  std::map<uint32_t, std::vector<Eigen::Vector3d>> seeds_;  // sparse points seen by each view
+};
+
+struct DenseTimings {
+  double photometric = 0, photometric_pm = 0, geometric = 0, geometric_pm = 0, fusion = 0;
+};
+
+nlohmann::json DenseReport(const core::Reconstruction& rec, const ViewPlan& plan, const DenseRunner::Fused& fused,
+                           const DenseTimings& t, double load_seconds, double total_seconds,
+                           const fs::path& ply, const DenseStageOptions& options) {
+  const FusionStats& fstats = fused.stats;
+  nlohmann::json hist = nlohmann::json::object();
+  double mean_views = 0;
+  for (const auto& [k, n] : fstats.views_histogram) {
+    hist[std::to_string(k)] = n;
+    mean_views += static_cast<double>(k) * n;
+  }
+  if (fused.points > 0) mean_views /= static_cast<double>(fused.points);
+  const auto& g0 = plan.geoms.at(plan.references.front());
+  const double n_refs = static_cast<double>(plan.references.size());
+  return {{"registered_images", rec.images.size()},
+          {"views_used", plan.usable.size()},
+          {"reference_views", plan.references.size()},
+          {"reference_coverage", options.references.coverage},
+          {"views_skipped", plan.skipped},
+          {"working_resolution", {g0.width, g0.height}},
+          {"max_size", options.max_size},
+          {"max_sources", options.max_sources},
+          {"geometric_pass", options.geometric},
+          {"points", fused.points},
+          {"valid_depth_fraction",
+           fused.total_pixels ? static_cast<double>(fused.valid_pixels) / fused.total_pixels : 0.0},
+          {"fusion",
+           {{"candidates", fstats.candidates},
+            {"rejected_too_few_views", fstats.rejected_support},
+            {"rejected_visibility", fstats.rejected_visibility},
+            {"edge_pixels_removed", fstats.edge_pixels},
+            {"edge_erosion_px", options.fusion.edge_erosion_px},
+            {"rejected_uncertainty", fstats.rejected_uncertainty},
+            {"max_relative_uncertainty", options.fusion.max_relative_uncertainty},
+            {"median_normal_sigma", fstats.median_uncertainty},
+            {"max_normal_sigma", fstats.max_uncertainty},
+            {"sigma_scale", fstats.sigma_scale},
+            {"sigma_coverage",
+             options.fusion.write_sigma ? nlohmann::json(options.fusion.sigma_coverage) : nlohmann::json()},
+            {"mean_consistent_views", mean_views},
+            {"consistent_views_histogram", hist}}},
+          {"seconds",
+           {{"view_selection", plan.seconds},
+            {"load_undistort", load_seconds},
+            {"photometric", t.photometric},
+            {"photometric_per_view", t.photometric_pm / n_refs},
+            {"geometric", t.geometric},
+            {"geometric_per_view", options.geometric ? t.geometric_pm / n_refs : 0.0},
+            {"fusion", t.fusion},
+            {"total", total_seconds}}},
+          {"output", ply.string()}};
+}
+
+}  // namespace
+
 nlohmann::json RunDenseStage(const fs::path& workspace, const DenseStageOptions& options) {
   options.Check();
-  using Clock = std::chrono::steady_clock;
   const auto t_start = Clock::now();
-  auto seconds_since = [](Clock::time_point t) { return std::chrono::duration<double>(Clock::now() - t).count(); };
   const fs::path sparse_dir = workspace / "sparse", frames_dir = workspace / "frames";
   const fs::path dense_dir = workspace / "dense", maps_dir = dense_dir / "maps", report_dir = workspace / "report";
   if (!fs::exists(sparse_dir / "images.txt"))
@@ -50,206 +286,35 @@ nlohmann::json RunDenseStage(const fs::path& workspace, const DenseStageOptions&
     throw Error(workspace.string() + ": the sparse model has " + std::to_string(rec.images.size()) +
                 " registered image(s); dense stereo needs at least 2");
 
-  // --- Views and view selection.
-  std::map<uint32_t, ViewGeometry> geoms;
-  for (const auto& [id, im] : rec.images) geoms[id] = MakeViewGeometry(rec, id, options.max_size);
-  const auto t_sel = Clock::now();
-  const auto selection = SelectViews(rec, geoms, options.selection);
-  const double sel_seconds = seconds_since(t_sel);
-  std::vector<uint32_t> usable;
-  nlohmann::json skipped = nlohmann::json::array();
-  for (const auto& [id, sel] : selection) {
-    if (sel.problem.empty()) {
-      usable.push_back(id);
-    } else {
-      spdlog::warn("dense: skipping view {}: {}", geoms.at(id).name, sel.problem);
-      skipped.push_back({{"image", geoms.at(id).name}, {"reason", sel.problem}});
-    }
-  }
-  if (usable.empty())
-    throw Error(workspace.string() + ": no registered view has a usable stereo neighbour (" +
-                (selection.empty() ? std::string("empty model") : selection.begin()->second.problem) + ")");
-  // Reference views (depth maps); every usable view stays a stereo source. Fusion checks each reference
-  // against its neighbours among the references: selected again on those views alone.
-  const std::vector<uint32_t> all_usable = usable;
-  usable = SelectReferenceViews(rec, geoms, all_usable, options.references);
-  std::map<uint32_t, ReferenceSelection> reference_selection;
-  const auto* fusion_selection = &selection;
-  if (usable.size() < all_usable.size()) {
-    std::map<uint32_t, ViewGeometry> ref_geoms;
-    for (uint32_t id : usable) ref_geoms[id] = geoms.at(id);
-    reference_selection = SelectViews(rec, ref_geoms, options.selection);
-    fusion_selection = &reference_selection;
-    spdlog::info("dense: {} of {} views are references (each sparse point in {} of them)", usable.size(),
-                 all_usable.size(), options.references.coverage);
-  }
+  const ViewPlan plan = PlanViews(workspace, rec, options);
   core::EnsureDirectory(maps_dir);
   core::EnsureDirectory(report_dir);
-  ViewCache cache(rec, geoms, frames_dir, static_cast<size_t>(std::max(options.cache_views, options.max_sources + 2)));
-  auto sources_of = [&](uint32_t id) {
-    std::vector<uint32_t> s;
-    for (const auto& nb : selection.at(id).neighbours) {
-      if (static_cast<int>(s.size()) >= options.max_sources) break;
-      s.push_back(nb.image_id);
-    }
-    return s;
-  };
-  auto map_path = [&](uint32_t id, const char* suffix) { return maps_dir / (MapFileStem(geoms.at(id).name) + suffix); };
-  std::map<uint32_t, std::vector<Eigen::Vector3d>> seeds;
-  for (const auto& [pid, p] : rec.points)
-    for (const auto& te : p.track) seeds[te.image_id].push_back(p.xyz);
-
+  DenseRunner runner(rec, plan, frames_dir, maps_dir, options);
   if (options.fuse_only)
-    for (uint32_t id : usable)
-      if (!fs::exists(map_path(id, ".dmap")))
-        throw Error(map_path(id, ".dmap").string() + ": no depth map to fuse — run `fmv3d dense` without --fuse-only");
+    for (uint32_t id : plan.references)
+      if (!fs::exists(runner.MapPath(id, ".dmap")))
+        throw Error(runner.MapPath(id, ".dmap").string() +
+                    ": no depth map to fuse — run `fmv3d dense` without --fuse-only");
 
-  // --- Photometric pass.
+  DenseTimings t;
   const auto t_photo = Clock::now();
-  double pm_seconds = 0;
-  if (!options.fuse_only) {
-    core::Progress progress("dense: photometric depth maps", usable.size());
-    for (uint32_t id : usable) {
-      PatchMatchInput in;
-      const auto ref = cache.Get(id);
-      std::vector<std::shared_ptr<const View>> holds;
-      for (uint32_t s : sources_of(id)) holds.push_back(cache.Get(s));
-      in.ref = ref.get();
-      for (const auto& h : holds) in.sources.push_back(h.get());
-      in.depth_min = selection.at(id).depth_min;
-      in.depth_max = selection.at(id).depth_max;
-      if (auto it = seeds.find(id); it != seeds.end()) in.seeds = it->second;
-      PatchMatchStats st;
-      const DepthMap map = RunPatchMatch(in, options.patch_match, &st);
-      pm_seconds += st.seconds;
-      WriteDepthMap(map, options.geometric ? map_path(id, ".photometric.dmap") : map_path(id, ".dmap"));
-      spdlog::debug("dense: {} photometric: {} valid pixels in {:.2f} s", geoms.at(id).name, st.valid_pixels,
-                    st.seconds);
-      progress.Add();
-    }
-  }
-  const double photo_seconds = seconds_since(t_photo);
-
-  // --- Geometric-consistency pass.
+  if (!options.fuse_only) t.photometric_pm = runner.PhotometricPass();
+  t.photometric = SecondsSince(t_photo);
   const auto t_geom = Clock::now();
-  double geom_pm_seconds = 0;
-  if (options.geometric && !options.fuse_only) {
-    core::Progress progress("dense: geometric depth maps", usable.size());
-    const std::set<uint32_t> usable_set(usable.begin(), usable.end());
-    for (uint32_t id : usable) {
-      const DepthMap init = ReadDepthMap(map_path(id, ".photometric.dmap"));
-      PatchMatchInput in;
-      const auto ref = cache.Get(id);
-      std::vector<std::shared_ptr<const View>> holds;
-      std::vector<DepthMap> src_maps;
-      const auto src_ids = sources_of(id);
-      src_maps.reserve(src_ids.size());
-      for (uint32_t s : src_ids) {
-        holds.push_back(cache.Get(s));
-        src_maps.push_back(usable_set.count(s) ? ReadDepthMap(map_path(s, ".photometric.dmap")) : DepthMap{});
-      }
-      in.ref = ref.get();
-      for (size_t k = 0; k < holds.size(); ++k) {
-        in.sources.push_back(holds[k].get());
-        in.source_maps.push_back(src_maps[k].empty() ? nullptr : &src_maps[k]);
-      }
-      in.depth_min = selection.at(id).depth_min;
-      in.depth_max = selection.at(id).depth_max;
-      in.init = &init;
-      PatchMatchStats st;
-      const DepthMap map = RunPatchMatch(in, options.patch_match, &st);
-      geom_pm_seconds += st.seconds;
-      WriteDepthMap(map, map_path(id, ".dmap"));
-      progress.Add();
-    }
-    if (!options.keep_photometric)
-      for (uint32_t id : usable) fs::remove(map_path(id, ".photometric.dmap"));
-  }
-  const double geom_seconds = seconds_since(t_geom);
-
-  // --- Fusion (+ previews while the maps are read).
+  if (options.geometric && !options.fuse_only) t.geometric_pm = runner.GeometricPass();
+  t.geometric = SecondsSince(t_geom);
   const auto t_fuse = Clock::now();
-  std::map<uint32_t, FusionView> fviews;
-  std::map<uint32_t, std::set<uint32_t>> links;
-  for (uint32_t id : usable)
-    for (const auto& nb : fusion_selection->at(id).neighbours) {
-      links[id].insert(nb.image_id);
-      links[nb.image_id].insert(id);  // symmetric: a view checks every view that chose it too
-    }
-  size_t valid_pixels = 0, total_pixels = 0;
-  {
-    core::Progress progress("dense: loading maps for fusion", usable.size());
-    for (uint32_t id : usable) {
-      const DepthMap map = ReadDepthMap(map_path(id, ".dmap"));
-      if (options.previews && !options.fuse_only)
-        WriteDepthPreview(map, map_path(id, ".depth.png"), map_path(id, ".normal.png"));
-      valid_pixels += static_cast<size_t>(map.CountValid());
-      total_pixels += map.depth.total();
-      const auto view = cache.Get(id);
-      FusionView fv =
-          MakeFusionView(geoms.at(id), map, view->color, std::vector<uint32_t>(links[id].begin(), links[id].end()));
-      if (options.fusion.max_relative_uncertainty > 0)
-        fv.texture = TexturePrecisionMap(view->color, options.patch_match.window_radius);
-      fviews.emplace(id, std::move(fv));
-      progress.Add();
-    }
-  }
-  FusionStats fstats;
-  // Straight to the PLY: the cloud is never held in memory (the largest part of the stage's memory otherwise).
-  const size_t n_points = FuseDepthMapsToPly(std::move(fviews), options.fusion, dense_dir / "fused.ply", &fstats);
-  fviews.clear();
-  if (n_points == 0)
+  const fs::path ply = dense_dir / "fused.ply";
+  const DenseRunner::Fused fused = runner.Fuse(ply);
+  if (fused.points == 0)
     spdlog::warn("dense: fusion produced no points (no pixel was consistent in {} views)", options.fusion.min_views);
-  const double fuse_seconds = seconds_since(t_fuse);
+  t.fusion = SecondsSince(t_fuse);
 
-  nlohmann::json hist = nlohmann::json::object();
-  double mean_views = 0;
-  for (const auto& [k, n] : fstats.views_histogram) {
-    hist[std::to_string(k)] = n;
-    mean_views += static_cast<double>(k) * n;
-  }
-  if (n_points > 0) mean_views /= static_cast<double>(n_points);
-  const auto& g0 = geoms.at(usable.front());
-  nlohmann::json report = {
-      {"registered_images", rec.images.size()},
-      {"views_used", all_usable.size()},
-      {"reference_views", usable.size()},
-      {"reference_coverage", options.references.coverage},
-      {"views_skipped", skipped},
-      {"working_resolution", {g0.width, g0.height}},
-      {"max_size", options.max_size},
-      {"max_sources", options.max_sources},
-      {"geometric_pass", options.geometric},
-      {"points", n_points},
-      {"valid_depth_fraction", total_pixels ? static_cast<double>(valid_pixels) / total_pixels : 0.0},
-      {"fusion",
-       {{"candidates", fstats.candidates},
-        {"rejected_too_few_views", fstats.rejected_support},
-        {"rejected_visibility", fstats.rejected_visibility},
-        {"edge_pixels_removed", fstats.edge_pixels},
-        {"edge_erosion_px", options.fusion.edge_erosion_px},
-        {"rejected_uncertainty", fstats.rejected_uncertainty},
-        {"max_relative_uncertainty", options.fusion.max_relative_uncertainty},
-        {"median_normal_sigma", fstats.median_uncertainty},
-        {"max_normal_sigma", fstats.max_uncertainty},
-        {"sigma_scale", fstats.sigma_scale},
-        {"sigma_coverage",
-         options.fusion.write_sigma ? nlohmann::json(options.fusion.sigma_coverage) : nlohmann::json()},
-        {"mean_consistent_views", mean_views},
-        {"consistent_views_histogram", hist}}},
-      {"seconds",
-       {{"view_selection", sel_seconds},
-        {"load_undistort", cache.load_seconds()},
-        {"photometric", photo_seconds},
-        {"photometric_per_view", pm_seconds / usable.size()},
-        {"geometric", geom_seconds},
-        {"geometric_per_view", options.geometric ? geom_pm_seconds / usable.size() : 0.0},
-        {"fusion", fuse_seconds},
-        {"total", seconds_since(t_start)}}},
-      {"output", (dense_dir / "fused.ply").string()}};
+  const nlohmann::json report =
+      DenseReport(rec, plan, fused, t, runner.load_seconds(), SecondsSince(t_start), ply, options);
   core::WriteJson(report_dir / "dense.json", report);
-  spdlog::info("dense: {} points from {} views ({} skipped) in {:.1f} s", n_points, usable.size(), skipped.size(),
-               seconds_since(t_start));
+  spdlog::info("dense: {} points from {} views ({} skipped) in {:.1f} s", fused.points, plan.references.size(),
+               plan.skipped.size(), SecondsSince(t_start));
   return report;
 }
 

@@ -95,17 +95,7 @@ CompletenessResult Completeness(const std::vector<Eigen::Vector3d>& pts, const g
   ro.supersample = 1;
   ro.shading = false;
   for (const auto& [id, im] : truth.images) {
-    core::Camera cam = truth.cameras.at(im.camera_id);
-    const double scale = std::min(1.0, static_cast<double>(opt.render_max_size) / std::max(cam.width, cam.height));
-    const int w = std::max(1, static_cast<int>(std::lround(cam.width * scale)));
-    const int h = std::max(1, static_cast<int>(std::lround(cam.height * scale)));
-    const double sx = static_cast<double>(w) / cam.width, sy = static_cast<double>(h) / cam.height;
-    cam.f *= sy;
-    cam.aspect *= sx / sy;
-    cam.u0 *= sx;
-    cam.v0 *= sy;
-    cam.width = w;
-    cam.height = h;
+    const core::Camera cam = truth.cameras.at(im.camera_id).FitWithin(opt.render_max_size);
     const cv::Mat depth = renderer.Render(cam, im.pose, ro).depth;
     tbb::parallel_for(size_t{0}, samples.size(), [&](size_t i) {
       const Eigen::Vector3d xc = im.pose.Transform(samples[i]);
@@ -114,7 +104,7 @@ CompletenessResult Completeness(const std::vector<Eigen::Vector3d>& pts, const g
       if (region_mesh.Normal(faces[i]).dot(view_dir) <= 0) return;  // back side of the face
       const Eigen::Vector2d uv = cam.Project(xc);
       const int u = static_cast<int>(std::floor(uv.x())), v = static_cast<int>(std::floor(uv.y()));
-      if (u < 0 || v < 0 || u >= w || v >= h) return;
+      if (u < 0 || v < 0 || u >= cam.width || v >= cam.height) return;
       const float d = depth.at<float>(v, u);
       // Tolerance: the pixel footprint on a slanted surface plus a share of the length.
       const double tol = 0.01 * characteristic_length + 3 * xc.z() / cam.f;

@@ -2,6 +2,8 @@
 
 #include <Eigen/Dense>
 #include <algorithm>
+#include <cerrno>
+#include <cstring>
 #include <cmath>
 #include <fstream>
 #include <functional>
@@ -368,7 +370,16 @@ size_t FuseDepthMapsToPly(std::map<uint32_t, FusionView> views, const FusionOpti
   ErodeOccludingEdges(&views, opt, &st);
   // Pass 1: every point's PLY record (float x y z, nx ny nz, uchar r g b, uchar n, n × int32 image id) to a
   // scratch file; only σ_n and the view count stay in memory.
+  // A fixed name: a run killed here leaves it, and the resumed run overwrites and then removes it. Removed on
+  // failure too (a full disk must not keep a half-written scratch file).
   const std::filesystem::path scratch = ply.string() + ".unfiltered";
+  struct ScratchGuard {
+    const std::filesystem::path& path;
+    ~ScratchGuard() {
+      std::error_code ec;
+      std::filesystem::remove(path, ec);
+    }
+  } scratch_guard{scratch};
   std::vector<float> sigma_of, scatter_of;
   std::vector<uint8_t> support_of;
   {
@@ -394,7 +405,8 @@ size_t FuseDepthMapsToPly(std::map<uint32_t, FusionView> views, const FusionOpti
       scatter_of.push_back(p.scatter);
       support_of.push_back(static_cast<uint8_t>(std::min(p.support, 255)));
     });
-    if (!out) throw Error(scratch.string() + ": write failed");
+    out.flush();
+    if (!out) throw Error(scratch.string() + ": write failed (" + std::strerror(errno) + ")");
   }
   views.clear();
   SetUncertaintyThreshold(sigma_of, opt, &st);
@@ -433,7 +445,7 @@ size_t FuseDepthMapsToPly(std::map<uint32_t, FusionView> views, const FusionOpti
     }
     if (!out) throw Error(tmp.string() + ": write failed");
   });
-  std::filesystem::remove(scratch);
+
   if (stats) *stats = st;
   return kept;
 }

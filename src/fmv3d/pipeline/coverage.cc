@@ -10,6 +10,7 @@
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
+#include "fmv3d/core/stats.h"
 #include "fmv3d/core/error.h"
 #include "fmv3d/core/files.h"
 #include "fmv3d/io/colmap_model.h"
@@ -25,27 +26,6 @@ namespace fmv3d::pipeline {
 namespace fs = std::filesystem;
 
 namespace {
-
-double Median(std::vector<double> v) {
-  if (v.empty()) return -1;
-  std::nth_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(v.size() / 2), v.end());
-  return v[v.size() / 2];
-}
-
-// The camera scaled so that its longer side is at most max_size.
-core::Camera Scaled(core::Camera cam, int max_size) {
-  const double scale = std::min(1.0, static_cast<double>(max_size) / std::max(cam.width, cam.height));
-  const int w = std::max(1, static_cast<int>(std::lround(cam.width * scale)));
-  const int h = std::max(1, static_cast<int>(std::lround(cam.height * scale)));
-  const double sx = static_cast<double>(w) / cam.width, sy = static_cast<double>(h) / cam.height;
-  cam.f *= sy;
-  cam.aspect *= sx / sy;
-  cam.u0 *= sx;
-  cam.v0 *= sy;
-  cam.width = w;
-  cam.height = h;
-  return cam;
-}
 
 double Share(const cv::Mat& covered, const cv::Mat& non_sky) {
   const int n = cv::countNonZero(non_sky);
@@ -223,7 +203,7 @@ CoverageReport ComputeWorkspaceCoverage(const fs::path& root, const CoverageOpti
       continue;
     }
     const cv::Mat frame = io::ReadImage(frame_path);
-    const core::Camera cam = Scaled(rec.cameras.at(im.camera_id), options.max_size);
+    const core::Camera cam = rec.cameras.at(im.camera_id).FitWithin(options.max_size);
     ViewCoverage vc =
         ComputeViewCoverage(frame, cam, im.pose, has_mesh ? &mesh : nullptr, cloud.empty() ? nullptr : &cloud, spacing);
     vc.image_id = id;
@@ -232,8 +212,9 @@ CoverageReport ComputeWorkspaceCoverage(const fs::path& root, const CoverageOpti
     if (vc.dense >= 0) dense_shares.push_back(vc.dense);
     out.views.push_back(vc);
   }
-  out.median_mesh = Median(mesh_shares);
-  out.median_dense = Median(dense_shares);
+  // -1: no view to measure (reported as null).
+  out.median_mesh = mesh_shares.empty() ? -1 : core::Median(mesh_shares);
+  out.median_dense = dense_shares.empty() ? -1 : core::Median(dense_shares);
 
   // The worst views, drawn side by side with their frames.
   std::vector<size_t> order(out.views.size());
@@ -248,7 +229,7 @@ CoverageReport ComputeWorkspaceCoverage(const fs::path& root, const CoverageOpti
     for (size_t k = 0; k < n_pictures; ++k) {
       const ViewCoverage& v = out.views[order[k]];
       const auto& im = rec.images.at(v.image_id);
-      const core::Camera cam = Scaled(rec.cameras.at(im.camera_id), options.max_size);
+      const core::Camera cam = rec.cameras.at(im.camera_id).FitWithin(options.max_size);
       cv::Mat frame = io::ReadImage(ws.frames_dir() / im.name);
       if (frame.type() == CV_8UC1) cv::cvtColor(frame, frame, cv::COLOR_GRAY2BGR);
       cv::resize(frame, frame, cv::Size(cam.width, cam.height), 0, 0, cv::INTER_AREA);

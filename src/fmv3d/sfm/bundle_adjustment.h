@@ -38,7 +38,10 @@ struct BundleAdjustmentOptions {
   // dense factorisation (6n + 3 unknowns, n³ flops) only costs as much past a few hundred images. Measured on a
   // 61-image 960x540 video model (424k residuals): dense 4.7 CPU-s vs sparse 6.2 for 6 iterations.
   int dense_schur_max_images = 200;
-  int num_threads = 0;  // 0: core::NumThreads()
+  // Ceres' threaded evaluation and Schur elimination sum in an order that changes from run to run, so the model
+  // would differ in its last digits between two runs and every later stage with it. One thread keeps a resumed
+  // or repeated run bit-for-bit equal to the first; 0 uses core::NumThreads() where speed matters more.
+  int num_threads = 1;
   // After solving: the posterior covariance of each camera's free intrinsics (Ceres Covariance, sparse QR of the
   // whole Jacobian), scaled by the residual variance σ² = SSE / (residuals − parameters).
   bool compute_intrinsics_covariance = false;

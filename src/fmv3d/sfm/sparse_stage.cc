@@ -1,3 +1,4 @@
+#include "fmv3d/core/camera_json.h"
 #include "fmv3d/sfm/sparse_stage.h"
 
 #include <spdlog/spdlog.h>
@@ -215,15 +216,11 @@ nlohmann::json RunSparseStage(const core::Workspace& ws, const SparseStageOption
       for (const auto& t : result.self_calibration[m]) calibration.push_back(ToJson(t));
     nlohmann::json cams = nlohmann::json::array();
     for (const auto& [id, c] : rec.cameras)
-      cams.push_back({{"id", id},
-                      {"f", c.f},
-                      {"aspect", c.aspect},
-                      {"u0", c.u0},
-                      {"v0", c.v0},
-                      {"k1", c.k1},
-                      {"k2", c.k2},
-                      {"p1", c.p1},
-                      {"p2", c.p2}});
+    {
+      nlohmann::json cam = core::IntrinsicsToJson(c);
+      cam["id"] = id;
+      cams.push_back(cam);
+    }
     report["models"].push_back({{"registered_images", rec.images.size()},
                                 {"points", rec.points.size()},
                                 {"mean_track_length", rec.MeanTrackLength()},

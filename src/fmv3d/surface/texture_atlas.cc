@@ -85,32 +85,14 @@ void AtlasOptions::Check() const {
   if (!(gain_regularisation > 0)) throw Error("texture: gain regularisation must be positive");
 }
 
-TexturedModel BuildTextureAtlas(const ColoredMesh& mesh, const std::vector<Eigen::Vector3i>& adjacency,
-                                const std::vector<TextureView>& views, const std::vector<int>& labels,
-                                const AtlasOptions& options) {
-  options.Check();
-  const size_t nf = mesh.triangles.size(), nv = mesh.vertices.size();
-  if (labels.size() != nf || adjacency.size() != nf) throw Error("texture: labels or adjacency do not match the mesh");
-  TexturedModel model;
-  auto& st = model.stats;
+namespace {
 
-  // Image coordinates of every labelled face corner (pixel-corner convention, camera.h).
-  std::vector<std::array<Eigen::Vector2d, 3>> corner(nf);
-  for (size_t f = 0; f < nf; ++f) {
-    if (labels[f] < 0) continue;
-    const TextureView& v = views[labels[f]];
-    for (int k = 0; k < 3; ++k) corner[f][k] = v.camera.Project(v.pose.Transform(mesh.vertices[mesh.triangles[f][k]]));
-  }
-
-  // 1. Patches: edge-connected faces on the same view.
-  UnionFind patches(nf);
-  for (size_t f = 0; f < nf; ++f)
-    for (int k = 0; k < 3; ++k) {
-      const int g = adjacency[f][k];
-      if (g >= 0 && labels[f] >= 0 && labels[g] == labels[f]) patches.Union(static_cast<int>(f), g);
-    }
-
-  // 2. Per-view colour gains from the seams (log colour: a gain is an offset there).
+// 2. Per-view colour gains from the seams (log colour: a gain is an offset there).
+std::vector<Eigen::Vector3f> SeamGains(const ColoredMesh& mesh, const std::vector<Eigen::Vector3i>& adjacency,
+                                       const std::vector<TextureView>& views, const std::vector<int>& labels,
+                                       const AtlasOptions& options, nlohmann::json* stats) {
+  const size_t nf = mesh.triangles.size();
+  auto& st = *stats;
   std::vector<Eigen::Vector3f> gain(views.size(), Eigen::Vector3f::Ones());
   size_t seam_edges = 0;
   if (options.adjust_colors && views.size() > 1) {
@@ -154,14 +136,20 @@ TexturedModel BuildTextureAtlas(const ColoredMesh& mesh, const std::vector<Eigen
   }
   st["seam_edges"] = seam_edges;
 
-  // 3. Charts: per view, the faces it textures are drawn into a mask, grown by the margin; each connected
-  // region of the mask is one chart (its bounding box is copied), so nearby patches share their pixels and
-  // a view's scattered patches do not drag the whole frame into the atlas.
-  size_t num_patches = 0;
-  for (size_t f = 0; f < nf; ++f) num_patches += labels[f] >= 0 && patches.Find(static_cast<int>(f)) == static_cast<int>(f);
-  st["patches"] = num_patches;
+  return gain;
+}
+
+// 3. Charts: per view, the faces it textures are drawn into a mask, grown by the margin; each connected
+// region of the mask is one chart (its bounding box is copied), so nearby patches share their pixels and
+// a view's scattered patches do not drag the whole frame into the atlas. Unseen faces get a flat chart each.
+std::vector<Chart> MakeCharts(const ColoredMesh& mesh, const std::vector<TextureView>& views,
+                              const std::vector<int>& labels, const std::vector<std::array<Eigen::Vector2d, 3>>& corner,
+                              const AtlasOptions& options, std::vector<int>* chart_of_face_out, nlohmann::json* stats) {
+  const size_t nf = mesh.triangles.size();
+  auto& st = *stats;
   std::vector<Chart> charts;
-  std::vector<int> chart_of_face(nf, -1);
+  std::vector<int>& chart_of_face = *chart_of_face_out;
+  chart_of_face.assign(nf, -1);
   {
     std::vector<std::vector<int>> faces_of_view(views.size());
     for (size_t f = 0; f < nf; ++f)
@@ -226,7 +214,15 @@ TexturedModel BuildTextureAtlas(const ColoredMesh& mesh, const std::vector<Eigen
   st["charts"] = view_charts;
   st["unseen_faces"] = charts.size() - view_charts;
 
-  // 4. Shelf packing, tallest first.
+  return charts;
+}
+
+// 4. Shelf packing of the charts into pages, tallest first; the charts' pixels copied in.
+std::vector<cv::Mat> PackCharts(std::vector<Chart>* charts_io, const std::vector<TextureView>& views,
+                                const std::vector<Eigen::Vector3f>& gain, const AtlasOptions& options,
+                                nlohmann::json* stats) {
+  std::vector<Chart>& charts = *charts_io;
+  auto& st = *stats;
   double area = 0;
   int widest = 1;
   for (const Chart& c : charts) area += static_cast<double>(c.w) * c.h, widest = std::max(widest, c.w);
@@ -269,11 +265,17 @@ TexturedModel BuildTextureAtlas(const ColoredMesh& mesh, const std::vector<Eigen
   st["atlas_fill"] = area / (static_cast<double>(page_w) * std::accumulate(pages.begin(), pages.end(), 0.0,
                                                                             [](double s, const cv::Mat& m) { return s + m.rows; }));
 
-  // 5. The textured mesh: one uv per (vertex, chart), faces grouped by page.
-  io::TexturedMesh& out = model.mesh;
+  return pages;
+}
+
+// 5. The textured mesh: one uv per (vertex, chart), faces grouped by page.
+io::TexturedMesh UvMesh(const ColoredMesh& mesh, const std::vector<Chart>& charts, const std::vector<int>& chart_of_face,
+                        const std::vector<std::array<Eigen::Vector2d, 3>>& corner, const std::vector<cv::Mat>& pages) {
+  const size_t nf = mesh.triangles.size();
+  io::TexturedMesh out;
   out.vertices = mesh.vertices;
   out.normals = mesh.normals;
-  for (int p = 0; p < num_pages; ++p) {
+  for (size_t p = 0; p < pages.size(); ++p) {
     io::Material m;
     m.name = "atlas_" + std::to_string(p);
     m.diffuse_bgr = Eigen::Vector3f::Ones();
@@ -317,7 +319,12 @@ TexturedModel BuildTextureAtlas(const ColoredMesh& mesh, const std::vector<Eigen
   }
   out.Validate();
 
-  // 6. Vertex colours from the texture (RGB), for the vertex-coloured PLY.
+  return out;
+}
+
+// 6. Vertex colours from the texture (RGB), for the vertex-coloured PLY.
+std::vector<io::Rgb8> VertexColours(const ColoredMesh& mesh, const io::TexturedMesh& out, const std::vector<cv::Mat>& pages) {
+  const size_t nv = mesh.vertices.size();
   std::vector<Eigen::Vector3f> acc(nv, Eigen::Vector3f::Zero());
   std::vector<int> cnt(nv, 0);
   for (const io::Face& face : out.faces) {
@@ -328,18 +335,58 @@ TexturedModel BuildTextureAtlas(const ColoredMesh& mesh, const std::vector<Eigen
       ++cnt[face.v[k]];
     }
   }
-  model.vertex_colors.resize(nv);
+  std::vector<io::Rgb8> colors(nv);
   for (size_t v = 0; v < nv; ++v) {
     if (cnt[v] == 0) {
-      model.vertex_colors[v] = mesh.colors.empty() ? io::Rgb8(128, 128, 128) : mesh.colors[v];
+      colors[v] = mesh.colors.empty() ? io::Rgb8(128, 128, 128) : mesh.colors[v];
       continue;
     }
     const Eigen::Vector3f bgr = acc[v] / static_cast<float>(cnt[v]);
     for (int ch = 0; ch < 3; ++ch)
-      model.vertex_colors[v][ch] = static_cast<uint8_t>(std::clamp(std::lround(bgr[2 - ch]), 0L, 255L));
+      colors[v][ch] = static_cast<uint8_t>(std::clamp(std::lround(bgr[2 - ch]), 0L, 255L));
   }
-  spdlog::info("texture: {} patches in {} charts on {} atlas page(s) of {} px wide ({:.0f}% filled)",
-               num_patches, view_charts, num_pages, page_w, 100 * st["atlas_fill"].get<double>());
+  return colors;
+}
+
+}  // namespace
+
+TexturedModel BuildTextureAtlas(const ColoredMesh& mesh, const std::vector<Eigen::Vector3i>& adjacency,
+                                const std::vector<TextureView>& views, const std::vector<int>& labels,
+                                const AtlasOptions& options) {
+  options.Check();
+  const size_t nf = mesh.triangles.size();
+  if (labels.size() != nf || adjacency.size() != nf) throw Error("texture: labels or adjacency do not match the mesh");
+  TexturedModel model;
+  auto& st = model.stats;
+
+  // Image coordinates of every labelled face corner (pixel-corner convention, camera.h).
+  std::vector<std::array<Eigen::Vector2d, 3>> corner(nf);
+  for (size_t f = 0; f < nf; ++f) {
+    if (labels[f] < 0) continue;
+    const TextureView& v = views[labels[f]];
+    for (int k = 0; k < 3; ++k) corner[f][k] = v.camera.Project(v.pose.Transform(mesh.vertices[mesh.triangles[f][k]]));
+  }
+
+  // 1. Patches: edge-connected faces on the same view.
+  UnionFind patches(nf);
+  for (size_t f = 0; f < nf; ++f)
+    for (int k = 0; k < 3; ++k) {
+      const int g = adjacency[f][k];
+      if (g >= 0 && labels[f] >= 0 && labels[g] == labels[f]) patches.Union(static_cast<int>(f), g);
+    }
+
+  const std::vector<Eigen::Vector3f> gain = SeamGains(mesh, adjacency, views, labels, options, &st);
+  size_t num_patches = 0;
+  for (size_t f = 0; f < nf; ++f) num_patches += labels[f] >= 0 && patches.Find(static_cast<int>(f)) == static_cast<int>(f);
+  st["patches"] = num_patches;
+  std::vector<int> chart_of_face;
+  std::vector<Chart> charts = MakeCharts(mesh, views, labels, corner, options, &chart_of_face, &st);
+  const std::vector<cv::Mat> pages = PackCharts(&charts, views, gain, options, &st);
+  model.mesh = UvMesh(mesh, charts, chart_of_face, corner, pages);
+  model.vertex_colors = VertexColours(mesh, model.mesh, pages);
+  spdlog::info("texture: {} patches in {} charts on {} atlas page(s) of {} px wide ({:.0f}% filled)", num_patches,
+               st["charts"].get<size_t>(), pages.size(), pages.empty() ? 0 : pages.front().cols,
+               100 * st["atlas_fill"].get<double>());
   return model;
 }
 

@@ -1,3 +1,4 @@
+#include "fmv3d/core/camera_json.h"
 #include "fmv3d/synth/synth.h"
 
 #include <fmt/format.h>
@@ -296,9 +297,7 @@ SynthResult RunSynth(const SynthOptions& o) {
   j["video"] = o.IsVideo() ? video_path.filename().string() : "";
   j["frame_names"] =
       std::string("flight-NNNNNN.") + (o.format == "jpg" ? "jpg" : "png") + " (6 digits, from 0 in decode order)";
-  j["camera"] = {{"width", camera.width}, {"height", camera.height}, {"f", camera.f},   {"aspect", camera.aspect},
-                 {"u0", camera.u0},       {"v0", camera.v0},         {"k1", camera.k1}, {"k2", camera.k2},
-                 {"p1", camera.p1},       {"p2", camera.p2}};
+  j["camera"] = core::CameraToJson(camera);
   j["flight"] = {{"path", o.flight.path},
                  {"altitude", geo.altitude},
                  {"radius", geo.radius},

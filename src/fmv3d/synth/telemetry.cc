@@ -7,25 +7,14 @@
 #include <random>
 
 #include "fmv3d/core/error.h"
+#include "fmv3d/geometry/wgs84.h"
 #include "fmv3d/telemetry/attitude.h"
 #include "fmv3d/telemetry/photo_telemetry.h"
 
 namespace fmv3d::synth {
 namespace {
 
-constexpr double kA = 6378137.0;          // WGS84 semi-major axis
-constexpr double kF = 1 / 298.257223563;  // flattening
-constexpr double kE2 = kF * (2 - kF);     // first eccentricity squared
 constexpr double kDeg = M_PI / 180;
-
-// Rotation whose rows are the local East, North, Up unit vectors in ECEF.
-Eigen::Matrix3d EnuFromEcef(const GeoPoint& o) {
-  const double sl = std::sin(o.lat * kDeg), cl = std::cos(o.lat * kDeg);
-  const double so = std::sin(o.lon * kDeg), co = std::cos(o.lon * kDeg);
-  Eigen::Matrix3d m;
-  m << -so, co, 0, -sl * co, -sl * so, cl, cl * co, cl * so, sl;
-  return m;
-}
 
 // Same portable normal as the flight's (std::normal_distribution differs between standard libraries).
 struct Normal {
@@ -40,36 +29,19 @@ struct Normal {
 
 }  // namespace
 
-Eigen::Vector3d GeodeticToEcef(const GeoPoint& p) {
-  const double sl = std::sin(p.lat * kDeg), cl = std::cos(p.lat * kDeg);
-  const double n = kA / std::sqrt(1 - kE2 * sl * sl);
-  return {(n + p.alt) * cl * std::cos(p.lon * kDeg), (n + p.alt) * cl * std::sin(p.lon * kDeg),
-          (n * (1 - kE2) + p.alt) * sl};
-}
+Eigen::Vector3d GeodeticToEcef(const GeoPoint& p) { return geometry::wgs84::GeodeticToEcef(p.lat, p.lon, p.alt); }
 
 GeoPoint EcefToGeodetic(const Eigen::Vector3d& x) {
-  GeoPoint g;
-  const double p = std::hypot(x.x(), x.y());
-  g.lon = std::atan2(x.y(), x.x()) / kDeg;
-  // Fixed-point iteration on latitude; converges to machine precision in a few steps away from the poles.
-  double lat = std::atan2(x.z(), p * (1 - kE2)), h = 0;
-  for (int i = 0; i < 10; ++i) {
-    const double sl = std::sin(lat);
-    const double n = kA / std::sqrt(1 - kE2 * sl * sl);
-    h = p / std::cos(lat) - n;
-    lat = std::atan2(x.z(), p * (1 - kE2 * n / (n + h)));
-  }
-  g.lat = lat / kDeg;
-  g.alt = h;
-  return g;
+  const Eigen::Vector3d g = geometry::wgs84::EcefToGeodetic(x);
+  return {g.x(), g.y(), g.z()};
 }
 
 GeoPoint EnuToGeodetic(const Eigen::Vector3d& enu, const GeoPoint& origin) {
-  return EcefToGeodetic(GeodeticToEcef(origin) + EnuFromEcef(origin).transpose() * enu);
+  return EcefToGeodetic(GeodeticToEcef(origin) + geometry::wgs84::EnuFromEcef(origin.lat, origin.lon).transpose() * enu);
 }
 
 Eigen::Vector3d GeodeticToEnu(const GeoPoint& p, const GeoPoint& origin) {
-  return EnuFromEcef(origin) * (GeodeticToEcef(p) - GeodeticToEcef(origin));
+  return geometry::wgs84::EnuFromEcef(origin.lat, origin.lon) * (GeodeticToEcef(p) - GeodeticToEcef(origin));
 }
 
 void KlvTelemetryOptions::Check() const {
