@@ -174,7 +174,7 @@ void Add(CLI::App& app) {
   auto degrade = std::make_shared<std::vector<std::string>>();
   cmd->add_option("--degrade", *degrade,
                   "Degrade frames so they cannot register automatically: FRAMES:KIND, e.g. 5,6:blur "
-                  "(KIND: blur = heavy motion blur, contrast = 3% contrast, blank = texture-less patch); repeatable");
+                  "(KIND: blur = heavy motion blur, contrast = 1% contrast, blank = texture-less patch); repeatable");
   cmd->add_option("-o,--output", *output, "Output folder")->required();
   cmd->callback([=] {
     synth::SynthOptions opts = *o;

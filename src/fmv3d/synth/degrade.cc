@@ -68,13 +68,13 @@ void Degrade(Degradation kind, cv::Mat* image) {
       cv::Mat f;
       im.convertTo(f, CV_32F);
       cv::Mat m(im.size(), f.type(), mean);
-      f = m + 0.03 * (f - m);
+      f = m + 0.01 * (f - m);
       f.convertTo(im, im.type());
       break;
     }
     case Degradation::kBlank: {
       const cv::Scalar mean = cv::mean(im);
-      const cv::Rect patch(im.cols / 20, im.rows / 20, im.cols - im.cols / 10, im.rows - im.rows / 10);
+      const cv::Rect patch(im.cols / 64, im.rows / 64, im.cols - 2 * (im.cols / 64), im.rows - 2 * (im.rows / 64));
       im(patch).setTo(mean);
       break;
     }

@@ -2,8 +2,8 @@
 // points): `fmv3d synth --degrade 5,6:blur --degrade 12:contrast`. Applied to the rendered image before it is
 // written; the truth (poses, tracks) is unchanged.
 //   blur      heavy linear motion blur, a kernel 1/8 of the image width long, diagonal
-//   contrast  contrast cut to 3% about the mean (a few grey levels of texture left after 8-bit quantisation)
-//   blank     a texture-less patch (the image's mean colour) over the central 90% x 90% of the frame
+//   contrast  contrast cut to 1% about the mean (one or two grey levels of texture left after 8-bit quantisation)
+//   blank     a texture-less patch (the image's mean colour) over the frame but for a border of 1/64 of its size
 #pragma once
 
 #include <cstdint>
