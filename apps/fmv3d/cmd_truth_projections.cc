@@ -45,6 +45,9 @@ void Add(CLI::App& app) {
   cmd->add_option("--frames", a->frames, "Comma-separated frames whose observations are kept (default: all)");
   cmd->add_option("--ws", a->ws, "Workspace: keep only its frames (frames/frames.json) and check the output against it");
   cmd->add_option("--noise", a->opt.noise_px, "Gaussian noise σ added to each pixel coordinate")->capture_default_str();
+  cmd->add_option("--noise-max", a->opt.noise_max_px,
+                  "Uniform noise in [-PX, PX] added to each pixel coordinate (a click within ±PX)")
+      ->capture_default_str();
   cmd->add_option("--seed", a->opt.seed, "Seed of the noise")->capture_default_str();
   cmd->add_option("--format", a->format, "json | tiepoints | gcp")
       ->check(CLI::IsMember({"json", "tiepoints", "gcp"}))

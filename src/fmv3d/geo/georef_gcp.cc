@@ -2,7 +2,10 @@
 
 #include <fmt/format.h>
 
+#include <Eigen/LU>
+#include <algorithm>
 #include <cmath>
+#include <limits>
 
 #include "fmv3d/core/error.h"
 #include "fmv3d/core/stats.h"
@@ -66,6 +69,15 @@ bool Triangulate(const core::Reconstruction& model, const GroundControlPoint& gc
     }
     sse += (cameras[k]->Project(xc) - pixels[k]).squaredNorm();
   }
+  // Precision of the point for a 1 px click: Σ = (Σ_k J_kᵀ J_k)⁻¹, J_k = d(pixel)/dX through camera k.
+  Eigen::Matrix3d info = Eigen::Matrix3d::Zero();
+  for (size_t k = 0; k < poses.size(); ++k) {
+    const Eigen::Matrix<double, 2, 3> J =
+        cameras[k]->ProjectJacobian(poses[k].Transform(X)) * poses[k].q.toRotationMatrix();
+    info += J.transpose() * J;
+  }
+  const Eigen::FullPivLU<Eigen::Matrix3d> lu(info);
+  r->sigma_per_px = lu.isInvertible() ? std::sqrt(lu.inverse().trace()) : std::numeric_limits<double>::infinity();
   r->triangulated = X;
   r->reprojection_px = std::sqrt(sse / poses.size());
   r->status = gcp.check ? GcpStatus::kCheck : GcpStatus::kControl;
@@ -105,6 +117,7 @@ GcpGeoref EstimateGcpGeoref(const core::Reconstruction& model, const std::vector
   }
   const LocalFrame frame(out.origin);
   std::vector<Eigen::Vector3d> src, dst;
+  std::vector<double> weights;
   std::vector<std::string> control_names;
   for (size_t i = 0; i < gcps.size(); ++i) {
     GcpResult r;
@@ -114,6 +127,7 @@ GcpGeoref EstimateGcpGeoref(const core::Reconstruction& model, const std::vector
     if (Triangulate(model, gcps[i], &r) && r.status == GcpStatus::kControl) {
       src.push_back(r.triangulated);
       dst.push_back(r.enu);
+      weights.push_back(std::isfinite(r.sigma_per_px) && r.sigma_per_px > 0 ? 1 / (r.sigma_per_px * r.sigma_per_px) : 0);
       control_names.push_back(r.name);
     }
     out.points.push_back(std::move(r));
@@ -128,7 +142,11 @@ GcpGeoref EstimateGcpGeoref(const core::Reconstruction& model, const std::vector
                             "are not used in the fit){}",
                             src.size(), options.min_control_points, why));
   }
-  if (!geometry::EstimateSimilarity(src, dst, &out.sim) || geometry::Collinearity(dst) < 1e-3)
+  // Each control point weighs by its triangulation's precision (1/σ², the model's units): a GCP seen by many
+  // frames from wide angles counts more than one seen by two frames close together.
+  const double w_max = weights.empty() ? 0 : *std::max_element(weights.begin(), weights.end());
+  if (!(w_max > 0)) weights.assign(src.size(), 1.0);
+  if (!geometry::EstimateSimilarity(src, dst, weights, true, &out.sim) || geometry::Collinearity(dst) < 1e-3)
     throw Error("georef: the control points (" + fmt::format("{}", fmt::join(control_names, ", ")) +
                 ") are collinear; add a GCP off their line");
   for (auto& p : out.points)
@@ -140,6 +158,7 @@ GcpGeoref EstimateGcpGeoref(const core::Reconstruction& model, const std::vector
 
 nlohmann::json GcpGeoref::ToJson() const {
   const LocalFrame frame(origin);
+  const double out_scale = sim.s;
   nlohmann::json j;
   j["version"] = 1;
   j["source"] = "gcp";
@@ -161,6 +180,7 @@ nlohmann::json GcpGeoref::ToJson() const {
       e["residual_enu_m"] = {p.residual_enu.x(), p.residual_enu.y(), p.residual_enu.z()};
       e["residual_horizontal_m"] = p.residual_enu.head<2>().norm();
       e["reprojection_px"] = p.reprojection_px;
+      e["sigma_m_per_px"] = p.sigma_per_px * out_scale;
     }
     pts.push_back(e);
   }
@@ -172,7 +192,9 @@ nlohmann::json GcpGeoref::ToJson() const {
                {"check_points_used", check_used},
                {"rms_m", control_rms_m},
                {"check_rms_m", check_used ? nlohmann::json(check_rms_m) : nlohmann::json()},
-               {"fit", "least-squares similarity (Umeyama) of the triangulated control points to their coordinates"},
+               {"fit",
+                "least-squares similarity (Umeyama) of the triangulated control points to their coordinates, each "
+                "weighted by 1/σ² of its triangulation (sigma_m_per_px: its σ in metres for a 1 px click)"},
                {"independent_accuracy",
                 check_used ? "check_rms_m: check points left out of the fit"
                            : "none: mark GCPs as check points (extra field \"check\") to measure it"}};

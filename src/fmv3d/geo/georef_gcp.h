@@ -6,7 +6,8 @@
 //   2. Its coordinates (the file's CRS) go to WGS84 through GDAL/PROJ, then to a local East-North-Up frame at the
 //      origin (the GCPs' centroid unless given).
 //   3. The similarity sparse → ENU is the least-squares (Umeyama) fit of the triangulated control points (not the
-//      check points) to their coordinates: ≥ 3 control points, not collinear.
+//      check points) to their coordinates, each weighted by the inverse variance of its triangulation (from the
+//      Jacobians of its projections): ≥ 3 control points, not collinear.
 //   4. Each point's residual |S·X_triangulated − X_enu| in metres: for control points the fit's own residual, for
 //      check points (left out of the fit) the independent accuracy.
 #pragma once
@@ -45,6 +46,7 @@ struct GcpResult {
   Eigen::Vector3d triangulated = Eigen::Vector3d::Zero();  // in the sparse model's frame
   Eigen::Vector3d residual_enu = Eigen::Vector3d::Zero();  // S·triangulated − enu (control / check)
   double reprojection_px = 0;  // RMS over its registered observations of the triangulated point
+  double sigma_per_px = 0;     // σ of the triangulated point (model units, √trace Σ) for a 1 px click error
   bool triangulated_ok() const { return status == GcpStatus::kControl || status == GcpStatus::kCheck; }
 };
 

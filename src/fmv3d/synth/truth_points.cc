@@ -75,11 +75,13 @@ std::vector<TruthPoint> SelectTruthPoints(const core::Reconstruction& truth, con
     chosen.push_back(best);
   }
   std::mt19937_64 rng(o.seed);
-  std::normal_distribution<double> noise(0.0, o.noise_px);
+  std::normal_distribution<double> gauss(0.0, o.noise_px);
+  std::uniform_real_distribution<double> uniform(-o.noise_max_px, o.noise_max_px);
+  auto noise = [&](std::mt19937_64& r) { return o.noise_max_px > 0 ? uniform(r) : gauss(r); };
   std::vector<TruthPoint> out;
   for (size_t i : chosen) {
     TruthPoint tp = eligible[i];
-    if (o.noise_px > 0)
+    if (o.noise_px > 0 || o.noise_max_px > 0)
       for (auto& ob : tp.observations) {
         const core::Camera& cam = truth.cameras.at(truth.FindImageByName(ob.frame)->camera_id);
         ob.x = std::clamp(ob.x + noise(rng), 0.0, double(cam.width));  // a click stays inside the image

@@ -25,6 +25,7 @@ struct TruthPointOptions {
   // Per required frame, keep points at least this far (pixels) from the image border.
   double border_px = 8;
   double noise_px = 0;  // σ of Gaussian noise per pixel coordinate
+  double noise_max_px = 0;  // or: uniform noise in [−noise_max_px, noise_max_px] per coordinate ("±1 px")
   uint64_t seed = 1;
   void Check() const;
 };
