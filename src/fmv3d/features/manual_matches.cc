@@ -78,6 +78,19 @@ void AddMatch(VerifiedPair* vp, const ManualObservation& a, const ManualObservat
 
 }  // namespace
 
+void AppendToFeatureSet(const ManualMatches::Appended& ap, FeatureSet* fs, const std::string& what) {
+  const size_t n0 = fs->keypoints.size();
+  if (n0 != ap.first_index)
+    throw Error(what + ": " + std::to_string(n0) + " automatic keypoints, not " + std::to_string(ap.first_index) +
+                " (stale matches/manual.json: run `fmv3d match` again)");
+  fs->keypoints.insert(fs->keypoints.end(), ap.keypoints.begin(), ap.keypoints.end());
+  Descriptors d(n0 + ap.keypoints.size(), 128);
+  if (n0) d.topRows(n0) = fs->descriptors.topRows(n0);
+  d.bottomRows(ap.keypoints.size()) = ap.descriptors;
+  fs->descriptors = std::move(d);
+  if (fs->colors.size() == n0) fs->colors.insert(fs->colors.end(), ap.colors.begin(), ap.colors.end());
+}
+
 ManualMatches AppendManualKeypoints(const io::TiePoints& t, const io::FramesIndex& index,
                                     const std::map<uint32_t, cv::Mat>& images, std::vector<FeatureSet>* features,
                                     const ManualMatchOptions& options) {
@@ -126,14 +139,7 @@ ManualMatches AppendManualKeypoints(const io::TiePoints& t, const io::FramesInde
       }
       ap.colors.push_back(rgb);
     }
-    FeatureSet& fs = (*features)[i];
-    const size_t n0 = fs.keypoints.size();
-    fs.keypoints.insert(fs.keypoints.end(), ap.keypoints.begin(), ap.keypoints.end());
-    Descriptors d(n0 + ap.keypoints.size(), 128);
-    if (n0) d.topRows(n0) = fs.descriptors.topRows(n0);
-    d.bottomRows(ap.keypoints.size()) = ap.descriptors;
-    fs.descriptors = std::move(d);
-    if (fs.colors.size() == n0) fs.colors.insert(fs.colors.end(), ap.colors.begin(), ap.colors.end());
+    AppendToFeatureSet(ap, &(*features)[i], index.frames[i].name);
   }
   return m;
 }

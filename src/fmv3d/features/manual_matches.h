@@ -73,6 +73,10 @@ struct ManualMatches {
   static ManualMatches FromJson(const nlohmann::json& j, const io::FramesIndex& index);
 };
 
+// Appends the keypoints, descriptors and colours of `appended` to a feature set holding exactly the automatic
+// keypoints (appended.first_index of them); throws fmv3d::Error naming `what` when it holds another count.
+void AppendToFeatureSet(const ManualMatches::Appended& appended, FeatureSet* features, const std::string& what);
+
 // Appends the clicked points to `features` (one FeatureSet per frame of `index`, in its order) and returns their
 // layout; `images[i]` is frame i's image (8-bit, as cv::imread gives; empty: descriptors zero, colour black) —
 // only frames with clicked points are read. Tie points and keypoints naming frames that are not in `index` are an

@@ -202,18 +202,10 @@ nlohmann::json RunSparseStage(const core::Workspace& ws, const SparseStageOption
     for (const auto& [i, ap] : mm.appended) {
       MapperImage& im = input.images[i];
       features::FeatureSet& fs_ = feature_sets[i];
-      if (ap.first_index != im.keypoints.size() || fs_.keypoints.size() != im.keypoints.size())
-        throw Error(manual_path.string() + ": frame " + im.name + " has " + std::to_string(im.keypoints.size()) +
-                    " keypoints, not " + std::to_string(ap.first_index) + " (stale: run `fmv3d match` again)");
-      const size_t n0 = fs_.keypoints.size();
+      features::AppendToFeatureSet(ap, &fs_, manual_path.string() + ": frame " + im.name);
+      if (im.colors.size() == im.keypoints.size())
+        im.colors.insert(im.colors.end(), ap.colors.begin(), ap.colors.end());
       for (const auto& k : ap.keypoints) im.keypoints.emplace_back(k.x, k.y);
-      if (im.colors.size() == n0) im.colors.insert(im.colors.end(), ap.colors.begin(), ap.colors.end());
-      fs_.keypoints.insert(fs_.keypoints.end(), ap.keypoints.begin(), ap.keypoints.end());
-      features::Descriptors d(n0 + ap.keypoints.size(), 128);
-      if (n0) d.topRows(n0) = fs_.descriptors.topRows(n0);
-      d.bottomRows(ap.keypoints.size()) = ap.descriptors;
-      fs_.descriptors = std::move(d);
-      if (fs_.colors.size() == n0) fs_.colors.insert(fs_.colors.end(), ap.colors.begin(), ap.colors.end());
       num_kp[i] = im.keypoints.size();
       input.manual_from[im.id] = ap.first_index;
     }
