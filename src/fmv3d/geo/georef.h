@@ -1,5 +1,7 @@
 // Geo-registration (`fmv3d georef WS`): a robust similarity from the sparse model's camera centres to the
-// telemetry positions that frames.json carries per frame, expressed in a local East-North-Up frame.
+// telemetry positions that frames.json carries per frame, expressed in a local East-North-Up frame. Ground
+// control points outrank telemetry: with WS/manual/gcp_list.txt (or GeorefOptions::gcp_file) the similarity
+// comes from them instead (geo/georef_gcp.h), and no telemetry is needed.
 //
 // Inputs:  WS/sparse/ (COLMAP text model), WS/frames/frames.json (per-frame "telemetry": sensor_latitude,
 //          sensor_longitude, sensor_altitude_hae or else sensor_altitude_msl), and when present

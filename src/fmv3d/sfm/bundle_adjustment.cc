@@ -150,6 +150,11 @@ class BundleProblem {
         pts_(point_ids_.size()),
         shared_loss_(MakeLoss(options)),
         problem_(ProblemOptions()) {
+    if (!config.weighted_from.empty() && config.observation_weight != 1) {
+      if (!(config.observation_weight > 0)) throw Error("bundle adjustment: observation_weight must be positive");
+      weighted_loss_ = std::make_unique<ceres::ScaledLoss>(shared_loss_.get(), config.observation_weight,
+                                                           ceres::DO_NOT_TAKE_OWNERSHIP);
+    }
     AllocateCameraBlocks();
   }
 
@@ -269,6 +274,14 @@ class BundleProblem {
     popts.manifold_ownership = ceres::DO_NOT_TAKE_OWNERSHIP;       // quaternion_manifold_, subset_manifolds_
     return popts;
   }
+  // The operator's tie points (keypoints from weighted_from[image] on) count observation_weight times.
+  ceres::LossFunction* LossOf(uint32_t image_id, uint32_t point2d_idx) const {
+    if (weighted_loss_) {
+      const auto w = config_.weighted_from.find(image_id);
+      if (w != config_.weighted_from.end() && point2d_idx >= w->second) return weighted_loss_.get();
+    }
+    return shared_loss_.get();
+  }
   int NumThreads() const { return options_.num_threads > 0 ? options_.num_threads : core::NumThreads(); }
   bool IsVariable(uint32_t id) const { return variable_.count(id) && !config_.constant_images.count(id); }
 
@@ -313,7 +326,8 @@ class BundleProblem {
         const PoseBlock& pose = poses_.at(el.image_id);
         costs_.emplace_back(image.points2d[el.point2d_idx]);
         residual_params_.push_back({intr_.at(image.camera_id), pose.q, pose.t, X.data()});
-        problem_.AddResidualBlock(&costs_.back(), shared_loss_.get(), residual_params_.back().data(), 4);
+        problem_.AddResidualBlock(&costs_.back(), LossOf(el.image_id, el.point2d_idx), residual_params_.back().data(),
+                                  4);
       }
       if (!options_.refine_points) problem_.SetParameterBlockConstant(X.data());
     }
@@ -439,6 +453,7 @@ class BundleProblem {
   std::vector<std::array<double*, 4>> residual_params_;     // per reprojection residual, for Rms()
   ceres::EigenQuaternionManifold quaternion_manifold_;
   std::unique_ptr<ceres::LossFunction> shared_loss_;  // one object: as many residuals would mean as many allocations
+  std::unique_ptr<ceres::LossFunction> weighted_loss_;  // shared_loss_ scaled, for weighted observations
   std::vector<std::unique_ptr<ceres::Manifold>> subset_manifolds_;
   std::unique_ptr<ceres::CostFunction> gauge_prior_;
   std::vector<std::unique_ptr<ceres::CostFunction>> prior_costs_;
