@@ -1,0 +1,370 @@
+#!/usr/bin/env node
+// Browser tests of the console's hand tools: the tie-point editor, the GCP page and the calibration window,
+// driven through the page by mouse clicks (Debian's Chromium, headless, playwright-core) against `fmv3d serve`
+// on a loopback port, on synthetic workspaces made here whose ground truth (truth/images.txt: the exact
+// projections of scene points) says where to click.
+//
+//   node web/tests/handtools.test.mjs --fmv3d build/fmv3d --web build/web [--out build/test-artefacts/handtools] [--keep]
+//
+// Exit 0: every check passed; 1: a check failed; 77: skipped (no Chromium, no web build or no playwright-core).
+import fs from 'node:fs';
+import os from 'node:os';
+import path from 'node:path';
+import net from 'node:net';
+import { spawn, execFileSync } from 'node:child_process';
+import { fileURLToPath } from 'node:url';
+
+const SKIP = 77;
+const here = path.dirname(fileURLToPath(import.meta.url));
+const args = process.argv.slice(2);
+const opt = (name, def) => { const i = args.indexOf(name); return i >= 0 ? args[i + 1] : def; };
+const fmv3d = path.resolve(opt('--fmv3d', path.join(here, '../../build/fmv3d')));
+const webDir = path.resolve(opt('--web', path.join(path.dirname(fmv3d), 'web')));
+const outDir = path.resolve(opt('--out', path.join(path.dirname(fmv3d), 'test-artefacts/handtools')));
+const chromiumPath = opt('--chromium', process.env.CHROMIUM ?? '/usr/bin/chromium');
+const keep = args.includes('--keep');
+
+function skip(why) { console.log(`SKIP: ${why}`); process.exit(SKIP); }
+if (!fs.existsSync(chromiumPath)) skip(`no Chromium at ${chromiumPath} (scripts/install-deps.sh installs it)`);
+if (!fs.existsSync(path.join(webDir, 'index.html'))) skip(`no web build at ${webDir} (make web)`);
+if (!fs.existsSync(fmv3d)) skip(`no fmv3d binary at ${fmv3d}`);
+let chromium;
+try { ({ chromium } = await import('playwright-core')); } catch { skip('playwright-core is not installed (cd web && npm ci)'); }
+
+fs.mkdirSync(outDir, { recursive: true });
+const root = opt('--work') ? path.resolve(opt('--work')) : fs.mkdtempSync(path.join(os.tmpdir(), 'fmv3d-handtools-'));
+const results = [];
+let server = null, context = null;
+const log = (...a) => console.log(...a);
+
+function run(argv, env = {}, timeoutMs = 900000) {
+  const t0 = Date.now();
+  const out = execFileSync(fmv3d, argv, { stdio: ['ignore', 'pipe', 'inherit'], timeout: timeoutMs, env: { ...process.env, ...env } });
+  log(`  fmv3d ${argv.join(' ')}  (${((Date.now() - t0) / 1000).toFixed(1)} s)`);
+  return out.toString();
+}
+function freePort() {
+  return new Promise((resolve, reject) => {
+    const s = net.createServer();
+    s.listen(0, '127.0.0.1', () => { const p = s.address().port; s.close(() => resolve(p)); });
+    s.on('error', reject);
+  });
+}
+async function check(name, fn) {
+  const t0 = Date.now();
+  try { await fn(); results.push([name, true]); log(`ok   ${name} (${((Date.now() - t0) / 1000).toFixed(1)} s)`); }
+  catch (e) { results.push([name, false]); log(`FAIL ${name}: ${e?.stack ?? e}`); }
+}
+function assert(cond, msg) { if (!cond) throw new Error(msg); }
+async function waitFor(page, fn, arg, timeout, what) {
+  try { await page.waitForFunction(fn, arg, { timeout, polling: 200 }); }
+  catch { throw new Error(`timed out waiting for ${what}`); }
+}
+const shot = (page, name) => page.screenshot({ path: path.join(outDir, `${name}.png`) });
+
+// truth/images.txt: per frame name, the exact projection of every scene point it sees (point id → [x, y]).
+function readTruthObservations(dir) {
+  const lines = fs.readFileSync(path.join(dir, 'truth', 'images.txt'), 'utf8').split('\n').filter((l) => l && !l.startsWith('#'));
+  const out = new Map();
+  for (let i = 0; i + 1 < lines.length; i += 2) {
+    const head = lines[i].trim().split(/\s+/);
+    const pts = lines[i + 1].trim().split(/\s+/).map(Number);
+    const m = new Map();
+    for (let k = 0; k + 2 < pts.length; k += 3) if (pts[k + 2] >= 0) m.set(pts[k + 2], [pts[k], pts[k + 1]]);
+    out.set(head[9], m);
+  }
+  return out;
+}
+function readTruthPoints(dir) {
+  const m = new Map();
+  for (const l of fs.readFileSync(path.join(dir, 'truth', 'points3D.txt'), 'utf8').split('\n')) {
+    if (!l || l.startsWith('#')) continue;
+    const v = l.trim().split(/\s+/).map(Number);
+    m.set(v[0], [v[1], v[2], v[3]]);
+  }
+  return m;
+}
+// Scene points seen in every frame of `frames`, spread over the image (a coarse grid of the first frame).
+function commonPoints(obs, frames, n, margin = 12) {
+  const first = obs.get(frames[0]);
+  const cells = new Map();
+  for (const [id, [x, y]] of first) {
+    if (!frames.every((f) => { const p = obs.get(f).get(id); return p && p[0] > margin && p[1] > margin && p[0] < 480 - margin && p[1] < 270 - margin; })) continue;
+    const key = `${Math.floor(x / 120)},${Math.floor(y / 90)}`;
+    if (!cells.has(key)) cells.set(key, id);
+  }
+  return [...cells.values()].slice(0, n);
+}
+
+// A click at image point (x, y) of a FrameView, through the page (the view's own image → page transform).
+async function clickImage(page, hook, view, x, y) {
+  const [cx, cy] = await page.evaluate(([h, v, px, py]) => window[h].views ? window[h].views[v].toClient(px, py) : window[h].view.toClient(px, py), [hook, view, x, y]);
+  await page.mouse.click(cx, cy);
+}
+
+try {
+  log(`work folder ${root}`);
+  const flight = path.join(root, 'flight');
+  const wsRoot = path.join(root, 'root');
+  const ws = path.join(wsRoot, 'demo');
+  if (!fs.existsSync(path.join(ws, 'sparse', 'images.txt'))) {
+    run(['-q', 'synth', '--scene', 'building', '--path', 'orbit', '--frames', '24', '--size', '480x270', '--seed', '3', '-o', flight]);
+    run(['-q', 'reconstruct', path.join(flight, 'frames'), '-o', ws, '--fast', '--until', 'sparse']);
+  }
+  const board = path.join(root, 'board');
+  if (!fs.existsSync(path.join(board, 'frames'))) {
+    run(['-q', 'synth', '--scene', 'board', '--frames', '8', '--size', '640x480', '--distortion', '-0.2,0.05,0.001,-0.001', '--seed', '2', '-o', board]);
+  }
+  fs.mkdirSync(path.join(wsRoot, 'cal'), { recursive: true });
+  fs.writeFileSync(path.join(wsRoot, 'cal', 'project.json'), '{"inputs": []}');
+  for (const f of ['tiepoints.json', 'gcp_list.txt']) fs.rmSync(path.join(ws, 'manual', f), { force: true });
+  const sensorDb = path.join(root, 'user-sensors.json');
+  fs.rmSync(sensorDb, { force: true });
+
+  const port = await freePort();
+  server = spawn(fmv3d, ['serve', wsRoot, '--port', String(port), '--host', '127.0.0.1', '--assets', webDir],
+    { stdio: ['ignore', 'pipe', 'pipe'], env: { ...process.env, FMV3D_USER_SENSORS: sensorDb } });
+  const serverLog = fs.createWriteStream(path.join(outDir, 'server.log'));
+  server.stdout.pipe(serverLog); server.stderr.pipe(serverLog);
+  const base = `http://127.0.0.1:${port}/`;
+  for (let i = 0; ; i++) {
+    try { const r = await fetch(base + 'api/health'); if (r.ok) break; } catch { /* not up yet */ }
+    if (i > 100 || server.exitCode !== null) throw new Error(`fmv3d serve did not come up on ${base} (see server.log)`);
+    await new Promise((r) => setTimeout(r, 100));
+  }
+  log(`fmv3d serve at ${base}`);
+  const profile = fs.mkdtempSync(path.join(os.tmpdir(), 'fmv3d-chromium-'));
+  context = await chromium.launchPersistentContext(profile, {
+    executablePath: chromiumPath, headless: true, viewport: { width: 1400, height: 860 },
+    args: ['--headless', '--no-sandbox', '--disable-gpu', '--no-first-run', '--disable-background-networking',
+      '--disable-component-update', '--disable-sync'],
+  });
+  const page = context.pages()[0] ?? await context.newPage();
+  const pageErrors = [];
+  page.on('pageerror', (e) => pageErrors.push(String(e)));
+  const obs = readTruthObservations(flight);
+  const frameNames = [...obs.keys()].sort();
+
+  // ---------------------------------------------------------------- tie points
+  await check('tie-point editor: frames, keypoints, matches, clicks at true projections, undo/redo, save', async () => {
+    await page.goto(base + '#/tiepoints/demo');
+    await waitFor(page, () => document.querySelector('.page-tiepoints')?.dataset.ready === '1', null, 20000, 'the editor');
+    const a = frameNames[3], b = frameNames[6], c = frameNames[9];
+    await page.click(`.thumb[data-frame="${a}"]`);
+    await page.click(`.thumb[data-frame="${b}"]`, { modifiers: ['Shift'] });
+    await waitFor(page, ([x, y]) => document.querySelector('.fv-title')?.textContent?.includes(x) &&
+      document.querySelectorAll('.fv-title')[1]?.textContent?.includes(y) && /verified/.test(document.getElementById('tp-pair')?.textContent ?? ''),
+      [a, b], 20000, 'frames A and B with their pair');
+    const pairText = await page.textContent('#tp-pair');
+    const nInliers = Number(/(\d+) verified/.exec(pairText)[1]);
+    assert(nInliers > 20, `few verified matches shown: ${pairText}`);
+    assert(/epipolar lines from the poses/.test(pairText), `no epipolar geometry: ${pairText}`);
+    // Six tie points clicked at the true projections in A and B, one also in a third frame.
+    const ids = commonPoints(obs, [a, b, c], 6);
+    assert(ids.length === 6, `only ${ids.length} scene points common to the three frames`);
+    for (const id of ids) {
+      await page.click('#tp-new');
+      await clickImage(page, 'fmv3dTiePoints', 'a', ...obs.get(a).get(id));
+      await clickImage(page, 'fmv3dTiePoints', 'b', ...obs.get(b).get(id));
+    }
+    await shot(page, 'tiepoints-editor');
+    // The last tie point in a third frame (frame B replaced by it).
+    await page.click(`.thumb[data-frame="${c}"]`, { modifiers: ['Shift'] });
+    await waitFor(page, (y) => document.querySelectorAll('.fv-title')[1]?.textContent?.includes(y), c, 20000, 'frame C');
+    await clickImage(page, 'fmv3dTiePoints', 'b', ...obs.get(c).get(ids[5]));
+    let doc = await page.evaluate(() => window.fmv3dTiePoints.doc());
+    assert(doc.tiepoints.length === 6 && doc.tiepoints[5].observations.length === 3, `tie points as held: ${JSON.stringify(doc.tiepoints.map((t) => t.observations.length))}`);
+    await page.click('#tp-undo');
+    doc = await page.evaluate(() => window.fmv3dTiePoints.doc());
+    assert(doc.tiepoints[5].observations.length === 2, 'undo did not remove the third observation');
+    await page.click('#tp-redo');
+    doc = await page.evaluate(() => window.fmv3dTiePoints.doc());
+    assert(doc.tiepoints[5].observations.length === 3, 'redo did not restore it');
+    await page.click('#tp-save');
+    await waitFor(page, () => /saved/.test(document.getElementById('tp-msg')?.textContent ?? ''), null, 10000, 'saved');
+    const saved = JSON.parse(fs.readFileSync(path.join(ws, 'manual', 'tiepoints.json'), 'utf8'));
+    let worst = 0;
+    for (let i = 0; i < ids.length; i++)
+      for (const o of saved.tiepoints[i].observations) {
+        const t = obs.get(o.image).get(ids[i]);
+        worst = Math.max(worst, Math.hypot(o.x - t[0], o.y - t[1]));
+      }
+    log(`  6 tie points saved, worst click offset from the true projection ${worst.toFixed(2)} px`);
+    assert(worst < 0.5, `clicked positions are ${worst.toFixed(2)} px from the true projections`);
+    await shot(page, 'tiepoints-saved');
+  });
+
+  await check('tie-point editor: bad input (one observation) → message, nothing saved', async () => {
+    const before = fs.readFileSync(path.join(ws, 'manual', 'tiepoints.json'), 'utf8');
+    await page.click('#tp-new');
+    await clickImage(page, 'fmv3dTiePoints', 'a', 100.25, 100.75);
+    await page.click('#tp-save');
+    await waitFor(page, () => document.getElementById('tp-msg')?.classList.contains('error'), null, 10000, 'an error message');
+    const text = await page.textContent('#tp-msg');
+    log(`  message: ${text}`);
+    assert(/tie point 't7' has 1 observation/.test(text) && /at least 2/.test(text), `unclear message: ${text}`);
+    assert(fs.readFileSync(path.join(ws, 'manual', 'tiepoints.json'), 'utf8') === before, 'the file changed');
+    await shot(page, 'tiepoints-bad-input');
+    await page.click('#tp-undo');
+    await page.click('#tp-undo');  // the empty tie point created by the first click goes with its observation
+    const doc = await page.evaluate(() => window.fmv3dTiePoints.doc());
+    assert(doc.tiepoints.length === 6, `undo left ${doc.tiepoints.length} tie points`);
+  });
+
+  await check('tie-point editor: re-run from matching (one button) ends with every frame registered', async () => {
+    await page.click('#tp-rerun');
+    await waitFor(page, () => document.getElementById('tp-job')?.dataset.state === 'done' || document.getElementById('tp-job')?.dataset.state === 'failed',
+      null, 600000, 'the re-run');
+    const state = await page.evaluate(() => document.getElementById('tp-job').dataset.state);
+    await waitFor(page, () => /registered/.test(document.getElementById('tp-msg')?.textContent ?? ''), null, 20000, 'the result line');
+    const text = await page.textContent('#tp-msg');
+    log(`  ${text}`);
+    await shot(page, 'tiepoints-rerun');
+    assert(state === 'done', `the re-run ended ${state}`);
+    assert(new RegExp(`${frameNames.length} of ${frameNames.length} frames registered`).test(text), text);
+    assert(await page.locator('#tp-job a[href^="#/3d/"]').count() === 1, 'no link to the 3D view');
+  });
+
+  // ---------------------------------------------------------------- GCPs
+  await check('GCP page: 5 GCPs entered and clicked in 2 frames each (±1 px), one check point, saved as gcp_list.txt', async () => {
+    await page.goto(base + '#/gcp/demo');
+    await waitFor(page, () => document.querySelector('.page-gcp')?.dataset.ready === '1', null, 20000, 'the GCP page');
+    const pts3 = readTruthPoints(flight);
+    const fa = frameNames[2], fb = frameNames[8];
+    const ids = commonPoints(obs, [fa, fb], 5);
+    assert(ids.length === 5, `only ${ids.length} common scene points`);
+    await page.selectOption('#gcp-crs-kind', 'epsg');
+    await page.fill('#gcp-epsg', '32618');
+    let seed = 7;
+    const noise = () => { seed = (seed * 48271) % 2147483647; return (seed / 2147483647 - 0.5) * 2; };  // ±1 px
+    for (let i = 0; i < ids.length; i++) {
+      const [X, Y, Z] = pts3.get(ids[i]);
+      await page.fill('#gcp-name', `g${i + 1}`);
+      await page.fill('#gcp-a', (500000 + X).toFixed(3));
+      await page.fill('#gcp-b', (4200000 + Y).toFixed(3));
+      await page.fill('#gcp-z', (100 + Z).toFixed(3));
+      if (i === 4) await page.check('#gcp-check');
+      await page.click('#gcp-add');
+      for (const f of [fa, fb]) {
+        await page.click(`.thumb[data-frame="${f}"]`);
+        await waitFor(page, (n) => document.querySelector('.fv-title')?.textContent === n, f, 10000, `frame ${f}`);
+        const [x, y] = obs.get(f).get(ids[i]);
+        await clickImage(page, 'fmv3dGcp', null, x + noise(), y + noise());
+      }
+    }
+    await shot(page, 'gcp-clicked');
+    await page.click('#gcp-save');
+    await waitFor(page, () => /saved/.test(document.getElementById('gcp-msg')?.textContent ?? ''), null, 10000, 'saved');
+    const text = fs.readFileSync(path.join(ws, 'manual', 'gcp_list.txt'), 'utf8').trim().split('\n');
+    assert(text[0] === 'EPSG:32618', `CRS line ${text[0]}`);
+    assert(text.length === 11, `${text.length - 1} observation lines`);
+    assert(text.filter((l) => / check$/.test(l)).length === 2, 'the check point is not marked');
+  });
+
+  await check('GCP page: broken line and unknown EPSG → clear message, nothing saved', async () => {
+    const file = path.join(ws, 'manual', 'gcp_list.txt');
+    const before = fs.readFileSync(file, 'utf8');
+    const broken = path.join(root, 'broken_gcp_list.txt');
+    fs.writeFileSync(broken, `EPSG:32618\n500000 4200000 100 10 10 ${frameNames[0]} a\n500001 4200001 oops 20 20 ${frameNames[1]} a\n`);
+    await page.setInputFiles('#gcp-import', broken);
+    await waitFor(page, () => /not imported/.test(document.getElementById('gcp-msg')?.textContent ?? ''), null, 10000, 'a message');
+    let msg = await page.textContent('#gcp-msg');
+    log(`  message: ${msg}`);
+    assert(/line 3/.test(msg) && /column 3/.test(msg) && /oops/.test(msg), `unclear: ${msg}`);
+    await shot(page, 'gcp-broken-line');
+    fs.writeFileSync(broken, `EPSG:999999\n500000 4200000 100 10 10 ${frameNames[0]} a\n500000 4200000 100 20 20 ${frameNames[1]} a\n`);
+    await page.setInputFiles('#gcp-import', broken);
+    await waitFor(page, () => /999999/.test(document.getElementById('gcp-msg')?.textContent ?? ''), null, 10000, 'a message');
+    msg = await page.textContent('#gcp-msg');
+    log(`  message: ${msg}`);
+    assert(/unknown coordinate reference system/.test(msg), `unclear: ${msg}`);
+    await shot(page, 'gcp-unknown-epsg');
+    assert(fs.readFileSync(file, 'utf8') === before, 'gcp_list.txt changed');
+    // Export gives back the saved file.
+    const href = await page.getAttribute('#gcp-export', 'href');
+    const exported = await (await fetch(base + href)).text();
+    assert(exported === before, 'the export differs from manual/gcp_list.txt');
+  });
+
+  await check('GCP page: run georef from the page; its GCP result is shown', async () => {
+    await page.click('#gcp-georef');
+    await waitFor(page, () => ['done', 'failed'].includes(document.getElementById('gcp-job')?.dataset.state ?? ''), null, 300000, 'georef');
+    const state = await page.evaluate(() => document.getElementById('gcp-job').dataset.state);
+    await page.waitForTimeout(1000);
+    await shot(page, 'gcp-georef');
+    assert(state === 'done', `georef ended ${state} (see the Jobs page log)`);
+    const g = JSON.parse(fs.readFileSync(path.join(ws, 'geo', 'georef.json'), 'utf8'));
+    assert(g.gcps || g.gcp, `geo/georef.json has no GCP section: ${Object.keys(g).join(', ')}`);
+    assert(await page.locator('#gcp-result h3').count() === 1, 'no georeference section on the page');
+  });
+
+  // ---------------------------------------------------------------- calibration
+  await check('calibration window: upload, run, result equals `fmv3d calibrate`, drop an image, save as sensor', async () => {
+    await page.goto(base + '#/calibration/cal');
+    await waitFor(page, () => document.querySelector('.page-calibration')?.dataset.ready === '1', null, 20000, 'the calibration window');
+    const images = fs.readdirSync(path.join(board, 'frames')).filter((f) => f.endsWith('.png')).sort().map((f) => path.join(board, 'frames', f));
+    await page.setInputFiles('#cal-upload', images);
+    await waitFor(page, (n) => document.querySelectorAll('#cal-images input:checked').length === n, images.length, 20000, 'the uploads');
+    await page.fill('#cal-board', '9x6');
+    await page.fill('#cal-square', '0.1');
+    await page.click('#cal-run');
+    await waitFor(page, () => ['done', 'failed'].includes(document.querySelector('.page-calibration')?.dataset.state ?? '') && document.getElementById('cal-param-table'),
+      null, 300000, 'the calibration');
+    await waitFor(page, () => Number(document.getElementById('cal-canvas')?.dataset.corners ?? 0) > 0, null, 20000, 'the corner view');
+    await shot(page, 'calibration');
+    const shown = await page.evaluate(() => Object.fromEntries([...document.querySelectorAll('#cal-param-table tr[data-param]')]
+      .map((r) => [r.dataset.param, [Number(r.querySelector('.val').textContent), r.querySelector('.sd').textContent]])));
+    // The same images through the command line.
+    const cli = path.join(root, 'cli-calib');
+    fs.mkdirSync(cli, { recursive: true });
+    run(['-q', 'calibrate', '--board', '9x6', '--square', '0.1', ...images, '-o', path.join(cli, 'camera.json')]);
+    const ref = JSON.parse(fs.readFileSync(path.join(cli, 'camera.json'), 'utf8'));
+    const digits = { f: 3, s_u: 6, u0: 3, v0: 3, k1: 6, k2: 6, p1: 6, p2: 6 };
+    const key = { f: 'f', s_u: 'aspect', u0: 'u0', v0: 'v0', k1: 'k1', k2: 'k2', p1: 'p1', p2: 'p2' };
+    for (const [p, d] of Object.entries(digits)) {
+      assert(shown[p], `parameter ${p} not shown`);
+      assert(Math.abs(shown[p][0] - ref[key[p]]) <= 0.5 * 10 ** -d + 1e-12, `${p}: window ${shown[p][0]}, fmv3d calibrate ${ref[key[p]]}`);
+      assert(/±/.test(shown[p][1]), `${p} has no standard deviation shown`);
+    }
+    const rms = Number(await page.textContent('#cal-rms'));
+    assert(Math.abs(rms - ref.rms) < 1e-4, `RMS ${rms} vs ${ref.rms}`);
+    log(`  window = CLI: f ${shown.f[0]} (${ref.f}), k1 ${shown.k1[0]} (${ref.k1}), RMS ${rms} px over ${ref.images.length} images`);
+    const bars = await page.locator('#cal-rms-chart rect[data-image]').count();
+    assert(bars === ref.images.length, `${bars} bars for ${ref.images.length} images`);
+    // Drop the worst image with one click: the run comes back with one image fewer.
+    const worst = ref.images.reduce((w, i) => (i.rms > w.rms ? i : w));
+    await page.click(`button[data-drop="${worst.name}"]`);
+    await waitFor(page, (n) => document.querySelectorAll('#cal-rms-chart rect[data-image]').length === n && document.querySelector('.page-calibration').dataset.state === 'done',
+      ref.images.length - 1, 300000, 'the re-run without the dropped image');
+    await shot(page, 'calibration-dropped');
+    await page.fill('#cal-sensor-name', 'synthetic board cam');
+    await page.click('#cal-save');
+    await waitFor(page, () => /saved as sensor/.test(document.getElementById('cal-msg')?.textContent ?? ''), null, 10000, 'saved');
+    const db = JSON.parse(fs.readFileSync(sensorDb, 'utf8'));
+    const entry = db.sensors.find((s) => s.name === 'synthetic board cam');
+    assert(entry, 'no entry in the user sensor database');
+    // A later `frames` run picks it up by name.
+    const listed = run(['cameras'], { FMV3D_USER_SENSORS: sensorDb });
+    assert(/synthetic board cam/.test(listed), '`fmv3d cameras` does not list the saved sensor');
+  });
+
+  await check('calibration window: bad input → clear message', async () => {
+    await page.fill('#cal-board', '9by6');
+    await page.click('#cal-run');
+    await waitFor(page, () => /board/.test(document.getElementById('cal-msg')?.textContent ?? '') && document.getElementById('cal-msg').classList.contains('error'), null, 10000, 'a message');
+    log(`  message: ${await page.textContent('#cal-msg')}`);
+    await shot(page, 'calibration-bad-input');
+  });
+
+  assert(pageErrors.length === 0, `page errors: ${pageErrors.join('; ')}`);
+} catch (e) {
+  results.push(['setup', false]);
+  log(`FAIL setup: ${e?.stack ?? e}`);
+} finally {
+  await context?.close().catch(() => undefined);
+  server?.kill('SIGTERM');
+  if (!keep && !opt('--work')) fs.rmSync(root, { recursive: true, force: true });
+}
+const failed = results.filter(([, ok]) => !ok);
+log(`${results.length - failed.length} / ${results.length} checks passed; screenshots in ${outDir}`);
+process.exit(failed.length ? 1 : 0);
