@@ -86,7 +86,7 @@ export function mountGcp(el: HTMLElement, ws: string | null): () => void {
       }));
     const marks: Record<string, string> = {};
     const cur = points.find((p) => p.name === current);
-    for (const o of cur?.observations ?? []) marks[o.image] = '✓';
+    for (const o of cur?.observations ?? []) marks[o.frame] = '✓';
     if (frame) marks[frame] = (marks[frame] ?? '') + '▶';
     const strip = stripBox.querySelector<HTMLElement>('.strip');
     if (strip) markStrip(strip, marks);
@@ -95,15 +95,15 @@ export function mountGcp(el: HTMLElement, ws: string | null): () => void {
   view.onClick = (x, y) => {
     const p = points.find((q) => q.name === current);
     if (!p || !frame) { say('add a GCP (or choose one in the table) first', 'error'); return; }
-    const o = p.observations.find((q) => q.image === frame);
-    if (o) { o.x = x; o.y = y; } else p.observations.push({ image: frame, x, y });
+    const o = p.observations.find((q) => q.frame === frame);
+    if (o) { o.x = x; o.y = y; } else p.observations.push({ frame, x, y });
     say(`${p.name} marked in ${p.observations.length} frame(s)`);
     renderTable(); view.draw();
   };
   view.overlays.push({
     draw(ctx, v) {
       for (const p of points) {
-        const o = p.observations.find((q) => q.image === frame);
+        const o = p.observations.find((q) => q.frame === frame);
         if (o) drawMarker(ctx, v, o.x, o.y, p.check ? '#e040fb' : p.name === current ? '#ffeb3b' : '#ff9800', p.name, p.name === current);
       }
     },

@@ -12,12 +12,13 @@ export interface Pair {
   a: string; b: string; inliers: PairMatch[]; rejected: PairMatch[]; F: number[] | null;
   F_source: 'poses' | 'matches' | null;
 }
-export interface Obs { image: string; x: number; y: number; }
-export interface TiePoint { id: string; observations: Obs[]; }
-export interface PointOfInterest extends Obs { id: string; }
-export interface RemovedMatch { image1: string; x1: number; y1: number; image2: string; x2: number; y2: number; }
+/** manual/tiepoints.json (docs/manual-inputs.md). */
+export interface Obs { frame: string; x: number; y: number; }
+export interface TiePoint { id: string; label?: string; observations: Obs[]; }
+export interface ManualKeypoint extends Obs { id: string; label?: string; }
+export interface DeletedMatch { frame1: string; frame2: string; feature1: number; feature2: number; }
 export interface TiePoints {
-  version: 1; tiepoints: TiePoint[]; points_of_interest: PointOfInterest[]; removed_matches: RemovedMatch[];
+  format: 'fmv3d-tiepoints'; version: 1; tie_points: TiePoint[]; keypoints: ManualKeypoint[]; deleted_matches: DeletedMatch[];
 }
 export interface Gcp { name: string; x: number; y: number; z: number; check: boolean; observations: Obs[]; }
 export interface Gcps { crs: string | null; points: Gcp[]; }

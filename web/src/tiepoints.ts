@@ -21,7 +21,7 @@ export function mountTiePoints(el: HTMLElement, ws: string | null): () => void {
   let frameA: string | null = null, frameB: string | null = null;
   const keypoints = new Map<string, Keypoints>();
   let pair: Pair | null = null;
-  let doc: TiePoints = { version: 1, tiepoints: [], points_of_interest: [], removed_matches: [] };
+  let doc: TiePoints = { format: 'fmv3d-tiepoints', version: 1, tie_points: [], keypoints: [], deleted_matches: [] };
   const undo: string[] = [], redo: string[] = [];
   let current: string | null = null;
   let mode: Mode = 'tie';
@@ -80,11 +80,11 @@ export function mountTiePoints(el: HTMLElement, ws: string | null): () => void {
     if (!s) return;
     to.push(snapshot());
     doc = JSON.parse(s) as TiePoints;
-    if (current && !doc.tiepoints.some((t) => t.id === current)) current = null;
+    if (current && !doc.tie_points.some((t) => t.id === current)) current = null;
     renderList(); redraw();
   }
   function nextId(prefix: string): string {
-    const used = new Set([...doc.tiepoints.map((t) => t.id), ...doc.points_of_interest.map((p) => p.id)]);
+    const used = new Set([...doc.tie_points.map((t) => t.id), ...doc.keypoints.map((p) => p.id)]);
     for (let i = 1; ; i++) if (!used.has(`${prefix}${i}`)) return `${prefix}${i}`;
   }
 
@@ -94,7 +94,7 @@ export function mountTiePoints(el: HTMLElement, ws: string | null): () => void {
     const frame = which === 'a' ? frameA : frameB;
     if (!frame) return;
     if (mode === 'poi') {
-      change(() => doc.points_of_interest.push({ id: nextId('p'), image: frame, x, y }));
+      change(() => doc.keypoints.push({ id: nextId('k'), frame, x, y }));
       say(`point of interest added in ${frame}`);
       return;
     }
@@ -109,23 +109,23 @@ export function mountTiePoints(el: HTMLElement, ws: string | null): () => void {
       });
       if (best < 0) { say('no verified match near the click'); return; }
       const m = pair.inliers[best];
-      change(() => doc.removed_matches.push({ image1: pair!.a, x1: m[2], y1: m[3], image2: pair!.b, x2: m[4], y2: m[5] }));
-      say(`match removed (${doc.removed_matches.length} removed)`);
+      change(() => doc.deleted_matches.push({ frame1: pair!.a, frame2: pair!.b, feature1: m[0], feature2: m[1] }));
+      say(`match removed (${doc.deleted_matches.length} removed)`);
       return;
     }
     change(() => {
-      let t = doc.tiepoints.find((p) => p.id === current);
-      if (!t) { t = { id: nextId('t'), observations: [] }; doc.tiepoints.push(t); current = t.id; }
-      const o = t.observations.find((p) => p.image === frame);
-      if (o) { o.x = x; o.y = y; } else t.observations.push({ image: frame, x, y });
+      let t = doc.tie_points.find((p) => p.id === current);
+      if (!t) { t = { id: nextId('t'), observations: [] }; doc.tie_points.push(t); current = t.id; }
+      const o = t.observations.find((p) => p.frame === frame);
+      if (o) { o.x = x; o.y = y; } else t.observations.push({ frame, x, y });
     });
   }
   views.a.onClick = (x, y) => clicked('a', x, y);
   views.b.onClick = (x, y) => clicked('b', x, y);
 
   function isRemoved(m: number[]): boolean {
-    return doc.removed_matches.some((r) => pair && r.image1 === pair.a && r.image2 === pair.b &&
-      Math.abs(r.x1 - m[2]) < 1e-3 && Math.abs(r.y1 - m[3]) < 1e-3 && Math.abs(r.x2 - m[4]) < 1e-3 && Math.abs(r.y2 - m[5]) < 1e-3);
+    return doc.deleted_matches.some((r) => pair && ((r.frame1 === pair.a && r.frame2 === pair.b && r.feature1 === m[0] && r.feature2 === m[1]) ||
+      (r.frame1 === pair.b && r.frame2 === pair.a && r.feature1 === m[1] && r.feature2 === m[0])));
   }
 
   // Epipolar line in frame b of a point of frame a (F maps a → b) and the reverse.
@@ -175,17 +175,17 @@ export function mountTiePoints(el: HTMLElement, ws: string | null): () => void {
       }
       const other = which === 'a' ? 'b' : 'a';
       const otherFrame = which === 'a' ? frameB : frameA;
-      for (const t of doc.tiepoints) {
+      for (const t of doc.tie_points) {
         const sel = t.id === current;
-        const o = t.observations.find((p) => p.image === frame);
+        const o = t.observations.find((p) => p.frame === frame);
         if (o) drawMarker(ctx, v, o.x, o.y, sel ? '#ffeb3b' : '#ff9800', t.id, sel);
-        const oo = t.observations.find((p) => p.image === otherFrame);
+        const oo = t.observations.find((p) => p.frame === otherFrame);
         if (sel && oo) {
           const l = epiline(other, oo.x, oo.y);
           if (l) drawLine(ctx, v, l, '#ffeb3b');
         }
       }
-      for (const p of doc.points_of_interest) if (p.image === frame) drawMarker(ctx, v, p.x, p.y, '#e040fb', p.id);
+      for (const p of doc.keypoints) if (p.frame === frame) drawMarker(ctx, v, p.x, p.y, '#e040fb', p.id);
     },
   });
   views.a.overlays.push(overlay('a'));
@@ -193,21 +193,21 @@ export function mountTiePoints(el: HTMLElement, ws: string | null): () => void {
   const redraw = () => { views.a.draw(); views.b.draw(); };
 
   function renderList() {
-    list.replaceChildren(...doc.tiepoints.map((t) => h('div', { class: `tp-item${t.id === current ? ' current' : ''}`, 'data-id': t.id },
+    list.replaceChildren(...doc.tie_points.map((t) => h('div', { class: `tp-item${t.id === current ? ' current' : ''}`, 'data-id': t.id },
       h('button', { class: 'small link', onclick: () => { current = t.id; setMode('tie'); renderList(); redraw(); } }, t.id),
-      h('span', { class: 'muted' }, `${t.observations.length} frames: ${t.observations.map((o) => o.image.replace(/\.[a-z]+$/i, '')).join(', ')}`),
+      h('span', { class: 'muted' }, `${t.observations.length} frames: ${t.observations.map((o) => o.frame.replace(/\.[a-z]+$/i, '')).join(', ')}`),
       h('button', { class: 'small danger', title: 'delete this tie point', onclick: () => change(() => {
-        doc.tiepoints = doc.tiepoints.filter((p) => p.id !== t.id);
+        doc.tie_points = doc.tie_points.filter((p) => p.id !== t.id);
         if (current === t.id) current = null;
       }) }, '✕'))),
-    ...doc.points_of_interest.map((p) => h('div', { class: 'tp-item poi', 'data-id': p.id },
-      h('span', {}, p.id), h('span', { class: 'muted' }, `point of interest in ${p.image}`),
+    ...doc.keypoints.map((p) => h('div', { class: 'tp-item poi', 'data-id': p.id },
+      h('span', {}, p.id), h('span', { class: 'muted' }, `point of interest in ${p.frame}`),
       h('button', { class: 'small danger', onclick: () => change(() => {
-        doc.points_of_interest = doc.points_of_interest.filter((q) => q.id !== p.id);
+        doc.keypoints = doc.keypoints.filter((q) => q.id !== p.id);
       }) }, '✕'))));
     const unsaved = JSON.stringify(doc) !== saved;
-    counts.textContent = `${doc.tiepoints.length} tie points, ${doc.points_of_interest.length} points of interest, ` +
-      `${doc.removed_matches.length} removed matches${unsaved ? ' — unsaved' : ''}`;
+    counts.textContent = `${doc.tie_points.length} tie points, ${doc.keypoints.length} points of interest, ` +
+      `${doc.deleted_matches.length} removed matches${unsaved ? ' — unsaved' : ''}`;
     const marks: Record<string, string> = {};
     if (frameA) marks[frameA] = 'A';
     if (frameB) marks[frameB] = 'B';
@@ -243,7 +243,7 @@ export function mountTiePoints(el: HTMLElement, ws: string | null): () => void {
     try {
       doc = await manualApi.saveTiepoints(ws!, doc);
       saved = JSON.stringify(doc);
-      say(`saved manual/tiepoints.json: ${doc.tiepoints.length} tie points`, 'ok');
+      say(`saved manual/tiepoints.json: ${doc.tie_points.length} tie points`, 'ok');
       renderList();
       return true;
     } catch (e) {

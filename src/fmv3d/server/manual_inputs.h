@@ -1,45 +1,36 @@
-// What the operator enters in the console's hand tools, checked whole before anything is written: tie points
+// What the operator enters in the console's hand tools, checked whole before anything is written (the formats
+// and their readers are docs/manual-inputs.md, io/tiepoints.h and geo/gcp_list.h): tie points
 // (WS/manual/tiepoints.json), ground control points (WS/manual/gcp_list.txt, OpenDroneMap's format), the
-// calibration window's request and the sensor name it saves under. Pure functions, free of HTTP; every
-// failure is a RequestError(400) whose message names the bad item (line, point, observation, field).
+// calibration window's request and the sensor name it saves under. Free of HTTP; every failure is a
+// RequestError(400) whose message names the bad items (entry, line, field).
 #pragma once
 
+#include <filesystem>
 #include <string>
 #include <string_view>
 #include <vector>
 
 #include <nlohmann/json.hpp>
 
+#include "fmv3d/io/tiepoints.h"
+
 namespace fmv3d::server {
 
-struct FrameSize {
-  std::string name;
-  int width = 0, height = 0;
-};
+// PUT body of tie points (manual/tiepoints.json's JSON) checked against the workspace's frames, then written
+// atomically to `path`; returns the document as written.
+nlohmann::json SaveTiePoints(std::string_view body, const io::FrameTable& frames, const std::filesystem::path& path);
+// The saved document, or an empty one.
+nlohmann::json LoadTiePoints(const std::filesystem::path& path);
 
-// manual/tiepoints.json (docs/manual-inputs.md):
-//   {"version": 1,
-//    "tiepoints": [{"id": "t1", "observations": [{"image": NAME, "x": px, "y": px}, ...]}],   ≥ 2 images each
-//    "points_of_interest": [{"id": "p1", "image": NAME, "x": px, "y": px}],                  single-frame keypoints
-//    "removed_matches": [{"image1": NAME, "image2": NAME, "x1", "y1", "x2", "y2"}]}          wrong automatic matches
-// Pixel coordinates in fmv3d's convention (origin at the image's top-left corner, pixel centres at +0.5).
-// Returns the normalised document (missing arrays added); rejects unknown frames, points outside the image,
-// tie points with fewer than 2 observations or two in one frame, duplicate ids, unknown fields.
-nlohmann::json ValidateTiePoints(std::string_view body, const std::vector<FrameSize>& frames);
-nlohmann::json EmptyTiePoints();
-
-// GCPs as the console shows them: {"crs": "EPSG:N" or a PROJ string, "points": [{"name", "x", "y", "z",
-// "check": bool, "observations": [{"image", "x", "y"}]}]}; x/y/z are the file's geo_x geo_y geo_z (for
-// EPSG:4326: longitude, latitude, ellipsoidal height).
-// gcp_list.txt: first line the CRS ("EPSG:N", "WGS84 UTM 32N" or a PROJ string), then one observation per line:
-// "geo_x geo_y geo_z im_x im_y image_name [gcp_name] [check]" (a point whose lines carry the word "check" in
-// the eighth column is a check point). Blank lines and lines starting with '#' are skipped.
-// Rejects: an unknown CRS (EPSG code PROJ does not know), a line with too few or non-numeric columns (naming
-// the line number), an image not in the workspace, a pixel outside the image, a point clicked in fewer than
-// 2 frames, one name with two different coordinates.
-nlohmann::json ParseGcpText(std::string_view text, const std::vector<FrameSize>& frames);
-nlohmann::json GcpsFromJson(std::string_view body, const std::vector<FrameSize>& frames);
-std::string FormatGcpText(const nlohmann::json& gcps);
+// GCPs as the console shows them: {"crs": line 1 of gcp_list.txt, "points": [{"name", "x", "y", "z", "check",
+// "observations": [{"frame", "x", "y"}]}]}; x/y/z are the file's geo_x geo_y geo_z (for EPSG:4326: longitude,
+// latitude, ellipsoidal height).
+// From the text of a gcp_list.txt (import) or that JSON (the page's table): parsed and checked by geo/gcp_list
+// (CRS known, every line well-formed, frames that exist, pixels inside the image) and every point marked in at
+// least 2 frames; then written atomically to `path`. Returns the JSON form of what was written.
+nlohmann::json SaveGcpText(std::string_view text, const io::FrameTable& frames, const std::filesystem::path& path);
+nlohmann::json SaveGcpJson(std::string_view body, const io::FrameTable& frames, const std::filesystem::path& path);
+nlohmann::json LoadGcps(const std::filesystem::path& path);
 
 // POST /api/workspaces/{ws}/calibration: {"images": [workspace-relative paths], "board": "9x6" or
 // {"cols", "rows"}, "square": metres}.

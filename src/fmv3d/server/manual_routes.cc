@@ -1,5 +1,6 @@
 // The console's hand tools (docs/console-api.md, "Hand tools"): frames with their state, a frame's keypoints,
 // the matches of a pair, tie points and GCPs entered by the operator, and the chessboard calibration window.
+#include <algorithm>
 #include <fstream>
 #include <map>
 #include <mutex>
@@ -14,6 +15,7 @@
 #include "fmv3d/features/matcher.h"
 #include "fmv3d/io/colmap_model.h"
 #include "fmv3d/io/frames_index.h"
+#include "fmv3d/io/tiepoints.h"
 #include "fmv3d/server/manual_inputs.h"
 #include "fmv3d/server/process.h"
 #include "fmv3d/server/routes.h"
@@ -225,6 +227,19 @@ nlohmann::json CalibrationJson(CalibrationRuns& runs, const fs::path& dir) {
   nlohmann::json j = {{"state", state}, {"log", LastLines(out / "calibrate.log", 200)}};
   j["request"] = fs::exists(out / "request.json") ? core::ReadJson(out / "request.json") : nlohmann::json();
   j["result"] = state == "done" ? core::ReadJson(out / "camera.json") : nlohmann::json();
+  // Images uploaded to the workspace, candidates for the board images.
+  std::vector<std::string> uploads;
+  std::error_code ec;
+  if (fs::is_directory(dir / "uploads", ec))
+    for (const auto& e : fs::directory_iterator(dir / "uploads", ec)) {
+      std::string ext = e.path().extension().string();
+      for (auto& c : ext) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+      if (e.is_regular_file(ec) && (ext == ".png" || ext == ".jpg" || ext == ".jpeg" || ext == ".tif" ||
+                                    ext == ".tiff" || ext == ".bmp"))
+        uploads.push_back("uploads/" + e.path().filename().string());
+    }
+  std::sort(uploads.begin(), uploads.end());
+  j["uploads"] = uploads;
   if (state == "done") {
     j["distortion_png"] = "calib/camera-distortion.png";
     j["corners_dir"] = "calib/camera-corners";
@@ -241,13 +256,14 @@ fs::path WorkspaceFile(const fs::path& dir, const std::string& rel, const std::s
   return *p;
 }
 
-std::vector<FrameSize> FrameSizes(const io::FramesIndex& index) {
-  std::vector<FrameSize> out;
-  for (const auto& f : index.frames) {
-    const auto* cam = index.FindCamera(f.camera_id);
-    out.push_back({f.name, cam ? cam->camera.width : 0, cam ? cam->camera.height : 0});
+io::FrameTable FrameTable(const fs::path& dir) {
+  io::FrameTable table = io::FrameTableOf(RequireFrames(dir));
+  // Deleted matches index the automatic keypoints: their counts when the features are there.
+  for (auto& [name, limits] : table) {
+    const fs::path p = features::FeaturePath(dir / "features", name);
+    if (fs::exists(p)) limits.num_keypoints = features::ReadFeatures(p).keypoints.size();
   }
-  return out;
+  return table;
 }
 
 }  // namespace
@@ -270,47 +286,31 @@ void RegisterManualRoutes(httplib::Server& http, Context& ctx) {
   });
   http.Get(ws + "/tiepoints", [&ctx](const httplib::Request& req, httplib::Response& res) {
     Guard(res, [&] {
-      const fs::path p = WorkspaceDir(ctx, req.matches[1]) / "manual" / "tiepoints.json";
-      SendJson(res, 200, fs::exists(p) ? core::ReadJson(p) : EmptyTiePoints());
+      SendJson(res, 200, LoadTiePoints(WorkspaceDir(ctx, req.matches[1]) / "manual" / "tiepoints.json"));
     });
   });
   http.Put(ws + "/tiepoints", [&ctx](const httplib::Request& req, httplib::Response& res) {
     Guard(res, [&] {
       const fs::path dir = WorkspaceDir(ctx, req.matches[1]);
       if (req.body.size() > kMaxJsonBody) throw RequestError(413, "the JSON body is larger than 1 MB", "body");
-      const nlohmann::json j = ValidateTiePoints(req.body, FrameSizes(RequireFrames(dir)));
+      const io::FrameTable frames = FrameTable(dir);
       core::EnsureDirectory(dir / "manual");
-      core::WriteJson(dir / "manual" / "tiepoints.json", j);
-      SendJson(res, 200, j);
+      SendJson(res, 200, SaveTiePoints(req.body, frames, dir / "manual" / "tiepoints.json"));
     });
   });
   http.Get(ws + "/gcps", [&ctx](const httplib::Request& req, httplib::Response& res) {
-    Guard(res, [&] {
-      const fs::path dir = WorkspaceDir(ctx, req.matches[1]);
-      const fs::path p = dir / "manual" / "gcp_list.txt";
-      if (!fs::exists(p)) return SendJson(res, 200, {{"crs", nullptr}, {"points", nlohmann::json::array()}});
-      std::ifstream in(p);
-      std::stringstream text;
-      text << in.rdbuf();
-      SendJson(res, 200, ParseGcpText(text.str(), FrameSizes(RequireFrames(dir))));
-    });
+    Guard(res, [&] { SendJson(res, 200, LoadGcps(WorkspaceDir(ctx, req.matches[1]) / "manual" / "gcp_list.txt")); });
   });
-  // PUT JSON ({"crs", "points"}) or the text of a gcp_list.txt (import); both are validated whole first.
+  // PUT JSON ({"crs", "points"}) or the text of a gcp_list.txt (import); both are checked whole first.
   http.Put(ws + "/gcps", [&ctx](const httplib::Request& req, httplib::Response& res) {
     Guard(res, [&] {
       const fs::path dir = WorkspaceDir(ctx, req.matches[1]);
       if (req.body.size() > kMaxJsonBody) throw RequestError(413, "the body is larger than 1 MB", "body");
-      const auto frames = FrameSizes(RequireFrames(dir));
+      const io::FrameTable frames = io::FrameTableOf(RequireFrames(dir));
       const bool is_json = req.get_header_value("Content-Type").rfind("application/json", 0) == 0;
-      const nlohmann::json gcps = is_json ? GcpsFromJson(req.body, frames) : ParseGcpText(req.body, frames);
       core::EnsureDirectory(dir / "manual");
-      const std::string text = FormatGcpText(gcps);
-      core::WriteAtomically(dir / "manual" / "gcp_list.txt", [&](const fs::path& tmp) {
-        std::ofstream out(tmp);
-        out << text;
-        if (!out) throw Error(tmp.string() + ": cannot write");
-      });
-      SendJson(res, 200, gcps);
+      const fs::path path = dir / "manual" / "gcp_list.txt";
+      SendJson(res, 200, is_json ? SaveGcpJson(req.body, frames, path) : SaveGcpText(req.body, frames, path));
     });
   });
   http.Get(ws + "/gcp_list.txt", [&ctx](const httplib::Request& req, httplib::Response& res) {
