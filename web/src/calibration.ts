@@ -11,6 +11,8 @@ const SVG = 'http://www.w3.org/2000/svg';
 const RESIDUAL_GAIN = 100;  // residual vectors drawn this many times longer than they are
 
 export function mountCalibration(el: HTMLElement, ws: string | null): () => void {
+  delete el.dataset.ready;  // the page element is shared with the other pages
+  delete el.dataset.state;
   if (!ws) { el.append(h('p', { class: 'pad muted' }, 'No workspace yet.')); return () => undefined; }
   const msg = h('div', { class: 'msg', id: 'cal-msg' });
   const say = (text: string, kind: 'ok' | 'error' | '' = '') => { msg.textContent = text; msg.className = `msg ${kind}`; };

@@ -9,6 +9,8 @@ import { FrameView, drawMarker, frameStrip, markStrip } from './frameview';
 import { manualApi, type FrameInfo, type Gcp, type Gcps } from './manual_api';
 
 export function mountGcp(el: HTMLElement, ws: string | null): () => void {
+  delete el.dataset.ready;  // the page element is shared with the other pages
+  delete el.dataset.state;
   if (!ws) { el.append(h('p', { class: 'pad muted' }, 'No workspace yet.')); return () => undefined; }
   const msg = h('div', { class: 'msg', id: 'gcp-msg' });
   const say = (text: string, kind: 'ok' | 'error' | '' = '') => { msg.textContent = text; msg.className = `msg ${kind}`; };

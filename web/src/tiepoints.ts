@@ -13,6 +13,8 @@ import { manualApi, type FrameInfo, type Keypoints, type Pair, type TiePoints } 
 type Mode = 'tie' | 'poi' | 'remove';
 
 export function mountTiePoints(el: HTMLElement, ws: string | null): () => void {
+  delete el.dataset.ready;  // the page element is shared with the other pages
+  delete el.dataset.state;
   if (!ws) { el.append(h('p', { class: 'pad muted' }, 'No workspace yet.')); return () => undefined; }
   const msg = h('div', { class: 'msg', id: 'tp-msg' });
   const say = (text: string, kind: 'ok' | 'error' | '' = '') => { msg.textContent = text; msg.className = `msg ${kind}`; };

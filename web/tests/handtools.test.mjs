@@ -115,6 +115,7 @@ try {
   if (!fs.existsSync(path.join(board, 'frames'))) {
     run(['-q', 'synth', '--scene', 'board', '--frames', '8', '--size', '640x480', '--distortion', '-0.2,0.05,0.001,-0.001', '--seed', '2', '-o', board]);
   }
+  fs.rmSync(path.join(wsRoot, 'cal'), { recursive: true, force: true });
   fs.mkdirSync(path.join(wsRoot, 'cal'), { recursive: true });
   fs.writeFileSync(path.join(wsRoot, 'cal', 'project.json'), '{"inputs": []}');
   for (const f of ['tiepoints.json', 'gcp_list.txt']) fs.rmSync(path.join(ws, 'manual', f), { force: true });
