@@ -1,5 +1,7 @@
-// `fmv3d georef WS [--origin LAT,LON,ALT]`: robust similarity from the sparse model's camera centres to the
-// frames' telemetry positions → WS/geo/sparse_enu/ (COLMAP text model in local ENU metres) and
+// `fmv3d georef WS [--origin LAT,LON,ALT] [--gcp FILE | --no-gcp]`: with ground control points
+// (WS/manual/gcp_list.txt or --gcp, geo/georef_gcp.h) the similarity from the triangulated GCPs to their
+// coordinates; otherwise the robust similarity from the sparse model's camera centres to the frames' telemetry
+// positions → WS/geo/sparse_enu/ (COLMAP text model in local ENU metres) and
 // WS/geo/georef.json (origin, similarity, residuals, UTM zone / EPSG, PROJ pipelines). With frames/telemetry.json
 // every packet is fitted against the model trajectory at its time (see geo/georef.h).
 #include <cstdio>
@@ -13,9 +15,9 @@ namespace fmv3d::app {
 namespace {
 
 void Add(CLI::App& app) {
-  auto* cmd = app.add_subcommand("georef", "Georeference the sparse model with telemetry (WS/geo/georef.json, sparse_enu/)");
+  auto* cmd = app.add_subcommand("georef", "Georeference the sparse model with GCPs or telemetry (WS/geo/georef.json, sparse_enu/)");
   struct Args {
-    std::string ws, origin, constrain = "auto";
+    std::string ws, origin, constrain = "auto", gcp;
     geo::GeorefOptions opt;
   };
   auto a = std::make_shared<Args>();
@@ -35,7 +37,12 @@ void Add(CLI::App& app) {
   cmd->add_option("--prior-sigma", a->opt.prior_sigma_m, "Telemetry position accuracy per axis, metres (priors' sigma)")
       ->check(CLI::PositiveNumber)
       ->capture_default_str();
-  cmd->callback([a, kf_only, no_fc] {
+  cmd->add_option("--gcp", a->gcp, "Ground control points (OpenDroneMap gcp_list.txt) instead of "
+                                  "WS/manual/gcp_list.txt; GCPs outrank telemetry");
+  auto* no_gcp = cmd->add_flag("--no-gcp", "Ignore WS/manual/gcp_list.txt (georeference from telemetry)");
+  cmd->callback([a, kf_only, no_fc, no_gcp] {
+    if (!a->gcp.empty()) a->opt.gcp_file = a->gcp;
+    a->opt.use_gcps = no_gcp->count() == 0;
     a->opt.use_track = kf_only->count() == 0;
     a->opt.use_frame_centres = no_fc->count() == 0;
     a->opt.constrain = a->constrain == "always"  ? geo::GeorefOptions::Constrain::kAlways
@@ -49,6 +56,17 @@ void Add(CLI::App& app) {
       a->opt.origin = g;
     }
     const auto j = geo::RunGeorefStage(a->ws, a->opt);
+    if (j.value("source", "") == "gcp") {
+      const auto& g = j["gcps"];
+      std::printf("georef: %d GCPs fitted, residual RMS %.3f m; %d check points%s, scale %.5f, %s (EPSG:%d)\n",
+                  g["control_points_used"].get<int>(), g["rms_m"].get<double>(), g["check_points_used"].get<int>(),
+                  g["check_rms_m"].is_number()
+                      ? (", RMS " + std::to_string(g["check_rms_m"].get<double>()) + " m").c_str()
+                      : "",
+                  j["similarity"]["scale"].get<double>(), j["utm"]["name"].get<std::string>().c_str(),
+                  j["utm"]["epsg"].get<int>());
+      return;
+    }
     std::printf("georef: fit on %d %s, %d/%d keyframes inliers, residual RMS %.3f m, expected translation error "
                 "%.2f m, scale %.5f, %s (EPSG:%d)\n",
                 j["fit"]["inliers"].get<int>(), j["fit"]["used"].get<bool>() ? "telemetry packets" : "keyframes",

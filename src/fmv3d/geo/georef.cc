@@ -10,6 +10,7 @@
 #include "fmv3d/core/files.h"
 #include "fmv3d/core/reconstruction.h"
 #include "fmv3d/geo/frame_centres.h"
+#include "fmv3d/geo/georef_gcp.h"
 #include "fmv3d/geo/georef_pairs.h"
 #include "fmv3d/geo/line_of_sight_check.h"
 #include "fmv3d/geo/telemetry_model.h"
@@ -176,6 +177,34 @@ Choice ChooseModel(const io::FramesIndex& index, const std::vector<telemetry::Te
   return c;
 }
 
+// The GCP georeference (georef_gcp.h): same outputs as the telemetry one.
+nlohmann::json RunGcpGeoref(const core::Workspace& ws, const fs::path& gcp_file, const io::FramesIndex& index,
+                            const core::Reconstruction& model, const GeorefOptions& o) {
+  const io::FrameTable frames = io::FrameTableOf(index);
+  const GcpList list = ReadGcpList(gcp_file, &frames);
+  const GcpCrs crs(list.crs);
+  GcpGeorefOptions go;
+  go.origin = o.origin;
+  GcpGeoref g = EstimateGcpGeoref(model, GroupGcps(list), crs, go);
+  g.crs = list.crs;
+  core::EnsureDirectory(ws.geo_dir());
+  core::Reconstruction enu = model;
+  enu.Transform(g.sim);
+  io::WriteColmapText(enu, ws.sparse_enu_dir());
+  nlohmann::json j = g.ToJson();
+  j["gcps"]["file"] = gcp_file.string();
+  j["cameras"] = model.images.size();
+  core::WriteJson(ws.georef_json(), j);
+  spdlog::info("georef: {} control points (RMS {:.3f} m), {} check points{}, scale {:.4f} → {}", g.control_used,
+               g.control_rms_m, g.check_used,
+               g.check_used ? fmt::format(" (RMS {:.3f} m, the independent accuracy)", g.check_rms_m) : "", g.sim.s,
+               ws.georef_json().string());
+  for (const auto& p : g.points)
+    if (!p.triangulated_ok())
+      spdlog::warn("georef: GCP \"{}\" not used: {}", p.name, GcpStatusName(p.status));
+  return j;
+}
+
 }  // namespace
 
 nlohmann::json RunGeorefStage(const core::Workspace& ws, const GeorefOptions& o) {
@@ -185,6 +214,9 @@ nlohmann::json RunGeorefStage(const core::Workspace& ws, const GeorefOptions& o)
     throw Error(ws.name() + ": no sparse/ model — run `fmv3d sparse` first");
   const io::FramesIndex index = io::ReadFramesIndex(ws.frames_json());
   const core::Reconstruction image_model = io::ReadColmapText(ws.sparse_dir());
+  const fs::path manual_gcp = ws.manual_dir() / "gcp_list.txt";
+  if (o.gcp_file || (o.use_gcps && fs::exists(manual_gcp)))
+    return RunGcpGeoref(ws, o.gcp_file.value_or(manual_gcp), index, image_model, o);
   std::optional<std::vector<telemetry::TelemetryTrack>> tracks;
   if (o.use_track && fs::exists(ws.telemetry_json())) tracks = telemetry::ReadTelemetryTracks(ws.telemetry_json());
   const std::vector<telemetry::TelemetryTrack>* track_ptr = tracks ? &*tracks : nullptr;

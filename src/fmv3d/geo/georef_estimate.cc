@@ -26,9 +26,7 @@ void GeorefOptions::Check() const {
 
 bool GeorefSolution::consistent_with_telemetry() const { return fit_fraction >= min_fit_fraction; }
 
-namespace {
-
-nlohmann::json SimJson(const core::Sim3& s) {
+nlohmann::json GeorefSimilarityJson(const core::Sim3& s) {
   const Eigen::Matrix3d R = s.q.toRotationMatrix();
   const Eigen::Matrix4d M = s.Matrix();
   nlohmann::json j;
@@ -42,6 +40,8 @@ nlohmann::json SimJson(const core::Sim3& s) {
   j["maps"] = "X_enu = scale * R * X_sparse + translation";
   return j;
 }
+
+namespace {
 
 // Expected accuracy: rotation from every measurement weighed, translation and scale from the positions, or from
 // their fusion with the frame centres (then at the frame centres' centroid).
@@ -167,7 +167,7 @@ nlohmann::json GeorefSolution::ToJson() const {
   j["origin_source"] = origin_given ? "option" : "telemetry centroid";
   j["vertical_datum"] = VerticalDatumName(datum);
   j["frame"] = "local East-North-Up (topocentric) metres at origin: x east, y north, z up";
-  j["similarity"] = SimJson(sim);
+  j["similarity"] = GeorefSimilarityJson(sim);
   j["rotation_about_track_from"] = RollSourceName(roll_source);
   j["attitude"] = attitude.ToJson();
   j["frame_centres"] = frame_centres.ToJson();

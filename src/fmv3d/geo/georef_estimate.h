@@ -15,6 +15,7 @@
 
 #include <Eigen/Core>
 #include <cstdint>
+#include <filesystem>
 #include <nlohmann/json.hpp>
 #include <optional>
 #include <string>
@@ -46,6 +47,10 @@ struct GeorefOptions {
   double min_fit_fraction = 0.8;
   double prior_sigma_m = 3.0;
   double attitude_sigma_deg = 1.0;  // the telemetry line of sight's accuracy (priors on the optical axes)
+  // Ground control points (geo/georef_gcp.h) outrank telemetry: gcp_file, else WS/manual/gcp_list.txt when it
+  // exists (unless use_gcps is false).
+  std::optional<std::filesystem::path> gcp_file;
+  bool use_gcps = true;
   void Check() const;
 };
 
@@ -80,6 +85,9 @@ struct GeorefSolution {
   // georef.json's content (without "telemetry_constrained", which the stage adds).
   nlohmann::json ToJson() const;
 };
+
+// georef.json's "similarity": scale, rotation (wxyz and 3x3), translation, 4x4 matrix (sparse → ENU).
+nlohmann::json GeorefSimilarityJson(const core::Sim3& sim);
 
 // Steps 1–5 above. model_points: the sparse model's points (for the ground plane). Throws fmv3d::Error on
 // degenerate camera positions or a straight track without enough points to find the ground.

@@ -89,8 +89,8 @@ std::vector<Stage> ReconstructStages(const ReconstructOptions& o) {
       const io::FramesIndex index = io::ReadFramesIndex(ws.frames_json());
       const bool any = std::any_of(index.frames.begin(), index.frames.end(),
                                    [](const io::FrameRecord& f) { return !f.telemetry.is_null(); });
-      if (!any) {
-        spdlog::info("{}: no telemetry in frames.json (KLV, SRT or GPS), no georeferenced products", stage);
+      if (!any && !fs::exists(ws.manual_dir() / "gcp_list.txt")) {
+        spdlog::info("{}: no telemetry in frames.json (KLV, SRT or GPS) nor GCPs, no georeferenced products", stage);
         return nlohmann::json{{"skipped", "no telemetry"}};
       }
       if (std::string(stage) != "georef" && !fs::exists(ws.georef_json())) {
@@ -102,7 +102,13 @@ std::vector<Stage> ReconstructStages(const ReconstructOptions& o) {
   };
   // georef runs before dense: when the image-only model disagrees with the flight it replaces WS/sparse with the
   // telemetry-initialised model (geo/georef.h), which the dense cloud, mesh and DSM must then be built on.
-  stages.push_back({"georef", [ws] { return std::vector<fs::path>{ws.sparse_dir() / "images.txt"}; }, ws.georef_json(),
+  stages.push_back({"georef",
+                    [ws] {
+                      std::vector<fs::path> in{ws.sparse_dir() / "images.txt"};
+                      if (fs::exists(ws.manual_dir() / "gcp_list.txt")) in.push_back(ws.manual_dir() / "gcp_list.txt");
+                      return in;
+                    },
+                    ws.georef_json(),
                     with_telemetry("georef", [o, root] {
                       // Unusable telemetry must not cost the user the model: the georeferenced products are
                       // skipped instead (dsm and ortho then say so).

@@ -1,0 +1,195 @@
+#include "fmv3d/geo/georef_gcp.h"
+
+#include <fmt/format.h>
+
+#include <cmath>
+
+#include "fmv3d/core/error.h"
+#include "fmv3d/core/stats.h"
+#include "fmv3d/geo/georef_estimate.h"
+#include "fmv3d/geometry/similarity.h"
+#include "fmv3d/geometry/triangulation.h"
+
+namespace fmv3d::geo {
+
+void GcpGeorefOptions::Check() const {
+  if (min_control_points < 3) throw Error("georef: a GCP fit needs at least 3 control points");
+}
+
+const char* GcpStatusName(GcpStatus s) {
+  switch (s) {
+    case GcpStatus::kControl:
+      return "control";
+    case GcpStatus::kCheck:
+      return "check";
+    case GcpStatus::kTooFewFrames:
+      return "fewer than 2 registered frames";
+    case GcpStatus::kNotTriangulated:
+      return "rays do not meet in front of the cameras";
+  }
+  return "";
+}
+
+namespace {
+
+// Triangulates one GCP from its observations in registered images; false when it cannot.
+bool Triangulate(const core::Reconstruction& model, const GroundControlPoint& gcp, GcpResult* r) {
+  std::vector<core::Pose> poses;
+  std::vector<Eigen::Vector2d> normalized, pixels;
+  std::vector<const core::Camera*> cameras;
+  for (const auto& o : gcp.observations) {
+    const core::Image* im = model.FindImageByName(o.frame);
+    if (!im) continue;
+    const core::Camera& cam = model.cameras.at(im->camera_id);
+    poses.push_back(im->pose);
+    normalized.push_back(cam.Unproject({o.x, o.y}).hnormalized());
+    pixels.emplace_back(o.x, o.y);
+    cameras.push_back(&cam);
+  }
+  r->registered_observations = static_cast<int>(poses.size());
+  if (poses.size() < 2) {
+    r->status = GcpStatus::kTooFewFrames;
+    return false;
+  }
+  Eigen::Vector3d X;
+  if (!geometry::TriangulateDLT(poses, normalized, &X)) {
+    r->status = GcpStatus::kNotTriangulated;
+    return false;
+  }
+  geometry::RefinePoint(poses, normalized, &X, 10);
+  double sse = 0;
+  for (size_t k = 0; k < poses.size(); ++k) {
+    const Eigen::Vector3d xc = poses[k].Transform(X);
+    if (xc.z() <= 0) {
+      r->status = GcpStatus::kNotTriangulated;
+      return false;
+    }
+    sse += (cameras[k]->Project(xc) - pixels[k]).squaredNorm();
+  }
+  r->triangulated = X;
+  r->reprojection_px = std::sqrt(sse / poses.size());
+  r->status = gcp.check ? GcpStatus::kCheck : GcpStatus::kControl;
+  return true;
+}
+
+double Rms3d(const std::vector<GcpResult>& points, GcpStatus status, int* n) {
+  double sse = 0;
+  *n = 0;
+  for (const auto& p : points)
+    if (p.status == status) {
+      sse += p.residual_enu.squaredNorm();
+      ++*n;
+    }
+  return *n ? std::sqrt(sse / *n) : 0.0;
+}
+
+}  // namespace
+
+GcpGeoref EstimateGcpGeoref(const core::Reconstruction& model, const std::vector<GroundControlPoint>& gcps,
+                            const GcpCrs& crs, const GcpGeorefOptions& options) {
+  options.Check();
+  GcpGeoref out;
+  out.crs_name = crs.name();
+  out.vertical_datum = crs.vertical_datum();
+  std::vector<GeoPoint> wgs84;
+  for (const auto& g : gcps) wgs84.push_back(crs.ToWgs84(g.geo));
+  if (options.origin) {
+    out.origin = *options.origin;
+    out.origin_given = true;
+  } else {
+    for (const auto& w : wgs84) {
+      out.origin.lat += w.lat / wgs84.size();
+      out.origin.lon += w.lon / wgs84.size();
+      out.origin.alt += w.alt / wgs84.size();
+    }
+  }
+  const LocalFrame frame(out.origin);
+  std::vector<Eigen::Vector3d> src, dst;
+  std::vector<std::string> control_names;
+  for (size_t i = 0; i < gcps.size(); ++i) {
+    GcpResult r;
+    r.name = gcps[i].name;
+    r.observations = static_cast<int>(gcps[i].observations.size());
+    r.enu = frame.ToEnu(wgs84[i]);
+    if (Triangulate(model, gcps[i], &r) && r.status == GcpStatus::kControl) {
+      src.push_back(r.triangulated);
+      dst.push_back(r.enu);
+      control_names.push_back(r.name);
+    }
+    out.points.push_back(std::move(r));
+  }
+  if (static_cast<int>(src.size()) < options.min_control_points) {
+    std::string why;
+    for (const auto& p : out.points)
+      if (p.status != GcpStatus::kControl && p.status != GcpStatus::kCheck)
+        why += fmt::format("; \"{}\": {} ({} of {} observations in registered frames)", p.name,
+                           GcpStatusName(p.status), p.registered_observations, p.observations);
+    throw Error(fmt::format("georef: {} GCP(s) could be triangulated as control points, {} needed (check points "
+                            "are not used in the fit){}",
+                            src.size(), options.min_control_points, why));
+  }
+  if (!geometry::EstimateSimilarity(src, dst, &out.sim) || geometry::Collinearity(dst) < 1e-3)
+    throw Error("georef: the control points (" + fmt::format("{}", fmt::join(control_names, ", ")) +
+                ") are collinear; add a GCP off their line");
+  for (auto& p : out.points)
+    if (p.triangulated_ok()) p.residual_enu = out.sim.Apply(p.triangulated) - p.enu;
+  out.control_rms_m = Rms3d(out.points, GcpStatus::kControl, &out.control_used);
+  out.check_rms_m = Rms3d(out.points, GcpStatus::kCheck, &out.check_used);
+  return out;
+}
+
+nlohmann::json GcpGeoref::ToJson() const {
+  const LocalFrame frame(origin);
+  nlohmann::json j;
+  j["version"] = 1;
+  j["source"] = "gcp";
+  j["origin"] = {{"lat", origin.lat}, {"lon", origin.lon}, {"alt", origin.alt}};
+  j["origin_source"] = origin_given ? "option" : "GCP centroid";
+  j["vertical_datum"] = vertical_datum;
+  j["frame"] = "local East-North-Up (topocentric) metres at origin: x east, y north, z up";
+  j["similarity"] = GeorefSimilarityJson(sim);
+  nlohmann::json pts = nlohmann::json::array();
+  for (const auto& p : points) {
+    nlohmann::json e = {{"name", p.name},
+                        {"status", GcpStatusName(p.status)},
+                        {"check", p.status == GcpStatus::kCheck},
+                        {"observations", p.observations},
+                        {"registered_observations", p.registered_observations},
+                        {"enu", {p.enu.x(), p.enu.y(), p.enu.z()}}};
+    if (p.triangulated_ok()) {
+      e["residual_m"] = p.residual_enu.norm();
+      e["residual_enu_m"] = {p.residual_enu.x(), p.residual_enu.y(), p.residual_enu.z()};
+      e["residual_horizontal_m"] = p.residual_enu.head<2>().norm();
+      e["reprojection_px"] = p.reprojection_px;
+    }
+    pts.push_back(e);
+  }
+  j["gcps"] = {{"crs", crs},
+               {"crs_name", crs_name},
+               {"vertical_datum", vertical_datum},
+               {"points", pts},
+               {"control_points_used", control_used},
+               {"check_points_used", check_used},
+               {"rms_m", control_rms_m},
+               {"check_rms_m", check_used ? nlohmann::json(check_rms_m) : nlohmann::json()},
+               {"fit", "least-squares similarity (Umeyama) of the triangulated control points to their coordinates"},
+               {"independent_accuracy",
+                check_used ? "check_rms_m: check points left out of the fit"
+                           : "none: mark GCPs as check points (extra field \"check\") to measure it"}};
+  // The keys the telemetry georeference writes and later stages read.
+  j["cameras"] = 0;
+  j["inliers"] = control_used;
+  j["residuals"] = {{"rms_m", control_rms_m}, {"per_gcp", "see gcps.points"}};
+  j["consistent_with_telemetry"] = true;
+  j["telemetry"] = "not used: GCPs outrank telemetry";
+  j["trusted"] = true;
+  const UtmZone zone = frame.utm_zone();
+  j["utm"] = {{"zone", zone.zone}, {"north", zone.north}, {"epsg", zone.Epsg()}, {"name", zone.Name()}};
+  j["proj"] = {
+      {"enu_from_wgs84", frame.EnuPipeline()}, {"utm_from_wgs84", frame.UtmPipeline()}, {"wgs84_crs", "EPSG:4979"}};
+  j["to_wgs84"] = "WGS84 (lon, lat, h) = inverse of proj.enu_from_wgs84 applied to X_enu";
+  j["wkt_utm"] = UtmWkt(zone);
+  return j;
+}
+
+}  // namespace fmv3d::geo
