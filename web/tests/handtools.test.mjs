@@ -301,6 +301,10 @@ try {
     const g = JSON.parse(fs.readFileSync(path.join(ws, 'geo', 'georef.json'), 'utf8'));
     assert(g.gcps || g.gcp, `geo/georef.json has no GCP section: ${Object.keys(g).join(', ')}`);
     assert(await page.locator('#gcp-result h3').count() === 1, 'no georeference section on the page');
+    await waitFor(page, () => document.querySelectorAll('#gcp-residuals tr').length === 6, null, 10000, 'five GCP residuals on the page');
+    const rows = await page.$$eval('#gcp-residuals tr', (trs) => trs.slice(1).map((t) => t.textContent));
+    log(`  georef.json: source ${g.source}, GCP rms ${g.gcps?.rms_m} m, check rms ${g.gcps?.check_rms_m} m; page: ${rows.join(' | ')}`);
+    assert(rows.some((r) => /check/.test(r) && /m$/.test(r)), 'the check point residual is not shown');
   });
 
   // ---------------------------------------------------------------- calibration
