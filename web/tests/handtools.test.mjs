@@ -84,6 +84,43 @@ function readTruthPoints(dir) {
   }
   return m;
 }
+// Camera centres (C = −Rᵀt) of a COLMAP images.txt, by image name.
+function readCentres(file) {
+  const lines = fs.readFileSync(file, 'utf8').split('\n').filter((l) => l && !l.startsWith('#'));
+  const out = new Map();
+  for (let i = 0; i < lines.length; i += 2) {
+    const v = lines[i].trim().split(/\s+/);
+    const [w, x, y, z] = v.slice(1, 5).map(Number), t = v.slice(5, 8).map(Number);
+    const R = [[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+      [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+      [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]];
+    out.set(v[9], [0, 1, 2].map((c) => -(R[0][c] * t[0] + R[1][c] * t[1] + R[2][c] * t[2])));
+  }
+  return out;
+}
+// WGS84 geodesy for the georeference check: local ENU at an origin → latitude, longitude, ellipsoidal height.
+const WGS_A = 6378137, WGS_E2 = 6.69437999014e-3;
+function toEcef(latDeg, lonDeg, h) {
+  const p = latDeg * Math.PI / 180, l = lonDeg * Math.PI / 180;
+  const N = WGS_A / Math.sqrt(1 - WGS_E2 * Math.sin(p) ** 2);
+  return [(N + h) * Math.cos(p) * Math.cos(l), (N + h) * Math.cos(p) * Math.sin(l), (N * (1 - WGS_E2) + h) * Math.sin(p)];
+}
+function enuToGeodetic(origin, [e, n, u]) {
+  const p = origin.lat * Math.PI / 180, l = origin.lon * Math.PI / 180;
+  const o = toEcef(origin.lat, origin.lon, origin.alt);
+  const X = [o[0] - Math.sin(l) * e - Math.sin(p) * Math.cos(l) * n + Math.cos(p) * Math.cos(l) * u,
+    o[1] + Math.cos(l) * e - Math.sin(p) * Math.sin(l) * n + Math.cos(p) * Math.sin(l) * u,
+    o[2] + Math.cos(p) * n + Math.sin(p) * u];
+  const lon = Math.atan2(X[1], X[0]), r = Math.hypot(X[0], X[1]);
+  let lat = Math.atan2(X[2], r * (1 - WGS_E2)), h = 0;
+  for (let i = 0; i < 10; i++) {
+    const N = WGS_A / Math.sqrt(1 - WGS_E2 * Math.sin(lat) ** 2);
+    h = r / Math.cos(lat) - N;
+    lat = Math.atan2(X[2], r * (1 - WGS_E2 * N / (N + h)));
+  }
+  return [lat * 180 / Math.PI, lon * 180 / Math.PI, h];
+}
+
 // Scene points seen in every frame of `frames`, spread over the image (a coarse grid of the first frame).
 function commonPoints(obs, frames, n, margin = 12) {
   const first = obs.get(frames[0]);
@@ -305,6 +342,26 @@ try {
     const rows = await page.$$eval('#gcp-residuals tr', (trs) => trs.slice(1).map((t) => t.textContent));
     log(`  georef.json: source ${g.source}, GCP rms ${g.gcps?.rms_m} m, check rms ${g.gcps?.check_rms_m} m; page: ${rows.join(' | ')}`);
     assert(rows.some((r) => /check/.test(r) && /m$/.test(r)), 'the check point residual is not shown');
+    // The georeferenced cameras in absolute coordinates (geo/sparse_enu at georef.json's origin → WGS84 → the
+    // GCPs' UTM zone) against the truth placed where the GCP coordinates put it (E = 500000 + X, ...).
+    const { default: proj4 } = await import('proj4');
+    const utm = proj4('EPSG:4326', '+proj=utm +zone=18 +datum=WGS84 +units=m +no_defs');
+    const truthC = readCentres(path.join(flight, 'truth', 'images.txt'));
+    const geoC = readCentres(path.join(ws, 'geo', 'sparse_enu', 'images.txt'));
+    const b = JSON.parse(fs.readFileSync(path.join(flight, 'truth.json'), 'utf8')).bounds;
+    const extent = Math.hypot(...[0, 1, 2].map((k) => b.max[k] - b.min[k]));
+    let worstC = 0, n = 0;
+    for (const [name, c] of geoC) {
+      const t = truthC.get(name);
+      if (!t) continue;
+      const [lat, lon, h] = enuToGeodetic(g.origin, c);
+      const [E, N] = utm.forward([lon, lat]);
+      worstC = Math.max(worstC, Math.hypot(E - (500000 + t[0]), N - (4200000 + t[1]), h - (100 + t[2])));
+      n++;
+    }
+    log(`  ${n} georeferenced cameras (GCPs only, no telemetry): worst centre error ${worstC.toFixed(3)} m = ${(100 * worstC / extent).toFixed(3)}% of the scene extent ${extent.toFixed(1)} m`);
+    assert(n === frameNames.length, `${n} cameras georeferenced`);
+    assert(worstC <= 0.001 * extent, `camera centres ${worstC.toFixed(3)} m from truth (> 0.1% of ${extent.toFixed(1)} m)`);
   });
 
   // ---------------------------------------------------------------- calibration
