@@ -8,58 +8,15 @@
 //
 // Exit 0: every check passed; 1: a check failed; 77: skipped (no Chromium, no web build or no playwright-core).
 import fs from 'node:fs';
-import os from 'node:os';
 import path from 'node:path';
-import net from 'node:net';
-import { spawn, execFileSync } from 'node:child_process';
 import { fileURLToPath } from 'node:url';
+import { setup, runFmv3d, checks, assert, waitFor, startServer, launchBrowser, log } from './harness.mjs';
 
-const SKIP = 77;
-const here = path.dirname(fileURLToPath(import.meta.url));
-const args = process.argv.slice(2);
-const opt = (name, def) => { const i = args.indexOf(name); return i >= 0 ? args[i + 1] : def; };
-const fmv3d = path.resolve(opt('--fmv3d', path.join(here, '../../build/fmv3d')));
-const webDir = path.resolve(opt('--web', path.join(path.dirname(fmv3d), 'web')));
-const outDir = path.resolve(opt('--out', path.join(path.dirname(fmv3d), 'test-artefacts/handtools')));
-const chromiumPath = opt('--chromium', process.env.CHROMIUM ?? '/usr/bin/chromium');
-const keep = args.includes('--keep');
-
-function skip(why) { console.log(`SKIP: ${why}`); process.exit(SKIP); }
-if (!fs.existsSync(chromiumPath)) skip(`no Chromium at ${chromiumPath} (scripts/install-deps.sh installs it)`);
-if (!fs.existsSync(path.join(webDir, 'index.html'))) skip(`no web build at ${webDir} (make web)`);
-if (!fs.existsSync(fmv3d)) skip(`no fmv3d binary at ${fmv3d}`);
-let chromium;
-try { ({ chromium } = await import('playwright-core')); } catch { skip('playwright-core is not installed (cd web && npm ci)'); }
-
-fs.mkdirSync(outDir, { recursive: true });
-const root = opt('--work') ? path.resolve(opt('--work')) : fs.mkdtempSync(path.join(os.tmpdir(), 'fmv3d-handtools-'));
-const results = [];
+const env = await setup(path.dirname(fileURLToPath(import.meta.url)), 'handtools');
+const { fmv3d, outDir, root, keep } = env;
+const run = (argv, extraEnv) => runFmv3d(fmv3d, argv, extraEnv);
+const { check, fail, finish } = checks();
 let server = null, context = null;
-const log = (...a) => console.log(...a);
-
-function run(argv, env = {}, timeoutMs = 900000) {
-  const t0 = Date.now();
-  const out = execFileSync(fmv3d, argv, { stdio: ['ignore', 'pipe', 'inherit'], timeout: timeoutMs, env: { ...process.env, ...env } });
-  log(`  fmv3d ${argv.join(' ')}  (${((Date.now() - t0) / 1000).toFixed(1)} s)`);
-  return out.toString();
-}
-function freePort() {
-  return new Promise((resolve, reject) => {
-    const s = net.createServer();
-    s.listen(0, '127.0.0.1', () => { const p = s.address().port; s.close(() => resolve(p)); });
-    s.on('error', reject);
-  });
-}
-async function check(name, fn) {
-  const t0 = Date.now();
-  try { await fn(); results.push([name, true]); log(`ok   ${name} (${((Date.now() - t0) / 1000).toFixed(1)} s)`); }
-  catch (e) { results.push([name, false]); log(`FAIL ${name}: ${e?.stack ?? e}`); }
-}
-function assert(cond, msg) { if (!cond) throw new Error(msg); }
-async function waitFor(page, fn, arg, timeout, what) {
-  try { await page.waitForFunction(fn, arg, { timeout, polling: 200 }); }
-  catch { throw new Error(`timed out waiting for ${what}`); }
-}
 const shot = (page, name) => page.screenshot({ path: path.join(outDir, `${name}.png`) });
 
 // truth/images.txt: per frame name, the exact projection of every scene point it sees (point id → [x, y]).
@@ -159,24 +116,10 @@ try {
   const sensorDb = path.join(root, 'user-sensors.json');
   fs.rmSync(sensorDb, { force: true });
 
-  const port = await freePort();
-  server = spawn(fmv3d, ['serve', wsRoot, '--port', String(port), '--host', '127.0.0.1', '--assets', webDir],
-    { stdio: ['ignore', 'pipe', 'pipe'], env: { ...process.env, FMV3D_USER_SENSORS: sensorDb } });
-  const serverLog = fs.createWriteStream(path.join(outDir, 'server.log'));
-  server.stdout.pipe(serverLog); server.stderr.pipe(serverLog);
-  const base = `http://127.0.0.1:${port}/`;
-  for (let i = 0; ; i++) {
-    try { const r = await fetch(base + 'api/health'); if (r.ok) break; } catch { /* not up yet */ }
-    if (i > 100 || server.exitCode !== null) throw new Error(`fmv3d serve did not come up on ${base} (see server.log)`);
-    await new Promise((r) => setTimeout(r, 100));
-  }
-  log(`fmv3d serve at ${base}`);
-  const profile = fs.mkdtempSync(path.join(os.tmpdir(), 'fmv3d-chromium-'));
-  context = await chromium.launchPersistentContext(profile, {
-    executablePath: chromiumPath, headless: true, viewport: { width: 1400, height: 860 },
-    args: ['--headless', '--no-sandbox', '--disable-gpu', '--no-first-run', '--disable-background-networking',
-      '--disable-component-update', '--disable-sync'],
-  });
+  const started = await startServer(env, wsRoot, { FMV3D_USER_SENSORS: sensorDb });
+  server = started.server;
+  const base = started.base;
+  context = await launchBrowser(env, { width: 1400, height: 860 });
   const page = context.pages()[0] ?? await context.newPage();
   const pageErrors = [];
   page.on('pageerror', (e) => pageErrors.push(String(e)));
@@ -424,13 +367,10 @@ try {
 
   assert(pageErrors.length === 0, `page errors: ${pageErrors.join('; ')}`);
 } catch (e) {
-  results.push(['setup', false]);
-  log(`FAIL setup: ${e?.stack ?? e}`);
+  fail('setup', e);
 } finally {
   await context?.close().catch(() => undefined);
-  server?.kill('SIGTERM');
-  if (!keep && !opt('--work')) fs.rmSync(root, { recursive: true, force: true });
+  if (server && server.exitCode === null) server.kill('SIGTERM');
+  if (!keep) fs.rmSync(root, { recursive: true, force: true });
 }
-const failed = results.filter(([, ok]) => !ok);
-log(`${results.length - failed.length} / ${results.length} checks passed; screenshots in ${outDir}`);
-process.exit(failed.length ? 1 : 0);
+finish(outDir);
