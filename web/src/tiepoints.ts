@@ -31,6 +31,18 @@ export function mountTiePoints(el: HTMLElement, ws: string | null): () => void {
   const show = { keypoints: true, inliers: true, rejected: false };
   let disposed = false;
   let jobId: string | null = null;
+  // What the last `match` did with the manual input (matches/manual.json): where single-frame keypoints were
+  // found in other frames (their tracks), and tie points that disagree with a pair's epipolar geometry.
+  let found: { frame: string; index: number; id: string }[] = [];
+  let manualKeypoints: Record<string, { first_index: number; keypoints: { id: string; x: number; y: number }[] }> = {};
+  // A keypoint index of matches/manual.json: an appended (manual) keypoint, or one of the frame's automatic ones.
+  const keypointAt = (frame: string, index: number): [number, number] | null => {
+    const m = manualKeypoints[frame];
+    if (m && index >= m.first_index) { const k = m.keypoints[index - m.first_index]; return k ? [k.x, k.y] : null; }
+    const kp = keypoints.get(frame);
+    return kp && 4 * index + 1 < kp.keypoints.length ? [kp.keypoints[4 * index], kp.keypoints[4 * index + 1]] : null;
+  };
+  const manualInfo = h('div', { class: 'muted', id: 'tp-manual' });
 
   const stripBox = h('div', { class: 'strip-box' });
   const leftOut = h('div', { class: 'left-out muted', id: 'tp-left-out' });
@@ -59,7 +71,7 @@ export function mountTiePoints(el: HTMLElement, ws: string | null): () => void {
     h('div', { class: 'row' },
       h('button', { id: 'tp-save', onclick: () => void save() }, 'Save'),
       h('button', { id: 'tp-rerun', onclick: () => void rerun() }, 'Re-run from matching')),
-    msg, jobLine);
+    msg, jobLine, manualInfo);
   const titleA = views.a.title, titleB = views.b.title;
   el.append(h('div', { class: 'tp' }, stripBox,
     h('div', { class: 'tp-main' }, h('div', { class: 'tp-views' }, views.a.el, views.b.el), side)));
@@ -188,6 +200,10 @@ export function mountTiePoints(el: HTMLElement, ws: string | null): () => void {
         }
       }
       for (const p of doc.keypoints) if (p.frame === frame) drawMarker(ctx, v, p.x, p.y, '#e040fb', p.id);
+      for (const p of found) {
+        const xy = p.frame === frame ? keypointAt(p.frame, p.index) : null;
+        if (xy) drawMarker(ctx, v, xy[0], xy[1], '#ce93d8', `${p.id} (found)`);
+      }
     },
   });
   views.a.overlays.push(overlay('a'));
@@ -268,7 +284,8 @@ export function mountTiePoints(el: HTMLElement, ws: string | null): () => void {
     jobLine.textContent = `job ${job.id}: ${job.state}${job.stage ? ` (${job.stage})` : ''}`;
     jobLine.dataset.state = job.state;
     if (job.state === 'done') {
-      void loadFrames().then(() => {
+      void Promise.all([loadFrames(), loadManualMatches().catch(() => undefined)]).then(() => {
+        redraw();
         const n = frames.filter((f) => f.registered).length;
         say(`done: ${n} of ${frames.length} frames registered`, 'ok');
         jobLine.replaceChildren(`job ${job.id}: done — `, h('a', { href: `#/3d/${encodeURIComponent(ws!)}` }, 'see it in the 3D view'));
@@ -277,6 +294,27 @@ export function mountTiePoints(el: HTMLElement, ws: string | null): () => void {
     } else if (job.state === 'failed' || job.state === 'stopped') say(`the re-run ${job.state}; see the Jobs page`, 'error');
   }
   const offJobs = store.onJobs((id) => { if (jobId && (id === jobId || id === null)) showJob(store.jobs.get(jobId)); });
+
+  async function loadManualMatches() {
+    found = [];
+    manualInfo.textContent = '';
+    const res = await fetch(fileURL(ws!, 'matches/manual.json'));
+    if (!res.ok) return;
+    const m = await res.json() as {
+      frames?: Record<string, { first_index: number; keypoints: { id: string; x: number; y: number }[] }>;
+      tracks?: { id: string; kind: string; observations: { frame: string; index: number }[] }[];
+      disagreeing?: { id: string; frame1: string; frame2: string; epipolar_px: number }[];
+    };
+    manualKeypoints = m.frames ?? {};
+    for (const t of m.tracks ?? [])
+      if (t.kind === 'keypoint')
+        for (const o of t.observations)
+          if (!doc.keypoints.some((p) => p.id === t.id && p.frame === o.frame)) found.push({ frame: o.frame, index: o.index, id: t.id });
+    const tracks = (m.tracks ?? []).filter((t) => t.kind === 'keypoint');
+    const dis = m.disagreeing ?? [];
+    manualInfo.textContent = `last matching: ${tracks.map((t) => `${t.id} tracked in ${t.observations.length} frames`).join(', ') || 'no keypoint tracks'}` +
+      (dis.length ? `; disagreeing with the epipolar geometry: ${dis.map((d) => `${d.id} (${d.frame1}–${d.frame2}, ${d.epipolar_px.toFixed(1)} px)`).join(', ')}` : '');
+  }
 
   async function loadFrames() {
     const r = await manualApi.frames(ws!);
@@ -294,6 +332,7 @@ export function mountTiePoints(el: HTMLElement, ws: string | null): () => void {
       await loadFrames();
       doc = await manualApi.tiepoints(ws);
       saved = JSON.stringify(doc);
+      await loadManualMatches().catch(() => undefined);
       if (disposed) return;
       const firstLeft = frames.find((f) => !f.registered && f.left_out);
       const a = firstLeft ?? frames[0];
