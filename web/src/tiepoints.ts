@@ -233,13 +233,20 @@ export function mountTiePoints(el: HTMLElement, ws: string | null): () => void {
     if (strip) markStrip(strip, marks);
   }
 
+  function setTitle(which: 'a' | 'b') {
+    const name = which === 'a' ? frameA : frameB;
+    const f = frames.find((x) => x.name === name);
+    const title = which === 'a' ? titleA : titleB;
+    if (!f) { title.replaceChildren(); return; }
+    title.replaceChildren(h('b', {}, `${which.toUpperCase()}: ${f.name}`), ' ',
+      h('span', { class: f.registered ? 'ok-text' : 'error' }, f.registered ? 'registered' : f.left_out ? 'left out' : ''));
+  }
+
   async function pick(name: string, which: 'a' | 'b') {
     if (which === 'a') frameA = name; else frameB = name;
     if (frameA === frameB) { if (which === 'a') frameB = null; else frameA = null; }
     const f = frames.find((x) => x.name === name)!;
-    const title = which === 'a' ? titleA : titleB;
-    title.replaceChildren(h('b', {}, `${which.toUpperCase()}: ${name}`), ' ',
-      h('span', { class: f.registered ? 'ok-text' : 'error' }, f.registered ? 'registered' : f.left_out ? 'left out' : ''));
+    setTitle(which);
     await views[which].load(fileURL(ws!, `frames/${name}`), f.width, f.height);
     if (!keypoints.has(name) && f.features)
       try { keypoints.set(name, await manualApi.keypoints(ws!, name)); } catch (e) { say(String((e as Error).message), 'error'); }
@@ -285,7 +292,7 @@ export function mountTiePoints(el: HTMLElement, ws: string | null): () => void {
     jobLine.dataset.state = job.state;
     if (job.state === 'done') {
       void Promise.all([loadFrames(), loadManualMatches().catch(() => undefined)]).then(() => {
-        redraw();
+        setTitle('a'); setTitle('b'); redraw();
         const n = frames.filter((f) => f.registered).length;
         say(`done: ${n} of ${frames.length} frames registered`, 'ok');
         jobLine.replaceChildren(`job ${job.id}: done — `, h('a', { href: `#/3d/${encodeURIComponent(ws!)}` }, 'see it in the 3D view'));

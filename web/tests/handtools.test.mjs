@@ -121,6 +121,29 @@ try {
   const base = started.base;
   context = await launchBrowser(env, { width: 1400, height: 860 });
   const page = context.pages()[0] ?? await context.newPage();
+  // A second workspace of the same flight in which two frames cannot register automatically: heavy blur and
+  // almost no contrast (drawn here through a canvas filter), so SIFT finds nothing to match in them.
+  const degraded = ['flight-000012.png', 'flight-000013.png'];
+  const wsDeg = path.join(wsRoot, 'degraded');
+  if (!fs.existsSync(path.join(wsDeg, 'sparse', 'images.txt'))) {
+    const input = path.join(root, 'degraded-frames');
+    fs.rmSync(input, { recursive: true, force: true });
+    fs.cpSync(path.join(flight, 'frames'), input, { recursive: true });
+    const tool = await context.newPage();
+    for (const f of degraded) {
+      const file = path.join(input, f);
+      const png = await tool.evaluate(async (src) => {
+        const img = new Image(); img.src = src; await img.decode();
+        const c = document.createElement('canvas'); c.width = img.naturalWidth; c.height = img.naturalHeight;
+        const ctx = c.getContext('2d'); ctx.filter = 'blur(8px) contrast(8%)'; ctx.drawImage(img, 0, 0);
+        return c.toDataURL('image/png');
+      }, 'data:image/png;base64,' + fs.readFileSync(file).toString('base64'));
+      fs.writeFileSync(file, Buffer.from(png.split(',')[1], 'base64'));
+    }
+    await tool.close();
+    run(['-q', 'reconstruct', input, '-o', wsDeg, '--fast', '--until', 'sparse']);
+  }
+  fs.rmSync(path.join(wsDeg, 'manual', 'tiepoints.json'), { force: true });
   const pageErrors = [];
   page.on('pageerror', (e) => pageErrors.push(String(e)));
   const obs = readTruthObservations(flight);
@@ -208,6 +231,69 @@ try {
     assert(state === 'done', `the re-run ended ${state}`);
     assert(new RegExp(`${frameNames.length} of ${frameNames.length} frames registered`).test(text), text);
     assert(await page.locator('#tp-job a[href^="#/3d/"]').count() === 1, 'no link to the 3D view');
+  });
+
+  await check('degraded frames left out automatically register through tie points clicked in the page (≤ 0.1% of the extent)', async () => {
+    await page.goto(base + '#/tiepoints/degraded');
+    await waitFor(page, () => document.querySelector('.page-tiepoints')?.dataset.ready === '1', null, 20000, 'the editor');
+    const leftOut = await page.textContent('#tp-left-out');
+    log(`  ${leftOut}`);
+    assert(/left out: .+/.test(leftOut) && degraded.some((f) => leftOut.includes(f)), `no left-out reason shown: ${leftOut}`);
+    let k = 0;
+    for (const d of degraded) {
+      const i = Number(/(\d+)\.png$/.exec(d)[1]);
+      const near = [i - 2, i + 2].map((j) => `flight-${String(j).padStart(6, '0')}.png`);
+      const ids = commonPoints(obs, [d, ...near], 8);
+      assert(ids.length >= 6, `only ${ids.length} scene points common to ${d} and ${near}`);
+      await page.click(`.thumb[data-frame="${d}"]`);
+      await page.click(`.thumb[data-frame="${near[0]}"]`, { modifiers: ['Shift'] });
+      await waitFor(page, ([x, y]) => document.querySelector('.fv-title')?.textContent?.includes(x) &&
+        document.querySelectorAll('.fv-title')[1]?.textContent?.includes(y), [d, near[0]], 20000, 'the two frames');
+      const first = k;
+      for (const id of ids) {
+        await page.click('#tp-new');
+        await clickImage(page, 'fmv3dTiePoints', 'a', ...obs.get(d).get(id));
+        await clickImage(page, 'fmv3dTiePoints', 'b', ...obs.get(near[0]).get(id));
+        k++;
+      }
+      await page.click(`.thumb[data-frame="${near[1]}"]`, { modifiers: ['Shift'] });
+      await waitFor(page, (y) => document.querySelectorAll('.fv-title')[1]?.textContent?.includes(y), near[1], 20000, 'the third frame');
+      for (let n = 0; n < ids.length; n++) {
+        await page.click(`.tp-item[data-id="t${first + n + 1}"] button.link`);
+        await clickImage(page, 'fmv3dTiePoints', 'b', ...obs.get(near[1]).get(ids[n]));
+      }
+    }
+    await shot(page, 'tiepoints-degraded');
+    const doc = await page.evaluate(() => window.fmv3dTiePoints.doc());
+    assert(doc.tie_points.length === k && doc.tie_points.every((t) => t.observations.length === 3), `tie points: ${JSON.stringify(doc.tie_points.map((t) => t.observations.length))}`);
+    await page.click('#tp-rerun');
+    await waitFor(page, () => ['done', 'failed'].includes(document.getElementById('tp-job')?.dataset.state ?? ''), null, 600000, 'the re-run');
+    const state = await page.evaluate(() => document.getElementById('tp-job').dataset.state);
+    await page.waitForTimeout(1500);
+    await shot(page, 'tiepoints-degraded-rerun');
+    assert(state === 'done', `the re-run ended ${state}`);
+    const text = await page.textContent('#tp-msg');
+    log(`  ${k} tie points; ${text}`);
+    run(['-q', 'evaluate-sparse', wsDeg, '--truth', path.join(flight, 'truth')]);
+    const ev = JSON.parse(fs.readFileSync(path.join(wsDeg, 'report', 'sparse_eval.json'), 'utf8'));
+    // Each degraded frame's centre error after the evaluation's similarity alignment (model → truth).
+    const [qw, qx, qy, qz] = ev.alignment.q_wxyz;
+    const R = [[1 - 2 * (qy * qy + qz * qz), 2 * (qx * qy - qz * qw), 2 * (qx * qz + qy * qw)],
+      [2 * (qx * qy + qz * qw), 1 - 2 * (qx * qx + qz * qz), 2 * (qy * qz - qx * qw)],
+      [2 * (qx * qz - qy * qw), 2 * (qy * qz + qx * qw), 1 - 2 * (qx * qx + qy * qy)]];
+    const model = readCentres(path.join(wsDeg, 'sparse', 'images.txt'));
+    const truthC = readCentres(path.join(flight, 'truth', 'images.txt'));
+    for (const d of degraded) {
+      const c = model.get(d);
+      assert(c, `${d} is still not registered (${text})`);
+      const a = [0, 1, 2].map((r) => ev.alignment.scale * (R[r][0] * c[0] + R[r][1] * c[1] + R[r][2] * c[2]) + ev.alignment.t[r]);
+      const t = truthC.get(d);
+      const err = Math.hypot(a[0] - t[0], a[1] - t[1], a[2] - t[2]);
+      log(`  ${d}: centre error ${err.toFixed(3)} m = ${(100 * err / ev.extent).toFixed(4)}% of the extent ${ev.extent.toFixed(1)} m`);
+      assert(err <= 0.001 * ev.extent, `${d}: ${(100 * err / ev.extent).toFixed(4)}% of the extent`);
+    }
+    log(`  all ${ev.registered_images} frames: max centre error ${ev.max_centre_error_percent_of_extent.toFixed(4)}% of the extent`);
+    assert(ev.registered_images === frameNames.length, `${ev.registered_images} of ${frameNames.length} registered`);
   });
 
   // ---------------------------------------------------------------- GCPs
