@@ -1,4 +1,5 @@
-// `fmv3d match WS`: pair selection, descriptor matching and geometric verification → WS/matches/.
+// `fmv3d match WS`: pair selection, descriptor matching and geometric verification → WS/matches/; then the
+// operator's tie points (WS/manual/tiepoints.json or --tiepoints) as correspondences verification never discards.
 #include <spdlog/spdlog.h>
 
 #include "command.h"
@@ -14,7 +15,8 @@ void Add(CLI::App& app) {
   struct Args {
     std::string ws, pairs = "auto", matcher = "auto";
     features::MatchStageOptions opt;
-    bool no_mutual = false, no_quadratic = false;
+    bool no_mutual = false, no_quadratic = false, no_tiepoints = false;
+    std::string tiepoints;
     uint64_t seed = 0;
   };
   auto a = std::make_shared<Args>();
@@ -47,8 +49,18 @@ void Add(CLI::App& app) {
   cmd->add_option("--min-inliers", a->opt.verify.min_inliers, "Pairs with fewer inliers are dropped")
       ->capture_default_str();
   cmd->add_option("--seed", a->seed, "Random seed (results are deterministic for a seed)")->capture_default_str();
+  cmd->add_option("--tiepoints", a->tiepoints,
+                  "The operator's tie points (docs/manual-inputs.md) instead of WS/manual/tiepoints.json");
+  cmd->add_flag("--no-tiepoints", a->no_tiepoints, "Ignore WS/manual/tiepoints.json");
+  cmd->add_option("--tie-max-epipolar-px", a->opt.manual.max_epipolar_px,
+                  "Report tie points farther than this from the automatic epipolar line (they are kept)")
+      ->capture_default_str();
+  cmd->add_option("--tie-scale", a->opt.manual.keypoint_scale_px, "Descriptor scale at a clicked point, pixels")
+      ->capture_default_str();
   cmd->callback([a] {
     const core::Workspace ws(a->ws);
+    if (!a->tiepoints.empty()) a->opt.tiepoints_file = a->tiepoints;
+    a->opt.use_tiepoints = !a->no_tiepoints;
     ws.Require(ws.frames_json(), "frames");
     ws.Require(ws.features_dir(), "features");
     auto& o = a->opt;

@@ -12,6 +12,7 @@ void Add(CLI::App& app) {
   struct Args {
     std::string ws;
     sfm::SparseStageOptions opt;
+    bool no_tiepoints = false;
   };
   auto a = std::make_shared<Args>();
   auto& m = a->opt.mapper;
@@ -56,8 +57,16 @@ void Add(CLI::App& app) {
   cmd->add_option("--focal-scan-pairs", m.focal_scan_pairs, "Guessed focal: pairs the focal scan uses")
       ->capture_default_str();
   cmd->add_option("--seed", m.seed, "Random seed")->capture_default_str();
+  cmd->add_option("--tie-weight", a->opt.manual.options.weight,
+                  "Weight of a tie-point observation against an automatic one in bundle adjustment")
+      ->capture_default_str();
+  cmd->add_option("--tie-min-points", a->opt.manual.options.min_tie_points,
+                  "Tie points (already in the model) a left-out frame needs to register through them")
+      ->capture_default_str();
+  cmd->add_flag("--no-tiepoints", a->no_tiepoints, "Ignore the tie points of WS/matches/manual.json");
   cmd->callback([a] {
     a->opt.mapper.filter_max_error_px = a->opt.mapper.tri_max_error_px;
+    a->opt.manual.enabled = !a->no_tiepoints;
     sfm::RunSparseStage(a->ws, a->opt);
   });
 }

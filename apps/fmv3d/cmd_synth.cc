@@ -171,11 +171,17 @@ void Add(CLI::App& app) {
       ->check(CLI::Range(0.0, 30.0))
       ->capture_default_str();
   cmd->add_flag("!--no-scene", o->write_scene, "Do not write scene.obj and its textures");
+  auto degrade = std::make_shared<std::vector<std::string>>();
+  cmd->add_option("--degrade", *degrade,
+                  "Degrade frames so they cannot register automatically: FRAMES:KIND, e.g. 5,6:blur "
+                  "(KIND: blur = heavy motion blur, contrast = 3% contrast, blank = texture-less patch); repeatable");
   cmd->add_option("-o,--output", *output, "Output folder")->required();
   cmd->callback([=] {
     synth::SynthOptions opts = *o;
     std::sscanf(size->c_str(), "%d%*c%d", &opts.width, &opts.height);
     if (focal_opt->count()) opts.focal = *focal;
+    for (const auto& spec : *degrade)
+      for (const auto& d : synth::ParseDegradation(spec)) opts.degrade.push_back(d);
     if (alt_opt->count()) opts.flight.altitude = *altitude;
     if (rad_opt->count()) opts.flight.radius = *radius;
     if (!distortion->empty()) {

@@ -6,6 +6,7 @@
 #include <atomic>
 #include <chrono>
 #include <mutex>
+#include <set>
 
 #include "fmv3d/core/error.h"
 #include "fmv3d/core/files.h"
@@ -14,6 +15,8 @@
 #include "fmv3d/features/feature_io.h"
 #include "fmv3d/features/spatial_pairs.h"
 #include "fmv3d/io/frames_index.h"
+#include "fmv3d/io/tiepoints.h"
+#include <opencv2/imgcodecs.hpp>
 
 namespace fmv3d::features {
 namespace fs = std::filesystem;
@@ -228,8 +231,50 @@ MatchStageStats RunMatchStage(const core::Workspace& ws, const MatchStageOptions
     stats.planar_or_rotation += vp.geometry == PairGeometry::kPlanarOrRotation;
     kept.push_back(vp);
   }
-  stats.pairs_verified = kept.size();
+  // --- The operator's tie points, keypoints and deleted matches.
+  const fs::path tiepoints_path = options.tiepoints_file.value_or(ws.manual_dir() / "tiepoints.json");
+  const fs::path manual_path = ManualMatchesPath(matches_dir);
+  nlohmann::json manual_summary = {{"used", false}};
   core::EnsureDirectory(matches_dir);
+  if (options.tiepoints_file || (options.use_tiepoints && fs::exists(tiepoints_path))) {
+    io::FrameTable table = io::FrameTableOf(index);
+    for (size_t i = 0; i < n; ++i) table[index.frames[i].name].num_keypoints = features[i].keypoints.size();
+    const io::TiePoints tie_points = io::ReadTiePoints(tiepoints_path, &table);
+    std::set<std::string> clicked;
+    for (const auto& tp : tie_points.tie_points)
+      for (const auto& o : tp.observations) clicked.insert(o.frame);
+    for (const auto& kp : tie_points.keypoints) clicked.insert(kp.point.frame);
+    std::map<uint32_t, cv::Mat> images;
+    for (size_t i = 0; i < n; ++i)
+      if (clicked.count(index.frames[i].name)) {
+        images[i] = cv::imread((ws.frames_dir() / index.frames[i].name).string(), cv::IMREAD_COLOR);
+        if (images[i].empty())
+          spdlog::warn("match: cannot read frames/{}: its tie points get no descriptor", index.frames[i].name);
+      }
+    ManualMatches manual = AppendManualKeypoints(tie_points, index, images, &features, options.manual);
+    const size_t pairs_before = kept.size();
+    ApplyManualMatches(tie_points, index, features, options.manual, &manual, &kept);
+    core::WriteJson(manual_path, manual.ToJson(index));
+    nlohmann::json disagreeing = manual.ToJson(index)["disagreeing"];
+    manual_summary = {{"used", true},
+                      {"file", tiepoints_path.string()},
+                      {"tie_points", tie_points.tie_points.size()},
+                      {"keypoints", tie_points.keypoints.size()},
+                      {"keypoint_matches_found", manual.keypoints_matched},
+                      {"deleted_matches_removed", manual.deleted},
+                      {"deleted_matches_not_found", manual.deleted_not_found},
+                      {"pairs_added", kept.size() > pairs_before ? kept.size() - pairs_before : 0},
+                      {"max_epipolar_px", options.manual.max_epipolar_px},
+                      {"disagreeing", disagreeing}};
+    for (const auto& d : manual.disagreeing)
+      spdlog::warn("match: tie point \"{}\" is {:.1f} px from the epipolar line of {} / {} (kept)", d.id,
+                   d.epipolar_px, index.frames[d.image1].name, index.frames[d.image2].name);
+    spdlog::info("match: {} tie points, {} keypoints ({} matches found), {} deleted matches removed",
+                 tie_points.tie_points.size(), tie_points.keypoints.size(), manual.keypoints_matched, manual.deleted);
+  } else if (fs::exists(manual_path)) {
+    fs::remove(manual_path);
+  }
+  stats.pairs_verified = kept.size();
   WriteMatches(kept, MatchesPath(matches_dir));
   stats.seconds_total = Since(t_start);
   const nlohmann::json summary = {
@@ -258,6 +303,7 @@ MatchStageStats RunMatchStage(const core::Workspace& ws, const MatchStageOptions
         {"loop_closure_candidates", options.pairs.loop_closure_candidates},
         {"max_error_px", options.verify.max_error_px},
         {"min_inliers", options.verify.min_inliers}}},
+      {"manual", manual_summary},
       {"pairs", per_pair}};
   core::WriteJson(MatchesSummaryPath(matches_dir), summary);
   spdlog::info(

@@ -7,11 +7,17 @@
 // kCalibrated and keeps E's inliers. With a guessed prior the pair keeps F's inliers (F does not depend on the
 // guess) and is only labelled kCalibrated when the guessed E still explains ≥ 95% of them (the guess is then
 // good enough for this pair); its relative pose (R, t) is filled in either case when E gives one.
+//
+// The operator's tie points (WS/manual/tiepoints.json, or MatchStageOptions::tiepoints_file) are added after the
+// automatic matching (features/manual_matches.h): WS/matches/manual.json holds the keypoints they append, and
+// matches.json "manual" what was added, found and deleted, and the tie points that disagree with an automatic F.
 #pragma once
 
 #include <filesystem>
+#include <optional>
 
 #include "fmv3d/core/workspace.h"
+#include "fmv3d/features/manual_matches.h"
 #include "fmv3d/features/matcher.h"
 #include "fmv3d/features/pairs.h"
 #include "fmv3d/geometry/two_view.h"
@@ -22,7 +28,11 @@ struct MatchStageOptions {
   PairOptions pairs;
   MatchOptions match;
   geometry::TwoViewOptions verify;
+  ManualMatchOptions manual;
+  std::optional<std::filesystem::path> tiepoints_file;  // default: WS/manual/tiepoints.json when it exists
+  bool use_tiepoints = true;
   void Check() const {
+    manual.Check();
     pairs.Check();
     match.Check();
     verify.Check();

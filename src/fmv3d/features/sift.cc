@@ -54,6 +54,36 @@ void QuantiseDescriptors(const cv::Mat& d, bool root_sift, Descriptors* out) {
   }
 }
 
+Descriptors DescribeAt(const cv::Mat& image, const std::vector<Keypoint>& keypoints, bool root_sift) {
+  Descriptors out(0, 128);
+  if (keypoints.empty()) return out;
+  cv::Mat grey;
+  if (image.channels() == 1)
+    grey = image;
+  else
+    cv::cvtColor(image, grey, cv::COLOR_BGR2GRAY);
+  // The inverse of ExtractSift's conversion (OpenCV's centres at integers and its 0.25 px offset).
+  std::vector<cv::KeyPoint> kps;
+  for (const auto& k : keypoints)
+    kps.emplace_back(cv::Point2f(k.x - 0.25f, k.y - 0.25f), std::max(2.0f, 2 * k.scale), 0.0f);
+  cv::Mat desc;
+  cv::SIFT::create()->compute(grey, kps, desc);
+  if (desc.rows != static_cast<int>(keypoints.size())) {
+    // OpenCV drops keypoints it cannot describe (too close to the border): describe them one by one.
+    cv::Mat all = cv::Mat::zeros(static_cast<int>(keypoints.size()), 128, CV_32F);
+    for (size_t i = 0; i < keypoints.size(); ++i) {
+      std::vector<cv::KeyPoint> one = {cv::KeyPoint(cv::Point2f(keypoints[i].x - 0.25f, keypoints[i].y - 0.25f),
+                                                    std::max(2.0f, 2 * keypoints[i].scale), 0.0f)};
+      cv::Mat d;
+      cv::SIFT::create()->compute(grey, one, d);
+      if (d.rows == 1) d.copyTo(all.row(static_cast<int>(i)));
+    }
+    desc = all;
+  }
+  QuantiseDescriptors(desc, root_sift, &out);
+  return out;
+}
+
 double KeypointCoverage(const std::vector<Keypoint>& keypoints, int width, int height, int grid) {
   if (width <= 0 || height <= 0 || grid <= 0) return 0;
   std::vector<char> hit(static_cast<size_t>(grid) * grid, 0);

@@ -46,6 +46,11 @@ FeatureSet ExtractSift(const cv::Mat& image, const SiftOptions& options, double*
 // normalised, times 512, clamped.
 void QuantiseDescriptors(const cv::Mat& descriptors_f32, bool root_sift, Descriptors* out);
 
+// Upright SIFT descriptors (orientation 0) at given points of an 8-bit image (fmv3d pixels, full size), each at
+// its keypoint's scale (fmv3d scale: keypoint size / 2); for keypoints the operator places by hand
+// (features/manual_matches.h). Row i belongs to keypoints[i].
+Descriptors DescribeAt(const cv::Mat& image, const std::vector<Keypoint>& keypoints, bool root_sift = true);
+
 struct FeaturesStageStats {
   size_t images = 0, total_keypoints = 0, min_keypoints = 0, max_keypoints = 0;
   size_t adapted_images = 0;  // images whose contrast threshold was lowered

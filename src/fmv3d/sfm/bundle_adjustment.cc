@@ -169,11 +169,24 @@ BundleAdjustmentSummary BundleAdjust(core::Reconstruction* rec, const BundleAdju
     default:
       break;
   }
+  std::unique_ptr<ceres::LossFunction> weighted_loss;
+  if (!config.weighted_from.empty() && config.observation_weight != 1) {
+    if (!(config.observation_weight > 0)) throw Error("bundle adjustment: observation_weight must be positive");
+    weighted_loss = std::make_unique<ceres::ScaledLoss>(shared_loss.get(), config.observation_weight,
+                                                        ceres::DO_NOT_TAKE_OWNERSHIP);
+  }
   std::vector<std::unique_ptr<ceres::Manifold>> subset_manifolds;
   std::unique_ptr<ceres::CostFunction> gauge_prior;
   ceres::Problem problem(popts);
 
   auto loss = [&]() { return shared_loss.get(); };
+  auto loss_of = [&](uint32_t image_id, uint32_t point2d_idx) {
+    if (weighted_loss) {
+      const auto w = config.weighted_from.find(image_id);
+      if (w != config.weighted_from.end() && point2d_idx >= w->second) return weighted_loss.get();
+    }
+    return loss();
+  };
 
   // Per residual: (image, point2d) for the caller and the parameter blocks, to evaluate the plain RMS directly
   // (ceres::Problem::Evaluate builds a whole program for it: measured ~10% of a local adjustment).
@@ -198,7 +211,7 @@ BundleAdjustmentSummary BundleAdjust(core::Reconstruction* rec, const BundleAdju
       if (cit == intr.end()) cit = intr.emplace(image.camera_id, rec->cameras.at(image.camera_id).Params()).first;
       costs.emplace_back(image.points2d[el.point2d_idx]);
       residual_params.push_back({cit->second.data(), pit->second.q.data(), pit->second.t.data(), X.data()});
-      problem.AddResidualBlock(&costs.back(), loss(), residual_params.back().data(), 4);
+      problem.AddResidualBlock(&costs.back(), loss_of(el.image_id, el.point2d_idx), residual_params.back().data(), 4);
       residual_obs.emplace_back(el.image_id, el.point2d_idx);
     }
     if (!options.refine_points) problem.SetParameterBlockConstant(X.data());

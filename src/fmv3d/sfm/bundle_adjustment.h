@@ -67,6 +67,11 @@ struct BundleAdjustmentConfig {
   // pointing; like centre priors they anchor the gauge (three or more).
   std::map<uint32_t, std::pair<Eigen::Vector3d, double>> sight_priors;
   double sight_prior_sigma = 1.0;
+  // Observations weighted above the others (the operator's tie points, appended after the automatic keypoints:
+  // features/manual_matches.h): in image id, the keypoints with index ≥ weighted_from[id] count
+  // observation_weight times (their robust loss scaled by it).
+  std::map<uint32_t, uint32_t> weighted_from;
+  double observation_weight = 1;
 };
 
 struct BundleAdjustmentSummary {

@@ -138,6 +138,13 @@ class ModelBuilder {
     return FindCorrespondences2D3D(rec_, graph_, image_id, images_.at(image_id)->keypoints);
   }
   bool TryRegister(uint32_t image_id);
+  // A configuration carrying the weights of the operator's tie points.
+  BundleAdjustmentConfig NewBaConfig() const {
+    BundleAdjustmentConfig cfg;
+    cfg.weighted_from = input_.manual_from;
+    cfg.observation_weight = input_.manual_weight;
+    return cfg;
+  }
   int RelocaliseImages();
   void LocalBundleAdjust(uint32_t image_id);
   BundleAdjustmentSummary GlobalBundleAdjust(bool final_pass);
@@ -353,7 +360,7 @@ bool ModelBuilder::TryInitialPair(const PairCandidate& c) {
     made += triangulator_.CreatePoint({{pair.image_id1, m.idx1}, {pair.image_id2, m.idx2}}) != core::kNoPoint3D;
   }
   if (made < opt_.init_min_inliers / 2) return false;
-  BundleAdjustmentConfig cfg;
+  BundleAdjustmentConfig cfg = NewBaConfig();
   cfg.gauge_image1 = gauge1_;
   cfg.gauge_image2 = gauge2_;
   for (const auto& [cid, cam] : rec_.cameras) cfg.constant_cameras.insert(cid);
@@ -529,7 +536,7 @@ void ModelBuilder::LocalBundleAdjust(uint32_t image_id) {
   std::vector<std::pair<int, uint32_t>> order;
   for (const auto& [id, n] : shared) order.emplace_back(-n, id);
   std::sort(order.begin(), order.end());
-  BundleAdjustmentConfig cfg;
+  BundleAdjustmentConfig cfg = NewBaConfig();
   cfg.variable_images.insert(image_id);
   for (size_t i = 0; i < order.size() && static_cast<int>(i) < opt_.local_ba_num_images - 1; ++i)
     cfg.variable_images.insert(order[i].second);
@@ -555,7 +562,7 @@ void ModelBuilder::LocalBundleAdjust(uint32_t image_id) {
 
 BundleAdjustmentSummary ModelBuilder::GlobalBundleAdjust(bool final_pass) {
   const auto start = Clock::now();
-  BundleAdjustmentConfig cfg;
+  BundleAdjustmentConfig cfg = NewBaConfig();
   cfg.gauge_image1 = gauge1_;
   cfg.gauge_image2 = gauge2_;
   BundleAdjustmentOptions o = BaOptions();
@@ -587,7 +594,7 @@ bool ModelBuilder::TrySelfCalibration(IntrinsicGroup group) {
   // large model), far below the price of a parameter for such a model, so the test needs no tighter convergence.
   o.function_tolerance = std::max(opt_.final_ba_function_tolerance, 1e-6);
   o.max_iterations = opt_.final_ba_max_iterations;
-  BundleAdjustmentConfig cfg;
+  BundleAdjustmentConfig cfg = NewBaConfig();
   cfg.gauge_image1 = gauge1_;
   cfg.gauge_image2 = gauge2_;
   NestedModelTestOptions to;
@@ -611,7 +618,7 @@ bool ModelBuilder::TrySelfCalibration(IntrinsicGroup group) {
 void ModelBuilder::DollyZoomFocalScan() {
   dolly_done_ = true;
   const auto start = Clock::now();
-  BundleAdjustmentConfig cfg;
+  BundleAdjustmentConfig cfg = NewBaConfig();
   cfg.gauge_image1 = gauge1_;
   cfg.gauge_image2 = gauge2_;
   DollyZoomScanOptions so;

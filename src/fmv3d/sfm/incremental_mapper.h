@@ -45,6 +45,10 @@ struct MapperInput {
   std::map<uint32_t, MapperCamera> cameras;
   std::vector<MapperImage> images;
   std::vector<features::VerifiedPair> pairs;
+  // The operator's tie points appended to the keypoints (features/manual_matches.h): image id → first such
+  // index; their observations weigh manual_weight times an automatic one in every bundle adjustment.
+  std::map<uint32_t, uint32_t> manual_from;
+  double manual_weight = 1;
 };
 
 struct MapperOptions {

@@ -12,6 +12,7 @@
 #include "fmv3d/core/files.h"
 #include "fmv3d/core/workspace.h"
 #include "fmv3d/features/feature_io.h"
+#include "fmv3d/features/manual_matches.h"
 #include "fmv3d/io/colmap_model.h"
 #include "fmv3d/io/frames_index.h"
 #include "fmv3d/sfm/relocalise.h"
@@ -37,29 +38,11 @@ void WritePointsPly(const core::Reconstruction& rec, const fs::path& path) {
   });
 }
 
-// Images outside the largest model retried against it (relocalise.h); those that register leave the other
-// models, whose shrunken remains are dropped below the mapper's minimum model size.
-nlohmann::json RelocaliseLeftOut(const MapperInput& input, const std::vector<features::FeatureSet>& feature_sets,
-                                 const SparseStageOptions& stage, MapperResult* result) {
-  const auto& options = stage.relocalise;
-  if (!options.enabled || result->models.empty()) return {{"enabled", options.enabled}};
+// Images now registered in the largest model leave the other models, whose shrunken remains are dropped below
+// the mapper's minimum model size.
+void LeaveOtherModels(const std::vector<uint32_t>& registered, int min_model_size, MapperResult* result) {
   core::Reconstruction& model = result->models[0];
-  std::map<uint32_t, const features::FeatureSet*> feats;
-  std::vector<RelocaliseCandidate> candidates;
-  std::map<uint32_t, core::Camera> cameras;
-  for (const auto& [id, c] : input.cameras) cameras[id] = c.camera;
-  for (size_t i = 0; i < input.images.size(); ++i) {
-    const auto& im = input.images[i];
-    feats[im.id] = &feature_sets[i];
-    if (!model.images.count(im.id) && !im.keypoints.empty()) candidates.push_back({im.id, im.camera_id, im.name});
-  }
-  if (candidates.empty()) return {{"enabled", true}, {"candidates", 0}};
-  const RelocaliseStats st = RelocaliseImages(&model, candidates, feats, cameras, options.options);
-  for (uint32_t id : st.registered) result->left_out.erase(id);
-  for (const auto& [id, why] : st.still_failed)
-    if (result->left_out.count(id)) result->left_out[id] += "; relocalisation: " + why;
-  // Registered images leave the other models.
-  std::set<uint32_t> moved(st.registered.begin(), st.registered.end());
+  std::set<uint32_t> moved(registered.begin(), registered.end());
   std::vector<core::Reconstruction> kept = {std::move(model)};
   for (size_t m = 1; m < result->models.size(); ++m) {
     core::Reconstruction& rec = result->models[m];
@@ -83,9 +66,33 @@ nlohmann::json RelocaliseLeftOut(const MapperInput& input, const std::vector<fea
         ++it;
       }
     }
-    if (static_cast<int>(rec.images.size()) >= stage.mapper.min_model_size) kept.push_back(std::move(rec));
+    if (static_cast<int>(rec.images.size()) >= min_model_size) kept.push_back(std::move(rec));
   }
   result->models = std::move(kept);
+}
+
+// Images outside the largest model retried against it (relocalise.h); those that register leave the other
+// models, whose shrunken remains are dropped below the mapper's minimum model size.
+nlohmann::json RelocaliseLeftOut(const MapperInput& input, const std::vector<features::FeatureSet>& feature_sets,
+                                 const SparseStageOptions& stage, MapperResult* result) {
+  const auto& options = stage.relocalise;
+  if (!options.enabled || result->models.empty()) return {{"enabled", options.enabled}};
+  core::Reconstruction& model = result->models[0];
+  std::map<uint32_t, const features::FeatureSet*> feats;
+  std::vector<RelocaliseCandidate> candidates;
+  std::map<uint32_t, core::Camera> cameras;
+  for (const auto& [id, c] : input.cameras) cameras[id] = c.camera;
+  for (size_t i = 0; i < input.images.size(); ++i) {
+    const auto& im = input.images[i];
+    feats[im.id] = &feature_sets[i];
+    if (!model.images.count(im.id) && !im.keypoints.empty()) candidates.push_back({im.id, im.camera_id, im.name});
+  }
+  if (candidates.empty()) return {{"enabled", true}, {"candidates", 0}};
+  const RelocaliseStats st = RelocaliseImages(&model, candidates, feats, cameras, options.options);
+  for (uint32_t id : st.registered) result->left_out.erase(id);
+  for (const auto& [id, why] : st.still_failed)
+    if (result->left_out.count(id)) result->left_out[id] += "; relocalisation: " + why;
+  LeaveOtherModels(st.registered, stage.mapper.min_model_size, result);
   spdlog::info("relocalise: {} of {} left-out images registered ({} observations, {} new points, {:.1f} s)",
                st.registered.size(), candidates.size(), st.observations_added, st.points_added, st.seconds);
   return {{"enabled", true},
@@ -133,6 +140,7 @@ nlohmann::json ToJson(const NestedModelTestResult& r) {
 void SparseStageOptions::Check() const {
   mapper.Check();
   relocalise.options.Check();
+  manual.options.Check();
   if (focal_px < 0) throw Error("sparse: --focal must be > 0 pixels");
   if (hfov_deg < 0 || hfov_deg >= 180) throw Error("sparse: --hfov must be in (0, 180) degrees");
   if (focal_px > 0 && hfov_deg > 0) throw Error("sparse: give --focal or --hfov, not both");
@@ -185,6 +193,38 @@ nlohmann::json RunSparseStage(const core::Workspace& ws, const SparseStageOption
     num_kp.push_back(im.keypoints.size());
     input.images.push_back(std::move(im));
   }
+  // The operator's tie points: the keypoints `match` appended (features/manual_matches.h), appended again here.
+  std::vector<TieTrack> tie_tracks;
+  const fs::path manual_path = features::ManualMatchesPath(ws.matches_dir());
+  const bool manual = options.manual.enabled && fs::exists(manual_path);
+  if (manual) {
+    const auto mm = features::ManualMatches::FromJson(core::ReadJson(manual_path), index);
+    for (const auto& [i, ap] : mm.appended) {
+      MapperImage& im = input.images[i];
+      features::FeatureSet& fs_ = feature_sets[i];
+      if (ap.first_index != im.keypoints.size() || fs_.keypoints.size() != im.keypoints.size())
+        throw Error(manual_path.string() + ": frame " + im.name + " has " + std::to_string(im.keypoints.size()) +
+                    " keypoints, not " + std::to_string(ap.first_index) + " (stale: run `fmv3d match` again)");
+      const size_t n0 = fs_.keypoints.size();
+      for (const auto& k : ap.keypoints) im.keypoints.emplace_back(k.x, k.y);
+      if (im.colors.size() == n0) im.colors.insert(im.colors.end(), ap.colors.begin(), ap.colors.end());
+      fs_.keypoints.insert(fs_.keypoints.end(), ap.keypoints.begin(), ap.keypoints.end());
+      features::Descriptors d(n0 + ap.keypoints.size(), 128);
+      if (n0) d.topRows(n0) = fs_.descriptors.topRows(n0);
+      d.bottomRows(ap.keypoints.size()) = ap.descriptors;
+      fs_.descriptors = std::move(d);
+      if (fs_.colors.size() == n0) fs_.colors.insert(fs_.colors.end(), ap.colors.begin(), ap.colors.end());
+      num_kp[i] = im.keypoints.size();
+      input.manual_from[im.id] = ap.first_index;
+    }
+    input.manual_weight = options.manual.options.weight;
+    for (const auto& t : mm.tracks) {
+      if (t.kind != features::ManualTrackKind::kTiePoint) continue;
+      TieTrack tt{t.id, {}};
+      for (const auto& o : t.observations) tt.observations.push_back({o.image + 1, o.keypoint});
+      tie_tracks.push_back(std::move(tt));
+    }
+  }
   const fs::path matches_path = features::MatchesPath(ws.matches_dir());
   input.pairs = features::ReadMatches(matches_path);
   features::ValidateMatches(input.pairs, num_kp, matches_path.string());
@@ -192,6 +232,30 @@ nlohmann::json RunSparseStage(const core::Workspace& ws, const SparseStageOption
 
   MapperResult result = RunIncrementalMapper(input, options.mapper);
   const nlohmann::json relocalisation = RelocaliseLeftOut(input, feature_sets, options, &result);
+  nlohmann::json manual_report = {{"used", manual}};
+  if (manual && !result.models.empty()) {
+    std::map<uint32_t, std::vector<Eigen::Vector2d>> keypoints;
+    std::map<uint32_t, std::string> names;
+    std::map<uint32_t, uint32_t> image_cameras;
+    std::map<uint32_t, core::Camera> cameras;
+    for (const auto& im : input.images) {
+      keypoints[im.id] = im.keypoints;
+      names[im.id] = im.name;
+      image_cameras[im.id] = im.camera_id;
+    }
+    for (const auto& [id, c] : input.cameras) cameras[id] = c.camera;
+    const ManualRegistrationResult mr = RegisterWithTiePoints(&result.models[0], tie_tracks, keypoints, names,
+                                                              image_cameras, cameras, input.manual_from,
+                                                              options.manual.options);
+    for (uint32_t id : mr.registered) result.left_out.erase(id);
+    for (const auto& [id, why] : mr.still_failed)
+      if (result.left_out.count(id)) result.left_out[id] += "; tie points: " + why;
+    LeaveOtherModels(mr.registered, options.mapper.min_model_size, &result);
+    manual_report = mr.ToJson(names);
+    manual_report["used"] = true;
+    manual_report["weight"] = options.manual.options.weight;
+    manual_report["min_tie_points"] = options.manual.options.min_tie_points;
+  }
 
   const auto write_start = Clock::now();
   core::EnsureDirectory(ws.sparse_dir());
@@ -242,6 +306,7 @@ nlohmann::json RunSparseStage(const core::Workspace& ws, const SparseStageOption
   report["left_out"] = left;
   report["mapper"] = result.stats;
   report["relocalisation"] = relocalisation;
+  report["manual"] = manual_report;
   report["seconds"] = {{"load", load_seconds},
                        {"mapping", result.stats["seconds"]["total"]},
                        {"write", std::chrono::duration<double>(Clock::now() - write_start).count()},

@@ -1,7 +1,9 @@
 // The `fmv3d sparse WS` stage: frames.json + features/*.feat + matches/matches.bin → incremental SfM →
 //   WS/sparse/            the largest model as a COLMAP text model (+ sparse.ply, coloured points)
 //   WS/sparse/1, 2, ...   further disconnected models, largest first
-// Images the mapper left out of the largest model are then retried against it (relocalise.h).
+// Images the mapper left out of the largest model are then retried against it (relocalise.h), and then through
+// the operator's tie points (WS/matches/manual.json from `match`, sfm/manual_registration.h), whose
+// observations weigh manual.options.weight times an automatic one in every bundle adjustment.
 //   WS/report/sparse.json registered / total (with the reason for every image left out), points, mean track
 //                         length, mean reprojection error, cameras, time per stage.
 #pragma once
@@ -12,6 +14,7 @@
 #include "fmv3d/core/reconstruction.h"
 #include "fmv3d/core/workspace.h"
 #include "fmv3d/sfm/incremental_mapper.h"
+#include "fmv3d/sfm/manual_registration.h"
 #include "fmv3d/sfm/relocalise.h"
 
 namespace fmv3d::sfm {
@@ -23,6 +26,11 @@ struct SparseStageOptions {
     bool enabled = true;
     RelocaliseOptions options;
   } relocalise;
+  // The operator's tie points (docs/manual-inputs.md): weighted, and registering left-out frames.
+  struct {
+    bool enabled = true;
+    ManualRegistrationOptions options;
+  } manual;
   // Focal prior for every camera, overriding frames.json's (e.g. from a lens spec or the telemetry's horizontal
   // field of view): focal in pixels, or the horizontal FOV in degrees (f = w / 2 / tan(hfov / 2)). 0 = unset.
   // Such a prior counts as known (no scan); with mapper.fix_known_focal it also stays fixed in BA.

@@ -26,6 +26,10 @@ void SynthOptions::Check() const {
   if (!known) throw Error("synth: unknown scene '" + scene + "' (expected building, town, terrain, board or sand)");
   flight.Check();
   render.Check();
+  for (const auto& d : degrade)
+    if (d.frame < 0 || d.frame >= flight.frames)
+      throw Error(fmt::format("synth: --degrade frame {} is not one of the {} frames (0..{})", d.frame, flight.frames,
+                              flight.frames - 1));
   if (width <= 0 || height <= 0 || width > 16384 || height > 16384)
     throw Error(fmt::format("synth: bad image size {}x{}", width, height));
   if (focal && !(*focal > 0)) throw Error("synth: focal length must be positive");
@@ -55,6 +59,10 @@ nlohmann::json SynthOptions::ToJson() const {
   j["scene"] = scene;
   j["path"] = flight.path;
   j["frames"] = flight.frames;
+  if (!degrade.empty()) {
+    j["degrade"] = nlohmann::json::array();
+    for (const auto& d : degrade) j["degrade"].push_back({{"frame", d.frame}, {"kind", DegradationName(d.kind)}});
+  }
   j["size"] = {width, height};
   if (focal) j["focal"] = *focal;
   if (flight.altitude) j["altitude"] = *flight.altitude;
@@ -184,7 +192,9 @@ SynthResult RunSynth(const SynthOptions& o) {
   for (size_t k = 0; k < poses.size(); ++k) {
     render::RenderOptions ro = o.render;
     ro.noise_seed = Hash64(o.flight.seed * 1000003ull + k);
-    const render::RenderResult frame = renderer.Render(camera, poses[k], ro);
+    render::RenderResult frame = renderer.Render(camera, poses[k], ro);
+    for (const auto& d : o.degrade)
+      if (d.frame == static_cast<int>(k)) Degrade(d.kind, &frame.image);
     if (video) {
       video->Write(frame.image);
       if (o.klv) video->WriteKlv(telemetry::klv::EncodeSt0601Packet(result.klv[k]), static_cast<int64_t>(k));

@@ -31,6 +31,7 @@
 #include "fmv3d/core/camera.h"
 #include "fmv3d/core/reconstruction.h"
 #include "fmv3d/render/renderer.h"
+#include "fmv3d/synth/degrade.h"
 #include "fmv3d/synth/flight.h"
 #include "fmv3d/synth/scene.h"
 #include "fmv3d/synth/telemetry.h"
@@ -63,6 +64,7 @@ struct SynthOptions {
   bool gpmf_gps9 = false;           // the GPMF track carries GPS9 instead of GPS5
   KlvTelemetryOptions klv_options;  // geo origin, GPS / attitude noise of every telemetry kind (fps and
                                     // seed are set from this struct's fps and flight.seed)
+  std::vector<FrameDegradation> degrade;  // frames degraded on purpose (synth/degrade.h)
   std::filesystem::path output;
 
   void Check() const;
