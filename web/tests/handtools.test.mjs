@@ -121,28 +121,17 @@ try {
   const base = started.base;
   context = await launchBrowser(env, { width: 1400, height: 860 });
   const page = context.pages()[0] ?? await context.newPage();
-  // A second workspace of the same flight in which two frames cannot register automatically: heavy blur and
-  // almost no contrast (drawn here through a canvas filter), so SIFT finds nothing to match in them.
+  // A second flight, the same but for two frames degraded by `synth --degrade` so that they cannot register
+  // automatically (heavy motion blur; contrast cut to 3%).
   const degraded = ['flight-000012.png', 'flight-000013.png'];
+  const flightDeg = path.join(root, 'flight-degraded');
   const wsDeg = path.join(wsRoot, 'degraded');
   if (!fs.existsSync(path.join(wsDeg, 'sparse', 'images.txt'))) {
-    const input = path.join(root, 'degraded-frames');
-    fs.rmSync(input, { recursive: true, force: true });
-    fs.cpSync(path.join(flight, 'frames'), input, { recursive: true });
-    const tool = await context.newPage();
-    for (const f of degraded) {
-      const file = path.join(input, f);
-      const png = await tool.evaluate(async (src) => {
-        const img = new Image(); img.src = src; await img.decode();
-        const c = document.createElement('canvas'); c.width = img.naturalWidth; c.height = img.naturalHeight;
-        const ctx = c.getContext('2d'); ctx.filter = 'blur(8px) contrast(8%)'; ctx.drawImage(img, 0, 0);
-        return c.toDataURL('image/png');
-      }, 'data:image/png;base64,' + fs.readFileSync(file).toString('base64'));
-      fs.writeFileSync(file, Buffer.from(png.split(',')[1], 'base64'));
-    }
-    await tool.close();
-    run(['-q', 'reconstruct', input, '-o', wsDeg, '--fast', '--until', 'sparse']);
+    run(['-q', 'synth', '--scene', 'building', '--path', 'orbit', '--frames', '24', '--size', '480x270', '--seed', '3',
+      '--degrade', '12:blur', '--degrade', '13:contrast', '-o', flightDeg]);
+    run(['-q', 'reconstruct', path.join(flightDeg, 'frames'), '-o', wsDeg, '--fast', '--until', 'sparse']);
   }
+  const obsDeg = readTruthObservations(flightDeg);
   fs.rmSync(path.join(wsDeg, 'manual', 'tiepoints.json'), { force: true });
   const pageErrors = [];
   page.on('pageerror', (e) => pageErrors.push(String(e)));
@@ -243,7 +232,7 @@ try {
     for (const d of degraded) {
       const i = Number(/(\d+)\.png$/.exec(d)[1]);
       const near = [i - 2, i + 2].map((j) => `flight-${String(j).padStart(6, '0')}.png`);
-      const ids = commonPoints(obs, [d, ...near], 8);
+      const ids = commonPoints(obsDeg, [d, ...near], 8);
       assert(ids.length >= 6, `only ${ids.length} scene points common to ${d} and ${near}`);
       await page.click(`.thumb[data-frame="${d}"]`);
       await page.click(`.thumb[data-frame="${near[0]}"]`, { modifiers: ['Shift'] });
@@ -252,15 +241,15 @@ try {
       const first = k;
       for (const id of ids) {
         await page.click('#tp-new');
-        await clickImage(page, 'fmv3dTiePoints', 'a', ...obs.get(d).get(id));
-        await clickImage(page, 'fmv3dTiePoints', 'b', ...obs.get(near[0]).get(id));
+        await clickImage(page, 'fmv3dTiePoints', 'a', ...obsDeg.get(d).get(id));
+        await clickImage(page, 'fmv3dTiePoints', 'b', ...obsDeg.get(near[0]).get(id));
         k++;
       }
       await page.click(`.thumb[data-frame="${near[1]}"]`, { modifiers: ['Shift'] });
       await waitFor(page, (y) => document.querySelectorAll('.fv-title')[1]?.textContent?.includes(y), near[1], 20000, 'the third frame');
       for (let n = 0; n < ids.length; n++) {
         await page.click(`.tp-item[data-id="t${first + n + 1}"] button.link`);
-        await clickImage(page, 'fmv3dTiePoints', 'b', ...obs.get(near[1]).get(ids[n]));
+        await clickImage(page, 'fmv3dTiePoints', 'b', ...obsDeg.get(near[1]).get(ids[n]));
       }
     }
     await shot(page, 'tiepoints-degraded');
@@ -274,7 +263,7 @@ try {
     assert(state === 'done', `the re-run ended ${state}`);
     const text = await page.textContent('#tp-msg');
     log(`  ${k} tie points; ${text}`);
-    run(['-q', 'evaluate-sparse', wsDeg, '--truth', path.join(flight, 'truth')]);
+    run(['-q', 'evaluate-sparse', wsDeg, '--truth', path.join(flightDeg, 'truth')]);
     const ev = JSON.parse(fs.readFileSync(path.join(wsDeg, 'report', 'sparse_eval.json'), 'utf8'));
     // Each degraded frame's centre error after the evaluation's similarity alignment (model → truth).
     const [qw, qx, qy, qz] = ev.alignment.q_wxyz;
@@ -282,7 +271,7 @@ try {
       [2 * (qx * qy + qz * qw), 1 - 2 * (qx * qx + qz * qz), 2 * (qy * qz - qx * qw)],
       [2 * (qx * qz - qy * qw), 2 * (qy * qz + qx * qw), 1 - 2 * (qx * qx + qy * qy)]];
     const model = readCentres(path.join(wsDeg, 'sparse', 'images.txt'));
-    const truthC = readCentres(path.join(flight, 'truth', 'images.txt'));
+    const truthC = readCentres(path.join(flightDeg, 'truth', 'images.txt'));
     for (const d of degraded) {
       const c = model.get(d);
       assert(c, `${d} is still not registered (${text})`);
