@@ -29,7 +29,8 @@ export class FrameView {
   constructor(readonly id: string, readonly title: HTMLElement = h('div', { class: 'fv-title' })) {
     this.canvas = h('canvas', { class: 'fv-canvas', 'data-view': id });
     this.loupe = h('canvas', { class: 'fv-loupe', width: LOUPE, height: LOUPE });
-    this.el = h('div', { class: 'fv' }, this.title, h('div', { class: 'fv-box' }, this.canvas, this.loupe));
+    const fitButton = h('button', { class: 'small fv-fit', title: 'fit the frame to the view', onclick: () => this.fit() }, 'fit');
+    this.el = h('div', { class: 'fv' }, this.title, h('div', { class: 'fv-box' }, this.canvas, this.loupe, fitButton));
     this.resize.observe(this.canvas);
     this.canvas.addEventListener('contextmenu', (e) => e.preventDefault());
     this.canvas.addEventListener('wheel', (e) => {

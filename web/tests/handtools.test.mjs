@@ -90,10 +90,17 @@ function commonPoints(obs, frames, n, margin = 12) {
   return [...cells.values()].slice(0, n);
 }
 
-// A click at image point (x, y) of a FrameView, through the page (the view's own image → page transform).
+// A click at image point (x, y) of a FrameView, through the page as an operator places it: the mouse wheel zooms
+// in about the point (×3.8), the click lands on the point at that zoom, and the view's "fit" button resets it.
 async function clickImage(page, hook, view, x, y) {
-  const [cx, cy] = await page.evaluate(([h, v, px, py]) => window[h].views ? window[h].views[v].toClient(px, py) : window[h].view.toClient(px, py), [hook, view, x, y]);
+  const at = () => page.evaluate(([h, v, px, py]) => (v ? window[h].views[v] : window[h].view).toClient(px, py), [hook, view, x, y]);
+  let [cx, cy] = await at();
+  await page.mouse.move(cx, cy);
+  for (let i = 0; i < 6; i++) await page.mouse.wheel(0, -100);
+  [cx, cy] = await at();
   await page.mouse.click(cx, cy);
+  const box = v => `.fv-canvas[data-view="${v}"]`;
+  await page.click(`${box(view ?? 'gcp')} ~ .fv-fit`);
 }
 
 try {
@@ -132,7 +139,10 @@ try {
     run(['-q', 'reconstruct', path.join(flightDeg, 'frames'), '-o', wsDeg, '--fast', '--until', 'sparse']);
   }
   const obsDeg = readTruthObservations(flightDeg);
-  fs.rmSync(path.join(wsDeg, 'manual', 'tiepoints.json'), { force: true });
+  if (fs.existsSync(path.join(wsDeg, 'manual', 'tiepoints.json'))) {  // a kept work folder: back to the automatic model
+    fs.rmSync(path.join(wsDeg, 'manual', 'tiepoints.json'));
+    run(['-q', 'reconstruct', path.join(flightDeg, 'frames'), '-o', wsDeg, '--fast', '--from', 'match', '--until', 'sparse']);
+  }
   const pageErrors = [];
   page.on('pageerror', (e) => pageErrors.push(String(e)));
   const obs = readTruthObservations(flight);
@@ -183,7 +193,7 @@ try {
         worst = Math.max(worst, Math.hypot(o.x - t[0], o.y - t[1]));
       }
     // A mouse click lands on a whole CSS pixel: up to half a pixel per axis, divided by the view's scale.
-    const scale = await page.evaluate(() => Math.min(window.fmv3dTiePoints.views.a.scale, window.fmv3dTiePoints.views.b.scale));
+    const scale = 1.25 ** 6 * await page.evaluate(() => Math.min(window.fmv3dTiePoints.views.a.scale, window.fmv3dTiePoints.views.b.scale));
     const bound = Math.SQRT1_2 / scale + 0.01;
     log(`  6 tie points saved, worst click offset from the true projection ${worst.toFixed(2)} px (bound ${bound.toFixed(2)} px at scale ${scale.toFixed(2)})`);
     assert(worst <= bound, `clicked positions are ${worst.toFixed(2)} px from the true projections`);
@@ -232,7 +242,7 @@ try {
     for (const d of degraded) {
       const i = Number(/(\d+)\.png$/.exec(d)[1]);
       const near = [i - 2, i + 2].map((j) => `flight-${String(j).padStart(6, '0')}.png`);
-      const ids = commonPoints(obsDeg, [d, ...near], 8);
+      const ids = commonPoints(obsDeg, [d, ...near], 12);
       assert(ids.length >= 6, `only ${ids.length} scene points common to ${d} and ${near}`);
       await page.click(`.thumb[data-frame="${d}"]`);
       await page.click(`.thumb[data-frame="${near[0]}"]`, { modifiers: ['Shift'] });
