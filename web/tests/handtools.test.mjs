@@ -139,8 +139,9 @@ try {
     run(['-q', 'reconstruct', path.join(flightDeg, 'frames'), '-o', wsDeg, '--fast', '--until', 'sparse']);
   }
   const obsDeg = readTruthObservations(flightDeg);
-  if (fs.existsSync(path.join(wsDeg, 'manual', 'tiepoints.json'))) {  // a kept work folder: back to the automatic model
-    fs.rmSync(path.join(wsDeg, 'manual', 'tiepoints.json'));
+  fs.rmSync(path.join(wsDeg, 'manual', 'tiepoints.json'), { force: true });
+  const leftOut = () => JSON.parse(fs.readFileSync(path.join(wsDeg, 'report', 'sparse.json'), 'utf8')).left_out.map((l) => l.image);
+  if (!degraded.every((f) => leftOut().includes(f))) {  // a kept work folder: back to the automatic model
     run(['-q', 'reconstruct', path.join(flightDeg, 'frames'), '-o', wsDeg, '--fast', '--from', 'match', '--until', 'sparse']);
   }
   const pageErrors = [];
