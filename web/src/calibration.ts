@@ -8,7 +8,6 @@ import { h, fmtNumber } from './dom';
 import { manualApi, type Calibration, type CalibResult } from './manual_api';
 
 const SVG = 'http://www.w3.org/2000/svg';
-const RESIDUAL_GAIN = 100;  // residual vectors drawn this many times longer than they are
 
 export function mountCalibration(el: HTMLElement, ws: string | null): () => void {
   delete el.dataset.ready;  // the page element is shared with the other pages
@@ -170,7 +169,12 @@ export function mountCalibration(el: HTMLElement, ws: string | null): () => void
     const path = c.request?.images.find((p) => p.split('/').pop() === name);
     if (!im || !path) return;
     const canvas = h('canvas', { class: 'cal-canvas', id: 'cal-canvas', 'data-image': name });
-    viewer.replaceChildren(h('div', { class: 'muted' }, `${name}: RMS ${im.rms.toFixed(3)} px; residuals drawn ×${RESIDUAL_GAIN}`), canvas);
+    // Residual vectors exaggerated so that the largest of all images is ~25 px long, in steps of 1-2-5.
+    let largest = 1e-9;
+    for (const i of r.images) for (let k = 0; k + 1 < (i.residuals ?? []).length; k += 2) largest = Math.max(largest, Math.hypot(i.residuals![k], i.residuals![k + 1]));
+    const raw = 25 / largest, decade = 10 ** Math.floor(Math.log10(raw));
+    const gain = [5, 2, 1].map((m) => m * decade).find((g) => g <= raw) ?? decade;
+    viewer.replaceChildren(h('div', { class: 'muted' }, `${name}: RMS ${im.rms.toFixed(3)} px; green: detected corners, red: residual vectors ×${gain}`), canvas);
     const img = new Image();
     img.src = fileURL(ws!, path);
     await img.decode();
@@ -188,7 +192,7 @@ export function mountCalibration(el: HTMLElement, ws: string | null): () => void
       if (k + 1 < res.length) {
         ctx.strokeStyle = '#ef5350';
         ctx.beginPath(); ctx.moveTo(x, y);
-        ctx.lineTo(x + res[k] * RESIDUAL_GAIN * scale, y + res[k + 1] * RESIDUAL_GAIN * scale); ctx.stroke();
+        ctx.lineTo(x + res[k] * gain * scale, y + res[k + 1] * gain * scale); ctx.stroke();
       }
     }
     canvas.dataset.corners = String(corners.length / 2);

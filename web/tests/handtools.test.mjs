@@ -17,7 +17,7 @@ const { fmv3d, outDir, root, keep } = env;
 const run = (argv, extraEnv) => runFmv3d(fmv3d, argv, extraEnv);
 const { check, fail, finish } = checks();
 let server = null, context = null;
-const shot = (page, name) => page.screenshot({ path: path.join(outDir, `${name}.png`) });
+const shot = (page, name) => page.screenshot({ path: path.join(outDir, `${name}.png`), fullPage: name.startsWith('calibration') });
 
 // truth/images.txt: per frame name, the exact projection of every scene point it sees (point id → [x, y]).
 function readTruthObservations(dir) {
