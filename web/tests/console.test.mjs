@@ -9,7 +9,7 @@ import fs from 'node:fs';
 import path from 'node:path';
 import { fileURLToPath } from 'node:url';
 import { decodePng, coverage, distinctColours } from './png.mjs';
-import { setup, runFmv3d, checks, assert, waitFor, startServer, launchBrowser, log } from './harness.mjs';
+import { setup, runFmv3d, checks, assert, waitFor, startServer, launchBrowser, closeAll, log } from './harness.mjs';
 
 const env = await setup(path.dirname(fileURLToPath(import.meta.url)), 'web');
 const { fmv3d, outDir, root, keep, opt } = env;
@@ -175,8 +175,6 @@ try {
 } catch (e) {
   fail('setup', e);
 } finally {
-  await context?.close().catch(() => undefined);
-  if (server && server.exitCode === null) server.kill('SIGTERM');
-  if (!keep) fs.rmSync(root, { recursive: true, force: true });
+  await closeAll({ context, server, root, keep });
 }
 finish(outDir);

@@ -100,3 +100,10 @@ export async function launchBrowser({ chromium, chromiumPath }, viewport = { wid
       '--disable-component-update', '--disable-sync', '--use-angle=swiftshader', '--enable-unsafe-swiftshader'],
   });
 }
+
+/** Closes the browser and the server; removes the work folder unless it is kept. */
+export async function closeAll({ context, server, root, keep }) {
+  await context?.close().catch(() => undefined);
+  if (server && server.exitCode === null) server.kill('SIGTERM');
+  if (!keep) fs.rmSync(root, { recursive: true, force: true });
+}

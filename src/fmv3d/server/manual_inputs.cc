@@ -57,7 +57,11 @@ json GcpsToJson(const geo::GcpList& list) {
   for (const auto& p : geo::GroupGcps(list)) {
     json obs = json::array();
     for (const auto& o : p.observations) obs.push_back({{"frame", o.frame}, {"x", o.x}, {"y", o.y}});
-    points.push_back({{"name", p.name}, {"x", p.geo.x()}, {"y", p.geo.y()}, {"z", p.geo.z()}, {"check", p.check},
+    points.push_back({{"name", p.name},
+                      {"x", p.geo.x()},
+                      {"y", p.geo.y()},
+                      {"z", p.geo.z()},
+                      {"check", p.check},
                       {"observations", obs}});
   }
   return {{"crs", list.crs}, {"points", points}};
@@ -133,7 +137,8 @@ json SaveGcpJson(std::string_view body, const io::FrameTable& frames, const fs::
       throw RequestError(400, where + ": 'check' must be true or false", "check");
     const json obs = Array(p, "observations");
     if (obs.size() < 2)
-      throw RequestError(400, where + " is marked in " + std::to_string(obs.size()) + " frame(s); mark it in at least 2",
+      throw RequestError(400,
+                         where + " is marked in " + std::to_string(obs.size()) + " frame(s); mark it in at least 2",
                          "observations");
     for (size_t k = 0; k < obs.size(); ++k) {
       const std::string w = where + ", observation " + std::to_string(k + 1);
@@ -189,7 +194,8 @@ CalibrationRequest ParseCalibrationRequest(std::string_view body) {
   }
   if (j.contains("square")) {
     r.square = Number(j, "square", "calibration");
-    if (r.square <= 0 || r.square > 10) throw RequestError(400, "'square': the square side in metres (0, 10]", "square");
+    if (r.square <= 0 || r.square > 10)
+      throw RequestError(400, "'square': the square side in metres (0, 10]", "square");
   }
   return r;
 }

@@ -91,8 +91,8 @@ nlohmann::json KeypointsJson(const fs::path& dir, const std::string& name) {
   std::vector<float> flat;
   flat.reserve(fs.keypoints.size() * 4);
   for (const auto& k : fs.keypoints) flat.insert(flat.end(), {k.x, k.y, k.scale, k.orientation});
-  return {{"frame", name}, {"width", fs.width}, {"height", fs.height}, {"count", fs.keypoints.size()},
-          {"keypoints", flat}};
+  return {
+      {"frame", name}, {"width", fs.width}, {"height", fs.height}, {"count", fs.keypoints.size()}, {"keypoints", flat}};
 }
 
 // F with x2ᵀ F x1 = 0 for pixel coordinates of two posed images (distortion ignored: for drawing lines).
@@ -137,7 +137,8 @@ nlohmann::json PairJson(const fs::path& dir, const std::string& a, const std::st
   if (fs::exists(mp)) {
     for (const auto& p : features::ReadMatches(mp)) {
       if (p.image_id1 != std::min(ida, idb) || p.image_id2 != std::max(ida, idb)) continue;
-      for (const auto& m : p.inliers) inlier_set.insert(swap ? std::make_pair(m.idx2, m.idx1) : std::make_pair(m.idx1, m.idx2));
+      for (const auto& m : p.inliers)
+        inlier_set.insert(swap ? std::make_pair(m.idx2, m.idx1) : std::make_pair(m.idx1, m.idx2));
       if (!p.F.isZero()) {
         F = Mat9(swap ? Eigen::Matrix3d(p.F.transpose()) : p.F);
         f_source = "matches";
@@ -184,13 +185,14 @@ class CalibrationRuns {
     fs::remove_all(out / "camera-corners", ec);
     for (const char* f : {"camera.json", "camera.yaml", "camera-distortion.png", "calibrate.log"})
       fs::remove(out / f, ec);
-    std::vector<std::string> argv = {exe.string(), "calibrate", "--board", std::to_string(r.cols) + "x" +
-                                     std::to_string(r.rows), "--square", std::to_string(r.square)};
+    std::vector<std::string> argv = {exe.string(), "calibrate",
+                                     "--board",    std::to_string(r.cols) + "x" + std::to_string(r.rows),
+                                     "--square",   std::to_string(r.square)};
     nlohmann::json names = nlohmann::json::array();
     for (const auto& i : images) argv.push_back(i.string()), names.push_back(fs::relative(i, ws_dir).string());
     argv.insert(argv.end(), {"-o", (out / "camera.json").string()});
-    core::WriteJson(out / "request.json", {{"board", {{"cols", r.cols}, {"rows", r.rows}}}, {"square", r.square},
-                                            {"images", names}});
+    core::WriteJson(out / "request.json",
+                    {{"board", {{"cols", r.cols}, {"rows", r.rows}}}, {"square", r.square}, {"images", names}});
     running_[ws_dir] = SpawnProcess(argv, out / "calibrate.log");
   }
   // "running", "done", "failed" or "none".
@@ -234,8 +236,8 @@ nlohmann::json CalibrationJson(CalibrationRuns& runs, const fs::path& dir) {
     for (const auto& e : fs::directory_iterator(dir / "uploads", ec)) {
       std::string ext = e.path().extension().string();
       for (auto& c : ext) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
-      if (e.is_regular_file(ec) && (ext == ".png" || ext == ".jpg" || ext == ".jpeg" || ext == ".tif" ||
-                                    ext == ".tiff" || ext == ".bmp"))
+      if (e.is_regular_file(ec) &&
+          (ext == ".png" || ext == ".jpg" || ext == ".jpeg" || ext == ".tif" || ext == ".tiff" || ext == ".bmp"))
         uploads.push_back("uploads/" + e.path().filename().string());
     }
   std::sort(uploads.begin(), uploads.end());
@@ -285,9 +287,8 @@ void RegisterManualRoutes(httplib::Server& http, Context& ctx) {
     });
   });
   http.Get(ws + "/tiepoints", [&ctx](const httplib::Request& req, httplib::Response& res) {
-    Guard(res, [&] {
-      SendJson(res, 200, LoadTiePoints(WorkspaceDir(ctx, req.matches[1]) / "manual" / "tiepoints.json"));
-    });
+    Guard(res,
+          [&] { SendJson(res, 200, LoadTiePoints(WorkspaceDir(ctx, req.matches[1]) / "manual" / "tiepoints.json")); });
   });
   http.Put(ws + "/tiepoints", [&ctx](const httplib::Request& req, httplib::Response& res) {
     Guard(res, [&] {
