@@ -6,16 +6,59 @@
 //
 // Exit 0: every check passed; 1: a check failed; 77: skipped (no Chromium, no web build or no playwright-core).
 import fs from 'node:fs';
+import os from 'node:os';
 import path from 'node:path';
+import net from 'node:net';
+import { spawn, execFileSync } from 'node:child_process';
 import { fileURLToPath } from 'node:url';
 import { decodePng, coverage, distinctColours } from './png.mjs';
-import { setup, runFmv3d, checks, assert, waitFor, startServer, launchBrowser, closeAll, log } from './harness.mjs';
 
-const env = await setup(path.dirname(fileURLToPath(import.meta.url)), 'web');
-const { fmv3d, outDir, root, keep, opt } = env;
-const run = (argv) => runFmv3d(fmv3d, argv);
-const { check, fail, finish } = checks();
+const SKIP = 77;
+const here = path.dirname(fileURLToPath(import.meta.url));
+const args = process.argv.slice(2);
+const opt = (name, def) => { const i = args.indexOf(name); return i >= 0 ? args[i + 1] : def; };
+const fmv3d = path.resolve(opt('--fmv3d', path.join(here, '../../build/fmv3d')));
+const webDir = path.resolve(opt('--web', path.join(path.dirname(fmv3d), 'web')));
+const outDir = path.resolve(opt('--out', path.join(path.dirname(fmv3d), 'test-artefacts/web')));
+const chromiumPath = opt('--chromium', process.env.CHROMIUM ?? '/usr/bin/chromium');
+const keep = args.includes('--keep');
+
+function skip(why) { console.log(`SKIP: ${why}`); process.exit(SKIP); }
+if (!fs.existsSync(chromiumPath)) skip(`no Chromium at ${chromiumPath} (scripts/install-deps.sh installs it)`);
+if (!fs.existsSync(path.join(webDir, 'index.html'))) skip(`no web build at ${webDir} (make web)`);
+if (!fs.existsSync(fmv3d)) skip(`no fmv3d binary at ${fmv3d}`);
+let chromium;
+try { ({ chromium } = await import('playwright-core')); } catch { skip('playwright-core is not installed (cd web && npm ci)'); }
+
+fs.mkdirSync(outDir, { recursive: true });
+// --work DIR reuses a work folder left by --keep (its workspace is not made again).
+const root = opt('--work') ? path.resolve(opt('--work')) : fs.mkdtempSync(path.join(os.tmpdir(), 'fmv3d-console-'));
+const results = [];
 let server = null, context = null;
+const log = (...a) => console.log(...a);
+
+function run(argv, timeoutMs = 600000) {
+  const t0 = Date.now();
+  execFileSync(fmv3d, argv, { stdio: ['ignore', 'ignore', 'inherit'], timeout: timeoutMs });
+  log(`  fmv3d ${argv.join(' ')}  (${((Date.now() - t0) / 1000).toFixed(1)} s)`);
+}
+function freePort() {
+  return new Promise((resolve, reject) => {
+    const s = net.createServer();
+    s.listen(0, '127.0.0.1', () => { const p = s.address().port; s.close(() => resolve(p)); });
+    s.on('error', reject);
+  });
+}
+async function check(name, fn) {
+  const t0 = Date.now();
+  try { await fn(); results.push([name, true]); log(`ok   ${name} (${((Date.now() - t0) / 1000).toFixed(1)} s)`); }
+  catch (e) { results.push([name, false]); log(`FAIL ${name}: ${e?.stack ?? e}`); }
+}
+function assert(cond, msg) { if (!cond) throw new Error(msg); }
+async function waitFor(page, fn, arg, timeout, what) {
+  try { await page.waitForFunction(fn, arg, { timeout, polling: 200 }); }
+  catch (e) { throw new Error(`timed out waiting for ${what}`); }
+}
 async function shot(page, name, selector) {
   const file = path.join(outDir, `${name}.png`);
   const buf = selector ? await page.locator(selector).screenshot({ path: file }) : await page.screenshot({ path: file });
@@ -35,10 +78,25 @@ try {
   }
   fs.rmSync(path.join(root, 'fromthepage'), { recursive: true, force: true });
 
-  const started = await startServer(env, root);
-  server = started.server;
-  const base = started.base;
-  context = await launchBrowser(env);
+  const port = await freePort();
+  server = spawn(fmv3d, ['serve', root, '--port', String(port), '--host', '127.0.0.1', '--assets', webDir],
+    { stdio: ['ignore', 'pipe', 'pipe'] });
+  const serverLog = fs.createWriteStream(path.join(outDir, 'server.log'));
+  server.stdout.pipe(serverLog); server.stderr.pipe(serverLog);
+  const base = `http://127.0.0.1:${port}/`;
+  for (let i = 0; ; i++) {
+    try { const r = await fetch(base + 'api/health'); if (r.ok) break; } catch { /* not up yet */ }
+    if (i > 100 || server.exitCode !== null) throw new Error(`fmv3d serve did not come up on ${base} (see server.log)`);
+    await new Promise((r) => setTimeout(r, 100));
+  }
+  log(`fmv3d serve at ${base}`);
+
+  const profile = fs.mkdtempSync(path.join(os.tmpdir(), 'fmv3d-chromium-'));
+  context = await chromium.launchPersistentContext(profile, {
+    executablePath: chromiumPath, headless: true, viewport: { width: 1280, height: 800 },
+    args: ['--headless', '--no-sandbox', '--disable-gpu', '--disable-quic', '--no-first-run', '--disable-background-networking',
+      '--disable-component-update', '--disable-sync', '--use-angle=swiftshader', '--enable-unsafe-swiftshader'],
+  });
   const page = context.pages()[0] ?? await context.newPage();
   const foreign = [];
   const consoleErrors = [];
@@ -173,8 +231,14 @@ try {
     assert(errs.length === 0, `${errs.length} page errors`);
   });
 } catch (e) {
-  fail('setup', e);
+  results.push(['setup', false]);
+  log(`FAIL setup: ${e?.stack ?? e}`);
 } finally {
-  await closeAll({ context, server, root, keep });
+  await context?.close().catch(() => undefined);
+  if (server && server.exitCode === null) server.kill('SIGTERM');
+  if (!keep && !opt('--work')) fs.rmSync(root, { recursive: true, force: true });
 }
-finish(outDir);
+const passed = results.filter(([, ok]) => ok).length, failed = results.length - passed;
+log(`artefacts in ${outDir}`);
+log(`${passed} passed, ${failed} failed`);
+process.exit(failed ? 1 : 0);
