@@ -144,6 +144,18 @@ TEST(Chessboard, SyntheticViewsRecoverKnownIntrinsics) {
   EXPECT_NEAR(c.p2, truth.p2, 0.001);
   EXPECT_LT(res.rms, 0.2);
   EXPECT_EQ(res.per_image_rms.size(), 12u);
+  // Per-image corners (+0.5 convention) and residuals: one per board corner, and each image's residual vectors
+  // give back its RMS.
+  ASSERT_EQ(res.corners.size(), 12u);
+  ASSERT_EQ(res.residuals.size(), 12u);
+  for (size_t v = 0; v < res.residuals.size(); ++v) {
+    ASSERT_EQ(res.corners[v].size(), size_t(board.cols * board.rows));
+    ASSERT_EQ(res.residuals[v].size(), res.corners[v].size());
+    double sq = 0;
+    for (const auto& r : res.residuals[v]) sq += r.squaredNorm();
+    EXPECT_NEAR(std::sqrt(sq / res.residuals[v].size()), res.per_image_rms[v], 1e-3 + 0.01 * res.per_image_rms[v]) << v;
+    EXPECT_NEAR(res.corners[v][0].x(), detections[v].corners[0].x + 0.5, 1e-6);
+  }
   // The standard deviations are honest: the true values lie within a few sigma.
   EXPECT_LT(std::abs(c.f - truth.f), 5 * res.stddev[core::kF] + 0.05);
   EXPECT_GT(res.stddev[core::kF], 0);

@@ -7,9 +7,13 @@ import { mountJobs } from './jobs';
 import { mountView3d } from './view3d';
 import { mountMap } from './map';
 import { mountReport } from './report';
+import { mountTiePoints } from './tiepoints';
+import { mountGcp } from './gcp';
+import { mountCalibration } from './calibration';
 
 type Mount = (el: HTMLElement, ws: string | null) => () => void;
-const pages: Record<string, Mount> = { jobs: mountJobs, '3d': mountView3d, map: mountMap, report: mountReport };
+const pages: Record<string, Mount> = { jobs: mountJobs, '3d': mountView3d, map: mountMap, report: mountReport,
+  tiepoints: mountTiePoints, gcp: mountGcp, calibration: mountCalibration };
 
 const app = document.getElementById('app')!;
 const select = document.getElementById('ws-select') as HTMLSelectElement;

@@ -22,8 +22,17 @@ void WriteCameraJson(const fs::path& path, const CalibrationResult& r) {
   static const char* kNames[] = {"f", "aspect", "u0", "v0", "k1", "k2", "p1", "p2"};
   for (int i = 0; i < core::kNumIntrinsics; ++i) j["stddev"][kNames[i]] = r.stddev[i];
   j["images"] = nlohmann::json::array();
-  for (size_t i = 0; i < r.used.size(); ++i)
-    j["images"].push_back({{"name", r.used[i]}, {"rms", i < r.per_image_rms.size() ? r.per_image_rms[i] : 0.0}});
+  for (size_t i = 0; i < r.used.size(); ++i) {
+    nlohmann::json im = {{"name", r.used[i]}, {"rms", i < r.per_image_rms.size() ? r.per_image_rms[i] : 0.0}};
+    auto flat = [](const std::vector<Eigen::Vector2d>& v) {
+      std::vector<double> out;
+      for (const auto& p : v) out.push_back(p.x()), out.push_back(p.y());
+      return out;
+    };
+    if (i < r.corners.size()) im["corners"] = flat(r.corners[i]);
+    if (i < r.residuals.size()) im["residuals"] = flat(r.residuals[i]);
+    j["images"].push_back(im);
+  }
   j["rejected"] = r.rejected;
   j["board"] = {{"cols", r.board.cols}, {"rows", r.board.rows}, {"square", r.board.square}};
   core::WriteJson(path, j);

@@ -3,7 +3,9 @@
 //
 // camera.json: { "version": 1, "model": "fmv3d-brown", "width", "height", "f", "aspect", "u0", "v0",
 //                "k1", "k2", "p1", "p2", "pixel_convention": "pixel centres at +0.5",
-//                "stddev": {...same keys...}, "rms": px, "images": [{"name", "rms"}], "rejected": [...],
+//                "stddev": {...same keys...}, "rms": px, "rejected": [...],
+//                "images": [{"name", "rms", "corners": [x0,y0,x1,y1,...] (detected, +0.5 convention),
+//                            "residuals": [dx0,dy0,...] (reprojected − detected, px)}],
 //                "board": {"cols", "rows", "square"} }
 // The OpenCV file uses OpenCV's convention (integer pixel centres): cx = u0 − 0.5.
 #pragma once

@@ -95,6 +95,16 @@ CalibrationResult Calibrate(const std::vector<BoardDetection>& detections, const
   res.rms = cv::calibrateCamera(object, image, size, K, dist, rvecs, tvecs, std_intr, std_extr, per_view, flags,
                                 cv::TermCriteria(cv::TermCriteria::COUNT | cv::TermCriteria::EPS, 100, 1e-12));
   for (int i = 0; i < per_view.rows; ++i) res.per_image_rms.push_back(per_view.at<double>(i));
+  for (size_t v = 0; v < image.size(); ++v) {
+    std::vector<cv::Point2f> projected;
+    cv::projectPoints(object[v], rvecs[v], tvecs[v], K, dist, projected);
+    auto& corners = res.corners.emplace_back();
+    auto& residuals = res.residuals.emplace_back();
+    for (size_t k = 0; k < projected.size(); ++k) {
+      corners.emplace_back(image[v][k].x + 0.5, image[v][k].y + 0.5);
+      residuals.emplace_back(projected[k].x - image[v][k].x, projected[k].y - image[v][k].y);
+    }
+  }
 
   core::Camera& cam = res.camera;
   cam.width = size.width;

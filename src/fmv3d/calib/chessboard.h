@@ -11,6 +11,7 @@
 #include <string>
 #include <vector>
 
+#include <Eigen/Core>
 #include <opencv2/core.hpp>
 
 #include "fmv3d/core/camera.h"
@@ -42,6 +43,9 @@ struct CalibrationResult {
   double rms = 0;                                 // over all corners of all used images, pixels
   std::vector<std::string> used;                  // image names, in order
   std::vector<double> per_image_rms;              // parallel to used
+  // Parallel to used: the detected corners (fmv3d convention, +0.5) and their reprojection residuals
+  // (reprojected − detected, pixels), row-major over the board — what the console's calibration window draws.
+  std::vector<std::vector<Eigen::Vector2d>> corners, residuals;
   std::vector<std::string> rejected;              // board not found
   BoardSpec board;
 };

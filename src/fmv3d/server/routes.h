@@ -38,6 +38,8 @@ std::filesystem::path WorkspaceDir(const Context& ctx, const std::string& name);
 void SendFile(httplib::Response& res, const std::filesystem::path& path);
 
 void RegisterApiRoutes(httplib::Server& http, Context& ctx);
-void RegisterFileRoutes(httplib::Server& http, Context& ctx);  // /files/{ws}/... and the front end's assets
+void RegisterFileRoutes(httplib::Server& http, Context& ctx);
+// The hand tools' endpoints (manual_routes.cc); registered before the API's catch-all.
+void RegisterManualRoutes(httplib::Server& http, Context& ctx);  // /files/{ws}/... and the front end's assets
 
 }  // namespace fmv3d::server

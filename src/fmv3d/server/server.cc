@@ -199,6 +199,7 @@ Server::Server(ServerOptions options) : impl_(std::make_unique<Impl>()) {
       SendError(res, 500, "internal error");
     }
   });
+  RegisterManualRoutes(http, ctx);
   RegisterApiRoutes(http, ctx);
   RegisterFileRoutes(http, ctx);
 }
