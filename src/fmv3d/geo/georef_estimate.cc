@@ -198,13 +198,18 @@ nlohmann::json GeorefSolution::ToJson() const {
   j["expected_accuracy"] = accuracy.ToJson();
   j["consistent_with_telemetry"] = consistent_with_telemetry();
   j["fit_fraction"] = fit_fraction;
+  AddLocalFrameJson(frame, &j);
+  return j;
+}
+
+void AddLocalFrameJson(const LocalFrame& frame, nlohmann::json* georef) {
+  nlohmann::json& j = *georef;
   const UtmZone zone = frame.utm_zone();
   j["utm"] = {{"zone", zone.zone}, {"north", zone.north}, {"epsg", zone.Epsg()}, {"name", zone.Name()}};
   j["proj"] = {
       {"enu_from_wgs84", frame.EnuPipeline()}, {"utm_from_wgs84", frame.UtmPipeline()}, {"wgs84_crs", "EPSG:4979"}};
   j["to_wgs84"] = "WGS84 (lon, lat, h) = inverse of proj.enu_from_wgs84 applied to X_enu";
   j["wkt_utm"] = UtmWkt(zone);
-  return j;
 }
 
 }  // namespace fmv3d::geo

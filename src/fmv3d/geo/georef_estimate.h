@@ -88,6 +88,8 @@ struct GeorefSolution {
 
 // georef.json's "similarity": scale, rotation (wxyz and 3x3), translation, 4x4 matrix (sparse → ENU).
 nlohmann::json GeorefSimilarityJson(const core::Sim3& sim);
+// The local frame's description in georef.json ("utm", "proj", "to_wgs84", "wkt_utm"), which later stages read.
+void AddLocalFrameJson(const LocalFrame& frame, nlohmann::json* georef);
 
 // Steps 1–5 above. model_points: the sparse model's points (for the ground plane). Throws fmv3d::Error on
 // degenerate camera positions or a straight track without enough points to find the ground.

@@ -205,12 +205,7 @@ nlohmann::json GcpGeoref::ToJson() const {
   j["consistent_with_telemetry"] = true;
   j["telemetry"] = "not used: GCPs outrank telemetry";
   j["trusted"] = true;
-  const UtmZone zone = frame.utm_zone();
-  j["utm"] = {{"zone", zone.zone}, {"north", zone.north}, {"epsg", zone.Epsg()}, {"name", zone.Name()}};
-  j["proj"] = {
-      {"enu_from_wgs84", frame.EnuPipeline()}, {"utm_from_wgs84", frame.UtmPipeline()}, {"wgs84_crs", "EPSG:4979"}};
-  j["to_wgs84"] = "WGS84 (lon, lat, h) = inverse of proj.enu_from_wgs84 applied to X_enu";
-  j["wkt_utm"] = UtmWkt(zone);
+  AddLocalFrameJson(frame, &j);
   return j;
 }
 
