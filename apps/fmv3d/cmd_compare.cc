@@ -28,7 +28,9 @@ void Add(CLI::App& app) {
     bool no_icp = false;
   };
   auto a = std::make_shared<Args>();
-  cmd->add_option("RECON", a->recon, "Reconstruction PLY (points or mesh vertices)")->required()->check(CLI::ExistingFile);
+  cmd->add_option("RECON", a->recon, "Reconstruction PLY (points or mesh vertices)")
+      ->required()
+      ->check(CLI::ExistingFile);
   cmd->add_option("--cad", a->cad, "CAD model (OBJ)")->required()->check(CLI::ExistingFile);
   cmd->add_option("--length", a->opt.length, "Characteristic length H in CAD units (e.g. building height)")
       ->required()
@@ -72,17 +74,17 @@ void Add(CLI::App& app) {
     if (!a->transform.empty()) o.transform = align::ReadSim3Json(a->transform);
     if (!a->cameras.empty()) o.cameras = a->cameras;
     const auto r = align::CompareToCad(o);
-    std::cout << fmt::format("compare: {} of {} points measured (alignment: {}{})\n", r.points_measured,
-                             r.points_total, r.coarse, r.icp ? " + ICP" : "")
+    std::cout << fmt::format("compare: {} of {} points measured (alignment: {}{})\n", r.points_measured, r.points_total,
+                             r.coarse, r.icp ? " + ICP" : "")
               << fmt::format("  {:<16} {:>9} {:>9} {:>9} {:>9} {:>9} {:>9}\n", "% of H", "mean", "std", "RMS",
                              "|e| 50%", "|e| 90%", "|e| 99%");
     const std::pair<const char*, const align::ErrorStats*> rows[] = {
         {"X", &r.x}, {"Y", &r.y}, {"Z", &r.z}, {"signed distance", &r.total}};
     for (const auto& [name, s] : rows)
-      std::cout << fmt::format("  {:<16} {:>9.3f} {:>9.3f} {:>9.3f} {:>9.3f} {:>9.3f} {:>9.3f}\n", name,
-                               100 * s->mean, 100 * s->std, 100 * s->rms, 100 * s->p50, 100 * s->p90, 100 * s->p99);
-    std::cout << fmt::format("  completeness {:.1f}% of {} CAD samples{}\n", 100 * r.completeness,
-                             r.surface_samples, r.completeness_seen_only ? " seen by >= 2 cameras" : "")
+      std::cout << fmt::format("  {:<16} {:>9.3f} {:>9.3f} {:>9.3f} {:>9.3f} {:>9.3f} {:>9.3f}\n", name, 100 * s->mean,
+                               100 * s->std, 100 * s->rms, 100 * s->p50, 100 * s->p90, 100 * s->p99);
+    std::cout << fmt::format("  completeness {:.1f}% of {} CAD samples{}\n", 100 * r.completeness, r.surface_samples,
+                             r.completeness_seen_only ? " seen by >= 2 cameras" : "")
               << "  report: " << (std::filesystem::path(a->out) / "compare.html").string() << "\n";
   });
 }

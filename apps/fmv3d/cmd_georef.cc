@@ -15,17 +15,19 @@ namespace fmv3d::app {
 namespace {
 
 void Add(CLI::App& app) {
-  auto* cmd = app.add_subcommand("georef", "Georeference the sparse model with GCPs or telemetry (WS/geo/georef.json, sparse_enu/)");
+  auto* cmd = app.add_subcommand(
+      "georef", "Georeference the sparse model with GCPs or telemetry (WS/geo/georef.json, sparse_enu/)");
   struct Args {
     std::string ws, origin, constrain = "auto", gcp;
     geo::GeorefOptions opt;
   };
   auto a = std::make_shared<Args>();
-  cmd->add_option("WS", a->ws, "Workspace folder (with frames/frames.json carrying telemetry, and sparse/)")->required();
+  cmd->add_option("WS", a->ws, "Workspace folder (with frames/frames.json carrying telemetry, and sparse/)")
+      ->required();
   cmd->add_option("--origin", a->origin, "Local ENU origin LAT,LON,ALT (default: centroid of the telemetry positions)");
   cmd->add_option("--seed", a->opt.seed, "Random seed of the robust fit")->capture_default_str();
-  auto* kf_only = cmd->add_flag("--keyframes-only",
-                                "Fit only the registered keyframes' telemetry, not every packet of frames/telemetry.json");
+  auto* kf_only = cmd->add_flag(
+      "--keyframes-only", "Fit only the registered keyframes' telemetry, not every packet of frames/telemetry.json");
   auto* no_fc = cmd->add_flag("--no-frame-centres",
                               "Fit the positions (and attitudes) only; ignore the frame centres at their slant range");
   cmd->add_option("--constrain", a->constrain,
@@ -37,8 +39,9 @@ void Add(CLI::App& app) {
   cmd->add_option("--prior-sigma", a->opt.prior_sigma_m, "Telemetry position accuracy per axis, metres (priors' sigma)")
       ->check(CLI::PositiveNumber)
       ->capture_default_str();
-  cmd->add_option("--gcp", a->gcp, "Ground control points (OpenDroneMap gcp_list.txt) instead of "
-                                  "WS/manual/gcp_list.txt; GCPs outrank telemetry");
+  cmd->add_option("--gcp", a->gcp,
+                  "Ground control points (OpenDroneMap gcp_list.txt) instead of "
+                  "WS/manual/gcp_list.txt; GCPs outrank telemetry");
   auto* no_gcp = cmd->add_flag("--no-gcp", "Ignore WS/manual/gcp_list.txt (georeference from telemetry)");
   cmd->callback([a, kf_only, no_fc, no_gcp] {
     if (!a->gcp.empty()) a->opt.gcp_file = a->gcp;
@@ -67,18 +70,19 @@ void Add(CLI::App& app) {
                   j["utm"]["epsg"].get<int>());
       return;
     }
-    std::printf("georef: fit on %d %s, %d/%d keyframes inliers, residual RMS %.3f m, expected translation error "
-                "%.2f m, scale %.5f, %s (EPSG:%d)\n",
-                j["fit"]["inliers"].get<int>(), j["fit"]["used"].get<bool>() ? "telemetry packets" : "keyframes",
-                j["inliers"].get<int>(), j["cameras"].get<int>(), j["residuals"]["rms_m"].get<double>(),
-                j["expected_translation_error_m"].get<double>(),
-                j["similarity"]["scale"].get<double>(), j["utm"]["name"].get<std::string>().c_str(),
-                j["utm"]["epsg"].get<int>());
+    std::printf(
+        "georef: fit on %d %s, %d/%d keyframes inliers, residual RMS %.3f m, expected translation error "
+        "%.2f m, scale %.5f, %s (EPSG:%d)\n",
+        j["fit"]["inliers"].get<int>(), j["fit"]["used"].get<bool>() ? "telemetry packets" : "keyframes",
+        j["inliers"].get<int>(), j["cameras"].get<int>(), j["residuals"]["rms_m"].get<double>(),
+        j["expected_translation_error_m"].get<double>(), j["similarity"]["scale"].get<double>(),
+        j["utm"]["name"].get<std::string>().c_str(), j["utm"]["epsg"].get<int>());
     if (j.contains("telemetry_constrained") && j["telemetry_constrained"].value("applied", false))
-      std::printf("georef: model built again from the telemetry (fit %.0f%% → %.0f%% of the packets); WS/sparse "
-                  "replaced, run the later stages again\n",
-                  100 * j["telemetry_constrained"]["fit_fraction_image_only"].get<double>(),
-                  100 * j["fit_fraction"].get<double>());
+      std::printf(
+          "georef: model built again from the telemetry (fit %.0f%% → %.0f%% of the packets); WS/sparse "
+          "replaced, run the later stages again\n",
+          100 * j["telemetry_constrained"]["fit_fraction_image_only"].get<double>(),
+          100 * j["fit_fraction"].get<double>());
   });
 }
 

@@ -4,8 +4,8 @@
 
 #include "command.h"
 #include "fmv3d/core/error.h"
-#include "fmv3d/features/match_stage.h"
 #include "fmv3d/core/workspace.h"
+#include "fmv3d/features/match_stage.h"
 
 namespace fmv3d::app {
 namespace {

@@ -24,8 +24,7 @@ void Add(CLI::App& app) {
       ->capture_default_str();
   cmd->add_option("--max-error", m.abs_pose_max_error_px, "Absolute pose RANSAC threshold, pixels")
       ->capture_default_str();
-  cmd->add_option("--min-angle", m.tri_min_angle_deg, "Minimum triangulation angle, degrees")
-      ->capture_default_str();
+  cmd->add_option("--min-angle", m.tri_min_angle_deg, "Minimum triangulation angle, degrees")->capture_default_str();
   cmd->add_option("--filter-angle", m.filter_min_angle_deg, "Points below this angle are removed, degrees")
       ->capture_default_str();
   cmd->add_option("--tri-max-error", m.tri_max_error_px, "Triangulation / filter reprojection error, pixels")
@@ -36,8 +35,7 @@ void Add(CLI::App& app) {
   cmd->add_flag("--tangential", m.refine_tangential, "Also refine p1, p2");
   cmd->add_option("--local-ba-iterations", m.local_ba_max_iterations, "Local BA: maximum iterations")
       ->capture_default_str();
-  cmd->add_option("--global-ba-iterations", m.global_ba_max_iterations,
-                  "Intermediate global BA: maximum iterations")
+  cmd->add_option("--global-ba-iterations", m.global_ba_max_iterations, "Intermediate global BA: maximum iterations")
       ->capture_default_str();
   cmd->add_option("--global-ba-ratio", m.global_ba_growth_ratio,
                   "Global BA whenever the model has grown by this factor")

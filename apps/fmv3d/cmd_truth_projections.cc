@@ -43,7 +43,8 @@ void Add(CLI::App& app) {
   cmd->add_option("--min-frames", a->opt.min_frames, "Frames that must see each point")->capture_default_str();
   cmd->add_option("--in", a->in, "Comma-separated frames every point must be seen in (e.g. a degraded frame)");
   cmd->add_option("--frames", a->frames, "Comma-separated frames whose observations are kept (default: all)");
-  cmd->add_option("--ws", a->ws, "Workspace: keep only its frames (frames/frames.json) and check the output against it");
+  cmd->add_option("--ws", a->ws,
+                  "Workspace: keep only its frames (frames/frames.json) and check the output against it");
   cmd->add_option("--noise", a->opt.noise_px, "Gaussian noise σ added to each pixel coordinate")->capture_default_str();
   cmd->add_option("--noise-max", a->opt.noise_max_px,
                   "Uniform noise in [-PX, PX] added to each pixel coordinate (a click within ±PX)")
@@ -119,7 +120,8 @@ void Add(CLI::App& app) {
              "\n";
     } else if (a->format == "tiepoints") {
       io::TiePoints t;
-      for (size_t i = 0; i < points.size(); ++i) t.tie_points.push_back({"p" + std::to_string(i + 1), "", points[i].observations});
+      for (size_t i = 0; i < points.size(); ++i)
+        t.tie_points.push_back({"p" + std::to_string(i + 1), "", points[i].observations});
       if (!a->output.empty()) {
         io::WriteTiePoints(t, a->output, table ? &*table : nullptr);
         return;

@@ -1,10 +1,11 @@
 // CAD comparison on a reconstruction whose errors are known: points sampled on the building's surface, moved
 // along the normal by Gaussian noise of known sigma, with ground around it, expressed in a foreign frame.
+#include "fmv3d/align/compare.h"
+
 #include <gtest/gtest.h>
 
 #include <random>
 
-#include "fmv3d/align/compare.h"
 #include "fmv3d/core/error.h"
 #include "fmv3d/core/files.h"
 #include "fmv3d/geometry/mesh_distance.h"
@@ -65,7 +66,7 @@ TEST(CompareToCad, MeasuresKnownNoiseFromARoughTransform) {
   const CompareResult r = CompareToCad(recon, f.cad, o);
   ASSERT_TRUE(r.icp.has_value());
   const core::Sim3 e = ComposeSim3(r.transform, f.to_recon);  // identity when perfect
-  EXPECT_NEAR(e.s, 1, 5e-4);  // noise of 0.4% of H near edges biases a few 1e-4
+  EXPECT_NEAR(e.s, 1, 5e-4);                                  // noise of 0.4% of H near edges biases a few 1e-4
   EXPECT_LT(core::RotationAngle(e.q, Eigen::Quaterniond::Identity()) * 180 / M_PI, 0.02);
   EXPECT_NEAR(r.total.rms, 0.004, 0.0004);
   EXPECT_NEAR(r.total.mean, 0, 0.0003);
@@ -166,8 +167,10 @@ TEST(CompareToCad, Sim3JsonRoundTripAndErrors) {
   EXPECT_THROW(Sim3FromJson(nlohmann::json{{"scale", 1}}), Error);
   // The shape of evaluate-sparse's report.
   const Eigen::Quaterniond& q = f.to_recon.q;
-  const nlohmann::json report = {{"alignment", {{"scale", f.to_recon.s}, {"q_wxyz", {q.w(), q.x(), q.y(), q.z()}},
-                                                {"t", {f.to_recon.t.x(), f.to_recon.t.y(), f.to_recon.t.z()}}}}};
+  const nlohmann::json report = {{"alignment",
+                                  {{"scale", f.to_recon.s},
+                                   {"q_wxyz", {q.w(), q.x(), q.y(), q.z()}},
+                                   {"t", {f.to_recon.t.x(), f.to_recon.t.y(), f.to_recon.t.z()}}}}};
   const core::Sim3 from_report = Sim3FromJson(report);
   EXPECT_LT(core::RotationAngle(from_report.q, f.to_recon.q), 1e-12);
   EXPECT_LT((from_report.t - f.to_recon.t).norm(), 1e-12);
@@ -193,8 +196,8 @@ TEST(CompareCli, WritesReportAndRejectsBadInput) {
   io::WritePointCloudPly(f.Recon(0.002 * kH), dir / "recon.ply");
   core::WriteJson(dir / "sim.json", Sim3ToJson(f.to_recon.Inverse()));
   const std::string base = "compare " + (dir / "recon.ply").string() + " --cad " + (dir / "cad.obj").string();
-  auto r = test::RunCli(base + " --length 30 --transform " + (dir / "sim.json").string() + " -o " +
-                        (dir / "out").string());
+  auto r =
+      test::RunCli(base + " --length 30 --transform " + (dir / "sim.json").string() + " -o " + (dir / "out").string());
   ASSERT_EQ(r.exit_code, 0) << r.err;
   EXPECT_NE(r.out.find("completeness"), std::string::npos) << r.out;
   EXPECT_TRUE(std::filesystem::exists(dir / "out/compare.html"));

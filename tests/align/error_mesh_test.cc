@@ -1,10 +1,11 @@
 // The CAD coloured by a comparison's errors: the building's surface subdivided, each vertex carrying the mean
 // signed error of the points near it, on a reconstruction whose error is known everywhere.
+#include "fmv3d/align/error_mesh.h"
+
 #include <gtest/gtest.h>
 
 #include <cmath>
 
-#include "fmv3d/align/error_mesh.h"
 #include "fmv3d/core/error.h"
 #include "fmv3d/core/files.h"
 #include "fmv3d/geometry/mesh_distance.h"

@@ -5,9 +5,8 @@
 
 #include <Eigen/Geometry>
 #include <cmath>
-#include <random>
-
 #include <opencv2/imgproc.hpp>
+#include <random>
 
 #include "fmv3d/core/error.h"
 #include "fmv3d/io/image_io.h"
@@ -80,9 +79,7 @@ class BoardRenderer {
 
  private:
   static constexpr int kSs = 3;
-  size_t Index(int u, int v, int i, int j) const {
-    return ((size_t(v) * cam_.width + u) * kSs + j) * kSs + i;
-  }
+  size_t Index(int u, int v, int i, int j) const { return ((size_t(v) * cam_.width + u) * kSs + j) * kSs + i; }
   core::Camera cam_;
   BoardSpec board_;
   std::vector<Eigen::Vector2f> rays_;
@@ -131,9 +128,10 @@ TEST(Chessboard, SyntheticViewsRecoverKnownIntrinsics) {
   ASSERT_EQ(detections.size(), 12u);
   const CalibrationResult res = Calibrate(detections, board);
   const core::Camera& c = res.camera;
-  std::printf("synthetic: f %.3f (true %.3f), aspect %.5f, pp (%.3f, %.3f) (true %.1f, %.1f), k1 %.5f k2 %.5f "
-              "p1 %.6f p2 %.6f, RMS %.3f px\n",
-              c.f, truth.f, c.aspect, c.u0, c.v0, truth.u0, truth.v0, c.k1, c.k2, c.p1, c.p2, res.rms);
+  std::printf(
+      "synthetic: f %.3f (true %.3f), aspect %.5f, pp (%.3f, %.3f) (true %.1f, %.1f), k1 %.5f k2 %.5f "
+      "p1 %.6f p2 %.6f, RMS %.3f px\n",
+      c.f, truth.f, c.aspect, c.u0, c.v0, truth.u0, truth.v0, c.k1, c.k2, c.p1, c.p2, res.rms);
   EXPECT_LT(std::abs(c.f - truth.f) / truth.f, 0.002);
   EXPECT_NEAR(c.aspect, truth.aspect, 0.002);
   EXPECT_NEAR(c.u0, truth.u0, 1.0);

@@ -9,9 +9,8 @@
 //    nothing finished earlier is lost, and the run resumes to the same result once the limit is lifted.
 //  - inputs: a read-only input video works; a workspace that cannot be created and a missing input are clear
 //    errors; an input video replaced after a run makes the next run start again from the frames stage.
-#include <gtest/gtest.h>
-
 #include <fcntl.h>
+#include <gtest/gtest.h>
 #include <poll.h>
 #include <signal.h>
 #include <sys/resource.h>
@@ -22,12 +21,11 @@
 #include <chrono>
 #include <fstream>
 #include <map>
+#include <nlohmann/json.hpp>
 #include <random>
 #include <regex>
 #include <set>
 #include <thread>
-
-#include <nlohmann/json.hpp>
 
 #include "fmv3d/core/files.h"
 #include "test_util.h"

@@ -63,8 +63,8 @@ TEST(E2eHandTools, DegradedFramesTiePointsAndGcps) {
   // --- GCPs, no telemetry.
   const geo::GeoPoint origin{46.95, 7.44, 540};
   Cli("truth-projections " + synth + " --ws " + ws +
-      " --points 6 --check 1 --noise-max 1 --seed 3 --format gcp --crs 'WGS84 UTM 32N' --origin 46.95,7.44,540 -o " + ws +
-      "/manual/gcp_list.txt");
+      " --points 6 --check 1 --noise-max 1 --seed 3 --format gcp --crs 'WGS84 UTM 32N' --origin 46.95,7.44,540 -o " +
+      ws + "/manual/gcp_list.txt");
   Cli("manual check " + ws);
   Cli("-q georef " + ws);
   {

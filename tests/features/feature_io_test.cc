@@ -172,10 +172,11 @@ TEST(FeatureIo, MatchesRoundTripAndValidation) {
     for (size_t k = 0; k < q[i].inliers.size(); ++k) EXPECT_EQ(q[i].inliers[k].idx2, pairs[i].inliers[k].idx2);
   }
   EXPECT_NO_THROW(ValidateMatches(q, {100, 100, 100, 100, 100}, "m"));
-  EXPECT_NE(ErrorOf([&] { ValidateMatches(q, {100, 100, 100, 100}, "m"); }).find("beyond the 4 frames"),
+  EXPECT_NE(ErrorOf([&] {
+              ValidateMatches(q, {100, 100, 100, 100}, "m");
+            }).find("beyond the 4 frames"),
             std::string::npos);
-  EXPECT_NE(ErrorOf([&] { ValidateMatches(q, {100, 100, 100, 100, 30}, "m"); }).find("keypoint"),
-            std::string::npos);
+  EXPECT_NE(ErrorOf([&] { ValidateMatches(q, {100, 100, 100, 100, 30}, "m"); }).find("keypoint"), std::string::npos);
 
   Truncate(path, std::filesystem::file_size(path) - 9);
   EXPECT_NE(ErrorOf([&] { ReadMatches(path); }).find("truncated"), std::string::npos);

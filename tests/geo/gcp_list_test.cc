@@ -70,8 +70,7 @@ TEST(GcpList, OdmFileWithCheckPoint) {
 TEST(GcpList, CrsForms) {
   // ODM's "WGS84 UTM 32N" = EPSG:32632 = its PROJ string.
   const GeoPoint p{46.9, 7.5, 500};
-  GcpCrs odm("WGS84 UTM 32N"), epsg("EPSG:32632"),
-      proj("+proj=utm +zone=32 +datum=WGS84 +units=m +no_defs");
+  GcpCrs odm("WGS84 UTM 32N"), epsg("EPSG:32632"), proj("+proj=utm +zone=32 +datum=WGS84 +units=m +no_defs");
   EXPECT_EQ(odm.epsg(), 32632);
   const Eigen::Vector3d a = odm.FromWgs84(p), b = epsg.FromWgs84(p), c = proj.FromWgs84(p);
   EXPECT_NEAR((a - b).norm(), 0, 1e-6);
@@ -102,13 +101,13 @@ TEST(GcpList, EveryBrokenLineNamed) {
   e = Problems(
       "EPSG:4326\n"
       "7.44 46.94 560 10 20 a.png g\n"
-      "7.44 46.94 560 10\n"                      // line 3: too few fields
-      "7.44 46,94 560 10 20 b.png g\n"           // line 4: a decimal comma
-      "7.44 46.94 nan 10 20 b.png g\n"           // line 5: not finite
-      "7.44 46.94 560 10 20 missing.png g\n"     // line 6: no such frame
-      "7.44 46.94 560 700 20 b.png g\n"          // line 7: outside the image
-      "7.45 46.94 560 10 20 b.png g\n"           // line 8: the same name elsewhere
-      "7.46 46.94 560 10 20 a.png check\n");     // line 9: a check point without a name
+      "7.44 46.94 560 10\n"                   // line 3: too few fields
+      "7.44 46,94 560 10 20 b.png g\n"        // line 4: a decimal comma
+      "7.44 46.94 nan 10 20 b.png g\n"        // line 5: not finite
+      "7.44 46.94 560 10 20 missing.png g\n"  // line 6: no such frame
+      "7.44 46.94 560 700 20 b.png g\n"       // line 7: outside the image
+      "7.45 46.94 560 10 20 b.png g\n"        // line 8: the same name elsewhere
+      "7.46 46.94 560 10 20 a.png check\n");  // line 9: a check point without a name
   ASSERT_GE(e.size(), 7u) << io::JoinErrors(e, 100);
   EXPECT_THAT(e[0], HasSubstr("gcp_list.txt:3: expected geo_x geo_y geo_z im_x im_y image_name"));
   EXPECT_THAT(e[1], HasSubstr("gcp_list.txt:4: geo_y \"46,94\" is not a number"));

@@ -1,16 +1,16 @@
 // geo/: PROJ frames against the independent closed-form geodesy of synth/, the robust georeference on
 // synthetic models with known similarities (noise, an outlier, a straight track), DSM / orthophoto rasters on
 // a known mesh, GeoTIFF and LAS read back.
+#include <gdal_priv.h>
+#include <gdal_utils.h>
 #include <gtest/gtest.h>
+#include <open3d/geometry/TriangleMesh.h>
+#include <open3d/io/TriangleMeshIO.h>
 #include <proj.h>
 
 #include <Eigen/Geometry>
 #include <cmath>
-#include <gdal_priv.h>
-#include <gdal_utils.h>
 #include <fstream>
-#include <open3d/geometry/TriangleMesh.h>
-#include <open3d/io/TriangleMeshIO.h>
 #include <random>
 
 #include "fmv3d/core/error.h"
@@ -24,10 +24,10 @@
 #include "fmv3d/geo/raster.h"
 #include "fmv3d/io/colmap_model.h"
 #include "fmv3d/io/frames_index.h"
-#include "fmv3d/telemetry/attitude.h"
-#include "fmv3d/telemetry/klv_st0601_writer.h"
 #include "fmv3d/io/obj_io.h"
 #include "fmv3d/synth/telemetry.h"
+#include "fmv3d/telemetry/attitude.h"
+#include "fmv3d/telemetry/klv_st0601_writer.h"
 #include "test_util.h"
 
 namespace fmv3d::geo {

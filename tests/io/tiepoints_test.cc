@@ -78,13 +78,15 @@ TEST(TiePoints, EveryBadInputNamed) {
   ASSERT_EQ(e.size(), 1u);
   EXPECT_THAT(e[0], HasSubstr("a second observation in frame \"a.png\""));
   // Duplicate and empty ids (across tie points and keypoints), missing fields, wrong types.
-  e = Problems(Doc(std::string(R"("tie_points": [{"id": "t1", )") + kTwo + R"(}, {"id": "t1", )" + kTwo +
-                   R"(}], "keypoints": [{"id": "t1", "frame": "a.png", "x": 1, "y": 1}, {"id": "", "frame": "a.png", "x": 1, "y": 1}])"));
+  e = Problems(Doc(
+      std::string(R"("tie_points": [{"id": "t1", )") + kTwo + R"(}, {"id": "t1", )" + kTwo +
+      R"(}], "keypoints": [{"id": "t1", "frame": "a.png", "x": 1, "y": 1}, {"id": "", "frame": "a.png", "x": 1, "y": 1}])"));
   ASSERT_EQ(e.size(), 3u);
   EXPECT_THAT(e[0], HasSubstr("duplicate id \"t1\""));
   EXPECT_THAT(e[1], HasSubstr("keypoint \"t1\": duplicate id"));
   EXPECT_THAT(e[2], HasSubstr("\"id\" is empty"));
-  e = Problems(Doc(R"("tie_points": [{"observations": []}, 7], "keypoints": [{"id": "k", "frame": 3, "x": "1", "y": null}])"));
+  e = Problems(
+      Doc(R"("tie_points": [{"observations": []}, 7], "keypoints": [{"id": "k", "frame": 3, "x": "1", "y": null}])"));
   EXPECT_GE(e.size(), 4u);
   EXPECT_THAT(JoinErrors(e, 100), HasSubstr("\"id\" is missing"));
   EXPECT_THAT(JoinErrors(e, 100), HasSubstr("\"frame\" must be a string"));

@@ -37,8 +37,9 @@ TEST(ManualCheck, ValidInvalidAndAbsent) {
   core::WriteTextFile(ws / "manual/tiepoints.json",
                       R"({"format": "fmv3d-tiepoints", "version": 1, "tie_points": [{"id": "t", "observations":
                           [{"frame": "a.png", "x": 10, "y": 10}, {"frame": "b.png", "x": 12, "y": 11}]}]})");
-  core::WriteTextFile(ws / "manual/gcp_list.txt", "EPSG:32632\n500000 5200000 300 10 20 a.png g\n"
-                                                  "500000 5200000 300 11 21 b.png g\n");
+  core::WriteTextFile(ws / "manual/gcp_list.txt",
+                      "EPSG:32632\n500000 5200000 300 10 20 a.png g\n"
+                      "500000 5200000 300 11 21 b.png g\n");
   r = CheckManualInputs(ws);
   EXPECT_TRUE(r.tiepoints.valid());
   EXPECT_TRUE(r.gcp.valid());
@@ -56,8 +57,9 @@ TEST(ManualCheck, ValidInvalidAndAbsent) {
   r = CheckManualInputs(ws);
   EXPECT_FALSE(r.ok());
   ASSERT_EQ(r.tiepoints.errors.size(), 3u) << r.ToJson().dump(2);
-  EXPECT_EQ(r.tiepoints.errors[0], "tiepoints.json: tie point \"u\": has 1 observation(s); a tie point needs ≥ 2 "
-                                   "(in different frames)");
+  EXPECT_EQ(r.tiepoints.errors[0],
+            "tiepoints.json: tie point \"u\": has 1 observation(s); a tie point needs ≥ 2 "
+            "(in different frames)");
   ASSERT_EQ(r.gcp.errors.size(), 2u) << r.ToJson().dump(2);
   EXPECT_NE(r.gcp.errors[0].find("gcp_list.txt:1: unknown CRS \"EPSG:999999\""), std::string::npos);
   EXPECT_NE(r.gcp.errors[1].find("gcp_list.txt:2: expected geo_x"), std::string::npos);

@@ -1,9 +1,8 @@
 // The console's HTTP API (docs/console-api.md) against a server in-process: every read endpoint, creation,
 // uploads, files with ranges, the security rules (traversal in every spelling, symlinks out of the root, NUL
 // bytes, absolute paths, bad bodies, oversize uploads, no CORS) and the token rules.
-#include <gtest/gtest.h>
-
 #include <arpa/inet.h>
+#include <gtest/gtest.h>
 #include <sys/socket.h>
 #include <unistd.h>
 

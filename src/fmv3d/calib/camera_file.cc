@@ -1,11 +1,10 @@
-#include "fmv3d/core/camera_json.h"
 #include "fmv3d/calib/camera_file.h"
 
 #include <algorithm>
 #include <cmath>
-
 #include <opencv2/core/persistence.hpp>
 
+#include "fmv3d/core/camera_json.h"
 #include "fmv3d/core/error.h"
 #include "fmv3d/core/files.h"
 
@@ -44,8 +43,8 @@ void WriteOpenCvYaml(const fs::path& path, const core::Camera& c, double rms) {
     if (!fsw.isOpened()) throw Error(path.string() + ": cannot write");
     cv::Mat K = (cv::Mat_<double>(3, 3) << c.fx(), 0, c.u0 - 0.5, 0, c.fy(), c.v0 - 0.5, 0, 0, 1);
     cv::Mat d = (cv::Mat_<double>(1, 5) << c.k1, c.k2, c.p1, c.p2, 0.0);
-    fsw << "image_width" << c.width << "image_height" << c.height << "camera_matrix" << K
-        << "distortion_coefficients" << d;
+    fsw << "image_width" << c.width << "image_height" << c.height << "camera_matrix" << K << "distortion_coefficients"
+        << d;
     if (rms >= 0) fsw << "avg_reprojection_error" << rms;
     fsw.release();
   });

@@ -2,7 +2,6 @@
 
 #include <cmath>
 #include <cstdio>
-
 #include <opencv2/calib3d.hpp>
 #include <opencv2/imgproc.hpp>
 
@@ -21,8 +20,7 @@ BoardSpec BoardSpec::Parse(const std::string& text, double square) {
 }
 
 void BoardSpec::Check() const {
-  if (cols < 2 || rows < 2 || cols > 100 || rows > 100)
-    throw Error("--board: needs at least 2x2 inner corners");
+  if (cols < 2 || rows < 2 || cols > 100 || rows > 100) throw Error("--board: needs at least 2x2 inner corners");
   if (!(square > 0)) throw Error("--square: must be a positive length");
 }
 
@@ -38,8 +36,8 @@ BoardDetection DetectChessboard(const cv::Mat& image, const BoardSpec& board, co
   const cv::Size pattern(board.cols, board.rows);
   // The classic detector + cornerSubPix is the reference for accuracy on sharp boards; the sector-based one
   // finds boards the classic one misses (blur, strong distortion).
-  d.found = cv::findChessboardCorners(grey, pattern, d.corners,
-                                      cv::CALIB_CB_ADAPTIVE_THRESH | cv::CALIB_CB_NORMALIZE_IMAGE);
+  d.found =
+      cv::findChessboardCorners(grey, pattern, d.corners, cv::CALIB_CB_ADAPTIVE_THRESH | cv::CALIB_CB_NORMALIZE_IMAGE);
   if (d.found) {
     // Search window scaled to the board's square size in the image, capped so it never spans two corners.
     double min_dist = 1e9;
@@ -68,8 +66,7 @@ CalibrationResult Calibrate(const std::vector<BoardDetection>& detections, const
   cv::Size size;
   std::vector<cv::Point3f> grid;
   for (int r = 0; r < board.rows; ++r)
-    for (int c = 0; c < board.cols; ++c)
-      grid.emplace_back(float(c * board.square), float(r * board.square), 0.f);
+    for (int c = 0; c < board.cols; ++c) grid.emplace_back(float(c * board.square), float(r * board.square), 0.f);
   for (const auto& d : detections) {
     if (!d.found) {
       res.rejected.push_back(d.name);
@@ -78,7 +75,8 @@ CalibrationResult Calibrate(const std::vector<BoardDetection>& detections, const
     if (size.area() == 0) size = d.image_size;
     if (d.image_size != size)
       throw Error(d.name + ": image size " + std::to_string(d.image_size.width) + "x" +
-                  std::to_string(d.image_size.height) + " differs from the first image's; calibrate one camera "
+                  std::to_string(d.image_size.height) +
+                  " differs from the first image's; calibrate one camera "
                   "mode at a time");
     object.push_back(grid);
     image.push_back(d.corners);
@@ -168,11 +166,12 @@ cv::Mat DrawDistortionField(const core::Camera& camera, double exaggeration, int
   cv::drawMarker(img, pp, cv::Scalar(0, 0, 255), cv::MARKER_CROSS, 20, 2);
   char text[240];
   if (factor == exaggeration)
-    std::snprintf(text, sizeof(text), "distortion x%.0f  (max %.2f px)  k1=%.4f k2=%.4f p1=%.5f p2=%.5f",
-                  exaggeration, max_disp, camera.k1, camera.k2, camera.p1, camera.p2);
+    std::snprintf(text, sizeof(text), "distortion x%.0f  (max %.2f px)  k1=%.4f k2=%.4f p1=%.5f p2=%.5f", exaggeration,
+                  max_disp, camera.k1, camera.k2, camera.p1, camera.p2);
   else
-    std::snprintf(text, sizeof(text), "distortion x%.2f (x%.0f would overlap; max %.2f px)  k1=%.4f k2=%.4f p1=%.5f p2=%.5f",
-                  factor, exaggeration, max_disp, camera.k1, camera.k2, camera.p1, camera.p2);
+    std::snprintf(text, sizeof(text),
+                  "distortion x%.2f (x%.0f would overlap; max %.2f px)  k1=%.4f k2=%.4f p1=%.5f p2=%.5f", factor,
+                  exaggeration, max_disp, camera.k1, camera.k2, camera.p1, camera.p2);
   cv::putText(img, text, cv::Point(10, H - 12), cv::FONT_HERSHEY_SIMPLEX, 0.5, cv::Scalar(0, 0, 0), 1, cv::LINE_AA);
   return img;
 }

@@ -6,13 +6,12 @@
 // returned by DetectChessboard are in OpenCV's (integer centres), as drawn on the corner images.
 #pragma once
 
+#include <Eigen/Core>
 #include <array>
 #include <filesystem>
+#include <opencv2/core.hpp>
 #include <string>
 #include <vector>
-
-#include <Eigen/Core>
-#include <opencv2/core.hpp>
 
 #include "fmv3d/core/camera.h"
 
@@ -38,15 +37,15 @@ struct BoardDetection {
 BoardDetection DetectChessboard(const cv::Mat& image, const BoardSpec& board, const std::string& name = "");
 
 struct CalibrationResult {
-  core::Camera camera;                            // fmv3d convention
+  core::Camera camera;                                // fmv3d convention
   std::array<double, core::kNumIntrinsics> stddev{};  // same order as Camera::Params()
-  double rms = 0;                                 // over all corners of all used images, pixels
-  std::vector<std::string> used;                  // image names, in order
-  std::vector<double> per_image_rms;              // parallel to used
+  double rms = 0;                                     // over all corners of all used images, pixels
+  std::vector<std::string> used;                      // image names, in order
+  std::vector<double> per_image_rms;                  // parallel to used
   // Parallel to used: the detected corners (fmv3d convention, +0.5) and their reprojection residuals
   // (reprojected − detected, pixels), row-major over the board — what the console's calibration window draws.
   std::vector<std::vector<Eigen::Vector2d>> corners, residuals;
-  std::vector<std::string> rejected;              // board not found
+  std::vector<std::string> rejected;  // board not found
   BoardSpec board;
 };
 

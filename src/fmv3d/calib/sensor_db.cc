@@ -1,4 +1,3 @@
-#include "fmv3d/core/camera_json.h"
 #include "fmv3d/calib/sensor_db.h"
 
 #include <spdlog/spdlog.h>
@@ -9,6 +8,7 @@
 #include <cstdlib>
 
 #include "fmv3d/calib/camera_file.h"
+#include "fmv3d/core/camera_json.h"
 #include "fmv3d/core/error.h"
 #include "fmv3d/core/files.h"
 
@@ -188,8 +188,9 @@ bool PriorFromSensor(const SensorEntry& e, int width, int height, double exif_fo
     if (ScaleCamera(*e.calibration, width, height, out)) return true;
     // A calibration of another aspect ratio (e.g. a 4:3 still vs 16:9 video): keep only the focal scaled by
     // width, like a sensor with a known focal.
-    *out = core::Camera::Pinhole(width, height, e.calibration->fx() * double(std::max(width, height)) /
-                                                   std::max(e.calibration->width, e.calibration->height));
+    *out = core::Camera::Pinhole(
+        width, height,
+        e.calibration->fx() * double(std::max(width, height)) / std::max(e.calibration->width, e.calibration->height));
     return true;
   }
   const double focal = exif_focal_mm > 0 ? exif_focal_mm : e.focal_mm;
@@ -203,8 +204,7 @@ bool PriorFromSensor(const SensorEntry& e, int width, int height, double exif_fo
     // 35 mm-equivalent focal is defined on the diagonal (43.27 mm) of the native frame; an image of another
     // aspect ratio is taken as the native frame's long side.
     double diag_px = std::hypot(width, height);
-    if (e.width > 0 && e.height > 0)
-      diag_px = long_side * std::hypot(e.width, e.height) / std::max(e.width, e.height);
+    if (e.width > 0 && e.height > 0) diag_px = long_side * std::hypot(e.width, e.height) / std::max(e.width, e.height);
     *out = core::Camera::Pinhole(width, height, e.focal_35mm * diag_px / std::hypot(36.0, 24.0));
     return true;
   }

@@ -119,11 +119,16 @@ Eigen::Matrix<double, 2, 3> Camera::ProjectJacobian(const Eigen::Vector3d& X) co
 
 void Camera::Validate() const {
   std::ostringstream why;
-  if (width <= 0 || height <= 0) why << "image size " << width << "x" << height << " is not positive";
-  else if (!(f > 0) || !std::isfinite(f)) why << "focal length " << f << " px is not positive";
-  else if (!(aspect > 0) || !std::isfinite(aspect)) why << "aspect ratio " << aspect << " is not positive";
-  else if (!std::isfinite(u0) || !std::isfinite(v0)) why << "principal point is not finite";
-  else if (!std::isfinite(k1 + k2 + p1 + p2)) why << "distortion coefficients are not finite";
+  if (width <= 0 || height <= 0)
+    why << "image size " << width << "x" << height << " is not positive";
+  else if (!(f > 0) || !std::isfinite(f))
+    why << "focal length " << f << " px is not positive";
+  else if (!(aspect > 0) || !std::isfinite(aspect))
+    why << "aspect ratio " << aspect << " is not positive";
+  else if (!std::isfinite(u0) || !std::isfinite(v0))
+    why << "principal point is not finite";
+  else if (!std::isfinite(k1 + k2 + p1 + p2))
+    why << "distortion coefficients are not finite";
   if (!why.str().empty()) throw Error("camera " + std::to_string(id) + ": " + why.str());
 }
 

@@ -1,6 +1,6 @@
 // Intrinsics as JSON ({"f", "aspect", "u0", "v0", "k1", "k2", "p1", "p2"}), the one reader and writer shared by
-// camera files, the sensor database, frames.json and the reports. Missing optional fields default to aspect 1, the image centre and no
-// distortion; "f" is required.
+// camera files, the sensor database, frames.json and the reports. Missing optional fields default to aspect 1, the
+// image centre and no distortion; "f" is required.
 #pragma once
 
 #include <nlohmann/json.hpp>

@@ -3,7 +3,6 @@
 #include <fmt/format.h>
 
 #include <Eigen/Geometry>
-
 #include <algorithm>
 #include <cmath>
 #include <set>
@@ -68,11 +67,10 @@ VerifiedPair& PairFor(std::vector<VerifiedPair>* pairs, std::map<std::pair<uint3
 }
 
 void AddMatch(VerifiedPair* vp, const ManualObservation& a, const ManualObservation& b) {
-  FeatureMatch m = a.image + 1 == vp->image_id1 ? FeatureMatch{a.keypoint, b.keypoint}
-                                                : FeatureMatch{b.keypoint, a.keypoint};
-  if (std::find_if(vp->inliers.begin(), vp->inliers.end(), [&](const FeatureMatch& x) {
-        return x.idx1 == m.idx1 && x.idx2 == m.idx2;
-      }) == vp->inliers.end())
+  FeatureMatch m =
+      a.image + 1 == vp->image_id1 ? FeatureMatch{a.keypoint, b.keypoint} : FeatureMatch{b.keypoint, a.keypoint};
+  if (std::find_if(vp->inliers.begin(), vp->inliers.end(),
+                   [&](const FeatureMatch& x) { return x.idx1 == m.idx1 && x.idx2 == m.idx2; }) == vp->inliers.end())
     vp->inliers.push_back(m);
 }
 
@@ -98,16 +96,15 @@ ManualMatches AppendManualKeypoints(const io::TiePoints& t, const io::FramesInde
   if (features->size() != index.frames.size()) throw Error("manual matches: one feature set per frame expected");
   const auto by_name = FrameIndexByName(index);
   ManualMatches m;
-  auto append = [&](const std::string& id, const io::ImagePoint& p, ManualTrackKind kind,
-                    ManualTrack* track) {
-    const uint32_t i = Lookup(by_name, p.frame, (kind == ManualTrackKind::kTiePoint ? "tie point \"" : "keypoint \"") +
-                                                    id + "\"");
+  auto append = [&](const std::string& id, const io::ImagePoint& p, ManualTrackKind kind, ManualTrack* track) {
+    const uint32_t i =
+        Lookup(by_name, p.frame, (kind == ManualTrackKind::kTiePoint ? "tie point \"" : "keypoint \"") + id + "\"");
     auto [it, inserted] = m.appended.try_emplace(i);
     ManualMatches::Appended& ap = it->second;
     if (inserted) ap.first_index = static_cast<uint32_t>((*features)[i].keypoints.size());
     ap.ids.push_back(id);
-    ap.keypoints.push_back({static_cast<float>(p.x), static_cast<float>(p.y),
-                            static_cast<float>(options.keypoint_scale_px), 0.0f});
+    ap.keypoints.push_back(
+        {static_cast<float>(p.x), static_cast<float>(p.y), static_cast<float>(options.keypoint_scale_px), 0.0f});
     track->observations.push_back({i, ap.first_index + static_cast<uint32_t>(ap.keypoints.size() - 1)});
   };
   for (const auto& tp : t.tie_points) {
@@ -124,12 +121,14 @@ ManualMatches AppendManualKeypoints(const io::TiePoints& t, const io::FramesInde
   for (auto& [i, ap] : m.appended) {
     const auto img = images.find(i);
     const bool have = img != images.end() && !img->second.empty();
-    ap.descriptors = have ? DescribeAt(img->second, ap.keypoints) : Descriptors(Descriptors::Zero(ap.keypoints.size(), 128));
+    ap.descriptors =
+        have ? DescribeAt(img->second, ap.keypoints) : Descriptors(Descriptors::Zero(ap.keypoints.size(), 128));
     for (const auto& k : ap.keypoints) {
       Eigen::Matrix<uint8_t, 3, 1> rgb = Eigen::Matrix<uint8_t, 3, 1>::Zero();
       if (have) {
         const cv::Mat& im = img->second;
-        const int c = std::clamp(static_cast<int>(k.x), 0, im.cols - 1), r = std::clamp(static_cast<int>(k.y), 0, im.rows - 1);
+        const int c = std::clamp(static_cast<int>(k.x), 0, im.cols - 1),
+                  r = std::clamp(static_cast<int>(k.y), 0, im.rows - 1);
         if (im.channels() == 3) {
           const cv::Vec3b& bgr = im.at<cv::Vec3b>(r, c);
           rgb = {bgr[2], bgr[1], bgr[0]};
@@ -172,7 +171,7 @@ void ApplyManualMatches(const io::TiePoints& t, const io::FramesIndex& index, co
       if (j == src.image || !automatic_f(src.image, j, &F)) continue;
       const FeatureSet& other = features[j];
       const uint32_t n_auto = manual->appended.count(j) ? manual->appended.at(j).first_index
-                                                         : static_cast<uint32_t>(other.keypoints.size());
+                                                        : static_cast<uint32_t>(other.keypoints.size());
       int best = -1, d1 = INT32_MAX, d2 = INT32_MAX;
       for (uint32_t k = 0; k < n_auto; ++k) {
         const Eigen::Vector2d y(other.keypoints[k].x, other.keypoints[k].y);
@@ -205,8 +204,8 @@ void ApplyManualMatches(const io::TiePoints& t, const io::FramesIndex& index, co
           const Eigen::Vector2d x1 = pixel(obs[a]), x2 = pixel(obs[b]);
           const double d = std::max(LineDistance(F, x1, x2), LineDistance(F.transpose(), x2, x1));
           if (d > options.max_epipolar_px)
-            manual->disagreeing.push_back({track.id, std::min(obs[a].image, obs[b].image),
-                                           std::max(obs[a].image, obs[b].image), d});
+            manual->disagreeing.push_back(
+                {track.id, std::min(obs[a].image, obs[b].image), std::max(obs[a].image, obs[b].image), d});
         }
         AddMatch(&PairFor(pairs, &where, obs[a].image, obs[b].image), obs[a], obs[b]);
       }
@@ -220,8 +219,8 @@ void ApplyManualMatches(const io::TiePoints& t, const io::FramesIndex& index, co
     if (it != where.end()) {
       auto& inl = (*pairs)[it->second].inliers;
       const uint32_t i1 = a < b ? d.feature1 : d.feature2, i2 = a < b ? d.feature2 : d.feature1;
-      const auto end = std::remove_if(inl.begin(), inl.end(),
-                                      [&](const FeatureMatch& m) { return m.idx1 == i1 && m.idx2 == i2; });
+      const auto end =
+          std::remove_if(inl.begin(), inl.end(), [&](const FeatureMatch& m) { return m.idx1 == i1 && m.idx2 == i2; });
       found = end != inl.end();
       inl.erase(end, inl.end());
     }
@@ -251,8 +250,11 @@ nlohmann::json ManualMatches::ToJson(const io::FramesIndex& index) const {
   nlohmann::json tr = nlohmann::json::array();
   for (const auto& t : tracks) {
     nlohmann::json obs = nlohmann::json::array();
-    for (const auto& o : t.observations) obs.push_back({{"frame", index.frames.at(o.image).name}, {"index", o.keypoint}});
-    tr.push_back({{"id", t.id}, {"kind", t.kind == ManualTrackKind::kTiePoint ? "tie_point" : "keypoint"}, {"observations", obs}});
+    for (const auto& o : t.observations)
+      obs.push_back({{"frame", index.frames.at(o.image).name}, {"index", o.keypoint}});
+    tr.push_back({{"id", t.id},
+                  {"kind", t.kind == ManualTrackKind::kTiePoint ? "tie_point" : "keypoint"},
+                  {"observations", obs}});
   }
   nlohmann::json dis = nlohmann::json::array();
   for (const auto& d : disagreeing)
@@ -298,8 +300,8 @@ ManualMatches ManualMatches::FromJson(const nlohmann::json& j, const io::FramesI
       t.id = e.at("id").get<std::string>();
       t.kind = e.at("kind").get<std::string>() == "keypoint" ? ManualTrackKind::kKeypoint : ManualTrackKind::kTiePoint;
       for (const auto& o : e.at("observations"))
-        t.observations.push_back({Lookup(by_name, o.at("frame").get<std::string>(), "manual.json"),
-                                  o.at("index").get<uint32_t>()});
+        t.observations.push_back(
+            {Lookup(by_name, o.at("frame").get<std::string>(), "manual.json"), o.at("index").get<uint32_t>()});
       m.tracks.push_back(std::move(t));
     }
     m.deleted = j.value("deleted", size_t{0});

@@ -28,7 +28,7 @@
 namespace fmv3d::features {
 
 struct ManualMatchOptions {
-  double max_epipolar_px = 4;  // tie points farther than this from the automatic epipolar line are reported
+  double max_epipolar_px = 4;    // tie points farther than this from the automatic epipolar line are reported
   double keypoint_scale_px = 4;  // the descriptor's scale at a clicked point
   double keypoint_ratio = 0.8;   // single-frame keypoints: Lowe's ratio among the candidates on the line
   void Check() const;
@@ -56,7 +56,7 @@ struct EpipolarDisagreement {
 // The appended keypoints per image (0-based index) and their tracks.
 struct ManualMatches {
   struct Appended {
-    uint32_t first_index = 0;  // the image's automatic keypoint count
+    uint32_t first_index = 0;      // the image's automatic keypoint count
     std::vector<std::string> ids;  // the tie point / keypoint each appended keypoint belongs to
     std::vector<Keypoint> keypoints;
     Descriptors descriptors;

@@ -6,6 +6,7 @@
 #include <atomic>
 #include <chrono>
 #include <mutex>
+#include <opencv2/imgcodecs.hpp>
 #include <set>
 
 #include "fmv3d/core/error.h"
@@ -16,7 +17,6 @@
 #include "fmv3d/features/spatial_pairs.h"
 #include "fmv3d/io/frames_index.h"
 #include "fmv3d/io/tiepoints.h"
-#include <opencv2/imgcodecs.hpp>
 
 namespace fmv3d::features {
 namespace fs = std::filesystem;
@@ -267,8 +267,8 @@ MatchStageStats RunMatchStage(const core::Workspace& ws, const MatchStageOptions
                       {"max_epipolar_px", options.manual.max_epipolar_px},
                       {"disagreeing", disagreeing}};
     for (const auto& d : manual.disagreeing)
-      spdlog::warn("match: tie point \"{}\" is {:.1f} px from the epipolar line of {} / {} (kept)", d.id,
-                   d.epipolar_px, index.frames[d.image1].name, index.frames[d.image2].name);
+      spdlog::warn("match: tie point \"{}\" is {:.1f} px from the epipolar line of {} / {} (kept)", d.id, d.epipolar_px,
+                   index.frames[d.image1].name, index.frames[d.image2].name);
     spdlog::info("match: {} tie points, {} keypoints ({} matches found), {} deleted matches removed",
                  tie_points.tie_points.size(), tie_points.keypoints.size(), manual.keypoints_matched, manual.deleted);
   } else if (fs::exists(manual_path)) {

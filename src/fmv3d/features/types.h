@@ -11,8 +11,8 @@
 namespace fmv3d::features {
 
 struct Keypoint {
-  float x = 0, y = 0;  // pixels, fmv3d/COLMAP convention (pixel centres at +0.5; see core/camera.h)
-  float scale = 0;     // SIFT scale (keypoint size / 2), pixels
+  float x = 0, y = 0;     // pixels, fmv3d/COLMAP convention (pixel centres at +0.5; see core/camera.h)
+  float scale = 0;        // SIFT scale (keypoint size / 2), pixels
   float orientation = 0;  // radians
 };
 
@@ -33,8 +33,8 @@ struct FeatureSet {
 // Which two-view model explains a verified pair best (COLMAP's "configuration" idea, simplified).
 enum class PairGeometry : uint8_t {
   kUndefined = 0,
-  kCalibrated = 1,    // essential matrix inliers dominate: general motion, intrinsics known well enough
-  kUncalibrated = 2,  // fundamental matrix only
+  kCalibrated = 1,        // essential matrix inliers dominate: general motion, intrinsics known well enough
+  kUncalibrated = 2,      // fundamental matrix only
   kPlanarOrRotation = 3,  // homography explains (almost) all F inliers: planar scene or pure rotation
 };
 

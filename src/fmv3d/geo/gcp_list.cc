@@ -90,9 +90,10 @@ GcpCrs::GcpCrs(const std::string& crs_line) : impl_(std::make_unique<Impl>()) {
   } else if (crs.rfind("+proj=", 0) == 0) {
     err = impl_->src.importFromProj4(crs.c_str());
   } else {
-    throw Error(fmt::format("CRS \"{}\" is not one of EPSG:<code>, \"WGS84 UTM <zone><N|S>\" or a PROJ string "
-                            "\"+proj=...\"",
-                            crs.substr(0, 80)));
+    throw Error(
+        fmt::format("CRS \"{}\" is not one of EPSG:<code>, \"WGS84 UTM <zone><N|S>\" or a PROJ string "
+                    "\"+proj=...\"",
+                    crs.substr(0, 80)));
   }
   if (err != OGRERR_NONE) throw Error(fmt::format("unknown CRS \"{}\" (GDAL: {})", crs.substr(0, 80), quiet.Last()));
   if (!impl_->src.IsProjected() && !impl_->src.IsGeographic() && !impl_->src.IsCompound())
@@ -208,8 +209,8 @@ GcpList ParseGcpList(const std::string& text, std::vector<std::string>* errors, 
 std::string FormatGcpList(const GcpList& list) {
   std::string out = list.crs + "\n";
   for (const auto& g : list.lines) {
-    out += fmt::format("{:.17g} {:.17g} {:.17g} {:.17g} {:.17g} {}", g.geo.x(), g.geo.y(), g.geo.z(), g.im_x,
-                       g.im_y, g.image);
+    out += fmt::format("{:.17g} {:.17g} {:.17g} {:.17g} {:.17g} {}", g.geo.x(), g.geo.y(), g.geo.z(), g.im_x, g.im_y,
+                       g.image);
     if (!g.name.empty()) out += " " + g.name;
     for (const auto& e : g.extra) out += " " + e;
     out += "\n";

@@ -21,10 +21,14 @@ UtmZone UtmZoneOf(double lat, double lon) {
   if (zone > 60) zone = 60;
   if (lat >= 56 && lat < 64 && lon >= 3 && lon < 12) zone = 32;  // Norway
   if (lat >= 72) {                                               // Svalbard
-    if (lon >= 0 && lon < 9) zone = 31;
-    else if (lon >= 9 && lon < 21) zone = 33;
-    else if (lon >= 21 && lon < 33) zone = 35;
-    else if (lon >= 33 && lon < 42) zone = 37;
+    if (lon >= 0 && lon < 9)
+      zone = 31;
+    else if (lon >= 9 && lon < 21)
+      zone = 33;
+    else if (lon >= 21 && lon < 33)
+      zone = 35;
+    else if (lon >= 33 && lon < 42)
+      zone = 37;
   }
   return {zone, lat >= 0};
 }
@@ -33,8 +37,9 @@ std::optional<double> GeoidUndulation(double lat, double lon) {
   PJ_CONTEXT* ctx = proj_context_create();
   proj_log_level(ctx, PJ_LOG_NONE);
   // vgridshift with multiplier +1 adds the grid value to z: from z = 0 it gives N.
-  PJ* p = proj_create(ctx, "+proj=pipeline +step +proj=unitconvert +xy_in=deg +xy_out=rad "
-                           "+step +proj=vgridshift +grids=egm96_15.gtx +multiplier=1");
+  PJ* p = proj_create(ctx,
+                      "+proj=pipeline +step +proj=unitconvert +xy_in=deg +xy_out=rad "
+                      "+step +proj=vgridshift +grids=egm96_15.gtx +multiplier=1");
   std::optional<double> n;
   if (p) {
     const PJ_COORD out = proj_trans(p, PJ_FWD, proj_coord(lon, lat, 0, 0));
@@ -61,14 +66,14 @@ struct LocalFrame::Impl {
   }
   PJ* Create(const std::string& def) {
     PJ* p = proj_create(ctx, def.c_str());
-    if (!p) throw Error("PROJ: cannot create '" + def + "': " + proj_context_errno_string(ctx, proj_context_errno(ctx)));
+    if (!p)
+      throw Error("PROJ: cannot create '" + def + "': " + proj_context_errno_string(ctx, proj_context_errno(ctx)));
     return p;
   }
   PJ_COORD Trans(PJ* p, PJ_DIRECTION dir, double a, double b, double c) const {
     PJ_COORD in = proj_coord(a, b, c, 0);
     PJ_COORD out = proj_trans(p, dir, in);
-    if (!std::isfinite(out.xyz.x) || !std::isfinite(out.xyz.y) || !std::isfinite(out.xyz.z) ||
-        out.xyz.x == HUGE_VAL)
+    if (!std::isfinite(out.xyz.x) || !std::isfinite(out.xyz.y) || !std::isfinite(out.xyz.z) || out.xyz.x == HUGE_VAL)
       throw Error(fmt::format("PROJ: cannot transform ({}, {}, {})", a, b, c));
     return out;
   }

@@ -200,8 +200,7 @@ nlohmann::json RunGcpGeoref(const core::Workspace& ws, const fs::path& gcp_file,
                g.check_used ? fmt::format(" (RMS {:.3f} m, the independent accuracy)", g.check_rms_m) : "", g.sim.s,
                ws.georef_json().string());
   for (const auto& p : g.points)
-    if (!p.triangulated_ok())
-      spdlog::warn("georef: GCP \"{}\" not used: {}", p.name, GcpStatusName(p.status));
+    if (!p.triangulated_ok()) spdlog::warn("georef: GCP \"{}\" not used: {}", p.name, GcpStatusName(p.status));
   return j;
 }
 

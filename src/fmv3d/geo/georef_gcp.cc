@@ -127,7 +127,8 @@ GcpGeoref EstimateGcpGeoref(const core::Reconstruction& model, const std::vector
     if (Triangulate(model, gcps[i], &r) && r.status == GcpStatus::kControl) {
       src.push_back(r.triangulated);
       dst.push_back(r.enu);
-      weights.push_back(std::isfinite(r.sigma_per_px) && r.sigma_per_px > 0 ? 1 / (r.sigma_per_px * r.sigma_per_px) : 0);
+      weights.push_back(std::isfinite(r.sigma_per_px) && r.sigma_per_px > 0 ? 1 / (r.sigma_per_px * r.sigma_per_px)
+                                                                            : 0);
       control_names.push_back(r.name);
     }
     out.points.push_back(std::move(r));
@@ -136,11 +137,12 @@ GcpGeoref EstimateGcpGeoref(const core::Reconstruction& model, const std::vector
     std::string why;
     for (const auto& p : out.points)
       if (p.status != GcpStatus::kControl && p.status != GcpStatus::kCheck)
-        why += fmt::format("; \"{}\": {} ({} of {} observations in registered frames)", p.name,
-                           GcpStatusName(p.status), p.registered_observations, p.observations);
-    throw Error(fmt::format("georef: {} GCP(s) could be triangulated as control points, {} needed (check points "
-                            "are not used in the fit){}",
-                            src.size(), options.min_control_points, why));
+        why += fmt::format("; \"{}\": {} ({} of {} observations in registered frames)", p.name, GcpStatusName(p.status),
+                           p.registered_observations, p.observations);
+    throw Error(
+        fmt::format("georef: {} GCP(s) could be triangulated as control points, {} needed (check points "
+                    "are not used in the fit){}",
+                    src.size(), options.min_control_points, why));
   }
   // Each control point weighs by its triangulation's precision (1/σ², the model's units): a GCP seen by many
   // frames from wide angles counts more than one seen by two frames close together.
@@ -184,20 +186,20 @@ nlohmann::json GcpGeoref::ToJson() const {
     }
     pts.push_back(e);
   }
-  j["gcps"] = {{"crs", crs},
-               {"crs_name", crs_name},
-               {"vertical_datum", vertical_datum},
-               {"points", pts},
-               {"control_points_used", control_used},
-               {"check_points_used", check_used},
-               {"rms_m", control_rms_m},
-               {"check_rms_m", check_used ? nlohmann::json(check_rms_m) : nlohmann::json()},
-               {"fit",
-                "least-squares similarity (Umeyama) of the triangulated control points to their coordinates, each "
-                "weighted by 1/σ² of its triangulation (sigma_m_per_px: its σ in metres for a 1 px click)"},
-               {"independent_accuracy",
-                check_used ? "check_rms_m: check points left out of the fit"
-                           : "none: mark GCPs as check points (extra field \"check\") to measure it"}};
+  j["gcps"] = {
+      {"crs", crs},
+      {"crs_name", crs_name},
+      {"vertical_datum", vertical_datum},
+      {"points", pts},
+      {"control_points_used", control_used},
+      {"check_points_used", check_used},
+      {"rms_m", control_rms_m},
+      {"check_rms_m", check_used ? nlohmann::json(check_rms_m) : nlohmann::json()},
+      {"fit",
+       "least-squares similarity (Umeyama) of the triangulated control points to their coordinates, each "
+       "weighted by 1/σ² of its triangulation (sigma_m_per_px: its σ in metres for a 1 px click)"},
+      {"independent_accuracy", check_used ? "check_rms_m: check points left out of the fit"
+                                          : "none: mark GCPs as check points (extra field \"check\") to measure it"}};
   // The keys the telemetry georeference writes and later stages read.
   j["cameras"] = 0;
   j["inliers"] = control_used;

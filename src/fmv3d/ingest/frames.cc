@@ -1,12 +1,13 @@
 #include "fmv3d/ingest/frames.h"
 
-#include <spdlog/spdlog.h>
 #include <signal.h>
+#include <spdlog/spdlog.h>
+#include <tbb/parallel_for.h>
+#include <tbb/task_group.h>
 #include <unistd.h>
 
-#include <cerrno>
-
 #include <algorithm>
+#include <cerrno>
 #include <cmath>
 #include <cstdio>
 #include <exception>
@@ -14,16 +15,13 @@
 #include <set>
 #include <tuple>
 
-#include <tbb/parallel_for.h>
-#include <tbb/task_group.h>
-
 #include "fmv3d/core/error.h"
 #include "fmv3d/core/files.h"
 #include "fmv3d/core/logging.h"
+#include "fmv3d/ingest/video_reader.h"
 #include "fmv3d/telemetry/dji_srt.h"
 #include "fmv3d/telemetry/gpmf_telemetry.h"
 #include "fmv3d/telemetry/telemetry.h"
-#include "fmv3d/ingest/video_reader.h"
 
 namespace fmv3d::ingest {
 namespace fs = std::filesystem;
@@ -399,16 +397,15 @@ class FramesBuilder {
         throw Error(groups_[i].source + ": intrinsics prior has the wrong image size");
       // Non-square pixels (e.g. DV/SD video, SAR 10:11): a pixel is pixel_aspect times wider than tall, so the
       // horizontal focal in pixels is f / pixel_aspect. A calibration already measured it.
-      if (groups_[i].pixel_aspect != 1.0 && source.rfind("calibration:", 0) != 0)
-        cam.aspect /= groups_[i].pixel_aspect;
+      if (groups_[i].pixel_aspect != 1.0 && source.rfind("calibration:", 0) != 0) cam.aspect /= groups_[i].pixel_aspect;
       if (source == "guess") FocalFromTelemetryHfov(index_, static_cast<uint32_t>(i + 1), &cam, &source);
       cam.Validate();
       index_.cameras[i].camera = cam;
       index_.cameras[i].prior_source = source;
     }
     for (const auto& c : index_.cameras)
-      spdlog::info("camera {}: {}x{} f={:.1f} ({}) from {}", c.camera.id, c.camera.width, c.camera.height,
-                   c.camera.f, c.prior_source, c.source);
+      spdlog::info("camera {}: {}x{} f={:.1f} ({}) from {}", c.camera.id, c.camera.width, c.camera.height, c.camera.f,
+                   c.prior_source, c.source);
   }
 
   const IngestOptions& options_;

@@ -1,6 +1,6 @@
-#include "fmv3d/core/camera_json.h"
 #include "fmv3d/io/frames_index.h"
 
+#include "fmv3d/core/camera_json.h"
 #include "fmv3d/core/error.h"
 #include "fmv3d/core/files.h"
 
@@ -27,12 +27,9 @@ void WriteFramesIndex(const FramesIndex& index, const std::filesystem::path& pat
   }
   j["frames"] = nlohmann::json::array();
   for (const auto& f : index.frames) {
-    nlohmann::json fj = {{"name", f.name},
-                         {"camera_id", f.camera_id},
-                         {"source", f.source},
-                         {"frame_index", f.frame_index},
-                         {"timestamp", f.timestamp},
-                         {"sharpness", f.sharpness}};
+    nlohmann::json fj = {{"name", f.name},           {"camera_id", f.camera_id},
+                         {"source", f.source},       {"frame_index", f.frame_index},
+                         {"timestamp", f.timestamp}, {"sharpness", f.sharpness}};
     if (!f.telemetry.is_null()) fj["telemetry"] = f.telemetry;
     j["frames"].push_back(fj);
   }

@@ -1,6 +1,6 @@
 // Streaming read of a PLY file's vertices (binary little-endian, as fmv3d and most tools write it): one callback
-// per vertex with its position, normal, colour, number of views and σ, without holding the cloud in memory — for consumers of
-// clouds too large to load whole (the 3D Tiles writer). Extra properties, lists included (fused.ply's
+// per vertex with its position, normal, colour, number of views and σ, without holding the cloud in memory — for
+// consumers of clouds too large to load whole (the 3D Tiles writer). Extra properties, lists included (fused.ply's
 // visibility), are skipped.
 #pragma once
 

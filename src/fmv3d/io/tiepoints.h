@@ -25,7 +25,7 @@ inline constexpr const char* kTiePointsFormat = "fmv3d-tiepoints";
 inline constexpr int kTiePointsVersion = 1;
 
 struct ImagePoint {
-  std::string frame;  // frame name as in frames.json
+  std::string frame;    // frame name as in frames.json
   double x = 0, y = 0;  // pixels, fmv3d convention
 };
 

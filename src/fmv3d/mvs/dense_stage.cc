@@ -221,8 +221,8 @@ struct DenseTimings {
 };
 
 nlohmann::json DenseReport(const core::Reconstruction& rec, const ViewPlan& plan, const DenseRunner::Fused& fused,
-                           const DenseTimings& t, double load_seconds, double total_seconds,
-                           const fs::path& ply, const DenseStageOptions& options) {
+                           const DenseTimings& t, double load_seconds, double total_seconds, const fs::path& ply,
+                           const DenseStageOptions& options) {
   const FusionStats& fstats = fused.stats;
   nlohmann::json hist = nlohmann::json::object();
   double mean_views = 0;
@@ -233,43 +233,43 @@ nlohmann::json DenseReport(const core::Reconstruction& rec, const ViewPlan& plan
   if (fused.points > 0) mean_views /= static_cast<double>(fused.points);
   const auto& g0 = plan.geoms.at(plan.references.front());
   const double n_refs = static_cast<double>(plan.references.size());
-  return {{"registered_images", rec.images.size()},
-          {"views_used", plan.usable.size()},
-          {"reference_views", plan.references.size()},
-          {"reference_coverage", options.references.coverage},
-          {"views_skipped", plan.skipped},
-          {"working_resolution", {g0.width, g0.height}},
-          {"max_size", options.max_size},
-          {"max_sources", options.max_sources},
-          {"geometric_pass", options.geometric},
-          {"points", fused.points},
-          {"valid_depth_fraction",
-           fused.total_pixels ? static_cast<double>(fused.valid_pixels) / fused.total_pixels : 0.0},
-          {"fusion",
-           {{"candidates", fstats.candidates},
-            {"rejected_too_few_views", fstats.rejected_support},
-            {"rejected_visibility", fstats.rejected_visibility},
-            {"edge_pixels_removed", fstats.edge_pixels},
-            {"edge_erosion_px", options.fusion.edge_erosion_px},
-            {"rejected_uncertainty", fstats.rejected_uncertainty},
-            {"max_relative_uncertainty", options.fusion.max_relative_uncertainty},
-            {"median_normal_sigma", fstats.median_uncertainty},
-            {"max_normal_sigma", fstats.max_uncertainty},
-            {"sigma_scale", fstats.sigma_scale},
-            {"sigma_coverage",
-             options.fusion.write_sigma ? nlohmann::json(options.fusion.sigma_coverage) : nlohmann::json()},
-            {"mean_consistent_views", mean_views},
-            {"consistent_views_histogram", hist}}},
-          {"seconds",
-           {{"view_selection", plan.seconds},
-            {"load_undistort", load_seconds},
-            {"photometric", t.photometric},
-            {"photometric_per_view", t.photometric_pm / n_refs},
-            {"geometric", t.geometric},
-            {"geometric_per_view", options.geometric ? t.geometric_pm / n_refs : 0.0},
-            {"fusion", t.fusion},
-            {"total", total_seconds}}},
-          {"output", ply.string()}};
+  return {
+      {"registered_images", rec.images.size()},
+      {"views_used", plan.usable.size()},
+      {"reference_views", plan.references.size()},
+      {"reference_coverage", options.references.coverage},
+      {"views_skipped", plan.skipped},
+      {"working_resolution", {g0.width, g0.height}},
+      {"max_size", options.max_size},
+      {"max_sources", options.max_sources},
+      {"geometric_pass", options.geometric},
+      {"points", fused.points},
+      {"valid_depth_fraction", fused.total_pixels ? static_cast<double>(fused.valid_pixels) / fused.total_pixels : 0.0},
+      {"fusion",
+       {{"candidates", fstats.candidates},
+        {"rejected_too_few_views", fstats.rejected_support},
+        {"rejected_visibility", fstats.rejected_visibility},
+        {"edge_pixels_removed", fstats.edge_pixels},
+        {"edge_erosion_px", options.fusion.edge_erosion_px},
+        {"rejected_uncertainty", fstats.rejected_uncertainty},
+        {"max_relative_uncertainty", options.fusion.max_relative_uncertainty},
+        {"median_normal_sigma", fstats.median_uncertainty},
+        {"max_normal_sigma", fstats.max_uncertainty},
+        {"sigma_scale", fstats.sigma_scale},
+        {"sigma_coverage",
+         options.fusion.write_sigma ? nlohmann::json(options.fusion.sigma_coverage) : nlohmann::json()},
+        {"mean_consistent_views", mean_views},
+        {"consistent_views_histogram", hist}}},
+      {"seconds",
+       {{"view_selection", plan.seconds},
+        {"load_undistort", load_seconds},
+        {"photometric", t.photometric},
+        {"photometric_per_view", t.photometric_pm / n_refs},
+        {"geometric", t.geometric},
+        {"geometric_per_view", options.geometric ? t.geometric_pm / n_refs : 0.0},
+        {"fusion", t.fusion},
+        {"total", total_seconds}}},
+      {"output", ply.string()}};
 }
 
 }  // namespace

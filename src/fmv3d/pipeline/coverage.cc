@@ -10,13 +10,13 @@
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
-#include "fmv3d/core/stats.h"
 #include "fmv3d/core/error.h"
 #include "fmv3d/core/files.h"
+#include "fmv3d/core/stats.h"
+#include "fmv3d/core/workspace.h"
 #include "fmv3d/io/colmap_model.h"
 #include "fmv3d/io/image_io.h"
 #include "fmv3d/io/obj_io.h"
-#include "fmv3d/core/workspace.h"
 #include "fmv3d/render/renderer.h"
 #include "fmv3d/surface/colored_mesh.h"
 #include "fmv3d/surface/poisson.h"

@@ -14,7 +14,8 @@ namespace fs = std::filesystem;
 
 nlohmann::json ManualCheck::ToJson() const {
   auto file = [](const ManualFileCheck& f) {
-    return nlohmann::json{{"path", f.path.string()}, {"present", f.present}, {"valid", f.valid()}, {"errors", f.errors}};
+    return nlohmann::json{
+        {"path", f.path.string()}, {"present", f.present}, {"valid", f.valid()}, {"errors", f.errors}};
   };
   nlohmann::json t = file(tiepoints), g = file(gcp);
   t["tie_points"] = tie_points;
@@ -47,7 +48,8 @@ ManualCheck CheckManualInputs(const core::Workspace& ws, const std::optional<fs:
         for (const auto& name : named) {
           auto it = frames.find(name);
           const fs::path fp = features::FeaturePath(ws.features_dir(), name);
-          if (it != frames.end() && fs::exists(fp)) it->second.num_keypoints = features::ReadFeatures(fp).keypoints.size();
+          if (it != frames.end() && fs::exists(fp))
+            it->second.num_keypoints = features::ReadFeatures(fp).keypoints.size();
         }
         io::CheckTiePoints(t, frames, &errors);
         out.tie_points = t.tie_points.size();

@@ -8,10 +8,10 @@
 #include "fmv3d/core/file_lock.h"
 #include "fmv3d/core/files.h"
 #include "fmv3d/core/progress_log.h"
+#include "fmv3d/core/workspace.h"
 #include "fmv3d/features/feature_io.h"
 #include "fmv3d/io/frames_index.h"
 #include "fmv3d/pipeline/report.h"
-#include "fmv3d/core/workspace.h"
 #include "fmv3d/pipeline/tiles_stage.h"
 
 namespace fmv3d::pipeline {
@@ -108,8 +108,7 @@ std::vector<Stage> ReconstructStages(const ReconstructOptions& o) {
                       if (fs::exists(ws.manual_dir() / "gcp_list.txt")) in.push_back(ws.manual_dir() / "gcp_list.txt");
                       return in;
                     },
-                    ws.georef_json(),
-                    with_telemetry("georef", [o, root] {
+                    ws.georef_json(), with_telemetry("georef", [o, root] {
                       // Unusable telemetry must not cost the user the model: the georeferenced products are
                       // skipped instead (dsm and ortho then say so).
                       try {

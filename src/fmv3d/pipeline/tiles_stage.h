@@ -10,14 +10,13 @@
 // ECEF (georef.json's similarity into ENU, then ENU at the origin into ECEF on WGS84; an MSL origin height is
 // raised by the EGM96 undulation when PROJ's grid is installed).
 // fused.ply is streamed into 32-byte tile points (io/ply_stream.h; other PLY flavours are read whole), so a
-// 10 M-point cloud costs ~450 MB. Point tiles carry the batch table "views" and "sigma" when fused.ply has them. Geometric error: a node's subsample spacing on a surface, cell size / √budget,
-// times 2; halving per level, 0 for leaves and the mesh. The tileset is written to WS/tiles.tmp and renamed, so
-// WS/tiles is never half-made.
+// 10 M-point cloud costs ~450 MB. Point tiles carry the batch table "views" and "sigma" when fused.ply has them.
+// Geometric error: a node's subsample spacing on a surface, cell size / √budget, times 2; halving per level, 0 for
+// leaves and the mesh. The tileset is written to WS/tiles.tmp and renamed, so WS/tiles is never half-made.
 #pragma once
 
 #include <Eigen/Core>
 #include <filesystem>
-
 #include <nlohmann/json.hpp>
 
 #include "fmv3d/pipeline/point_octree.h"

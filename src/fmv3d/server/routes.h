@@ -7,9 +7,8 @@
 
 #include <filesystem>
 #include <functional>
-#include <string>
-
 #include <nlohmann/json.hpp>
+#include <string>
 
 #include "fmv3d/server/events.h"
 #include "fmv3d/server/jobs.h"

@@ -4,8 +4,8 @@
 #include <fstream>
 
 #include "fmv3d/core/files.h"
-#include "fmv3d/pipeline/reconstruct.h"
 #include "fmv3d/core/workspace.h"
+#include "fmv3d/pipeline/reconstruct.h"
 #include "fmv3d/server/validation.h"
 
 namespace fmv3d::server {

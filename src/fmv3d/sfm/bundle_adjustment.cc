@@ -140,8 +140,8 @@ std::vector<uint64_t> PointsOfImages(const core::Reconstruction& rec, const std:
 // (reprojection errors, pose priors, the gauge), which keeps a single-threaded solve bit-for-bit repeatable.
 class BundleProblem {
  public:
-  BundleProblem(core::Reconstruction* rec, const BundleAdjustmentConfig& config,
-                const BundleAdjustmentOptions& options, std::set<uint32_t> variable, std::vector<uint64_t> point_ids)
+  BundleProblem(core::Reconstruction* rec, const BundleAdjustmentConfig& config, const BundleAdjustmentOptions& options,
+                std::set<uint32_t> variable, std::vector<uint64_t> point_ids)
       : rec_(rec),
         config_(config),
         options_(options),
@@ -232,8 +232,7 @@ class BundleProblem {
     for (auto& [cid, params] : intr_) {
       if (problem_.IsParameterBlockConstant(params)) continue;
       Eigen::Matrix<double, core::kNumIntrinsics, core::kNumIntrinsics, Eigen::RowMajor> m;
-      if (covariance.GetCovarianceBlock(params, params, m.data()))
-        out->intrinsics_covariance[cid] = sigma2 * m;
+      if (covariance.GetCovarianceBlock(params, params, m.data())) out->intrinsics_covariance[cid] = sigma2 * m;
     }
   }
 
@@ -364,8 +363,7 @@ class BundleProblem {
       }
     }
     if (!config_.axis_priors.empty()) {
-      if (!(config_.axis_prior_sigma_rad > 0))
-        throw Error("bundle adjustment: axis_prior_sigma_rad must be positive");
+      if (!(config_.axis_prior_sigma_rad > 0)) throw Error("bundle adjustment: axis_prior_sigma_rad must be positive");
       for (const auto& [id, axis] : config_.axis_priors) {
         const auto it = poses_.find(id);
         if (it == poses_.end() || !IsVariable(id)) continue;
@@ -450,9 +448,9 @@ class BundleProblem {
   std::map<uint32_t, double*> intr_;
   std::vector<std::array<double, 3>> pts_;
   std::deque<geometry::AnalyticReprojectionError> costs_;  // stable addresses, allocated in chunks
-  std::vector<std::array<double*, 4>> residual_params_;     // per reprojection residual, for Rms()
+  std::vector<std::array<double*, 4>> residual_params_;    // per reprojection residual, for Rms()
   ceres::EigenQuaternionManifold quaternion_manifold_;
-  std::unique_ptr<ceres::LossFunction> shared_loss_;  // one object: as many residuals would mean as many allocations
+  std::unique_ptr<ceres::LossFunction> shared_loss_;    // one object: as many residuals would mean as many allocations
   std::unique_ptr<ceres::LossFunction> weighted_loss_;  // shared_loss_ scaled, for weighted observations
   std::vector<std::unique_ptr<ceres::Manifold>> subset_manifolds_;
   std::unique_ptr<ceres::CostFunction> gauge_prior_;
@@ -485,11 +483,10 @@ BundleAdjustmentSummary BundleAdjust(core::Reconstruction* rec, const BundleAdju
   spdlog::debug(
       "BA: {} var images, {} points, {} residuals, {} iterations; setup {:.3f} s, solve {:.3f} s "
       "(pre {:.3f}, jac {:.3f}, res {:.3f}, lin {:.3f}), rms {:.3f} s",
-      problem.num_variable_images(), problem.num_points(),
-      problem.num_residuals(), summary.iterations.size(), std::chrono::duration<double>(t_setup - start).count(),
-      summary.total_time_in_seconds, summary.preprocessor_time_in_seconds,
-      summary.jacobian_evaluation_time_in_seconds, summary.residual_evaluation_time_in_seconds,
-      summary.linear_solver_time_in_seconds,
+      problem.num_variable_images(), problem.num_points(), problem.num_residuals(), summary.iterations.size(),
+      std::chrono::duration<double>(t_setup - start).count(), summary.total_time_in_seconds,
+      summary.preprocessor_time_in_seconds, summary.jacobian_evaluation_time_in_seconds,
+      summary.residual_evaluation_time_in_seconds, summary.linear_solver_time_in_seconds,
       std::chrono::duration<double>(std::chrono::steady_clock::now() - t_setup).count() -
           summary.total_time_in_seconds);
   out.num_residuals = static_cast<int>(problem.num_residuals());

@@ -14,13 +14,12 @@
 // the data ask for it and determine it (nested-model tests, self_calibration.h), reported in MapperResult.
 #pragma once
 
+#include <Eigen/Core>
 #include <cstdint>
 #include <map>
+#include <nlohmann/json.hpp>
 #include <string>
 #include <vector>
-
-#include <Eigen/Core>
-#include <nlohmann/json.hpp>
 
 #include "fmv3d/core/reconstruction.h"
 #include "fmv3d/features/types.h"

@@ -47,7 +47,8 @@ void LinkObservations(core::Reconstruction* rec, const TieTrack& t, uint64_t pid
     if (it == rec->images.end() || el.point2d_idx >= it->second.point3d_ids.size()) continue;
     if (it->second.point3d_ids[el.point2d_idx] != core::kNoPoint3D) continue;
     // One observation of a point per image.
-    if (std::any_of(p.track.begin(), p.track.end(), [&](const core::TrackElement& e) { return e.image_id == el.image_id; }))
+    if (std::any_of(p.track.begin(), p.track.end(),
+                    [&](const core::TrackElement& e) { return e.image_id == el.image_id; }))
       continue;
     if (PixelError(*rec, el, p.xyz) > max_error_px) continue;
     it->second.point3d_ids[el.point2d_idx] = static_cast<int64_t>(pid);
@@ -83,7 +84,8 @@ bool TriangulateTiePoint(core::Reconstruction* rec, const TieTrack& t, double ma
   rec->points[pid] = std::move(p);
   LinkObservations(rec, t, pid, max_error_px);
   if (rec->points.at(pid).track.size() < 2) {  // should not happen: every observation was checked above
-    for (const auto& el : rec->points.at(pid).track) rec->images.at(el.image_id).point3d_ids[el.point2d_idx] = core::kNoPoint3D;
+    for (const auto& el : rec->points.at(pid).track)
+      rec->images.at(el.image_id).point3d_ids[el.point2d_idx] = core::kNoPoint3D;
     rec->points.erase(pid);
     return false;
   }

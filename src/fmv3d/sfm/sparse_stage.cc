@@ -1,14 +1,14 @@
-#include "fmv3d/core/camera_json.h"
 #include "fmv3d/sfm/sparse_stage.h"
 
 #include <spdlog/spdlog.h>
 
 #include <algorithm>
 #include <chrono>
-#include <set>
 #include <cmath>
 #include <fstream>
+#include <set>
 
+#include "fmv3d/core/camera_json.h"
 #include "fmv3d/core/error.h"
 #include "fmv3d/core/files.h"
 #include "fmv3d/core/workspace.h"
@@ -237,9 +237,9 @@ nlohmann::json RunSparseStage(const core::Workspace& ws, const SparseStageOption
       image_cameras[im.id] = im.camera_id;
     }
     for (const auto& [id, c] : input.cameras) cameras[id] = c.camera;
-    const ManualRegistrationResult mr = RegisterWithTiePoints(&result.models[0], tie_tracks, keypoints, names,
-                                                              image_cameras, cameras, input.manual_from,
-                                                              options.manual.options);
+    const ManualRegistrationResult mr =
+        RegisterWithTiePoints(&result.models[0], tie_tracks, keypoints, names, image_cameras, cameras,
+                              input.manual_from, options.manual.options);
     for (uint32_t id : mr.registered) result.left_out.erase(id);
     for (const auto& [id, why] : mr.still_failed)
       if (result.left_out.count(id)) result.left_out[id] += "; tie points: " + why;
@@ -271,8 +271,7 @@ nlohmann::json RunSparseStage(const core::Workspace& ws, const SparseStageOption
     if (m < result.self_calibration.size())
       for (const auto& t : result.self_calibration[m]) calibration.push_back(ToJson(t));
     nlohmann::json cams = nlohmann::json::array();
-    for (const auto& [id, c] : rec.cameras)
-    {
+    for (const auto& [id, c] : rec.cameras) {
       nlohmann::json cam = core::IntrinsicsToJson(c);
       cam["id"] = id;
       cams.push_back(cam);

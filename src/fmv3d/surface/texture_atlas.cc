@@ -5,8 +5,8 @@
 #include <Eigen/Dense>
 #include <algorithm>
 #include <array>
-#include <limits>
 #include <cmath>
+#include <limits>
 #include <numeric>
 #include <opencv2/imgproc.hpp>
 #include <unordered_map>
@@ -34,8 +34,8 @@ struct UnionFind {
 struct Chart {
   int view = -1;  // -1: flat block of unseen faces
   int x0 = 0, y0 = 0, x1 = 0, y1 = 0;
-  double scale = 1;     // texels per source pixel
-  int w = 0, h = 0;     // size in the atlas, texels
+  double scale = 1;  // texels per source pixel
+  int w = 0, h = 0;  // size in the atlas, texels
   int page = -1, px = 0, py = 0;
   Eigen::Vector3f flat_bgr = Eigen::Vector3f::Zero();
 };
@@ -105,7 +105,8 @@ std::vector<Eigen::Vector3f> SeamGains(const ColoredMesh& mesh, const std::vecto
         if (g <= static_cast<int>(f) || labels[f] < 0 || labels[g] < 0 || labels[g] == labels[f]) continue;
         ++seam_edges;
         const int va = labels[f], vb = labels[g];
-        const Eigen::Vector3d p0 = mesh.vertices[mesh.triangles[f][k]], p1 = mesh.vertices[mesh.triangles[f][(k + 1) % 3]];
+        const Eigen::Vector3d p0 = mesh.vertices[mesh.triangles[f][k]],
+                              p1 = mesh.vertices[mesh.triangles[f][(k + 1) % 3]];
         for (double t : {0.0, 0.5, 1.0}) {
           const Eigen::Vector3d p = (1 - t) * p0 + t * p1;
           const Eigen::Vector2d ua = views[va].camera.Project(views[va].pose.Transform(p));
@@ -155,7 +156,8 @@ std::vector<Chart> MakeCharts(const ColoredMesh& mesh, const std::vector<Texture
     for (size_t f = 0; f < nf; ++f)
       if (labels[f] >= 0) faces_of_view[labels[f]].push_back(static_cast<int>(f));
     const int pad = options.margin + 1;  // corners may lie up to half a pixel outside the image
-    const cv::Mat kernel = cv::getStructuringElement(cv::MORPH_RECT, cv::Size(2 * options.margin + 1, 2 * options.margin + 1));
+    const cv::Mat kernel =
+        cv::getStructuringElement(cv::MORPH_RECT, cv::Size(2 * options.margin + 1, 2 * options.margin + 1));
     for (size_t v = 0; v < views.size(); ++v) {
       if (faces_of_view[v].empty()) continue;
       const core::Camera& cam = views[v].camera;
@@ -226,8 +228,8 @@ std::vector<cv::Mat> PackCharts(std::vector<Chart>* charts_io, const std::vector
   double area = 0;
   int widest = 1;
   for (const Chart& c : charts) area += static_cast<double>(c.w) * c.h, widest = std::max(widest, c.w);
-  const int page_w =
-      std::min(options.max_page_size, std::max(NextPow2(widest), NextPow2(static_cast<int>(std::ceil(std::sqrt(area * 1.15))))));
+  const int page_w = std::min(
+      options.max_page_size, std::max(NextPow2(widest), NextPow2(static_cast<int>(std::ceil(std::sqrt(area * 1.15))))));
   std::vector<int> order(charts.size());
   std::iota(order.begin(), order.end(), 0);
   std::stable_sort(order.begin(), order.end(), [&](int a, int b) { return charts[a].h > charts[b].h; });
@@ -262,14 +264,16 @@ std::vector<cv::Mat> PackCharts(std::vector<Chart>* charts_io, const std::vector
   st["pages"] = num_pages;
   st["page_size"] = nlohmann::json::array();
   for (const auto& p : pages) st["page_size"].push_back({p.cols, p.rows});
-  st["atlas_fill"] = area / (static_cast<double>(page_w) * std::accumulate(pages.begin(), pages.end(), 0.0,
-                                                                            [](double s, const cv::Mat& m) { return s + m.rows; }));
+  st["atlas_fill"] =
+      area / (static_cast<double>(page_w) *
+              std::accumulate(pages.begin(), pages.end(), 0.0, [](double s, const cv::Mat& m) { return s + m.rows; }));
 
   return pages;
 }
 
 // 5. The textured mesh: one uv per (vertex, chart), faces grouped by page.
-io::TexturedMesh UvMesh(const ColoredMesh& mesh, const std::vector<Chart>& charts, const std::vector<int>& chart_of_face,
+io::TexturedMesh UvMesh(const ColoredMesh& mesh, const std::vector<Chart>& charts,
+                        const std::vector<int>& chart_of_face,
                         const std::vector<std::array<Eigen::Vector2d, 3>>& corner, const std::vector<cv::Mat>& pages) {
   const size_t nf = mesh.triangles.size();
   io::TexturedMesh out;
@@ -313,7 +317,8 @@ io::TexturedMesh UvMesh(const ColoredMesh& mesh, const std::vector<Chart>& chart
         t = kFlat[k] + Eigen::Vector2d(c.px, c.py);
       }
       const Eigen::Vector2f uv(static_cast<float>(t.x() / page.cols), static_cast<float>(1.0 - t.y() / page.rows));
-      face.vt[k] = c.view >= 0 ? uv_of(face.v[k], ci, uv) : static_cast<int>((out.uvs.push_back(uv), out.uvs.size() - 1));
+      face.vt[k] =
+          c.view >= 0 ? uv_of(face.v[k], ci, uv) : static_cast<int>((out.uvs.push_back(uv), out.uvs.size() - 1));
     }
     out.faces.push_back(face);
   }
@@ -323,7 +328,8 @@ io::TexturedMesh UvMesh(const ColoredMesh& mesh, const std::vector<Chart>& chart
 }
 
 // 6. Vertex colours from the texture (RGB), for the vertex-coloured PLY.
-std::vector<io::Rgb8> VertexColours(const ColoredMesh& mesh, const io::TexturedMesh& out, const std::vector<cv::Mat>& pages) {
+std::vector<io::Rgb8> VertexColours(const ColoredMesh& mesh, const io::TexturedMesh& out,
+                                    const std::vector<cv::Mat>& pages) {
   const size_t nv = mesh.vertices.size();
   std::vector<Eigen::Vector3f> acc(nv, Eigen::Vector3f::Zero());
   std::vector<int> cnt(nv, 0);
@@ -342,8 +348,7 @@ std::vector<io::Rgb8> VertexColours(const ColoredMesh& mesh, const io::TexturedM
       continue;
     }
     const Eigen::Vector3f bgr = acc[v] / static_cast<float>(cnt[v]);
-    for (int ch = 0; ch < 3; ++ch)
-      colors[v][ch] = static_cast<uint8_t>(std::clamp(std::lround(bgr[2 - ch]), 0L, 255L));
+    for (int ch = 0; ch < 3; ++ch) colors[v][ch] = static_cast<uint8_t>(std::clamp(std::lround(bgr[2 - ch]), 0L, 255L));
   }
   return colors;
 }
@@ -377,7 +382,8 @@ TexturedModel BuildTextureAtlas(const ColoredMesh& mesh, const std::vector<Eigen
 
   const std::vector<Eigen::Vector3f> gain = SeamGains(mesh, adjacency, views, labels, options, &st);
   size_t num_patches = 0;
-  for (size_t f = 0; f < nf; ++f) num_patches += labels[f] >= 0 && patches.Find(static_cast<int>(f)) == static_cast<int>(f);
+  for (size_t f = 0; f < nf; ++f)
+    num_patches += labels[f] >= 0 && patches.Find(static_cast<int>(f)) == static_cast<int>(f);
   st["patches"] = num_patches;
   std::vector<int> chart_of_face;
   std::vector<Chart> charts = MakeCharts(mesh, views, labels, corner, options, &chart_of_face, &st);

@@ -1,4 +1,3 @@
-#include "fmv3d/core/camera_json.h"
 #include "fmv3d/synth/synth.h"
 
 #include <fmt/format.h>
@@ -9,13 +8,14 @@
 #include <opencv2/imgcodecs.hpp>
 #include <random>
 
+#include "fmv3d/core/camera_json.h"
 #include "fmv3d/core/error.h"
 #include "fmv3d/core/files.h"
 #include "fmv3d/core/logging.h"
+#include "fmv3d/ingest/video_writer.h"
 #include "fmv3d/io/colmap_model.h"
 #include "fmv3d/io/exif_writer.h"
 #include "fmv3d/io/obj_io.h"
-#include "fmv3d/ingest/video_writer.h"
 #include "fmv3d/synth/noise.h"
 
 namespace fmv3d::synth {

@@ -58,12 +58,12 @@ struct SynthOptions {
   int truth_points = 3000;  // surface points sampled for points3D.txt (0: none)
   bool write_scene = true;  // scene.obj + textures
   bool write_depth = false;
-  bool klv = false;                 // MPEG-TS with ST 0601 telemetry (needs format ts)
-  bool exif_gps = false;            // JPEG frames with EXIF GPS + DJI XMP (needs format jpg)
-  bool gpmf = false;                // MP4 with a GPMF telemetry track (needs format mp4)
-  bool gpmf_gps9 = false;           // the GPMF track carries GPS9 instead of GPS5
-  KlvTelemetryOptions klv_options;  // geo origin, GPS / attitude noise of every telemetry kind (fps and
-                                    // seed are set from this struct's fps and flight.seed)
+  bool klv = false;                       // MPEG-TS with ST 0601 telemetry (needs format ts)
+  bool exif_gps = false;                  // JPEG frames with EXIF GPS + DJI XMP (needs format jpg)
+  bool gpmf = false;                      // MP4 with a GPMF telemetry track (needs format mp4)
+  bool gpmf_gps9 = false;                 // the GPMF track carries GPS9 instead of GPS5
+  KlvTelemetryOptions klv_options;        // geo origin, GPS / attitude noise of every telemetry kind (fps and
+                                          // seed are set from this struct's fps and flight.seed)
   std::vector<FrameDegradation> degrade;  // frames degraded on purpose (synth/degrade.h)
   std::filesystem::path output;
 

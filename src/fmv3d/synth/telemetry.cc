@@ -37,7 +37,8 @@ GeoPoint EcefToGeodetic(const Eigen::Vector3d& x) {
 }
 
 GeoPoint EnuToGeodetic(const Eigen::Vector3d& enu, const GeoPoint& origin) {
-  return EcefToGeodetic(GeodeticToEcef(origin) + geometry::wgs84::EnuFromEcef(origin.lat, origin.lon).transpose() * enu);
+  return EcefToGeodetic(GeodeticToEcef(origin) +
+                        geometry::wgs84::EnuFromEcef(origin.lat, origin.lon).transpose() * enu);
 }
 
 Eigen::Vector3d GeodeticToEnu(const GeoPoint& p, const GeoPoint& origin) {

@@ -24,7 +24,7 @@ struct TruthPointOptions {
   std::vector<std::string> allowed_frames;
   // Per required frame, keep points at least this far (pixels) from the image border.
   double border_px = 8;
-  double noise_px = 0;  // σ of Gaussian noise per pixel coordinate
+  double noise_px = 0;      // σ of Gaussian noise per pixel coordinate
   double noise_max_px = 0;  // or: uniform noise in [−noise_max_px, noise_max_px] per coordinate ("±1 px")
   uint64_t seed = 1;
   void Check() const;
@@ -32,7 +32,7 @@ struct TruthPointOptions {
 
 struct TruthPoint {
   Eigen::Vector3d xyz = Eigen::Vector3d::Zero();  // world (metres; with a geo origin, its ENU frame)
-  std::vector<io::ImagePoint> observations;        // true (+ noise) pixels, frames in truth order
+  std::vector<io::ImagePoint> observations;       // true (+ noise) pixels, frames in truth order
 };
 
 // Picks points.points points spread over the scene (farthest-point sampling in 3D among the eligible ones, from
