@@ -188,116 +188,129 @@ CompareResult CompareToCad(const CompareOptions& options) {
   return CompareToCad(recon, cad, options, triangles);
 }
 
-CompareResult CompareToCad(const io::OrientedPointCloud& recon_in, const io::TexturedMesh& cad, const CompareOptions& o,
-                           const std::vector<Eigen::Vector3i>& triangles) {
-  o.Check();
-  if (recon_in.empty()) throw Error("compare: the reconstruction has no points");
-  cad.Validate();
-  if (cad.faces.empty()) throw Error("compare: the CAD model has no faces");
-  const double H = o.length;
-  CompareResult res;
-  res.length = H;
-  res.points_total = recon_in.size();
+namespace {
 
-  const geometry::MeshDistance cad_distance(cad);
-  std::vector<int> sample_faces;
+// The CAD surface sampled at the requested spacing, with each sample's face normal.
+struct CadSamples {
+  std::vector<Eigen::Vector3d> points, normals;
+  double spacing = 0;
+};
+
+CadSamples SampleCad(const geometry::MeshDistance& cad_distance, double H, const CompareOptions& o) {
   // A CAD much larger than H (a whole site) would need billions of samples at the requested spacing: cap
   // the count so memory stays bounded, and say so.
   double area = 0;
   for (size_t f = 0; f < cad_distance.num_triangles(); ++f) area += cad_distance.Area(static_cast<int>(f));
   constexpr double kMaxSamples = 4e6;
-  double spacing = o.sample_spacing * H;
-  if (area / (spacing * spacing) > kMaxSamples) {
-    spacing = std::sqrt(area / kMaxSamples);
+  CadSamples s;
+  s.spacing = o.sample_spacing * H;
+  if (area / (s.spacing * s.spacing) > kMaxSamples) {
+    s.spacing = std::sqrt(area / kMaxSamples);
     spdlog::warn(
         "compare: the CAD surface ({:.0f} m²) is large for --length {}: surface samples {:.3f} apart "
         "instead of {:.3f} (completeness is coarser)",
-        area, H, spacing, o.sample_spacing * H);
+        area, H, s.spacing, o.sample_spacing * H);
   }
-  const std::vector<Eigen::Vector3d> samples = cad_distance.SampleSurface(spacing, &sample_faces, 7);
-  if (samples.size() < 10) throw Error("compare: the CAD surface is too small for --length " + std::to_string(H));
-  std::vector<Eigen::Vector3d> sample_normals(samples.size());
-  for (size_t i = 0; i < samples.size(); ++i) sample_normals[i] = cad_distance.Normal(sample_faces[i]);
+  std::vector<int> faces;
+  s.points = cad_distance.SampleSurface(s.spacing, &faces, 7);
+  if (s.points.size() < 10) throw Error("compare: the CAD surface is too small for --length " + std::to_string(H));
+  s.normals.resize(s.points.size());
+  for (size_t i = 0; i < s.points.size(); ++i) s.normals[i] = cad_distance.Normal(faces[i]);
+  return s;
+}
 
-  // 1. Coarse alignment.
+// The reconstruction's points (and normals) mapped by `sim` that fall in the CAD's box grown by `margin`, above
+// the ground cut.
+io::OrientedPointCloud CropToCad(const io::OrientedPointCloud& recon, const core::Sim3& sim,
+                                 const Eigen::AlignedBox3d& cad_box, double margin, double ground_z) {
+  const Eigen::Vector3d m = Eigen::Vector3d::Constant(margin);
+  Eigen::AlignedBox3d box(cad_box.min() - m, cad_box.max() + m);
+  box.min().z() = ground_z;
+  io::OrientedPointCloud out;
+  for (size_t i = 0; i < recon.size(); ++i) {
+    const Eigen::Vector3d p = sim.Apply(recon.positions[i]);
+    if (!box.contains(p)) continue;
+    out.positions.push_back(p);
+    if (recon.has_normals()) out.normals.push_back((sim.q.cast<float>() * recon.normals[i]).normalized());
+  }
+  return out;
+}
+
+// Steps 1–2: the reconstruction onto the CAD — a given transform or global registration, then scaled ICP on the
+// points near the CAD (a wider box: the start may be off).
+core::Sim3 AlignToCad(const io::OrientedPointCloud& recon, const CadSamples& cs, const Eigen::AlignedBox3d& cad_box,
+                      double ground_z, const CompareOptions& o, CompareResult& res) {
+  const double H = o.length;
   core::Sim3 T;
   if (o.transform) {
     T = *o.transform;
     res.coarse = "transform";
   } else {
     io::OrientedPointCloud cad_cloud;
-    cad_cloud.positions = samples;
-    const GlobalRegistrationResult g = GlobalRegistration(recon_in, cad_cloud, o.global_options);
+    cad_cloud.positions = cs.points;
+    const GlobalRegistrationResult g = GlobalRegistration(recon, cad_cloud, o.global_options);
     T = g.transform;
     res.coarse = "global:" + g.method;
     spdlog::info("compare: global registration ({}), {:.1f}% of the points land on the CAD", g.method,
                  100 * g.inlier_fraction);
   }
+  if (!o.icp) return T;
+  const io::OrientedPointCloud near = CropToCad(recon, T, cad_box, std::max(o.crop_margin, 0.1) * H, ground_z);
+  if (near.size() < 10)
+    throw Error("compare: only " + std::to_string(near.size()) +
+                " reconstructed points near the CAD model after the coarse alignment — check --transform");
+  io::OrientedPointCloud cad_cloud;
+  cad_cloud.positions = cs.points;
+  for (const auto& n : cs.normals) cad_cloud.normals.push_back(n.cast<float>());
+  const IcpTarget target(cad_cloud);
+  IcpResult r = ScaledIcp(near, target, core::Sim3(), o.icp_options);
+  spdlog::info("compare: ICP {} after {} iterations, RMS {:.4g} → {:.4g} ({:.3f}% → {:.3f}% of H), scale ×{:.6f}",
+               r.converged ? "converged" : "stopped", r.iterations, r.initial_rmse, r.rmse, 100 * r.initial_rmse / H,
+               100 * r.rmse / H, r.transform.s);
+  res.icp = r;
+  return ComposeSim3(r.transform, T);
+}
 
-  const Eigen::AlignedBox3d cad_box = cad.Bounds();
-  auto crop = [&](const core::Sim3& sim, double margin, io::OrientedPointCloud* out) {
-    const Eigen::Vector3d m = Eigen::Vector3d::Constant(margin);
-    Eigen::AlignedBox3d box(cad_box.min() - m, cad_box.max() + m);
-    box.min().z() = cad_box.min().z() + o.ground_cut * H;
-    *out = io::OrientedPointCloud();
-    for (size_t i = 0; i < recon_in.size(); ++i) {
-      const Eigen::Vector3d p = sim.Apply(recon_in.positions[i]);
-      if (!box.contains(p)) continue;
-      out->positions.push_back(p);
-      if (recon_in.has_normals()) out->normals.push_back((sim.q.cast<float>() * recon_in.normals[i]).normalized());
-    }
-  };
+// Per point: the error to the closest CAD point per axis and the signed distance, as fractions of H.
+struct PointErrors {
+  std::vector<double> x, y, z, signed_distance;
+};
 
-  // 2. ICP against CAD surface samples, on the points near the CAD (a wider box: the start may be off).
-  if (o.icp) {
-    io::OrientedPointCloud near;
-    crop(T, std::max(o.crop_margin, 0.1) * H, &near);
-    if (near.size() < 10)
-      throw Error("compare: only " + std::to_string(near.size()) +
-                  " reconstructed points near the CAD model after the coarse alignment — check --transform");
-    io::OrientedPointCloud cad_cloud;
-    cad_cloud.positions = samples;
-    for (const auto& n : sample_normals) cad_cloud.normals.push_back(n.cast<float>());
-    const IcpTarget target(cad_cloud);
-    IcpResult r = ScaledIcp(near, target, core::Sim3(), o.icp_options);
-    spdlog::info("compare: ICP {} after {} iterations, RMS {:.4g} → {:.4g} ({:.3f}% → {:.3f}% of H), scale ×{:.6f}",
-                 r.converged ? "converged" : "stopped", r.iterations, r.initial_rmse, r.rmse, 100 * r.initial_rmse / H,
-                 100 * r.rmse / H, r.transform.s);
-    T = ComposeSim3(r.transform, T);
-    res.icp = r;
-  }
-  res.transform = T;
-
-  // 3. Errors of the points inside the crop box.
-  io::OrientedPointCloud pts;
-  crop(T, o.crop_margin * H, &pts);
-  res.points_measured = pts.size();
-  res.points_cropped = res.points_total - pts.size();
-  if (pts.empty()) throw Error("compare: no reconstructed point lies within the CAD model's bounding box");
-  std::vector<double> ex(pts.size()), ey(pts.size()), ez(pts.size()), ed(pts.size());
+PointErrors MeasureErrors(const geometry::MeshDistance& cad_distance, const std::vector<Eigen::Vector3d>& pts,
+                          double H) {
+  PointErrors e;
+  e.x.resize(pts.size());
+  e.y.resize(pts.size());
+  e.z.resize(pts.size());
+  e.signed_distance.resize(pts.size());
   tbb::parallel_for(tbb::blocked_range<size_t>(0, pts.size(), 1024), [&](const tbb::blocked_range<size_t>& r) {
     for (size_t i = r.begin(); i < r.end(); ++i) {
-      const geometry::ClosestPoint c = cad_distance.Closest(pts.positions[i]);
-      const Eigen::Vector3d e = (pts.positions[i] - c.point) / H;
-      ex[i] = e.x();
-      ey[i] = e.y();
-      ez[i] = e.z();
-      ed[i] = c.signed_distance / H;
+      const geometry::ClosestPoint c = cad_distance.Closest(pts[i]);
+      const Eigen::Vector3d d = (pts[i] - c.point) / H;
+      e.x[i] = d.x();
+      e.y[i] = d.y();
+      e.z[i] = d.z();
+      e.signed_distance[i] = c.signed_distance / H;
     }
   });
-  res.x = Stats(ex);
-  res.y = Stats(ey);
-  res.z = Stats(ez);
-  res.total = Stats(ed);
+  return e;
+}
 
-  // 4. Completeness.
+// Step 4: the share of the CAD samples above the ground cut (and seen by the cameras, when given) that have a
+// reconstructed point — or a point on the reconstruction's faces — within the completeness distance.
+void MeasureCompleteness(const io::OrientedPointCloud& recon_in, const io::TexturedMesh& cad, const CadSamples& cs,
+                         const io::OrientedPointCloud& pts, const core::Sim3& T,
+                         const std::vector<Eigen::Vector3i>& triangles, double ground_z, const CompareOptions& o,
+                         CompareResult& res) {
+  const double H = o.length;
+  const Eigen::AlignedBox3d cad_box = cad.Bounds();
+  const std::vector<Eigen::Vector3d>& samples = cs.points;
   std::vector<char> counted(samples.size(), 1);
-  const double ground_z = cad_box.min().z() + o.ground_cut * H;
   for (size_t i = 0; i < samples.size(); ++i) counted[i] = samples[i].z() >= ground_z;
   if (!o.cameras.empty()) {
     const core::Reconstruction cams = io::ReadColmapText(o.cameras);
     if (cams.images.empty()) throw Error(o.cameras.string() + ": the model has no images");
-    const std::vector<char> seen = SeenSamples(cad, samples, sample_normals, cams, H, o);
+    const std::vector<char> seen = SeenSamples(cad, samples, cs.normals, cams, H, o);
     for (size_t i = 0; i < samples.size(); ++i) counted[i] = counted[i] && seen[i];
     res.completeness_seen_only = true;
   }
@@ -330,46 +343,82 @@ CompareResult CompareToCad(const io::OrientedPointCloud& recon_in, const io::Tex
   res.surface_samples = n_counted;
   res.completeness_threshold = o.completeness_threshold;
   res.completeness = n_counted ? double(n_covered) / n_counted : 0;
+}
 
+// Step 5: histograms, top and side views, the CAD coloured by error, compare.json and compare.html.
+void WriteCompareOutputs(const io::TexturedMesh& cad, const std::vector<Eigen::Vector3d>& pts, const PointErrors& e,
+                         double spacing, const CompareOptions& o, const CompareResult& res) {
+  const double H = o.length;
+  core::EnsureDirectory(o.output_dir);
+  PlotInput plot{cad, pts, e.x, e.y, e.z, e.signed_distance, H};
+  WriteHistogramPlot(plot, o.output_dir / "histograms.png");
+  WriteErrorView(plot, ViewDirection::kTop, o.output_dir / "top.png");
+  WriteErrorView(plot, ViewDirection::kSide, o.output_dir / "side.png");
+  nlohmann::json j = res.ToJson();
+  j["reconstruction"] = o.reconstruction.string();
+  j["cad"] = o.cad.string();
+  j["crop_margin_percent"] = 100 * o.crop_margin;
+  j["ground_cut_percent"] = 100 * o.ground_cut;
+  if (!o.cameras.empty()) j["cameras"] = o.cameras.string();
+  // The CAD coloured by the errors around each of its points (error_mesh.h): edges of two sample spacings,
+  // errors from the points within the completeness distance (or two spacings), colours saturating at the
+  // 90th percentile of |signed distance|.
+  ErrorMeshOptions eo;
+  eo.max_edge = 2 * spacing;
+  eo.radius = std::max(o.completeness_threshold * H, 2 * spacing);
+  eo.scale = std::max(res.total.p90, 1e-6);
+  eo.length = H;
+  const ErrorMesh em = BuildErrorMesh(cad, pts, e.signed_distance, eo);
+  WriteErrorMeshPly(em, o.output_dir / "cad_error.ply");
+  j["error_mesh"] = {{"file", "cad_error.ply"},
+                     {"frame", "cad"},
+                     {"vertices", em.vertices.size()},
+                     {"triangles", em.triangles.size()},
+                     {"covered_percent", 100 * em.covered_fraction},
+                     {"radius_percent", 100 * eo.radius / H},
+                     {"scale_percent", 100 * eo.scale}};
+  core::WriteJson(o.output_dir / "compare.json", j);
+  WriteCompareHtml(j, o.output_dir / "compare.html");
+}
+
+}  // namespace
+
+CompareResult CompareToCad(const io::OrientedPointCloud& recon_in, const io::TexturedMesh& cad, const CompareOptions& o,
+                           const std::vector<Eigen::Vector3i>& triangles) {
+  o.Check();
+  if (recon_in.empty()) throw Error("compare: the reconstruction has no points");
+  cad.Validate();
+  if (cad.faces.empty()) throw Error("compare: the CAD model has no faces");
+  const double H = o.length;
+  CompareResult res;
+  res.length = H;
+  res.points_total = recon_in.size();
+
+  const geometry::MeshDistance cad_distance(cad);
+  const CadSamples cs = SampleCad(cad_distance, H, o);
+  const Eigen::AlignedBox3d cad_box = cad.Bounds();
+  const double ground_z = cad_box.min().z() + o.ground_cut * H;
+  const core::Sim3 T = AlignToCad(recon_in, cs, cad_box, ground_z, o, res);
+  res.transform = T;
+
+  // 3. Errors of the points inside the crop box.
+  const io::OrientedPointCloud pts = CropToCad(recon_in, T, cad_box, o.crop_margin * H, ground_z);
+  res.points_measured = pts.size();
+  res.points_cropped = res.points_total - pts.size();
+  if (pts.empty()) throw Error("compare: no reconstructed point lies within the CAD model's bounding box");
+  const PointErrors e = MeasureErrors(cad_distance, pts.positions, H);
+  res.x = Stats(e.x);
+  res.y = Stats(e.y);
+  res.z = Stats(e.z);
+  res.total = Stats(e.signed_distance);
+
+  MeasureCompleteness(recon_in, cad, cs, pts, T, triangles, ground_z, o, res);
   spdlog::info(
       "compare: {} of {} points measured; RMS {:.3f}% of H (x {:.3f}%, y {:.3f}%, z {:.3f}%), "
       "completeness {:.1f}%",
       res.points_measured, res.points_total, 100 * res.total.rms, 100 * res.x.rms, 100 * res.y.rms, 100 * res.z.rms,
       100 * res.completeness);
-
-  // 5. Outputs.
-  if (!o.output_dir.empty()) {
-    core::EnsureDirectory(o.output_dir);
-    PlotInput plot{cad, pts.positions, ex, ey, ez, ed, H};
-    WriteHistogramPlot(plot, o.output_dir / "histograms.png");
-    WriteErrorView(plot, ViewDirection::kTop, o.output_dir / "top.png");
-    WriteErrorView(plot, ViewDirection::kSide, o.output_dir / "side.png");
-    nlohmann::json j = res.ToJson();
-    j["reconstruction"] = o.reconstruction.string();
-    j["cad"] = o.cad.string();
-    j["crop_margin_percent"] = 100 * o.crop_margin;
-    j["ground_cut_percent"] = 100 * o.ground_cut;
-    if (!o.cameras.empty()) j["cameras"] = o.cameras.string();
-    // The CAD coloured by the errors around each of its points (error_mesh.h): edges of two sample spacings,
-    // errors from the points within the completeness distance (or two spacings), colours saturating at the
-    // 90th percentile of |signed distance|.
-    ErrorMeshOptions eo;
-    eo.max_edge = 2 * spacing;
-    eo.radius = std::max(o.completeness_threshold * H, 2 * spacing);
-    eo.scale = std::max(res.total.p90, 1e-6);
-    eo.length = H;
-    const ErrorMesh em = BuildErrorMesh(cad, pts.positions, ed, eo);
-    WriteErrorMeshPly(em, o.output_dir / "cad_error.ply");
-    j["error_mesh"] = {{"file", "cad_error.ply"},
-                       {"frame", "cad"},
-                       {"vertices", em.vertices.size()},
-                       {"triangles", em.triangles.size()},
-                       {"covered_percent", 100 * em.covered_fraction},
-                       {"radius_percent", 100 * eo.radius / H},
-                       {"scale_percent", 100 * eo.scale}};
-    core::WriteJson(o.output_dir / "compare.json", j);
-    WriteCompareHtml(j, o.output_dir / "compare.html");
-  }
+  if (!o.output_dir.empty()) WriteCompareOutputs(cad, pts.positions, e, cs.spacing, o, res);
   return res;
 }
 

@@ -1,7 +1,6 @@
 #include "fmv3d/align/merge.h"
 
 #include <spdlog/spdlog.h>
-
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
@@ -317,6 +316,94 @@ mvs::DenseStageOptions MergedDenseOptions(const std::vector<Track>& tracks) {
   return o;
 }
 
+namespace {
+
+// Links each track's frames into the output under their merged names and writes the merged frames.json.
+struct FramesWritten {
+  size_t linked = 0, missing = 0;
+};
+
+FramesWritten WriteMergedFrames(const std::vector<Track>& tracks, const MultiTrackAlignment& alignment,
+                                const MergedModel& merged, const core::Workspace& out) {
+  io::FramesIndex index;
+  FramesWritten n;
+  for (size_t k : MergeOrder(tracks.size(), alignment.reference)) {
+    const core::Workspace in_ws(tracks[k].workspace);
+    const fs::path frames = in_ws.frames_dir();
+    for (const auto& [old_name, new_name] : merged.image_names[k]) {
+      if (fs::exists(frames / old_name)) {
+        LinkOrCopy(frames / old_name, out.frames_dir() / new_name);
+        ++n.linked;
+      } else {
+        ++n.missing;
+      }
+    }
+    if (!fs::exists(in_ws.frames_json())) continue;
+    const io::FramesIndex in = io::ReadFramesIndex(in_ws.frames_json());
+    for (const auto& cam : in.cameras) {
+      const auto it = merged.camera_ids[k].find(cam.camera.id);
+      if (it == merged.camera_ids[k].end()) continue;
+      io::CameraPrior c = cam;
+      c.camera.id = it->second;
+      index.cameras.push_back(c);
+    }
+    for (const auto& f : in.frames) {
+      const auto it = merged.image_names[k].find(f.name);
+      const auto cit = merged.camera_ids[k].find(f.camera_id);
+      if (it == merged.image_names[k].end() || cit == merged.camera_ids[k].end()) continue;
+      io::FrameRecord r = f;
+      r.name = it->second;
+      r.camera_id = cit->second;
+      index.frames.push_back(r);
+    }
+  }
+  if (!index.frames.empty()) io::WriteFramesIndex(index, out.frames_json());
+  if (n.missing) spdlog::warn("align: {} frame images not found in the input workspaces", n.missing);
+  return n;
+}
+
+// The merged dense cloud: multi-view stereo again over every track's views when each track has a dense cloud and
+// all frames are there, else (or when that fails) the union of the tracks' clouds. Returns its report block.
+nlohmann::json WriteMergedDense(const std::vector<Track>& tracks, const MergedModel& merged, bool frames_complete,
+                                const MergeOptions& merge_options, const fs::path& output) {
+  nlohmann::json dense_json = {{"method", "none"}};
+  if (merged.dense.empty()) return dense_json;
+  const bool every_track_dense =
+      std::all_of(tracks.begin(), tracks.end(), [](const Track& t) { return !t.dense.empty(); });
+  if (merge_options.recompute_dense && every_track_dense && frames_complete) {
+    const mvs::DenseStageOptions dense_options = MergedDenseOptions(tracks);
+    spdlog::info("align: multi-view stereo over the merged model ({} views, {} px)", merged.sparse.images.size(),
+                 dense_options.max_size);
+    try {
+      const nlohmann::json r = mvs::RunDenseStage(output, dense_options);
+      return {{"method", "recomputed over every track's views"},
+              {"points", r.at("points")},
+              {"max_size", dense_options.max_size},
+              {"max_sources", dense_options.max_sources},
+              {"geometric_pass", dense_options.geometric},
+              {"reference_coverage", dense_options.references.coverage}};
+    } catch (const Error& e) {
+      spdlog::warn(
+          "align: multi-view stereo over the merged model failed ({}); writing the union of the "
+          "tracks' dense clouds instead",
+          e.what());
+      dense_json = {{"method", "union"}, {"recompute_failed", e.what()}};
+    }
+  } else {
+    dense_json = {{"method", "union"}};
+    if (merge_options.recompute_dense)
+      dense_json["why_not_recomputed"] =
+          !every_track_dense ? "a track has no dense cloud" : "frame images of the tracks are missing";
+  }
+  const core::Workspace out(output);
+  core::EnsureDirectory(out.dense_dir());
+  io::WritePointCloudPly(merged.dense, out.dense_dir() / "fused.ply");
+  dense_json["points"] = merged.dense.size();
+  return dense_json;
+}
+
+}  // namespace
+
 nlohmann::json RunAlignStage(const std::vector<fs::path>& workspaces, const fs::path& output,
                              const TrackAlignOptions& options, const MergeOptions& merge_options) {
   options.Check();
@@ -342,77 +429,8 @@ nlohmann::json RunAlignStage(const std::vector<fs::path>& workspaces, const fs::
   core::EnsureDirectory(out.sparse_dir());
   io::WriteColmapText(merged.sparse, out.sparse_dir());
   sfm::WritePointsPly(merged.sparse, out.sparse_dir() / "sparse.ply");
-
-  // Frames and their index.
-  io::FramesIndex index;
-  size_t frames_linked = 0, frames_missing = 0;
-  for (size_t k : MergeOrder(tracks.size(), alignment.reference)) {
-    const core::Workspace in_ws(tracks[k].workspace);
-    const fs::path frames = in_ws.frames_dir();
-    for (const auto& [old_name, new_name] : merged.image_names[k]) {
-      if (fs::exists(frames / old_name)) {
-        LinkOrCopy(frames / old_name, out.frames_dir() / new_name);
-        ++frames_linked;
-      } else {
-        ++frames_missing;
-      }
-    }
-    if (!fs::exists(in_ws.frames_json())) continue;
-    const io::FramesIndex in = io::ReadFramesIndex(in_ws.frames_json());
-    for (const auto& cam : in.cameras) {
-      const auto it = merged.camera_ids[k].find(cam.camera.id);
-      if (it == merged.camera_ids[k].end()) continue;
-      io::CameraPrior c = cam;
-      c.camera.id = it->second;
-      index.cameras.push_back(c);
-    }
-    for (const auto& f : in.frames) {
-      const auto it = merged.image_names[k].find(f.name);
-      const auto cit = merged.camera_ids[k].find(f.camera_id);
-      if (it == merged.image_names[k].end() || cit == merged.camera_ids[k].end()) continue;
-      io::FrameRecord r = f;
-      r.name = it->second;
-      r.camera_id = cit->second;
-      index.frames.push_back(r);
-    }
-  }
-  if (!index.frames.empty()) io::WriteFramesIndex(index, out.frames_json());
-  if (frames_missing) spdlog::warn("align: {} frame images not found in the input workspaces", frames_missing);
-  nlohmann::json dense_json = {{"method", "none"}};
-  if (!merged.dense.empty()) {
-    const bool every_track_dense =
-        std::all_of(tracks.begin(), tracks.end(), [](const Track& t) { return !t.dense.empty(); });
-    if (merge_options.recompute_dense && every_track_dense && frames_missing == 0) {
-      const mvs::DenseStageOptions dense_options = MergedDenseOptions(tracks);
-      spdlog::info("align: multi-view stereo over the merged model ({} views, {} px)", merged.sparse.images.size(),
-                   dense_options.max_size);
-      try {
-        const nlohmann::json r = mvs::RunDenseStage(output, dense_options);
-        dense_json = {{"method", "recomputed over every track's views"},
-                      {"points", r.at("points")},
-                      {"max_size", dense_options.max_size},
-                      {"max_sources", dense_options.max_sources},
-                      {"geometric_pass", dense_options.geometric},
-                      {"reference_coverage", dense_options.references.coverage}};
-      } catch (const Error& e) {
-        spdlog::warn(
-            "align: multi-view stereo over the merged model failed ({}); writing the union of the "
-            "tracks' dense clouds instead",
-            e.what());
-        dense_json = {{"method", "union"}, {"recompute_failed", e.what()}};
-      }
-    } else {
-      dense_json = {{"method", "union"}};
-      if (merge_options.recompute_dense)
-        dense_json["why_not_recomputed"] =
-            !every_track_dense ? "a track has no dense cloud" : "frame images of the tracks are missing";
-    }
-    if (dense_json.at("method") == "union") {
-      core::EnsureDirectory(out.dense_dir());
-      io::WritePointCloudPly(merged.dense, out.dense_dir() / "fused.ply");
-      dense_json["points"] = merged.dense.size();
-    }
-  }
+  const FramesWritten frames = WriteMergedFrames(tracks, alignment, merged, out);
+  const nlohmann::json dense_json = WriteMergedDense(tracks, merged, frames.missing == 0, merge_options, output);
 
   nlohmann::json report;
   report["reference"] = tracks[alignment.reference].name;
@@ -437,8 +455,8 @@ nlohmann::json RunAlignStage(const std::vector<fs::path>& workspaces, const fs::
                       {"dense_points", dense_json.value("points", size_t{0})},
                       {"dense_points_union", dense_before_overlap},
                       {"dense_points_dropped_in_overlap", overlap_dropped},
-                      {"frames_linked", frames_linked},
-                      {"frames_missing", frames_missing}};
+                      {"frames_linked", frames.linked},
+                      {"frames_missing", frames.missing}};
   report["dense"] = dense_json;
   if (joint) report["joint_bundle_adjustment"] = joint->ToJson();
   report["notes"] =

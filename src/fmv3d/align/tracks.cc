@@ -103,56 +103,57 @@ std::string NoOverlap(const Track& a, const Track& b) {
   return "no overlap found between " + a.name + " and " + b.name;
 }
 
-PairAlignment AlignPair(const std::vector<Track>& tracks, size_t ri, size_t mi, const TrackAlignOptions& o,
-                        FeatureCache& cache) {
-  const Track& ref = tracks[ri];
-  const Track& mov = tracks[mi];
-  const auto& fa = cache.Get(tracks, ri);
-  const auto& fb = cache.Get(tracks, mi);
-  PairAlignment res;
-  res.reference = ri;
-  res.moving = mi;
-
-  // 1. Candidate image pairs (index into fa, index into fb).
+// Candidate image pairs (index into fa, index into fb): every pair when few, else each image's most similar
+// images of the other track by global descriptor.
+std::vector<std::pair<size_t, size_t>> CandidatePairs(const std::vector<ImageFeatures>& fa,
+                                                      const std::vector<ImageFeatures>& fb,
+                                                      const TrackAlignOptions& o) {
   std::set<std::pair<size_t, size_t>> cand;
   if (fa.size() * fb.size() <= static_cast<size_t>(o.exhaustive_max_pairs)) {
     for (size_t i = 0; i < fa.size(); ++i)
       for (size_t j = 0; j < fb.size(); ++j) cand.insert({i, j});
-  } else {
-    std::vector<const features::Descriptors*> all;
-    for (const auto& f : fa) all.push_back(&f.descriptors);
-    for (const auto& f : fb) all.push_back(&f.descriptors);
-    features::PairOptions po;
-    po.seed = o.seed;
-    const auto g = features::GlobalDescriptors(all, po);
-    auto top = [&](size_t self, size_t begin, size_t end) {
-      std::vector<std::pair<float, size_t>> sims;
-      for (size_t k = begin; k < end; ++k) {
-        float dot = 0;
-        for (size_t d = 0; d < g[self].size(); ++d) dot += g[self][d] * g[k][d];
-        sims.push_back({-dot, k});
-      }
-      const size_t n = std::min<size_t>(o.candidates_per_image, sims.size());
-      std::partial_sort(sims.begin(), sims.begin() + n, sims.end());
-      sims.resize(n);
-      return sims;
-    };
-    for (size_t i = 0; i < fa.size(); ++i)
-      for (const auto& [s, k] : top(i, fa.size(), all.size())) cand.insert({i, k - fa.size()});
-    for (size_t j = 0; j < fb.size(); ++j)
-      for (const auto& [s, k] : top(fa.size() + j, 0, fa.size())) cand.insert({k, j});
+    return {cand.begin(), cand.end()};
   }
-  const std::vector<std::pair<size_t, size_t>> pairs(cand.begin(), cand.end());
-  res.image_pairs_tried = pairs.size();
+  std::vector<const features::Descriptors*> all;
+  for (const auto& f : fa) all.push_back(&f.descriptors);
+  for (const auto& f : fb) all.push_back(&f.descriptors);
+  features::PairOptions po;
+  po.seed = o.seed;
+  const auto g = features::GlobalDescriptors(all, po);
+  auto top = [&](size_t self, size_t begin, size_t end) {
+    std::vector<std::pair<float, size_t>> sims;
+    for (size_t k = begin; k < end; ++k) {
+      float dot = 0;
+      for (size_t d = 0; d < g[self].size(); ++d) dot += g[self][d] * g[k][d];
+      sims.push_back({-dot, k});
+    }
+    const size_t n = std::min<size_t>(o.candidates_per_image, sims.size());
+    std::partial_sort(sims.begin(), sims.begin() + n, sims.end());
+    sims.resize(n);
+    return sims;
+  };
+  for (size_t i = 0; i < fa.size(); ++i)
+    for (const auto& [s, k] : top(i, fa.size(), all.size())) cand.insert({i, k - fa.size()});
+  for (size_t j = 0; j < fb.size(); ++j)
+    for (const auto& [s, k] : top(fa.size() + j, 0, fa.size())) cand.insert({k, j});
+  return {cand.begin(), cand.end()};
+}
 
-  // 2. Match and verify each pair (parallel); descriptors' search structures are built once per image.
+// Matches and verifies (essential matrix, RANSAC) each candidate pair in parallel; per pair, the 3D point ids
+// (reference, moving) of its verified matches, empty when it did not verify.
+std::vector<std::vector<std::pair<uint64_t, uint64_t>>> CrossMatch(const std::vector<ImageFeatures>& fa,
+                                                                   const std::vector<ImageFeatures>& fb,
+                                                                   const std::vector<std::pair<size_t, size_t>>& pairs,
+                                                                   const TrackAlignOptions& o,
+                                                                   const std::string& label) {
+  // Descriptors' search structures are built once per image.
   std::vector<std::unique_ptr<features::ImageDescriptors>> da, db;
   for (size_t i = 0; i < fa.size(); ++i)
     da.push_back(std::make_unique<features::ImageDescriptors>(fa[i].descriptors, uint32_t(i + 1)));
   for (size_t j = 0; j < fb.size(); ++j)
     db.push_back(std::make_unique<features::ImageDescriptors>(fb[j].descriptors, uint32_t(100000 + j)));
   std::vector<std::vector<std::pair<uint64_t, uint64_t>>> found(pairs.size());
-  core::Progress progress("cross-match " + ref.name + " / " + mov.name, pairs.size());
+  core::Progress progress("cross-match " + label, pairs.size());
   tbb::parallel_for(tbb::blocked_range<size_t>(0, pairs.size(), 1), [&](const tbb::blocked_range<size_t>& r) {
     for (size_t p = r.begin(); p < r.end(); ++p) {
       const auto& A = fa[pairs[p].first];
@@ -177,6 +178,65 @@ PairAlignment AlignPair(const std::vector<Track>& tracks, size_t ri, size_t mi, 
     }
   });
   progress.Finish();
+  return found;
+}
+
+// Robust refit of the similarity src → dst: IRLS with Huber weights, the inlier set (mask) re-chosen each round
+// at 3 robust sigmas of the residuals, never beyond max_error.
+core::Sim3 RefitSimilarityIrls(const std::vector<Eigen::Vector3d>& src, const std::vector<Eigen::Vector3d>& dst,
+                               core::Sim3 sim, double max_error, double scale, int min_inliers,
+                               std::vector<char>& mask) {
+  for (int round = 0; round < 6; ++round) {
+    std::vector<double> r(src.size()), rin;
+    for (size_t i = 0; i < src.size(); ++i) {
+      r[i] = (sim.Apply(src[i]) - dst[i]).norm();
+      if (mask[i]) rin.push_back(r[i]);
+    }
+    const double sigma = std::max(core::RobustSigma(rin), 1e-12 * scale);
+    std::vector<Eigen::Vector3d> a, b;
+    std::vector<double> w;
+    for (size_t i = 0; i < src.size(); ++i) {
+      mask[i] = r[i] <= std::min(3 * sigma, max_error);
+      if (!mask[i]) continue;
+      a.push_back(src[i]);
+      b.push_back(dst[i]);
+      w.push_back(r[i] <= 1.5 * sigma ? 1.0 : 1.5 * sigma / r[i]);
+    }
+    core::Sim3 refit;
+    if (static_cast<int>(a.size()) < min_inliers || !geometry::EstimateSimilarity(a, b, w, true, &refit)) break;
+    sim = refit;
+  }
+  return sim;
+}
+
+// The fine step: scaled ICP between the dense clouds, started at the similarity from correspondences.
+void RefineByDenseIcp(const Track& ref, const Track& mov, const TrackAlignOptions& o, core::Sim3& sim,
+                      PairAlignment& res) {
+  IcpOptions io = o.icp_options;
+  const double overlap = OverlapFraction(ref, mov, sim);
+  io.trim_fraction = std::clamp(overlap, 0.3, io.trim_fraction);
+  const IcpTarget target(ref.dense, io.normal_neighbours);
+  const IcpResult icp = ScaledIcp(mov.dense, target, sim, io);
+  spdlog::info("align {} ← {}: ICP on dense clouds, RMS {:.4g} → {:.4g}, {} iterations", ref.name, mov.name,
+               icp.initial_rmse, icp.rmse, icp.iterations);
+  sim = icp.transform;
+  res.rms_before = icp.initial_rmse;
+  res.rms_after = icp.rmse;
+  res.fine = "icp-dense";
+}
+
+PairAlignment AlignPair(const std::vector<Track>& tracks, size_t ri, size_t mi, const TrackAlignOptions& o,
+                        FeatureCache& cache) {
+  const Track& ref = tracks[ri];
+  const Track& mov = tracks[mi];
+  const auto& fa = cache.Get(tracks, ri);
+  const auto& fb = cache.Get(tracks, mi);
+  PairAlignment res;
+  res.reference = ri;
+  res.moving = mi;
+  const std::vector<std::pair<size_t, size_t>> pairs = CandidatePairs(fa, fb, o);
+  res.image_pairs_tried = pairs.size();
+  const auto found = CrossMatch(fa, fb, pairs, o, ref.name + " / " + mov.name);
 
   // 3. Distinct 3D–3D pairs.
   std::set<std::pair<uint64_t, uint64_t>> links;
@@ -205,28 +265,8 @@ PairAlignment AlignPair(const std::vector<Track>& tracks, size_t ri, size_t mi, 
     throw NoOverlapError(NoOverlap(ref, mov) + " (" + std::to_string(inliers) + " consistent 3D correspondences, " +
                          std::to_string(o.min_inliers) + " needed)");
 
-  // Robust refit: IRLS with Huber weights, the inlier set re-chosen at 3 robust sigmas of the residuals.
   const core::Sim3 coarse = sim;
-  for (int round = 0; round < 6; ++round) {
-    std::vector<double> r(src.size()), rin;
-    for (size_t i = 0; i < src.size(); ++i) {
-      r[i] = (sim.Apply(src[i]) - dst[i]).norm();
-      if (mask[i]) rin.push_back(r[i]);
-    }
-    const double sigma = std::max(core::RobustSigma(rin), 1e-12 * ref.radius);
-    std::vector<Eigen::Vector3d> a, b;
-    std::vector<double> w;
-    for (size_t i = 0; i < src.size(); ++i) {
-      mask[i] = r[i] <= std::min(3 * sigma, ro.max_error);
-      if (!mask[i]) continue;
-      a.push_back(src[i]);
-      b.push_back(dst[i]);
-      w.push_back(r[i] <= 1.5 * sigma ? 1.0 : 1.5 * sigma / r[i]);
-    }
-    core::Sim3 refit;
-    if (static_cast<int>(a.size()) < o.min_inliers || !geometry::EstimateSimilarity(a, b, w, true, &refit)) break;
-    sim = refit;
-  }
+  sim = RefitSimilarityIrls(src, dst, sim, ro.max_error, ref.radius, o.min_inliers, mask);
   auto inlier_rms = [&](const core::Sim3& s) {
     double sum = 0;
     size_t n = 0;
@@ -244,20 +284,7 @@ PairAlignment AlignPair(const std::vector<Track>& tracks, size_t ri, size_t mi, 
   res.rms_after = inlier_rms(sim);
   res.fine = "correspondences";
 
-  // Fine: ICP between the dense clouds.
-  if (o.icp && !ref.dense.empty() && !mov.dense.empty()) {
-    IcpOptions io = o.icp_options;
-    const double overlap = OverlapFraction(ref, mov, sim);
-    io.trim_fraction = std::clamp(overlap, 0.3, io.trim_fraction);
-    const IcpTarget target(ref.dense, io.normal_neighbours);
-    const IcpResult icp = ScaledIcp(mov.dense, target, sim, io);
-    spdlog::info("align {} ← {}: ICP on dense clouds, RMS {:.4g} → {:.4g}, {} iterations", ref.name, mov.name,
-                 icp.initial_rmse, icp.rmse, icp.iterations);
-    sim = icp.transform;
-    res.rms_before = icp.initial_rmse;
-    res.rms_after = icp.rmse;
-    res.fine = "icp-dense";
-  }
+  if (o.icp && !ref.dense.empty() && !mov.dense.empty()) RefineByDenseIcp(ref, mov, o, sim, res);
   res.sim = sim;
   res.overlap_fraction = OverlapFraction(ref, mov, sim);
   spdlog::info("align {} ← {}: {} inliers, scale {:.6g}, overlap {:.0f}%, RMS {:.4g} ({:.4f}% of the scene radius)",

@@ -1,8 +1,8 @@
 #include "fmv3d/geo/evaluation.h"
 
-#include <Eigen/Eigenvalues>
 #include <fmt/format.h>
 
+#include <Eigen/Eigenvalues>
 #include <algorithm>
 #include <cmath>
 #include <limits>
@@ -185,6 +185,196 @@ nlohmann::json SurfaceError(const core::Reconstruction& est, const core::Reconst
   return j;
 }
 
+// The truth's frame (synth's geo origin) to the workspace's ENU frame.
+struct TruthToWorkspace {
+  const LocalFrame& fg;
+  const LocalFrame& ft;
+  Eigen::Vector3d operator()(const Eigen::Vector3d& x) const { return fg.ToEnu(ft.ToGeodetic(x)); }
+};
+
+// Camera centres of geo/sparse_enu against the true ones; `bias` gets their mean offset.
+nlohmann::json CameraErrors(const core::Reconstruction& est, const core::Reconstruction& tru,
+                            const TruthToWorkspace& to_ws, const std::string& ws_name, Eigen::Vector3d& bias) {
+  Stats c3, ch, cv_;
+  bias.setZero();
+  for (const auto& [id, img] : est.images) {
+    const core::Image* t = tru.FindImageByName(img.name);
+    if (!t) continue;
+    const Eigen::Vector3d d = img.pose.Centre() - to_ws(t->pose.Centre());
+    c3.Add(d.norm());
+    ch.Add(d.head<2>().norm());
+    cv_.Add(d.z());
+    bias += d;
+  }
+  if (c3.n == 0) throw Error(ws_name + ": no camera of geo/sparse_enu matches the truth by name");
+  bias /= static_cast<double>(c3.n);
+  return {{"matched", c3.n},
+          {"centre_rms_m", c3.Rms()},
+          {"horizontal_rms_m", ch.Rms()},
+          {"vertical_rms_m", cv_.Rms()},
+          {"bias_enu_m", {bias.x(), bias.y(), bias.z()}},
+          {"bias_m", bias.norm()}};
+}
+
+// Telemetry positions against the true camera centres: per-axis RMS and the mean error (`mean`), the floor a
+// position-only georeference cannot see past.
+struct TelemetryErrors {
+  Stats x, y, z;
+  Eigen::Vector3d sum = Eigen::Vector3d::Zero();
+  void Add(const Eigen::Vector3d& d) {
+    x.Add(d.x()), y.Add(d.y()), z.Add(d.z());
+    sum += d;
+  }
+  Eigen::Vector3d Mean() const { return x.n ? Eigen::Vector3d(sum / static_cast<double>(x.n)) : sum; }
+  nlohmann::json ToJson(const char* count_name) const {
+    const Eigen::Vector3d mean = Mean();
+    return {{count_name, x.n},
+            {"error_rms_per_axis_m", {x.Rms(), y.Rms(), z.Rms()}},
+            {"mean_error_enu_m", {mean.x(), mean.y(), mean.z()}},
+            {"mean_error_m", mean.norm()}};
+  }
+};
+
+// The telemetry of each keyframe (frames.json) against its true camera.
+TelemetryErrors FrameTelemetryErrors(const io::FramesIndex& index, const core::Reconstruction& tru,
+                                     const LocalFrame& fg, const TruthToWorkspace& to_ws) {
+  TelemetryErrors e;
+  for (const auto& f : index.frames) {
+    const core::Image* t = tru.FindImageByName(f.name);
+    const auto& tel = f.telemetry;
+    if (!t || !tel.is_object() || !tel.contains("sensor_latitude") || !tel.contains("sensor_longitude")) continue;
+    const char* alt = tel.contains("sensor_altitude_hae") ? "sensor_altitude_hae" : "sensor_altitude_msl";
+    if (!tel.contains(alt)) continue;
+    const GeoPoint p{tel["sensor_latitude"].get<double>(), tel["sensor_longitude"].get<double>(),
+                     tel[alt].get<double>()};
+    e.Add(fg.ToEnu(p) - to_ws(t->pose.Centre()));
+  }
+  return e;
+}
+
+// Every packet of frames/telemetry.json against the true camera of its frame (synth writes one packet per frame,
+// at its time).
+TelemetryErrors TrackTelemetryErrors(const fs::path& track_json, double fps, const core::Reconstruction& tru,
+                                     const LocalFrame& fg, const TruthToWorkspace& to_ws) {
+  TelemetryErrors e;
+  for (const auto& track : telemetry::ReadTelemetryTracks(track_json))
+    for (const auto& s : track.samples) {
+      const double k = std::round(s.time * fps);
+      if (std::abs(s.time * fps - k) > 0.01 || !s.sensor_latitude || !s.sensor_longitude) continue;
+      const std::optional<double> alt = s.sensor_altitude_hae ? s.sensor_altitude_hae : s.sensor_altitude_msl;
+      const core::Image* t = tru.FindImageByName(fmt::format("flight-{:06d}.png", static_cast<long long>(k)));
+      if (!t || !alt) continue;
+      e.Add(fg.ToEnu({*s.sensor_latitude, *s.sensor_longitude, *alt}) - to_ws(t->pose.Centre()));
+    }
+  return e;
+}
+
+// Sparse points against the true mesh (already in the workspace frame).
+nlohmann::json PointErrors(const core::Reconstruction& est, const geometry::MeshDistance& dist, double building) {
+  Stats pd, ps;
+  std::vector<double> all;
+  for (const auto& [id, p] : est.points) {
+    const auto c = dist.Closest(p.xyz);
+    pd.Add(c.distance);
+    if (c.distance < 0.05 * building) ps.Add(c.signed_distance);  // the bias of the points near the surface
+    all.push_back(c.distance);
+  }
+  std::sort(all.begin(), all.end());
+  return {{"count", pd.n},
+          {"rms_m", pd.Rms()},
+          {"median_m", all.empty() ? 0.0 : all[all.size() / 2]},
+          {"signed_mean_m", ps.Mean()},
+          {"signed_mean_of", "points within 5% of H of the true mesh; + outside"}};
+}
+
+// The lowest and highest true height over a disc of radius k cells around each cell; a cell without truth (NaN)
+// in the disc makes them ∓inf.
+void TruthRangeOverDisc(const cv::Mat& th, int k, cv::Mat& t_min, cv::Mat& t_max) {
+  constexpr float kInf = std::numeric_limits<float>::infinity();
+  t_min = th.clone();
+  t_max = th.clone();
+  t_min.setTo(-kInf, th != th);
+  t_max.setTo(kInf, th != th);
+  const cv::Mat disc = cv::getStructuringElement(cv::MORPH_ELLIPSE, cv::Size(2 * k + 1, 2 * k + 1));
+  cv::erode(t_min, t_min, disc, cv::Point(-1, -1), 1, cv::BORDER_CONSTANT, -kInf);
+  cv::dilate(t_max, t_max, disc, cv::Point(-1, -1), 1, cv::BORDER_CONSTANT, kInf);
+}
+
+// The DSM against the true mesh rasterised on its grid; writes report/dsm_error.png.
+nlohmann::json DsmErrors(const core::Workspace& ws, const fs::path& dsm_path, const io::TexturedMesh& mesh,
+                         const nlohmann::json& truth, double building, const Georef& g, const LocalFrame& fg,
+                         const LocalFrame& ft, const core::Sim3& s_inv) {
+  GridSpec grid;
+  const cv::Mat h = ReadHeightGeoTiff(dsm_path, &grid);
+  UtmSurface ts;
+  ts.vertices = mesh.vertices;
+  fg.EnuToUtm(&ts.vertices);
+  for (const auto& f : mesh.faces) ts.triangles.emplace_back(f.v[0], f.v[1], f.v[2]);
+  const cv::Mat th = RasteriseDsm(ts, grid);
+  // Cells are compared where the true surface is flat (within 1% of H) over a disc of radius `margin`
+  // (3% of H, at least one cell) around them. A height step (a wall) has no single true height in its cell,
+  // and the cells beside it take the wall's full height from any horizontal offset of the reconstruction
+  // (the georeference alone is ~0.5 m off horizontally) or from the mesh rounding the wall's foot: there a
+  // height difference measures the offset, not the DSM's heights (the usual breakline exclusion).
+  const double flat = std::max(0.01 * building, 0.05);
+  const double margin = std::max(grid.gsd, 0.03 * building);
+  cv::Mat t_min, t_max;
+  TruthRangeOverDisc(th, static_cast<int>(std::ceil(margin / grid.gsd)), t_min, t_max);
+  // Two tallies: the modelled area (truth.json's bounds: the terrain tile and buildings, the region of the
+  // surface figure) and every compared cell, which adds synth's backdrop: a far-ground ring of quarter-tile
+  // facets, 0.3 m below the terrain at its vertices and flat between them, with blurred, hazy texture (it is
+  // there so oblique views see land). Its seam with the tile is a step of synth's own making, and its land is
+  // made not to be matched. The headline is the modelled area, as for the surface.
+  const Eigen::AlignedBox3d region = ModelledRegion(truth);
+  const Eigen::AlignedBox2d modelled =
+      region.isEmpty() ? Eigen::AlignedBox2d() : Eigen::AlignedBox2d(region.min().head<2>(), region.max().head<2>());
+  DsmTally in_area, all_cells;
+  size_t seen = 0;
+  // Signed error per compared cell, for dsm_error.png: blue below the truth, red above, full colour at 1% of
+  // the building height; grey where seen but not compared (near a height step), black where unseen.
+  cv::Mat err_png(h.rows, h.cols, CV_8UC3, cv::Scalar(0, 0, 0));
+  for (int r = 0; r < h.rows; ++r)
+    for (int c = 0; c < h.cols; ++c) {
+      const float v = h.at<float>(r, c);
+      if (!std::isfinite(v)) continue;
+      ++seen;
+      err_png.at<cv::Vec3b>(r, c) = cv::Vec3b(96, 96, 96);
+      const float lo = t_min.at<float>(r, c), hi = t_max.at<float>(r, c);
+      if (!std::isfinite(lo) || !std::isfinite(hi) || hi - lo > flat) continue;
+      const double e = v - th.at<float>(r, c);
+      // The part of e that is the reconstruction's own (not the georeference's): minus the height error S⁻¹
+      // makes at this true surface point.
+      const Eigen::Vector2d en = grid.CellCentre(r, c);
+      const Eigen::Vector3d xw = fg.ToEnu(fg.UtmToGeodetic({en.x(), en.y(), th.at<float>(r, c)}));
+      const double e_model = e - (s_inv.Apply(xw) - xw).z();
+      std::optional<double> expected;
+      if (g.accuracy && g.accuracy->rotation_known) expected = g.accuracy->HeightSigma(xw - g.accuracy->pivot);
+      all_cells.Add(e, e_model, expected);
+      if (modelled.isEmpty() || modelled.contains(Eigen::Vector2d(ft.ToEnu(fg.ToGeodetic(xw)).head<2>())))
+        in_area.Add(e, e_model, expected);
+      const double t = std::clamp(e / (0.01 * building), -1.0, 1.0);
+      const auto lift = [](double a) { return static_cast<uchar>(255 * (1 - std::abs(a))); };
+      err_png.at<cv::Vec3b>(r, c) = t < 0 ? cv::Vec3b(255, lift(t), lift(t)) : cv::Vec3b(lift(t), lift(t), 255);
+    }
+  core::EnsureDirectory(ws.report_dir());
+  core::WriteAtomically(ws.report_dir() / "dsm_error.png", [&](const fs::path& tmp) {
+    if (!cv::imwrite(tmp.string() + ".png", err_png))
+      throw Error((ws.report_dir() / "dsm_error.png").string() + ": cannot write");
+    fs::rename(tmp.string() + ".png", tmp);
+  });
+  nlohmann::json j = in_area.ToJson(building);
+  j.update({{"cells_seen", seen},
+            {"region", modelled.isEmpty() ? "whole DSM (truth.json has no bounds)"
+                                          : "truth.json bounds (the modelled area, as for the surface)"},
+            {"flat_tolerance_m", flat},
+            {"step_margin_m", margin},
+            {"compared", "cells whose true surface is flat within flat_tolerance_m over a disc of step_margin_m"},
+            {"error_map", "report/dsm_error.png (blue below, red above the truth, saturated at 1% of H)"}});
+  j["whole_seen"] = all_cells.ToJson(building);
+  j["whole_seen"]["region"] = "every compared cell, synth's far-ground backdrop included";
+  return j;
+}
+
 }  // namespace
 
 nlohmann::json EvaluateGeoAgainstSynth(const core::Workspace& ws, const fs::path& synth) {
@@ -196,189 +386,39 @@ nlohmann::json EvaluateGeoAgainstSynth(const core::Workspace& ws, const fs::path
   const double building = truth.at("characteristic_length").get<double>();
   const Georef g = ReadGeoref(ws);
   const LocalFrame fg(g.origin, g.utm), ft(to, g.utm);
-  auto to_ws = [&](const Eigen::Vector3d& x) { return fg.ToEnu(ft.ToGeodetic(x)); };
+  const TruthToWorkspace to_ws{fg, ft};
 
   nlohmann::json j;
   j["building_height_m"] = building;
-  // Cameras.
   const core::Reconstruction est = io::ReadColmapText(ws.sparse_enu_dir());
   const core::Reconstruction tru = io::ReadColmapText(synth / "truth");
-  Stats c3, ch, cv_;
-  Eigen::Vector3d bias = Eigen::Vector3d::Zero();
-  for (const auto& [id, img] : est.images) {
-    const core::Image* t = tru.FindImageByName(img.name);
-    if (!t) continue;
-    const Eigen::Vector3d d = img.pose.Centre() - to_ws(t->pose.Centre());
-    c3.Add(d.norm());
-    ch.Add(d.head<2>().norm());
-    cv_.Add(d.z());
-    bias += d;
-  }
-  if (c3.n == 0) throw Error(ws.name() + ": no camera of geo/sparse_enu matches the truth by name");
-  bias /= static_cast<double>(c3.n);
-  j["cameras"] = {{"matched", c3.n},
-                  {"centre_rms_m", c3.Rms()},
-                  {"horizontal_rms_m", ch.Rms()},
-                  {"vertical_rms_m", cv_.Rms()},
-                  {"bias_enu_m", {bias.x(), bias.y(), bias.z()}},
-                  {"bias_m", bias.norm()}};
+  Eigen::Vector3d bias;
+  j["cameras"] = CameraErrors(est, tru, to_ws, ws.name(), bias);
   // The floor set by the telemetry itself: the mean of (telemetry − true) camera positions, which a
   // position-only georeference cannot see past (its translation error tends to exactly this).
-  const fs::path frames_json = ws.frames_json();
-  if (fs::exists(frames_json)) {
-    const io::FramesIndex index = io::ReadFramesIndex(frames_json);
-    Stats tx, ty, tz;
-    Eigen::Vector3d mean = Eigen::Vector3d::Zero();
-    for (const auto& f : index.frames) {
-      const core::Image* t = tru.FindImageByName(f.name);
-      const auto& tel = f.telemetry;
-      if (!t || !tel.is_object() || !tel.contains("sensor_latitude") || !tel.contains("sensor_longitude")) continue;
-      const char* alt = tel.contains("sensor_altitude_hae") ? "sensor_altitude_hae" : "sensor_altitude_msl";
-      if (!tel.contains(alt)) continue;
-      const GeoPoint p{tel["sensor_latitude"].get<double>(), tel["sensor_longitude"].get<double>(),
-                       tel[alt].get<double>()};
-      const Eigen::Vector3d d = fg.ToEnu(p) - to_ws(t->pose.Centre());
-      tx.Add(d.x()), ty.Add(d.y()), tz.Add(d.z());
-      mean += d;
-    }
-    if (tx.n) {
-      mean /= static_cast<double>(tx.n);
-      j["telemetry"] = {{"frames", tx.n},
-                        {"error_rms_per_axis_m", {tx.Rms(), ty.Rms(), tz.Rms()}},
-                        {"mean_error_enu_m", {mean.x(), mean.y(), mean.z()}},
-                        {"mean_error_m", mean.norm()}};
-      j["cameras"]["bias_minus_telemetry_mean_m"] = (bias - mean).norm();
+  if (fs::exists(ws.frames_json())) {
+    const TelemetryErrors e = FrameTelemetryErrors(io::ReadFramesIndex(ws.frames_json()), tru, fg, to_ws);
+    if (e.x.n) {
+      j["telemetry"] = e.ToJson("frames");
+      j["cameras"]["bias_minus_telemetry_mean_m"] = (bias - e.Mean()).norm();
     }
   }
-  // The same floor for a georeference fitted on every packet (frames/telemetry.json): the mean error of all
-  // packets, each against the true camera of its frame (synth writes one packet per frame, at its time).
-  const fs::path track_json = ws.telemetry_json();
-  if (fs::exists(track_json) && truth.contains("fps")) {
-    const double fps = truth["fps"].get<double>();
-    Stats tx, ty, tz;
-    Eigen::Vector3d mean = Eigen::Vector3d::Zero();
-    for (const auto& track : telemetry::ReadTelemetryTracks(track_json))
-      for (const auto& s : track.samples) {
-        const double k = std::round(s.time * fps);
-        if (std::abs(s.time * fps - k) > 0.01 || !s.sensor_latitude || !s.sensor_longitude) continue;
-        const std::optional<double> alt = s.sensor_altitude_hae ? s.sensor_altitude_hae : s.sensor_altitude_msl;
-        const core::Image* t = tru.FindImageByName(fmt::format("flight-{:06d}.png", static_cast<long long>(k)));
-        if (!t || !alt) continue;
-        const Eigen::Vector3d d = fg.ToEnu({*s.sensor_latitude, *s.sensor_longitude, *alt}) - to_ws(t->pose.Centre());
-        tx.Add(d.x()), ty.Add(d.y()), tz.Add(d.z());
-        mean += d;
-      }
-    if (tx.n) {
-      mean /= static_cast<double>(tx.n);
-      j["telemetry_track"] = {{"packets", tx.n},
-                              {"error_rms_per_axis_m", {tx.Rms(), ty.Rms(), tz.Rms()}},
-                              {"mean_error_enu_m", {mean.x(), mean.y(), mean.z()}},
-                              {"mean_error_m", mean.norm()}};
-      j["cameras"]["bias_minus_track_mean_m"] = (bias - mean).norm();
+  // The same floor for a georeference fitted on every packet (frames/telemetry.json).
+  if (fs::exists(ws.telemetry_json()) && truth.contains("fps")) {
+    const TelemetryErrors e = TrackTelemetryErrors(ws.telemetry_json(), truth["fps"].get<double>(), tru, fg, to_ws);
+    if (e.x.n) {
+      j["telemetry_track"] = e.ToJson("packets");
+      j["cameras"]["bias_minus_track_mean_m"] = (bias - e.Mean()).norm();
     }
   }
   io::TexturedMesh mesh = io::ReadObj(synth / "scene.obj", false);
   double fit_rms = 0;
   const core::Sim3 s_err = GeorefErrorSimilarity(est, tru, to_ws, &fit_rms);
-  const core::Sim3 s_inv = s_err.Inverse();
   j["surface"] = SurfaceError(est, tru, s_err, fit_rms, mesh, truth, to_ws, g.accuracy);
   for (auto& v : mesh.vertices) v = to_ws(v);
-  // Points against the true mesh.
-  const geometry::MeshDistance dist(mesh);
-  Stats pd, ps;
-  std::vector<double> all;
-  for (const auto& [id, p] : est.points) {
-    const auto c = dist.Closest(p.xyz);
-    pd.Add(c.distance);
-    if (c.distance < 0.05 * building) ps.Add(c.signed_distance);  // the bias of the points near the surface
-    all.push_back(c.distance);
-  }
-  std::sort(all.begin(), all.end());
-  j["points"] = {{"count", pd.n},
-                 {"rms_m", pd.Rms()},
-                 {"median_m", all.empty() ? 0.0 : all[all.size() / 2]},
-                 {"signed_mean_m", ps.Mean()},
-                 {"signed_mean_of", "points within 5% of H of the true mesh; + outside"}};
-  // DSM.
+  j["points"] = PointErrors(est, geometry::MeshDistance(mesh), building);
   const fs::path dsm_path = ws.geo_dir() / "dsm.tif";
-  if (fs::exists(dsm_path)) {
-    GridSpec grid;
-    const cv::Mat h = ReadHeightGeoTiff(dsm_path, &grid);
-    UtmSurface ts;
-    ts.vertices = mesh.vertices;
-    fg.EnuToUtm(&ts.vertices);
-    for (const auto& f : mesh.faces) ts.triangles.emplace_back(f.v[0], f.v[1], f.v[2]);
-    const cv::Mat th = RasteriseDsm(ts, grid);
-    // Cells are compared where the true surface is flat (within 1% of H) over a disc of radius `margin`
-    // (3% of H, at least one cell) around them. A height step (a wall) has no single true height in its cell,
-    // and the cells beside it take the wall's full height from any horizontal offset of the reconstruction
-    // (the georeference alone is ~0.5 m off horizontally) or from the mesh rounding the wall's foot: there a
-    // height difference measures the offset, not the DSM's heights (the usual breakline exclusion).
-    const double flat = std::max(0.01 * building, 0.05);
-    const double margin = std::max(grid.gsd, 0.03 * building);
-    const int k = static_cast<int>(std::ceil(margin / grid.gsd));
-    // Lowest and highest truth over the disc; a cell without truth (NaN) in the disc makes them ∓inf.
-    constexpr float kInf = std::numeric_limits<float>::infinity();
-    cv::Mat t_min = th.clone(), t_max = th.clone();
-    t_min.setTo(-kInf, th != th);
-    t_max.setTo(kInf, th != th);
-    const cv::Mat disc = cv::getStructuringElement(cv::MORPH_ELLIPSE, cv::Size(2 * k + 1, 2 * k + 1));
-    cv::erode(t_min, t_min, disc, cv::Point(-1, -1), 1, cv::BORDER_CONSTANT, -kInf);
-    cv::dilate(t_max, t_max, disc, cv::Point(-1, -1), 1, cv::BORDER_CONSTANT, kInf);
-    // Two tallies: the modelled area (truth.json's bounds: the terrain tile and buildings, the region of the
-    // surface figure) and every compared cell, which adds synth's backdrop: a far-ground ring of quarter-tile
-    // facets, 0.3 m below the terrain at its vertices and flat between them, with blurred, hazy texture (it is
-    // there so oblique views see land). Its seam with the tile is a step of synth's own making, and its land is
-    // made not to be matched. The headline is the modelled area, as for the surface.
-    const Eigen::AlignedBox3d region = ModelledRegion(truth);
-    const Eigen::AlignedBox2d modelled =
-        region.isEmpty() ? Eigen::AlignedBox2d() : Eigen::AlignedBox2d(region.min().head<2>(), region.max().head<2>());
-    DsmTally in_area, all_cells;
-    size_t seen = 0;
-    // Signed error per compared cell, for dsm_error.png: blue below the truth, red above, full colour at 1% of
-    // the building height; grey where seen but not compared (near a height step), black where unseen.
-    cv::Mat err_png(h.rows, h.cols, CV_8UC3, cv::Scalar(0, 0, 0));
-    for (int r = 0; r < h.rows; ++r)
-      for (int c = 0; c < h.cols; ++c) {
-        const float v = h.at<float>(r, c);
-        if (!std::isfinite(v)) continue;
-        ++seen;
-        err_png.at<cv::Vec3b>(r, c) = cv::Vec3b(96, 96, 96);
-        const float lo = t_min.at<float>(r, c), hi = t_max.at<float>(r, c);
-        if (!std::isfinite(lo) || !std::isfinite(hi) || hi - lo > flat) continue;
-        const double e = v - th.at<float>(r, c);
-        // The part of e that is the reconstruction's own (not the georeference's): minus the height error S⁻¹
-        // makes at this true surface point.
-        const Eigen::Vector2d en = grid.CellCentre(r, c);
-        const Eigen::Vector3d xw = fg.ToEnu(fg.UtmToGeodetic({en.x(), en.y(), th.at<float>(r, c)}));
-        const double e_model = e - (s_inv.Apply(xw) - xw).z();
-        std::optional<double> expected;
-        if (g.accuracy && g.accuracy->rotation_known) expected = g.accuracy->HeightSigma(xw - g.accuracy->pivot);
-        all_cells.Add(e, e_model, expected);
-        if (modelled.isEmpty() || modelled.contains(Eigen::Vector2d(ft.ToEnu(fg.ToGeodetic(xw)).head<2>())))
-          in_area.Add(e, e_model, expected);
-        const double t = std::clamp(e / (0.01 * building), -1.0, 1.0);
-        const auto lift = [](double a) { return static_cast<uchar>(255 * (1 - std::abs(a))); };
-        err_png.at<cv::Vec3b>(r, c) = t < 0 ? cv::Vec3b(255, lift(t), lift(t)) : cv::Vec3b(lift(t), lift(t), 255);
-      }
-    core::EnsureDirectory(ws.report_dir());
-    core::WriteAtomically(ws.report_dir() / "dsm_error.png", [&](const fs::path& tmp) {
-      if (!cv::imwrite(tmp.string() + ".png", err_png))
-        throw Error((ws.report_dir() / "dsm_error.png").string() + ": cannot write");
-      fs::rename(tmp.string() + ".png", tmp);
-    });
-    j["dsm"] = in_area.ToJson(building);
-    j["dsm"].update(
-        {{"cells_seen", seen},
-         {"region", modelled.isEmpty() ? "whole DSM (truth.json has no bounds)"
-                                       : "truth.json bounds (the modelled area, as for the surface)"},
-         {"flat_tolerance_m", flat},
-         {"step_margin_m", margin},
-         {"compared", "cells whose true surface is flat within flat_tolerance_m over a disc of step_margin_m"},
-         {"error_map", "report/dsm_error.png (blue below, red above the truth, saturated at 1% of H)"}});
-    j["dsm"]["whole_seen"] = all_cells.ToJson(building);
-    j["dsm"]["whole_seen"]["region"] = "every compared cell, synth's far-ground backdrop included";
-  }
+  if (fs::exists(dsm_path)) j["dsm"] = DsmErrors(ws, dsm_path, mesh, truth, building, g, fg, ft, s_err.Inverse());
   return j;
 }
 

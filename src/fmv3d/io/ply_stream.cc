@@ -9,7 +9,7 @@
 #include <vector>
 
 #include "fmv3d/core/error.h"
-#include "fmv3d/io/ply_scalar.h"
+#include "fmv3d/io/ply_header.h"
 
 namespace fmv3d::io {
 
@@ -18,7 +18,7 @@ namespace {
 using ply::Scalar;
 
 struct Property {
-  std::optional<Scalar> type;        // scalar type, or the list's item type
+  Scalar type = Scalar::kF32;        // scalar type, or the list's item type
   std::optional<Scalar> count_type;  // set for lists
   int slot = -1;  // 0-2 position, 3-5 normal, 6-8 colour, 9 the visibility list, 10 sigma, -1 ignored
 };
@@ -50,59 +50,34 @@ class Buffer {
   size_t pos_ = 0, end_ = 0;
 };
 
+// Where each property of the vertex element goes: 0-2 position, 3-5 normal, 6-8 colour, 9 the visibility list,
+// 10 sigma, -1 ignored.
+int SlotOf(const ply::Property& p) {
+  static const char* kSlots[] = {"x", "y", "z", "nx", "ny", "nz", "red", "green", "blue"};
+  if (p.is_list) return p.name == "visibility" ? 9 : -1;
+  for (int s = 0; s < 9; ++s)
+    if (p.name == kSlots[s]) return s;
+  return p.name == "sigma" ? 10 : -1;
+}
+
 }  // namespace
 
 bool StreamPlyVertices(const std::filesystem::path& path, const std::function<void(size_t)>& on_count,
                        const std::function<void(const PlyVertex&)>& on_vertex) {
   std::ifstream in(path, std::ios::binary);
   if (!in) throw Error(path.string() + ": cannot open for reading");
-  std::string line;
-  if (!std::getline(in, line) || line.rfind("ply", 0) != 0) throw Error(path.string() + ": not a PLY file");
-  bool little = false, in_vertex = false, seen_element = false;
-  size_t count = 0;
+  const ply::Header header = ply::ReadHeader(in, path.string());
+  if (header.format != ply::Format::kBinaryLittleEndian) return false;
+  if (header.elements.empty() || header.elements[0].name != "vertex") return false;
+  const size_t count = header.elements[0].count;
   std::vector<Property> props;
-  static const char* kSlots[] = {"x", "y", "z", "nx", "ny", "nz", "red", "green", "blue"};
-  while (std::getline(in, line)) {
-    if (!line.empty() && line.back() == '\r') line.pop_back();
-    std::istringstream ss(line);
-    std::string word;
-    ss >> word;
-    if (word == "end_header") break;
-    if (word == "format") {
-      std::string f;
-      ss >> f;
-      little = f == "binary_little_endian";
-    } else if (word == "element") {
-      std::string name;
-      ss >> name;
-      if (!seen_element && name != "vertex") return false;
-      in_vertex = name == "vertex";
-      if (in_vertex && !(ss >> count)) throw Error(path.string() + ": malformed PLY vertex count");
-      seen_element = true;
-    } else if (word == "property" && in_vertex) {
-      std::string type, name;
-      ss >> type;
-      Property p;
-      if (type == "list") {
-        std::string ct, it;
-        ss >> ct >> it >> name;
-        p.count_type = ply::ScalarFromName(ct);
-        p.type = ply::ScalarFromName(it);
-        if (!p.count_type) throw Error(path.string() + ": bad PLY list type '" + ct + "'");
-      } else {
-        ss >> name;
-        p.type = ply::ScalarFromName(type);
-      }
-      if (!p.type) throw Error(path.string() + ": bad PLY property type in '" + line + "'");
-      for (int s = 0; s < 9; ++s)
-        if (name == kSlots[s] && !p.count_type) p.slot = s;
-      if (name == "visibility" && p.count_type) p.slot = 9;
-      if (name == "sigma" && !p.count_type) p.slot = 10;
-      props.push_back(p);
-    }
+  for (const ply::Property& hp : header.elements[0].properties) {
+    Property p;
+    p.type = hp.type;
+    if (hp.is_list) p.count_type = hp.count_type;
+    p.slot = SlotOf(hp);
+    props.push_back(p);
   }
-  if (!in) throw Error(path.string() + ": PLY header without end_header");
-  if (!little) return false;
   if (on_count) on_count(count);
   Buffer buf(in, path);
   PlyVertex v;
@@ -111,11 +86,11 @@ bool StreamPlyVertices(const std::filesystem::path& path, const std::function<vo
       if (p.count_type) {
         const double n = ply::Decode(*p.count_type, buf.Take(ply::SizeOf(*p.count_type)));
         if (n < 0 || n > 1e6) throw Error(path.string() + ": implausible PLY list length");
-        buf.Take(static_cast<size_t>(n) * ply::SizeOf(*p.type));
+        buf.Take(static_cast<size_t>(n) * ply::SizeOf(p.type));
         if (p.slot == 9) v.views = static_cast<uint8_t>(std::min(n, 255.0));
         continue;
       }
-      const double x = ply::Decode(*p.type, buf.Take(ply::SizeOf(*p.type)));
+      const double x = ply::Decode(p.type, buf.Take(ply::SizeOf(p.type)));
       if (p.slot < 0) continue;
       if (p.slot < 3)
         v.position[p.slot] = static_cast<float>(x);

@@ -9,7 +9,7 @@
 
 #include "fmv3d/core/error.h"
 #include "fmv3d/core/files.h"
-#include "fmv3d/io/ply_scalar.h"
+#include "fmv3d/io/ply_header.h"
 
 namespace fmv3d::io {
 
@@ -105,32 +105,14 @@ void WritePointCloudPly(const OrientedPointCloud& cloud, const fs::path& path) {
 namespace {
 
 using Type = ply::Scalar;
-
-Type ParseType(const std::string& s, const std::string& file) {
-  if (const auto t = ply::ScalarFromName(s)) return *t;
-  throw Error(file + ": unknown PLY property type '" + s + "'");
-}
-
 using ply::SizeOf;
-
-struct Property {
-  std::string name;
-  bool is_list = false;
-  Type count_type = Type::kU8, type = Type::kF32;
-};
-
-struct Element {
-  std::string name;
-  size_t count = 0;
-  std::vector<Property> props;
-};
 
 // Reads values of one element, in ascii or binary (with or without byte swap).
 class ValueReader {
  public:
-  ValueReader(std::istream& in, int format, const std::string& file) : in_(in), format_(format), file_(file) {}
+  ValueReader(std::istream& in, ply::Format format, const std::string& file) : in_(in), format_(format), file_(file) {}
   double Read(Type t) {
-    if (format_ == 0) {
+    if (format_ == ply::Format::kAscii) {
       double v;
       if (!(in_ >> v)) throw Error(file_ + ": truncated or malformed ascii PLY data");
       return v;
@@ -139,15 +121,73 @@ class ValueReader {
     const size_t n = SizeOf(t);
     if (!in_.read(reinterpret_cast<char*>(b), static_cast<std::streamsize>(n)))
       throw Error(file_ + ": truncated PLY data");
-    if (format_ == 2) std::reverse(b, b + n);
+    if (format_ == ply::Format::kBinaryBigEndian) std::reverse(b, b + n);
     return ply::Decode(t, reinterpret_cast<const char*>(b));
   }
 
  private:
   std::istream& in_;
-  int format_;  // 0 ascii, 1 binary little endian, 2 binary big endian
+  ply::Format format_;
   const std::string& file_;
 };
+
+// Where the vertex element keeps the properties the cloud holds (-1: absent).
+struct VertexColumns {
+  int x = -1, y = -1, z = -1, nx = -1, ny = -1, nz = -1, r = -1, g = -1, b = -1, visibility = -1, sigma = -1;
+  explicit VertexColumns(const ply::Element& e) {
+    auto either = [&](const char* a, const char* b) { return std::max(e.Find(a), e.Find(b)); };
+    x = e.Find("x"), y = e.Find("y"), z = e.Find("z");
+    nx = e.Find("nx"), ny = e.Find("ny"), nz = e.Find("nz");
+    r = either("red", "r"), g = either("green", "g"), b = either("blue", "b");
+    visibility = e.Find("visibility", true);
+    sigma = e.Find("sigma");
+  }
+};
+
+// Reads one element's records; a vertex element fills the cloud, any other is read past.
+void ReadElement(const ply::Element& e, ValueReader& reader, const std::string& file, OrientedPointCloud& cloud) {
+  const bool is_vertex = e.name == "vertex";
+  const VertexColumns c(e);
+  if (is_vertex) {
+    if (c.x < 0 || c.y < 0 || c.z < 0) throw Error(file + ": PLY vertices have no x, y, z");
+    cloud.positions.resize(e.count);
+    if (c.nx >= 0 && c.ny >= 0 && c.nz >= 0) cloud.normals.resize(e.count);
+    if (c.r >= 0 && c.g >= 0 && c.b >= 0) cloud.colors.resize(e.count);
+    if (c.visibility >= 0) cloud.visibility.resize(e.count);
+    if (c.sigma >= 0) cloud.sigma.resize(e.count);
+  }
+  // Float colours in [0, 1] are scaled to 8 bits.
+  const bool unit_colour =
+      cloud.has_colors() && (e.properties[c.r].type == Type::kF32 || e.properties[c.r].type == Type::kF64);
+  auto c8 = [&](double v) {
+    if (std::isnan(v)) return uint8_t{0};
+    return static_cast<uint8_t>(std::clamp(unit_colour ? v * 255.0 + 0.5 : v, 0.0, 255.0));
+  };
+  std::vector<double> values(e.properties.size());
+  for (size_t i = 0; i < e.count; ++i) {
+    for (size_t k = 0; k < e.properties.size(); ++k) {
+      const ply::Property& p = e.properties[k];
+      if (!p.is_list) {
+        values[k] = reader.Read(p.type);
+        continue;
+      }
+      const double n = reader.Read(p.count_type);
+      if (n < 0 || n > 1e6) throw Error(file + ": bad PLY list length");
+      const bool keep = is_vertex && static_cast<int>(k) == c.visibility;
+      for (int j = 0; j < static_cast<int>(n); ++j) {
+        const double v = reader.Read(p.type);
+        if (!keep) continue;
+        if (!(v >= 0 && v <= 4294967295.0)) throw Error(file + ": bad PLY visibility index");
+        cloud.visibility[i].push_back(static_cast<uint32_t>(v));
+      }
+    }
+    if (!is_vertex) continue;
+    cloud.positions[i] = {values[c.x], values[c.y], values[c.z]};
+    if (cloud.has_sigma()) cloud.sigma[i] = static_cast<float>(values[c.sigma]);
+    if (cloud.has_normals()) cloud.normals[i] = {float(values[c.nx]), float(values[c.ny]), float(values[c.nz])};
+    if (cloud.has_colors()) cloud.colors[i] = {c8(values[c.r]), c8(values[c.g]), c8(values[c.b])};
+  }
+}
 
 }  // namespace
 
@@ -155,136 +195,18 @@ OrientedPointCloud ReadPointCloudPly(const fs::path& path) {
   const std::string file = path.string();
   std::ifstream in(path, std::ios::binary);
   if (!in) throw Error(file + ": cannot open");
-  std::string line;
-  if (!std::getline(in, line) || line.rfind("ply", 0) != 0) throw Error(file + ": not a PLY file");
-  int format = -1;
-  std::vector<Element> elements;
-  while (true) {
-    if (!std::getline(in, line)) throw Error(file + ": PLY header has no end_header");
-    if (!line.empty() && line.back() == '\r') line.pop_back();
-    std::istringstream ls(line);
-    std::string word;
-    ls >> word;
-    if (word == "end_header") break;
-    if (word == "format") {
-      std::string f;
-      ls >> f;
-      format = f == "ascii" ? 0 : f == "binary_little_endian" ? 1 : f == "binary_big_endian" ? 2 : -1;
-      if (format < 0) throw Error(file + ": unknown PLY format '" + f + "'");
-    } else if (word == "element") {
-      Element e;
-      long long count = -1;
-      ls >> e.name >> count;
-      if (count < 0 || count > (1LL << 34)) throw Error(file + ": bad PLY element count");
-      e.count = static_cast<size_t>(count);
-      elements.push_back(e);
-    } else if (word == "property") {
-      if (elements.empty()) throw Error(file + ": PLY property before any element");
-      Property p;
-      std::string t;
-      ls >> t;
-      if (t == "list") {
-        std::string ct, it;
-        ls >> ct >> it >> p.name;
-        p.is_list = true;
-        p.count_type = ParseType(ct, file);
-        p.type = ParseType(it, file);
-      } else {
-        p.type = ParseType(t, file);
-        ls >> p.name;
-      }
-      elements.back().props.push_back(p);
-    }
-  }
-  if (format < 0) throw Error(file + ": PLY header has no format line");
-  // Counts must fit the bytes that follow the header (an ascii value takes at least 2 bytes, a binary one its
-  // size), so a corrupt count is an error rather than a huge allocation.
+  const ply::Header header = ply::ReadHeader(in, file);
   const std::streamoff data_start = in.tellg();
   in.seekg(0, std::ios::end);
   const auto data_bytes = static_cast<unsigned long long>(std::max<std::streamoff>(0, in.tellg() - data_start));
   in.seekg(data_start);
-  unsigned long long needed = 0;
-  for (const Element& e : elements) {
-    unsigned long long record = 0;
-    for (const Property& p : e.props) record += format == 0 ? 2 : SizeOf(p.is_list ? p.count_type : p.type);
-    needed += e.count * std::max<unsigned long long>(record, 1);
-    if (needed > data_bytes)
-      throw Error(file + ": truncated PLY: element '" + e.name + "' needs at least " + std::to_string(needed) +
-                  " bytes of data, the file has " + std::to_string(data_bytes));
-  }
+  ply::CheckCountsFit(header, data_bytes, file);
 
   OrientedPointCloud cloud;
-  ValueReader reader(in, format, file);
-  for (const Element& e : elements) {
-    const bool is_vertex = e.name == "vertex";
-    int ix = -1, iy = -1, iz = -1, inx = -1, iny = -1, inz = -1, ir = -1, ig = -1, ib = -1, ivis = -1, isig = -1;
-    for (size_t k = 0; k < e.props.size(); ++k) {
-      const auto& n = e.props[k].name;
-      const int kk = static_cast<int>(k);
-      if (n == "x")
-        ix = kk;
-      else if (n == "y")
-        iy = kk;
-      else if (n == "z")
-        iz = kk;
-      else if (n == "nx")
-        inx = kk;
-      else if (n == "ny")
-        iny = kk;
-      else if (n == "nz")
-        inz = kk;
-      else if (n == "red" || n == "r")
-        ir = kk;
-      else if (n == "green" || n == "g")
-        ig = kk;
-      else if (n == "blue" || n == "b")
-        ib = kk;
-      else if (n == "visibility" && e.props[k].is_list)
-        ivis = kk;
-      else if (n == "sigma" && !e.props[k].is_list)
-        isig = kk;
-    }
-    if (is_vertex) {
-      if (ix < 0 || iy < 0 || iz < 0) throw Error(file + ": PLY vertices have no x, y, z");
-      cloud.positions.resize(e.count);
-      if (inx >= 0 && iny >= 0 && inz >= 0) cloud.normals.resize(e.count);
-      if (ir >= 0 && ig >= 0 && ib >= 0) cloud.colors.resize(e.count);
-      if (ivis >= 0) cloud.visibility.resize(e.count);
-      if (isig >= 0) cloud.sigma.resize(e.count);
-    }
-    std::vector<double> values(e.props.size());
-    for (size_t i = 0; i < e.count; ++i) {
-      for (size_t k = 0; k < e.props.size(); ++k) {
-        const Property& p = e.props[k];
-        if (!p.is_list) {
-          values[k] = reader.Read(p.type);
-          continue;
-        }
-        const double n = reader.Read(p.count_type);
-        if (n < 0 || n > 1e6) throw Error(file + ": bad PLY list length");
-        const bool keep = is_vertex && static_cast<int>(k) == ivis;
-        for (int j = 0; j < static_cast<int>(n); ++j) {
-          const double v = reader.Read(p.type);
-          if (!keep) continue;
-          if (!(v >= 0 && v <= 4294967295.0)) throw Error(file + ": bad PLY visibility index");
-          cloud.visibility[i].push_back(static_cast<uint32_t>(v));
-        }
-      }
-      if (!is_vertex) continue;
-      cloud.positions[i] = {values[ix], values[iy], values[iz]};
-      if (cloud.has_sigma()) cloud.sigma[i] = static_cast<float>(values[isig]);
-      if (cloud.has_normals()) cloud.normals[i] = {float(values[inx]), float(values[iny]), float(values[inz])};
-      if (cloud.has_colors()) {
-        // Float colours in [0, 1] are scaled to 8 bits.
-        const bool unit = e.props[ir].type == Type::kF32 || e.props[ir].type == Type::kF64;
-        auto c8 = [&](double v) {
-          if (std::isnan(v)) return uint8_t{0};
-          return static_cast<uint8_t>(std::clamp(unit ? v * 255.0 + 0.5 : v, 0.0, 255.0));
-        };
-        cloud.colors[i] = {c8(values[ir]), c8(values[ig]), c8(values[ib])};
-      }
-    }
-    if (is_vertex) break;  // later elements (faces) are not needed
+  ValueReader reader(in, header.format, file);
+  for (const ply::Element& e : header.elements) {
+    ReadElement(e, reader, file, cloud);
+    if (e.name == "vertex") break;  // later elements (faces) are not needed
   }
   return cloud;
 }

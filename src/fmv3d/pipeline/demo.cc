@@ -2,12 +2,11 @@
 
 #include <spdlog/spdlog.h>
 
-#include <opencv2/imgcodecs.hpp>
-
 #include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <opencv2/imgcodecs.hpp>
 
 #include "fmv3d/align/compare.h"
 #include "fmv3d/core/error.h"
@@ -88,28 +87,26 @@ HeldOutResult RenderHeldOut(const fs::path& synth_dir, const fs::path& textured_
   return res;
 }
 
-nlohmann::json RunDemo(const DemoOptions& o) {
-  o.Check();
-  core::EnsureDirectory(o.output);
-  const fs::path video = o.output / "flight.mp4";
-  const fs::path truth_json = o.output / "truth.json";
-  if (!fs::exists(video) || !fs::exists(truth_json)) {
-    spdlog::info("demo: rendering a {}-frame {}x{} orbit around the CAD building", o.frames, o.width, o.height);
-    synth::SynthOptions s;
-    s.scene = "building";
-    s.flight.path = "orbit";
-    s.flight.frames = o.frames;
-    s.flight.seed = o.seed;
-    s.width = o.width;
-    s.height = o.height;
-    s.format = "mp4";
-    // One frame every half second, all kept: a 20 s orbit sampled as a keyframe selector would.
-    s.fps = 2;
-    s.output = o.output;
-    synth::RunSynth(s);
-  }
-  const double height = core::ReadJson(truth_json).at("characteristic_length").get<double>();
+namespace {
 
+// The embedded flight: an orbit video around the CAD building with exact ground truth (rendered once).
+void RenderDemoFlight(const DemoOptions& o) {
+  spdlog::info("demo: rendering a {}-frame {}x{} orbit around the CAD building", o.frames, o.width, o.height);
+  synth::SynthOptions s;
+  s.scene = "building";
+  s.flight.path = "orbit";
+  s.flight.frames = o.frames;
+  s.flight.seed = o.seed;
+  s.width = o.width;
+  s.height = o.height;
+  s.format = "mp4";
+  // One frame every half second, all kept: a 20 s orbit sampled as a keyframe selector would.
+  s.fps = 2;
+  s.output = o.output;
+  synth::RunSynth(s);
+}
+
+ReconstructOptions DemoReconstructOptions(const DemoOptions& o, const fs::path& video) {
   ReconstructOptions r;
   r.inputs = {video};
   r.workspace = o.output / "ws";
@@ -127,25 +124,12 @@ nlohmann::json RunDemo(const DemoOptions& o) {
   } else {
     r.match.pairs.mode = features::PairMode::kExhaustive;
   }
-  std::vector<StageResult> stages;
-  RunReconstruct(r, &stages);
-  const auto t_eval = std::chrono::steady_clock::now();
-  const double cpu_eval = ProcessCpuSeconds();
+  return r;
+}
 
-  // Accuracy: cameras against the exact truth (similarity by frame name), surfaces against the CAD model.
-  const core::Reconstruction truth = io::ReadColmapText(o.output / "truth");
-  const core::Reconstruction model = io::ReadColmapText(core::Workspace(r.workspace).sparse_dir());
-  const sfm::SparseEvaluation ev = sfm::EvaluateSparse(model, truth);
-  nlohmann::json demo;
-  demo["building_height_m"] = height;
-  demo["frames"] = o.frames;
-  demo["registered"] = model.images.size();
-  demo["sparse"] = ev.ToJson();
-  demo["sparse"]["mean_reprojection_error_px"] = model.MeanReprojectionError();
-  // The Poisson mesh against the CAD model, brought into its frame by the camera alignment (+ scaled ICP).
-  // The CAD model is the building itself (scene.obj's building_* materials), not the terrain around it.
-  const io::TexturedMesh scene = io::ReadObj(o.output / "scene.obj", /*load_textures=*/false);
-  // Only its own vertices are kept, so the CAD's bounds (compare's crop box) are the building's.
+// The CAD model is the building itself (scene.obj's building_* materials), not the terrain around it; only its
+// own vertices are kept, so the CAD's bounds (compare's crop box) are the building's.
+io::TexturedMesh BuildingOnly(const io::TexturedMesh& scene) {
   io::TexturedMesh cad;
   std::vector<int> remap(scene.vertices.size(), -1);
   for (const auto& f : scene.faces)
@@ -161,55 +145,53 @@ nlohmann::json RunDemo(const DemoOptions& o) {
       }
       cad.faces.push_back(g);
     }
-  if (cad.faces.empty()) throw Error((o.output / "scene.obj").string() + ": no building faces");
-  io::WriteObj(cad, o.output / "cad.obj");
-  align::CompareOptions c;
-  c.reconstruction = core::Workspace(r.workspace).mesh_dir() / "poisson.ply";
-  c.cad = o.output / "cad.obj";
-  c.length = height;
-  c.transform = ev.alignment;
-  c.cameras = o.output / "truth";
-  c.output_dir = core::Workspace(r.workspace).report_dir() / "compare";
-  const align::CompareResult cmp = align::CompareToCad(c);
-  demo["mesh_vs_cad"] = cmp.ToJson();
-  // The textured model from a viewpoint the reconstruction never saw, against the true frame there.
-  const HeldOutResult held = RenderHeldOut(o.output, core::Workspace(r.workspace).mesh_dir() / "textured.obj",
-                                           cmp.transform, synth::SynthOptions().render, o.output / "heldout");
-  demo["held_out_view"] = {{"between_frames", held.between},
-                           {"psnr_db", held.psnr_db},
-                           {"covered_percent", 100 * held.covered_fraction},
-                           {"images", (o.output / "heldout").string()}};
+  return cad;
+}
+
+struct Seconds {
+  double wall = 0, cpu = 0;
+};
+
+// Each stage's wall and CPU seconds, the evaluation's and the total (skipped stages not counted).
+nlohmann::json StageTiming(const std::vector<StageResult>& stages, Seconds eval) {
   nlohmann::json timing = nlohmann::json::object();
-  double total_wall = 0, total_cpu = 0;
+  Seconds total;
   for (const auto& st : stages) {
     if (st.skipped) {
       timing[st.name] = "skipped";
       continue;
     }
     timing[st.name] = {{"wall_s", st.seconds}, {"cpu_s", st.cpu_seconds}};
-    total_wall += st.seconds;
-    total_cpu += st.cpu_seconds;
+    total.wall += st.seconds;
+    total.cpu += st.cpu_seconds;
   }
-  const double eval_wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - t_eval).count();
-  const double eval_cpu = ProcessCpuSeconds() - cpu_eval;
-  timing["evaluation"] = {{"wall_s", eval_wall}, {"cpu_s", eval_cpu}};
-  timing["total"] = {{"wall_s", total_wall + eval_wall}, {"cpu_s", total_cpu + eval_cpu}};
-  demo["seconds"] = timing;
-  demo["options"] = {
-      {"max_features", o.max_features},           {"pairs", o.sequential_pairs ? "sequential" : "exhaustive"},
-      {"pair_overlap", o.pair_overlap},           {"dense_max_size", o.dense_max_size},
-      {"dense_sources", o.dense_sources},         {"dense_iterations", o.dense_iterations},
-      {"dense_geometric_pass", o.dense_geometric}};
-  core::WriteJson(o.output / "demo.json", demo);
-  WriteReport(r.workspace);
+  timing["evaluation"] = {{"wall_s", eval.wall}, {"cpu_s", eval.cpu}};
+  timing["total"] = {{"wall_s", total.wall + eval.wall}, {"cpu_s", total.cpu + eval.cpu}};
+  return timing;
+}
 
+// What a user reads at the end of `fmv3d demo`.
+struct DemoSummary {
+  double height = 0;
+  size_t registered = 0;
+  double reprojection_px = 0;
+  sfm::SparseEvaluation sparse;
+  align::CompareResult mesh;
+  HeldOutResult held;
+  Seconds eval;
+  fs::path report, compare, model, table;
+};
+
+void PrintDemoSummary(const DemoOptions& o, const DemoSummary& d, const std::vector<StageResult>& stages) {
+  const auto& ev = d.sparse;
+  const auto& cmp = d.mesh;
   std::printf("\nfmv3d demo: %d-frame synthetic orbit (%dx%d) around a %.0f m building\n", o.frames, o.width, o.height,
-              height);
-  std::printf("  %-44s %zu / %d\n", "registered frames", model.images.size(), o.frames);
+              d.height);
+  std::printf("  %-44s %zu / %d\n", "registered frames", d.registered, o.frames);
   std::printf("  %-44s %.4f %%\n", "camera centre RMSE (of the orbit's extent)", 100 * ev.centre_rmse_fraction);
   std::printf("  %-44s %.4f deg\n", "median relative rotation error", ev.median_rotation_error_deg);
   std::printf("  %-44s %.4f %%\n", "focal length error", 100 * ev.focal_relative_error);
-  std::printf("  %-44s %.3f px\n", "mean reprojection error", model.MeanReprojectionError());
+  std::printf("  %-44s %.3f px\n", "mean reprojection error", d.reprojection_px);
   std::printf("  Poisson mesh vs CAD (%% of the building height, %zu vertices measured):\n", cmp.points_measured);
   std::printf("    %-10s %8s %8s %8s %8s %8s\n", "axis", "mean", "sigma", "RMS", "p50", "p90");
   const std::pair<const char*, const align::ErrorStats*> rows[] = {
@@ -222,16 +204,87 @@ nlohmann::json RunDemo(const DemoOptions& o) {
                                           : "completeness (seen surface within 1% of height)",
               100 * cmp.completeness);
   std::printf("  %-44s %.1f dB over %.0f %% of the frame\n", "held-out view PSNR (textured model vs truth)",
-              held.psnr_db, 100 * held.covered_fraction);
+              d.held.psnr_db, 100 * d.held.covered_fraction);
   std::printf("  time (s, this run; skipped stages not counted):\n    %-12s %8s %8s\n", "stage", "wall", "CPU");
+  Seconds total;
   for (const auto& st : stages)
-    if (!st.skipped) std::printf("    %-12s %8.1f %8.1f\n", st.name.c_str(), st.seconds, st.cpu_seconds);
-  std::printf("    %-12s %8.1f %8.1f\n    %-12s %8.1f %8.1f\n", "evaluation", eval_wall, eval_cpu, "total",
-              total_wall + eval_wall, total_cpu + eval_cpu);
-  std::printf("\n  report:  %s\n  compare: %s\n  model:   %s\n  table:   %s\n",
-              (core::Workspace(r.workspace).report_dir() / "report.html").c_str(),
-              (c.output_dir / "compare.html").c_str(), (core::Workspace(r.workspace).mesh_dir() / "model.glb").c_str(),
-              (o.output / "demo.json").c_str());
+    if (!st.skipped) {
+      std::printf("    %-12s %8.1f %8.1f\n", st.name.c_str(), st.seconds, st.cpu_seconds);
+      total.wall += st.seconds;
+      total.cpu += st.cpu_seconds;
+    }
+  std::printf("    %-12s %8.1f %8.1f\n    %-12s %8.1f %8.1f\n", "evaluation", d.eval.wall, d.eval.cpu, "total",
+              total.wall + d.eval.wall, total.cpu + d.eval.cpu);
+  std::printf("\n  report:  %s\n  compare: %s\n  model:   %s\n  table:   %s\n", d.report.c_str(), d.compare.c_str(),
+              d.model.c_str(), d.table.c_str());
+}
+
+}  // namespace
+
+nlohmann::json RunDemo(const DemoOptions& o) {
+  o.Check();
+  core::EnsureDirectory(o.output);
+  const fs::path video = o.output / "flight.mp4";
+  const fs::path truth_json = o.output / "truth.json";
+  if (!fs::exists(video) || !fs::exists(truth_json)) RenderDemoFlight(o);
+  const double height = core::ReadJson(truth_json).at("characteristic_length").get<double>();
+
+  const ReconstructOptions r = DemoReconstructOptions(o, video);
+  const core::Workspace ws(r.workspace);
+  std::vector<StageResult> stages;
+  RunReconstruct(r, &stages);
+  const auto t_eval = std::chrono::steady_clock::now();
+  const double cpu_eval = ProcessCpuSeconds();
+
+  // Accuracy: cameras against the exact truth (similarity by frame name), surfaces against the CAD model.
+  DemoSummary d;
+  d.height = height;
+  const core::Reconstruction truth = io::ReadColmapText(o.output / "truth");
+  const core::Reconstruction model = io::ReadColmapText(ws.sparse_dir());
+  d.registered = model.images.size();
+  d.reprojection_px = model.MeanReprojectionError();
+  d.sparse = sfm::EvaluateSparse(model, truth);
+  nlohmann::json demo;
+  demo["building_height_m"] = height;
+  demo["frames"] = o.frames;
+  demo["registered"] = d.registered;
+  demo["sparse"] = d.sparse.ToJson();
+  demo["sparse"]["mean_reprojection_error_px"] = d.reprojection_px;
+  // The Poisson mesh against the CAD model, brought into its frame by the camera alignment (+ scaled ICP).
+  const io::TexturedMesh cad = BuildingOnly(io::ReadObj(o.output / "scene.obj", /*load_textures=*/false));
+  if (cad.faces.empty()) throw Error((o.output / "scene.obj").string() + ": no building faces");
+  io::WriteObj(cad, o.output / "cad.obj");
+  align::CompareOptions c;
+  c.reconstruction = ws.mesh_dir() / "poisson.ply";
+  c.cad = o.output / "cad.obj";
+  c.length = height;
+  c.transform = d.sparse.alignment;
+  c.cameras = o.output / "truth";
+  c.output_dir = ws.report_dir() / "compare";
+  d.mesh = align::CompareToCad(c);
+  demo["mesh_vs_cad"] = d.mesh.ToJson();
+  // The textured model from a viewpoint the reconstruction never saw, against the true frame there.
+  d.held = RenderHeldOut(o.output, ws.mesh_dir() / "textured.obj", d.mesh.transform, synth::SynthOptions().render,
+                         o.output / "heldout");
+  demo["held_out_view"] = {{"between_frames", d.held.between},
+                           {"psnr_db", d.held.psnr_db},
+                           {"covered_percent", 100 * d.held.covered_fraction},
+                           {"images", (o.output / "heldout").string()}};
+  d.eval.wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - t_eval).count();
+  d.eval.cpu = ProcessCpuSeconds() - cpu_eval;
+  demo["seconds"] = StageTiming(stages, d.eval);
+  demo["options"] = {
+      {"max_features", o.max_features},           {"pairs", o.sequential_pairs ? "sequential" : "exhaustive"},
+      {"pair_overlap", o.pair_overlap},           {"dense_max_size", o.dense_max_size},
+      {"dense_sources", o.dense_sources},         {"dense_iterations", o.dense_iterations},
+      {"dense_geometric_pass", o.dense_geometric}};
+  core::WriteJson(o.output / "demo.json", demo);
+  WriteReport(r.workspace);
+  d.report = ws.report_dir() / "report.html";
+  d.compare = c.output_dir / "compare.html";
+  d.model = ws.mesh_dir() / "model.glb";
+  d.table = o.output / "demo.json";
+  PrintDemoSummary(o, d, stages);
   return demo;
 }
 

@@ -41,18 +41,11 @@ struct Prim {
   double A = 0, B = 0, C = 0;
 };
 
-// Per-face shading planes: for the ray d, s = m·d = 1/z, and u·s, v·s and light·s are linear in d too
-// (texture coordinates and per-vertex light interpolated with perspective-correct barycentrics).
-struct ShadePlane {
-  Eigen::Vector3d m;
-  Eigen::Vector3f pu, pv, pl;
-};
-
 // Fast log2 for mip selection (max error ~0.01).
 inline float FastLog2(float x) {
   int e;
   const float f = std::frexp(x, &e);  // x = f·2^e, f in [0.5, 1)
-  const float m = 2.0f * f;  // x = m·2^(e−1), m in [1, 2)
+  const float m = 2.0f * f;           // x = m·2^(e−1), m in [1, 2)
   return static_cast<float>(e - 1) + (-0.34484843f * m + 2.02466578f) * m - 0.67487759f;
 }
 
@@ -81,9 +74,81 @@ inline int ContainingFace(const std::vector<Eigen::Matrix3d>& planes, const int3
   return best;
 }
 
+// Sky colour along the ray d (camera frame; Rt turns it into the world frame): a gradient from the horizon
+// up, haze below it.
+Eigen::Vector3f SkyColour(const Eigen::Matrix3d& Rt, const Eigen::Vector3d& d) {
+  const Eigen::Vector3d w = (Rt * d).normalized();
+  const float e = static_cast<float>(w.z());
+  if (e < 0) return {150.0f, 160.0f, 165.0f};                           // beyond the edge of the world: haze
+  const Eigen::Vector3f horizon(235, 225, 212), zenith(205, 150, 100);  // BGR
+  const float a = std::min(1.0f, std::sqrt(e));
+  return (1 - a) * horizon + a * zenith;
+}
+
+// One (clipped) triangle v of face f into the visibility raster rows [by0, by1] of one band: edge functions
+// with a top-left rule, so a sample on an edge shared by two faces goes to exactly one of them.
+void RasteriseTriangle(const Prim& pr, std::array<Eigen::Vector2d, 3> v, int f, int by0, int by1, int vw,
+                       std::vector<float>& wbuf, std::vector<int32_t>& ibuf) {
+  const double area = (v[1] - v[0]).x() * (v[2] - v[0]).y() - (v[1] - v[0]).y() * (v[2] - v[0]).x();
+  if (area == 0 || !std::isfinite(area)) return;
+  if (area < 0) std::swap(v[1], v[2]);
+  double ex[3], ey[3], ec[3];
+  bool tie[3];
+  for (int e = 0; e < 3; ++e) {
+    const Eigen::Vector2d& a = v[e];
+    const Eigen::Vector2d& b = v[(e + 1) % 3];
+    const double dx = b.x() - a.x(), dy = b.y() - a.y();
+    // E(p) = dx·(p.y − a.y) − dy·(p.x − a.x) > 0 inside; shared edges go to exactly one side.
+    ex[e] = -dy;
+    ey[e] = dx;
+    ec[e] = dy * a.x() - dx * a.y();
+    tie[e] = dy > 0 || (dy == 0 && dx < 0);
+  }
+  const double txmin = std::min({v[0].x(), v[1].x(), v[2].x()});
+  const double txmax = std::max({v[0].x(), v[1].x(), v[2].x()});
+  const double tymin = std::min({v[0].y(), v[1].y(), v[2].y()});
+  const double tymax = std::max({v[0].y(), v[1].y(), v[2].y()});
+  const int X0 = std::max(pr.x0, static_cast<int>(std::ceil(txmin - 0.5)));
+  const int X1 = std::min(pr.x1, static_cast<int>(std::floor(txmax - 0.5)));
+  const int Y0 = std::max({pr.y0, by0, static_cast<int>(std::ceil(tymin - 0.5))});
+  const int Y1 = std::min({pr.y1, by1, static_cast<int>(std::floor(tymax - 0.5))});
+  for (int Y = Y0; Y <= Y1; ++Y) {
+    const double py = Y + 0.5, px0 = X0 + 0.5;
+    double e0 = ex[0] * px0 + ey[0] * py + ec[0];
+    double e1 = ex[1] * px0 + ey[1] * py + ec[1];
+    double e2 = ex[2] * px0 + ey[2] * py + ec[2];
+    double w = pr.A * px0 + pr.B * py + pr.C;
+    float* wrow = &wbuf[size_t(Y) * vw];
+    int32_t* irow = &ibuf[size_t(Y) * vw];
+    for (int X = X0; X <= X1; ++X) {
+      if ((e0 > 0 || (e0 == 0 && tie[0])) && (e1 > 0 || (e1 == 0 && tie[1])) && (e2 > 0 || (e2 == 0 && tie[2]))) {
+        const float wf = static_cast<float>(w);
+        if (wf > wrow[X] || (wf == wrow[X] && f < irow[X])) {
+          wrow[X] = wf;
+          irow[X] = f;
+        }
+      }
+      e0 += ex[0];
+      e1 += ex[1];
+      e2 += ex[2];
+      w += pr.A;
+    }
+  }
+}
+
+}  // namespace
+
+// Per-face shading planes: for the ray d, s = m·d = 1/z, and u·s, v·s and light·s are linear in d too
+// (texture coordinates and per-vertex light interpolated with perspective-correct barycentrics).
+struct detail::ShadePlane {
+  Eigen::Vector3d m;
+  Eigen::Vector3f pu, pv, pl;
+};
+using detail::ShadePlane;
+
 // Buffers reused across frames rendered by the same thread (page faults on fresh 30 MB buffers cost more
 // than clearing them).
-struct Scratch {
+struct Renderer::Scratch {
   std::vector<Eigen::Vector3d> vc;
   std::vector<Prim> prims;
   std::vector<Eigen::Matrix3d> planes;
@@ -92,8 +157,6 @@ struct Scratch {
   std::vector<int32_t> ibuf;
   std::vector<std::vector<int>> bins;
 };
-
-}  // namespace
 
 // Normalised rays for every output pixel centre and sub-sample, and the visibility raster's pinhole.
 // Without distortion the raster is exactly the S×S supersampled output grid and rays are computed on the
@@ -195,44 +258,30 @@ std::shared_ptr<const Renderer::RayTable> Renderer::Rays(const core::Camera& cam
   return t;
 }
 
-RenderResult Renderer::Render(const core::Camera& camera, const core::Pose& pose,
-                              const RenderOptions& options) const {
-  camera.Validate();
-  options.Check();
-  const int S = options.supersample, W = camera.width, H = camera.height;
-  const auto rays = Rays(camera, S);
-  const RayTable& rt = *rays;
+// Steps 1–2: vertices to the camera frame, then per face: cull, plane matrix, near clipping, projection to
+// the visibility raster and the shading planes.
+void Renderer::PrepareFaces(const RayTable& rt, const core::Pose& pose, const RenderOptions& options,
+                            Scratch& sc) const {
   const Eigen::Matrix3d R = pose.R();
-  const Eigen::Matrix3d Rt = R.transpose();
-  const Eigen::Vector3d sun = options.SunDirection();
-  const double near = options.near_plane;
-
-  // 1. Vertices to the camera frame.
   const size_t nv = mesh_.vertices.size(), nf = mesh_.faces.size();
-  thread_local Scratch scratch;
-  auto& vc = scratch.vc;
-  vc.resize(nv);
+  sc.vc.resize(nv);
   tbb::parallel_for(tbb::blocked_range<size_t>(0, nv, 4096), [&](const auto& r) {
-    for (size_t i = r.begin(); i < r.end(); ++i) vc[i] = R * mesh_.vertices[i] + pose.t;
+    for (size_t i = r.begin(); i < r.end(); ++i) sc.vc[i] = R * mesh_.vertices[i] + pose.t;
   });
-
-  // 2. Face set-up: cull, plane matrix, near clipping, projection to the visibility raster.
-  auto& prims = scratch.prims;
-  auto& planes = scratch.planes;
-  auto& shade_planes = scratch.shade;
-  prims.assign(nf, Prim());
-  planes.resize(nf);
-  shade_planes.resize(nf);
+  sc.prims.assign(nf, Prim());
+  sc.planes.resize(nf);
+  sc.shade.resize(nf);
+  const double near = options.near_plane;
+  const Eigen::Vector3d sun = options.SunDirection();
+  // A flat surface under the sun shows its albedo.
   const double light_gain =
-      options.shading
-          ? 1.0 / (options.ambient + (1 - options.ambient) * std::max(sun.z(), 0.05))
-          : 1.0;
+      options.shading ? 1.0 / (options.ambient + (1 - options.ambient) * std::max(sun.z(), 0.05)) : 1.0;
   tbb::parallel_for(tbb::blocked_range<size_t>(0, nf, 1024), [&](const auto& r) {
     for (size_t f = r.begin(); f < r.end(); ++f) {
       const io::Face& face = mesh_.faces[f];
-      const Eigen::Vector3d& a = vc[face.v[0]];
-      const Eigen::Vector3d& b = vc[face.v[1]];
-      const Eigen::Vector3d& c = vc[face.v[2]];
+      const Eigen::Vector3d& a = sc.vc[face.v[0]];
+      const Eigen::Vector3d& b = sc.vc[face.v[1]];
+      const Eigen::Vector3d& c = sc.vc[face.v[2]];
       if (a.z() < near && b.z() < near && c.z() < near) continue;
       const Eigen::Vector3d n = (b - a).cross(c - a);
       const double side = n.dot(a);  // < 0: front face (camera on the outer side of the plane)
@@ -254,7 +303,7 @@ RenderResult Renderer::Render(const core::Camera& camera, const core::Pose& pose
         if (pin) poly[np++] = p;
         if (pin != qin) poly[np++] = p + (q - p) * ((near - p.z()) / (q.z() - p.z()));
       }
-      Prim& pr = prims[f];
+      Prim& pr = sc.prims[f];
       double xmin = 1e300, xmax = -1e300, ymin = 1e300, ymax = -1e300;
       for (int k = 0; k < np; ++k) {
         pr.p[k] = {rt.fvx * poly[k].x() / poly[k].z() + rt.cu, rt.fvy * poly[k].y() / poly[k].z() + rt.cv};
@@ -276,144 +325,122 @@ RenderResult Renderer::Render(const core::Camera& camera, const core::Pose& pose
       pr.A = m.x() / rt.fvx;
       pr.B = m.y() / rt.fvy;
       pr.C = m.z() - m.x() * rt.cu / rt.fvx - m.y() * rt.cv / rt.fvy;
-      planes[f] = M;
-      // Shading planes: texture coordinates and per-vertex light.
-      ShadePlane& sp = shade_planes[f];
-      sp.m = m;
-      Eigen::Vector3d pu = Eigen::Vector3d::Zero(), pv = Eigen::Vector3d::Zero(), pl = Eigen::Vector3d::Zero();
-      for (int k = 0; k < 3; ++k) {
-        if (face.vt[0] >= 0) {
-          pu += mesh_.uvs[face.vt[k]].x() * M.row(k).transpose();
-          pv += mesh_.uvs[face.vt[k]].y() * M.row(k).transpose();
-        }
-        double light = 1.0;
-        if (options.shading) {
-          Eigen::Vector3d n = face.vn[k] >= 0 ? mesh_.normals[face.vn[k]].cast<double>().normalized()
-                                              : face_normals_[f];
-          if (face.vn[k] < 0 && side > 0) n = -n;  // seen from behind (culling off): light the visible side
-          light = (options.ambient + (1 - options.ambient) * std::max(0.0, n.dot(sun))) * light_gain;
-        }
-        pl += light * M.row(k).transpose();
-      }
-      sp.pu = pu.cast<float>();
-      sp.pv = pv.cast<float>();
-      sp.pl = pl.cast<float>();
+      sc.planes[f] = M;
+      sc.shade[f] = MakeShadePlane(f, M, m, side, options, sun, light_gain);
     }
   });
+}
 
-  // 3. Bin faces into bands of raster rows (in face order, so the result does not depend on threads).
-  const int nbands = (rt.vh + kBandRows - 1) / kBandRows;
-  auto& bins = scratch.bins;
-  bins.resize(nbands);
-  for (auto& b : bins) b.clear();
-  for (size_t f = 0; f < nf; ++f) {
-    const Prim& p = prims[f];
-    if (p.n == 0) continue;
-    for (int b = p.y0 / kBandRows; b <= p.y1 / kBandRows; ++b) bins[b].push_back(static_cast<int>(f));
+// Texture coordinates and per-vertex light of face f as planes in the ray d (see ShadePlane).
+ShadePlane Renderer::MakeShadePlane(size_t f, const Eigen::Matrix3d& M, const Eigen::Vector3d& m, double side,
+                                    const RenderOptions& options, const Eigen::Vector3d& sun, double light_gain) const {
+  const io::Face& face = mesh_.faces[f];
+  ShadePlane sp;
+  sp.m = m;
+  Eigen::Vector3d pu = Eigen::Vector3d::Zero(), pv = Eigen::Vector3d::Zero(), pl = Eigen::Vector3d::Zero();
+  for (int k = 0; k < 3; ++k) {
+    if (face.vt[0] >= 0) {
+      pu += mesh_.uvs[face.vt[k]].x() * M.row(k).transpose();
+      pv += mesh_.uvs[face.vt[k]].y() * M.row(k).transpose();
+    }
+    double light = 1.0;
+    if (options.shading) {
+      Eigen::Vector3d n = face.vn[k] >= 0 ? mesh_.normals[face.vn[k]].cast<double>().normalized() : face_normals_[f];
+      if (face.vn[k] < 0 && side > 0) n = -n;  // seen from behind (culling off): light the visible side
+      light = (options.ambient + (1 - options.ambient) * std::max(0.0, n.dot(sun))) * light_gain;
+    }
+    pl += light * M.row(k).transpose();
   }
+  sp.pu = pu.cast<float>();
+  sp.pv = pv.cast<float>();
+  sp.pl = pl.cast<float>();
+  return sp;
+}
 
-  // 4. Visibility raster: nearest face per sample (largest 1/z), ties keep the lower face index.
-  auto& wbuf = scratch.wbuf;
-  auto& ibuf = scratch.ibuf;
-  wbuf.assign(size_t(rt.vw) * rt.vh, 0.0f);
-  ibuf.assign(size_t(rt.vw) * rt.vh, -1);
+// Steps 3–4: faces binned into bands of raster rows (in face order, so the result does not depend on threads),
+// then the visibility raster: nearest face per sample (largest 1/z), ties keep the lower face index.
+void Renderer::RasteriseVisibility(const RayTable& rt, Scratch& sc) {
+  const int nbands = (rt.vh + kBandRows - 1) / kBandRows;
+  sc.bins.resize(nbands);
+  for (auto& b : sc.bins) b.clear();
+  for (size_t f = 0; f < sc.prims.size(); ++f) {
+    const Prim& p = sc.prims[f];
+    if (p.n == 0) continue;
+    for (int b = p.y0 / kBandRows; b <= p.y1 / kBandRows; ++b) sc.bins[b].push_back(static_cast<int>(f));
+  }
+  sc.wbuf.assign(size_t(rt.vw) * rt.vh, 0.0f);
+  sc.ibuf.assign(size_t(rt.vw) * rt.vh, -1);
   tbb::parallel_for(0, nbands, [&](int band) {
     const int by0 = band * kBandRows, by1 = std::min(rt.vh - 1, by0 + kBandRows - 1);
-    for (int f : bins[band]) {
-      const Prim& pr = prims[f];
-      for (int k = 1; k + 1 < pr.n; ++k) {
-        Eigen::Vector2d v[3] = {pr.p[0], pr.p[k], pr.p[k + 1]};
-        const double area = (v[1] - v[0]).x() * (v[2] - v[0]).y() - (v[1] - v[0]).y() * (v[2] - v[0]).x();
-        if (area == 0 || !std::isfinite(area)) continue;
-        if (area < 0) std::swap(v[1], v[2]);
-        double ex[3], ey[3], ec[3];
-        bool tie[3];
-        for (int e = 0; e < 3; ++e) {
-          const Eigen::Vector2d& a = v[e];
-          const Eigen::Vector2d& b = v[(e + 1) % 3];
-          const double dx = b.x() - a.x(), dy = b.y() - a.y();
-          // E(p) = dx·(p.y − a.y) − dy·(p.x − a.x) > 0 inside; shared edges go to exactly one side.
-          ex[e] = -dy;
-          ey[e] = dx;
-          ec[e] = dy * a.x() - dx * a.y();
-          tie[e] = dy > 0 || (dy == 0 && dx < 0);
-        }
-        const double txmin = std::min({v[0].x(), v[1].x(), v[2].x()});
-        const double txmax = std::max({v[0].x(), v[1].x(), v[2].x()});
-        const double tymin = std::min({v[0].y(), v[1].y(), v[2].y()});
-        const double tymax = std::max({v[0].y(), v[1].y(), v[2].y()});
-        const int X0 = std::max(pr.x0, static_cast<int>(std::ceil(txmin - 0.5)));
-        const int X1 = std::min(pr.x1, static_cast<int>(std::floor(txmax - 0.5)));
-        const int Y0 = std::max({pr.y0, by0, static_cast<int>(std::ceil(tymin - 0.5))});
-        const int Y1 = std::min({pr.y1, by1, static_cast<int>(std::floor(tymax - 0.5))});
-        for (int Y = Y0; Y <= Y1; ++Y) {
-          const double py = Y + 0.5, px0 = X0 + 0.5;
-          double e0 = ex[0] * px0 + ey[0] * py + ec[0];
-          double e1 = ex[1] * px0 + ey[1] * py + ec[1];
-          double e2 = ex[2] * px0 + ey[2] * py + ec[2];
-          double w = pr.A * px0 + pr.B * py + pr.C;
-          float* wrow = &wbuf[size_t(Y) * rt.vw];
-          int32_t* irow = &ibuf[size_t(Y) * rt.vw];
-          for (int X = X0; X <= X1; ++X) {
-            if ((e0 > 0 || (e0 == 0 && tie[0])) && (e1 > 0 || (e1 == 0 && tie[1])) &&
-                (e2 > 0 || (e2 == 0 && tie[2]))) {
-              const float wf = static_cast<float>(w);
-              if (wf > wrow[X] || (wf == wrow[X] && f < irow[X])) {
-                wrow[X] = wf;
-                irow[X] = f;
-              }
-            }
-            e0 += ex[0];
-            e1 += ex[1];
-            e2 += ex[2];
-            w += pr.A;
+    for (int f : sc.bins[band]) {
+      const Prim& pr = sc.prims[f];
+      for (int k = 1; k + 1 < pr.n; ++k)
+        RasteriseTriangle(pr, {pr.p[0], pr.p[k], pr.p[k + 1]}, f, by0, by1, rt.vw, sc.wbuf, sc.ibuf);
+    }
+  });
+}
+
+// The faces seen by the S×S samples of output pixel (i, j).
+void Renderer::PixelSampleFaces(const RayTable& rt, const Scratch& sc, int i, int j, int32_t* ids) {
+  const int S = rt.S, SS = S * S;
+  const size_t p = size_t(j) * rt.width + i;
+  for (int b = 0; b < S; ++b)
+    for (int a = 0; a < S; ++a) {
+      int32_t id = -1;
+      if (!rt.distorted) {
+        id = sc.ibuf[size_t(S * j + b) * rt.vw + S * i + a];
+      } else {
+        const int32_t cell = rt.sub_cell[p * SS + b * S + a];
+        if (cell >= 0) {
+          const int32_t c4[4] = {sc.ibuf[cell], sc.ibuf[cell + 1], sc.ibuf[cell + rt.vw], sc.ibuf[cell + rt.vw + 1]};
+          if (c4[0] == c4[1] && c4[0] == c4[2] && c4[0] == c4[3]) {
+            id = c4[0];
+          } else {
+            const Eigen::Vector3d ds(rt.sub[p * SS + b * S + a].x(), rt.sub[p * SS + b * S + a].y(), 1.0);
+            id = ContainingFace(sc.planes, c4, 4, ds);
+            if (id < -1) id = c4[0];  // none contains the ray (sliver): keep the nearest sample's face
           }
         }
       }
+      ids[b * S + a] = id;
     }
-  });
+}
 
-  // 5. Shading at exact rays.
+// The colour of face f along the exact ray d: texture filtered over the pixel footprint, times its light.
+Eigen::Vector3f Renderer::ShadeRay(const ShadePlane& sp, int f, const Eigen::Vector3d& d, double inv_fx, double inv_fy,
+                                   float exposure) const {
+  const float s = static_cast<float>(sp.m.dot(d)), inv_s = 1.0f / s;
+  const Eigen::Vector3f df = d.cast<float>();
+  const io::Face& face = mesh_.faces[f];
+  const int mat = face.material;
+  const float light = sp.pl.dot(df) * inv_s * exposure;
+  const MipTexture* tex = (mat >= 0 && face.vt[0] >= 0 && !textures_[mat].empty()) ? &textures_[mat] : nullptr;
+  if (tex) {
+    const float u = sp.pu.dot(df) * inv_s, v = sp.pv.dot(df) * inv_s;
+    // d(u, v)/d(pixel) from u = (pu·d)/(m·d); the pixel footprint picks the mip level.
+    const float mx = static_cast<float>(sp.m.x()), my = static_cast<float>(sp.m.y());
+    const float kx = inv_s * static_cast<float>(inv_fx), ky = inv_s * static_cast<float>(inv_fy);
+    const float dux = (sp.pu.x() - u * mx) * kx * tex->width(), dvx = (sp.pv.x() - v * mx) * kx * tex->height();
+    const float duy = (sp.pu.y() - u * my) * ky * tex->width(), dvy = (sp.pv.y() - v * my) * ky * tex->height();
+    const float rho2 = std::max(dux * dux + dvx * dvx, duy * duy + dvy * dvy);
+    const float lod = rho2 > 1 ? 0.5f * FastLog2(rho2) : 0.0f;
+    return tex->Sample(u, v, lod) * light;
+  }
+  if (mat >= 0) return mesh_.materials[mat].diffuse_bgr * (255.0f * light);
+  return Eigen::Vector3f::Constant(200.0f * light);
+}
+
+// Step 5: colour and depth at the exact rays of every output pixel (edge pixels average their samples).
+void Renderer::ShadePixels(const core::Camera& camera, const core::Pose& pose, const RayTable& rt, const Scratch& sc,
+                           const RenderOptions& options, RenderResult& out) const {
+  const int S = rt.S, SS = S * S, W = camera.width, H = camera.height;
+  const Eigen::Matrix3d Rt = pose.R().transpose();
   const double inv_fx = 1.0 / camera.fx(), inv_fy = 1.0 / camera.fy();
   const float exposure = static_cast<float>(options.exposure);
-  auto shade = [&](int f, const Eigen::Vector3d& d) -> Eigen::Vector3f {
-    const ShadePlane& sp = shade_planes[f];
-    const float s = static_cast<float>(sp.m.dot(d)), inv_s = 1.0f / s;
-    const Eigen::Vector3f df = d.cast<float>();
-    const io::Face& face = mesh_.faces[f];
-    const int mat = face.material;
-    const float light = sp.pl.dot(df) * inv_s * exposure;
-    const MipTexture* tex =
-        (mat >= 0 && face.vt[0] >= 0 && !textures_[mat].empty()) ? &textures_[mat] : nullptr;
-    if (tex) {
-      const float u = sp.pu.dot(df) * inv_s, v = sp.pv.dot(df) * inv_s;
-      // d(u, v)/d(pixel) from u = (pu·d)/(m·d); the pixel footprint picks the mip level.
-      const float mx = static_cast<float>(sp.m.x()), my = static_cast<float>(sp.m.y());
-      const float kx = inv_s * static_cast<float>(inv_fx), ky = inv_s * static_cast<float>(inv_fy);
-      const float dux = (sp.pu.x() - u * mx) * kx * tex->width(), dvx = (sp.pv.x() - v * mx) * kx * tex->height();
-      const float duy = (sp.pu.y() - u * my) * ky * tex->width(), dvy = (sp.pv.y() - v * my) * ky * tex->height();
-      const float rho2 = std::max(dux * dux + dvx * dvx, duy * duy + dvy * dvy);
-      const float lod = rho2 > 1 ? 0.5f * FastLog2(rho2) : 0.0f;
-      return tex->Sample(u, v, lod) * light;
-    }
-    if (mat >= 0) return mesh_.materials[mat].diffuse_bgr * (255.0f * light);
-    return Eigen::Vector3f::Constant(200.0f * light);
-  };
-  auto sky = [&](const Eigen::Vector3d& d) -> Eigen::Vector3f {
-    const Eigen::Vector3d w = (Rt * d).normalized();
-    const float e = static_cast<float>(w.z());
-    if (e < 0) return {150.0f, 160.0f, 165.0f};  // beyond the edge of the world: haze
-    const Eigen::Vector3f horizon(235, 225, 212), zenith(205, 150, 100);  // BGR
-    const float a = std::min(1.0f, std::sqrt(e));
-    return (1 - a) * horizon + a * zenith;
-  };
-
-  RenderResult out;
-  out.image.create(H, W, CV_8UC3);
-  out.depth.create(H, W, CV_32F);
-  out.face.create(H, W, CV_32S);
-  const int SS = S * S;
   const float noise_sigma = static_cast<float>(options.noise_sigma);
+  auto colour_of = [&](int f, const Eigen::Vector3d& d) -> Eigen::Vector3f {
+    return f >= 0 ? ShadeRay(sc.shade[f], f, d, inv_fx, inv_fy, exposure) : SkyColour(Rt, d);
+  };
   tbb::parallel_for(0, H, [&](int j) {
     uint8_t* img = out.image.ptr<uint8_t>(j);
     float* dep = out.depth.ptr<float>(j);
@@ -426,39 +453,20 @@ RenderResult Renderer::Render(const core::Camera& camera, const core::Pose& pose
     float* rc = row_colour.data();
     for (int i = 0; i < W; ++i) {
       const size_t p = size_t(j) * W + i;
-      for (int b = 0; b < S; ++b)
-        for (int a = 0; a < S; ++a) {
-          int32_t id = -1;
-          if (!rt.distorted) {
-            id = ibuf[size_t(S * j + b) * rt.vw + S * i + a];
-          } else {
-            const int32_t cell = rt.sub_cell[p * SS + b * S + a];
-            if (cell >= 0) {
-              const int32_t c4[4] = {ibuf[cell], ibuf[cell + 1], ibuf[cell + rt.vw], ibuf[cell + rt.vw + 1]};
-              if (c4[0] == c4[1] && c4[0] == c4[2] && c4[0] == c4[3]) {
-                id = c4[0];
-              } else {
-                const Eigen::Vector3d ds(rt.sub[p * SS + b * S + a].x(), rt.sub[p * SS + b * S + a].y(), 1.0);
-                id = ContainingFace(planes, c4, 4, ds);
-                if (id < -1) id = c4[0];  // none contains the ray (sliver): keep the nearest sample's face
-              }
-            }
-          }
-          ids[b * S + a] = id;
-        }
-      const Eigen::Vector3d dc = rt.distorted ? Eigen::Vector3d(rt.centre[p].x(), rt.centre[p].y(), 1.0)
-                                              : Eigen::Vector3d((i + 0.5 - camera.u0) * inv_fx,
-                                                                (j + 0.5 - camera.v0) * inv_fy, 1.0);
+      PixelSampleFaces(rt, sc, i, j, ids.data());
+      const Eigen::Vector3d dc =
+          rt.distorted ? Eigen::Vector3d(rt.centre[p].x(), rt.centre[p].y(), 1.0)
+                       : Eigen::Vector3d((i + 0.5 - camera.u0) * inv_fx, (j + 0.5 - camera.v0) * inv_fy, 1.0);
       bool uniform = true;
       for (int k = 1; k < SS; ++k) uniform &= ids[k] == ids[0];
       Eigen::Vector3f colour;
       int centre_face = -1;
       if (uniform) {
         centre_face = ids[0];
-        colour = centre_face >= 0 ? shade(centre_face, dc) : sky(dc);
+        colour = colour_of(centre_face, dc);
       } else {
         // The face through the exact pixel centre: the nearest of the sampled faces that contains it.
-        centre_face = std::max(-1, ContainingFace(planes, ids.data(), SS, dc));
+        centre_face = std::max(-1, ContainingFace(sc.planes, ids.data(), SS, dc));
         colour.setZero();
         for (int b = 0; b < S; ++b)
           for (int a = 0; a < S; ++a) {
@@ -468,13 +476,12 @@ RenderResult Renderer::Render(const core::Camera& camera, const core::Pose& pose
             } else {
               ds << (i + (a + 0.5) / S - camera.u0) * inv_fx, (j + (b + 0.5) / S - camera.v0) * inv_fy, 1.0;
             }
-            const int f = ids[b * S + a];
-            colour += f >= 0 ? shade(f, ds) : sky(ds);
+            colour += colour_of(ids[b * S + a], ds);
           }
         colour /= static_cast<float>(SS);
       }
       fid[i] = centre_face;
-      dep[i] = centre_face >= 0 ? static_cast<float>(1.0 / shade_planes[centre_face].m.dot(dc)) : 0.0f;
+      dep[i] = centre_face >= 0 ? static_cast<float>(1.0 / sc.shade[centre_face].m.dot(dc)) : 0.0f;
       rc[3 * i] = colour[0];
       rc[3 * i + 1] = colour[1];
       rc[3 * i + 2] = colour[2];
@@ -486,6 +493,20 @@ RenderResult Renderer::Render(const core::Camera& camera, const core::Pose& pose
       img[k] = static_cast<uint8_t>(std::clamp(val, 0.0f, 255.0f) + 0.5f);
     }
   });
+}
+
+RenderResult Renderer::Render(const core::Camera& camera, const core::Pose& pose, const RenderOptions& options) const {
+  camera.Validate();
+  options.Check();
+  const auto rays = Rays(camera, options.supersample);
+  thread_local Scratch scratch;
+  PrepareFaces(*rays, pose, options, scratch);
+  RasteriseVisibility(*rays, scratch);
+  RenderResult out;
+  out.image.create(camera.height, camera.width, CV_8UC3);
+  out.depth.create(camera.height, camera.width, CV_32F);
+  out.face.create(camera.height, camera.width, CV_32S);
+  ShadePixels(camera, pose, *rays, scratch, options, out);
   return out;
 }
 

@@ -35,16 +35,16 @@
 namespace fmv3d::render {
 
 struct RenderOptions {
-  int supersample = 2;             // visibility samples per pixel along each axis (1..4)
-  double sun_azimuth_deg = 135;    // clockwise from +y (north) towards +x (east)
-  double sun_elevation_deg = 50;   // above the horizon
-  double ambient = 0.4;            // share of light that is not direct sun (sky light)
-  double exposure = 1.0;           // gain on the shaded colour; 1 = a flat sunlit surface shows its albedo
-  double noise_sigma = 0;          // Gaussian sensor noise, digital numbers (0..255 scale)
-  uint64_t noise_seed = 0;         // noise differs for each seed (and should differ for each frame)
-  bool cull_backfaces = true;      // skip faces seen from behind (meshes must be wound outwards)
-  bool shading = true;             // false: plain albedo (no sun/ambient), handy for tests
-  double near_plane = 0.05;        // metres; geometry closer than this to the camera is clipped
+  int supersample = 2;            // visibility samples per pixel along each axis (1..4)
+  double sun_azimuth_deg = 135;   // clockwise from +y (north) towards +x (east)
+  double sun_elevation_deg = 50;  // above the horizon
+  double ambient = 0.4;           // share of light that is not direct sun (sky light)
+  double exposure = 1.0;          // gain on the shaded colour; 1 = a flat sunlit surface shows its albedo
+  double noise_sigma = 0;         // Gaussian sensor noise, digital numbers (0..255 scale)
+  uint64_t noise_seed = 0;        // noise differs for each seed (and should differ for each frame)
+  bool cull_backfaces = true;     // skip faces seen from behind (meshes must be wound outwards)
+  bool shading = true;            // false: plain albedo (no sun/ambient), handy for tests
+  double near_plane = 0.05;       // metres; geometry closer than this to the camera is clipped
   // Throws fmv3d::Error naming the bad field.
   void Check() const;
   // Unit vector towards the sun in the world frame (z up).
@@ -56,6 +56,10 @@ struct RenderResult {
   cv::Mat depth;  // CV_32F, camera-frame z through the pixel centre; 0 = nothing
   cv::Mat face;   // CV_32S, face index through the pixel centre; -1 = nothing
 };
+
+namespace detail {
+struct ShadePlane;  // a face's texture and light as planes in the viewing ray (renderer.cc)
+}
 
 class Renderer {
  public:
@@ -69,10 +73,20 @@ class Renderer {
 
  private:
   struct RayTable;  // per-camera normalised rays of all pixels and samples (cached for distorted lenses)
+  struct Scratch;   // per-thread buffers of one frame: faces set up, visibility raster
   std::shared_ptr<const RayTable> Rays(const core::Camera& camera, int supersample) const;
+  void PrepareFaces(const RayTable& rt, const core::Pose& pose, const RenderOptions& options, Scratch& sc) const;
+  detail::ShadePlane MakeShadePlane(size_t f, const Eigen::Matrix3d& M, const Eigen::Vector3d& m, double side,
+                                    const RenderOptions& options, const Eigen::Vector3d& sun, double light_gain) const;
+  static void RasteriseVisibility(const RayTable& rt, Scratch& sc);
+  static void PixelSampleFaces(const RayTable& rt, const Scratch& sc, int i, int j, int32_t* ids);
+  Eigen::Vector3f ShadeRay(const detail::ShadePlane& sp, int f, const Eigen::Vector3d& d, double inv_fx, double inv_fy,
+                           float exposure) const;
+  void ShadePixels(const core::Camera& camera, const core::Pose& pose, const RayTable& rt, const Scratch& sc,
+                   const RenderOptions& options, RenderResult& out) const;
 
   const io::TexturedMesh& mesh_;
-  std::vector<MipTexture> textures_;        // per material (empty when it has no texture)
+  std::vector<MipTexture> textures_;  // per material (empty when it has no texture)
   std::vector<Eigen::Vector3d> face_normals_;
   mutable std::mutex cache_mutex_;
   mutable std::shared_ptr<const RayTable> ray_cache_;

@@ -1,11 +1,11 @@
 #include "fmv3d/surface/view_selection.h"
 
-#include <array>
 #include <spdlog/spdlog.h>
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
+#include <array>
 #include <chrono>
 #include <cmath>
 
@@ -142,8 +142,8 @@ void ViewCandidates(const ColoredMesh& mesh, const std::vector<Eigen::Vector3d>&
         inside = x.z() > 0 && cam.InImage(uv[k] = cam.Project(x), 0.5);
       }
       if (!inside) continue;
-      const double area = 0.5 * std::abs((uv[1] - uv[0]).x() * (uv[2] - uv[0]).y() -
-                                         (uv[1] - uv[0]).y() * (uv[2] - uv[0]).x());
+      const double area =
+          0.5 * std::abs((uv[1] - uv[0]).x() * (uv[2] - uv[0]).y() - (uv[1] - uv[0]).y() * (uv[2] - uv[0]).x());
       const double area_small = area * sx * sy;
       Candidate cand{static_cast<float>(area), static_cast<uint16_t>(view_index), {0, 0, 0}};
       if (count[f] > 0) {
@@ -207,56 +207,57 @@ std::vector<Eigen::Vector3i> FaceAdjacency(const std::vector<Eigen::Vector3i>& t
   return adj;
 }
 
-ViewSelection SelectViews(const ColoredMesh& mesh, const std::vector<Eigen::Vector3i>& adjacency,
-                          const std::vector<TextureView>& views, const ViewSelectionOptions& options) {
-  options.Check();
-  const auto start = Clock::now();
-  const size_t nf = mesh.triangles.size();
-  ViewSelection result;
-  result.labels.assign(nf, -1);
-  if (nf == 0 || views.empty()) return result;
+namespace {
 
-  // 1. Candidates of every view: per face the best max_candidates_per_face by quality, then in CSR form
-  // ordered by view.
-  if (views.size() > 65535) throw Error("texture: at most 65535 views");
+// Every view's candidates per face (the best max_candidates_per_face by quality), in CSR form ordered by view:
+// face f's candidates are cand[offset[f] .. offset[f + 1]).
+struct FaceCandidates {
+  std::vector<size_t> offset;
+  std::vector<Candidate> cand;
+  const Candidate* Find(int f, int view) const {  // a handful of candidates per face
+    for (size_t i = offset[f]; i < offset[f + 1]; ++i)
+      if (cand[i].view == view) return &cand[i];
+    return nullptr;
+  }
+};
+
+FaceCandidates CollectCandidates(const ColoredMesh& mesh, const std::vector<TextureView>& views,
+                                 const ViewSelectionOptions& options) {
+  const size_t nf = mesh.triangles.size();
   const io::TexturedMesh geometry = mesh.ToTexturedMesh();
   const render::Renderer renderer(geometry);
   std::vector<Eigen::Vector3d> face_normals(nf);
   for (size_t f = 0; f < nf; ++f) face_normals[f] = geometry.FaceNormal(f);
-  std::vector<size_t> offset;
-  std::vector<Candidate> cand;
-  {
-    CandidateStore store(nf, options.max_candidates_per_face);
-    core::Progress progress("texture: visibility", views.size());
-    for (size_t v = 0; v < views.size(); ++v) {
-      ViewCandidates(mesh, face_normals, renderer, views[v], static_cast<int>(v), options, &store);
-      progress.Add();
-    }
-    store.ToCsr(&offset, &cand);
+  FaceCandidates fc;
+  CandidateStore store(nf, options.max_candidates_per_face);
+  core::Progress progress("texture: visibility", views.size());
+  for (size_t v = 0; v < views.size(); ++v) {
+    ViewCandidates(mesh, face_normals, renderer, views[v], static_cast<int>(v), options, &store);
+    progress.Add();
   }
-  const double seconds_visibility = std::chrono::duration<double>(Clock::now() - start).count();
-  auto find = [&](int f, int view) -> const Candidate* {  // a handful of candidates per face
-    for (size_t i = offset[f]; i < offset[f + 1]; ++i)
-      if (cand[i].view == view) return &cand[i];
-    return nullptr;
-  };
+  store.ToCsr(&fc.offset, &fc.cand);
+  return fc;
+}
 
-  // 2. Photo-consistency on neighbourhood-averaged colours.
-  std::vector<char> consistent(cand.size(), 1);
+// Photo-consistency on neighbourhood-averaged colours: per face, candidates whose colour lies far from the
+// candidates' median (beyond the threshold and 3 median deviations) are marked inconsistent (0).
+std::vector<char> ConsistentCandidates(const FaceCandidates& fc, const std::vector<Eigen::Vector3i>& adjacency,
+                                       size_t nf, const ViewSelectionOptions& options, size_t* rejected) {
+  std::vector<char> consistent(fc.cand.size(), 1);
   std::vector<size_t> rejected_per_chunk(64, 0);
   tbb::parallel_for(size_t{0}, size_t{64}, [&](size_t chunk) {
     std::vector<Eigen::Vector3f> colors;
     std::vector<float> channel, dist;
     for (size_t f = nf * chunk / 64; f < nf * (chunk + 1) / 64; ++f) {
-      const size_t n = offset[f + 1] - offset[f];
+      const size_t n = fc.offset[f + 1] - fc.offset[f];
       if (n < 3) continue;
       colors.clear();
-      for (size_t i = offset[f]; i < offset[f + 1]; ++i) {
-        Eigen::Vector3f c = cand[i].Color();
+      for (size_t i = fc.offset[f]; i < fc.offset[f + 1]; ++i) {
+        Eigen::Vector3f c = fc.cand[i].Color();
         int m = 1;
         for (int k = 0; k < 3; ++k)
           if (adjacency[f][k] >= 0)
-            if (const Candidate* o = find(adjacency[f][k], cand[i].view)) c += o->Color(), ++m;
+            if (const Candidate* o = fc.Find(adjacency[f][k], fc.cand[i].view)) c += o->Color(), ++m;
         colors.push_back(c / static_cast<float>(m));
       }
       Eigen::Vector3f median;
@@ -273,39 +274,44 @@ ViewSelection SelectViews(const ColoredMesh& mesh, const std::vector<Eigen::Vect
       const float limit = std::max(static_cast<float>(options.consistency_threshold), 3.0f * sorted[n / 2]);
       for (size_t k = 0; k < n; ++k)
         if (dist[k] > limit) {
-          consistent[offset[f] + k] = 0;
+          consistent[fc.offset[f] + k] = 0;
           ++rejected_per_chunk[chunk];
         }
     }
   });
-  size_t rejected = 0;
-  for (size_t r : rejected_per_chunk) rejected += r;
+  *rejected = 0;
+  for (size_t r : rejected_per_chunk) *rejected += r;
+  return consistent;
+}
 
-  // 3. Initial labels: the best consistent candidate; then label voting.
+// Labels: the best consistent candidate per face, then label voting (Gauss–Seidel sweeps in face order:
+// deterministic, and converges in a few sweeps). Returns the number of changes per sweep.
+nlohmann::json LabelFaces(const FaceCandidates& fc, const std::vector<char>& consistent,
+                          const std::vector<Eigen::Vector3i>& adjacency, const ViewSelectionOptions& options,
+                          std::vector<int>& labels) {
+  const size_t nf = labels.size();
   std::vector<float> best_quality(nf, 0);
   for (size_t f = 0; f < nf; ++f)
-    for (size_t i = offset[f]; i < offset[f + 1]; ++i)
-      if (consistent[i] && cand[i].quality > best_quality[f]) {
-        best_quality[f] = cand[i].quality;
-        result.labels[f] = cand[i].view;
+    for (size_t i = fc.offset[f]; i < fc.offset[f + 1]; ++i)
+      if (consistent[i] && fc.cand[i].quality > best_quality[f]) {
+        best_quality[f] = fc.cand[i].quality;
+        labels[f] = fc.cand[i].view;
       }
-  std::vector<int>& labels = result.labels;
   nlohmann::json changes = nlohmann::json::array();
   for (int it = 0; it < options.smoothing_iterations && options.smoothness > 0; ++it) {
     size_t changed = 0;
-    // Gauss–Seidel sweep in face order: deterministic, and converges in a few sweeps.
     for (size_t f = 0; f < nf; ++f) {
       if (labels[f] < 0) continue;
       double best = -1;
       int best_view = labels[f];
-      for (size_t i = offset[f]; i < offset[f + 1]; ++i) {
+      for (size_t i = fc.offset[f]; i < fc.offset[f + 1]; ++i) {
         if (!consistent[i]) continue;
         int agree = 0;
-        for (int k = 0; k < 3; ++k) agree += adjacency[f][k] >= 0 && labels[adjacency[f][k]] == cand[i].view;
-        const double score = cand[i].quality / best_quality[f] + options.smoothness * agree;
+        for (int k = 0; k < 3; ++k) agree += adjacency[f][k] >= 0 && labels[adjacency[f][k]] == fc.cand[i].view;
+        const double score = fc.cand[i].quality / best_quality[f] + options.smoothness * agree;
         if (score > best + 1e-12) {
           best = score;
-          best_view = cand[i].view;
+          best_view = fc.cand[i].view;
         }
       }
       if (best_view != labels[f]) {
@@ -316,22 +322,42 @@ ViewSelection SelectViews(const ColoredMesh& mesh, const std::vector<Eigen::Vect
     changes.push_back(changed);
     if (changed == 0) break;
   }
+  return changes;
+}
+
+}  // namespace
+
+ViewSelection SelectViews(const ColoredMesh& mesh, const std::vector<Eigen::Vector3i>& adjacency,
+                          const std::vector<TextureView>& views, const ViewSelectionOptions& options) {
+  options.Check();
+  const auto start = Clock::now();
+  const size_t nf = mesh.triangles.size();
+  ViewSelection result;
+  result.labels.assign(nf, -1);
+  if (nf == 0 || views.empty()) return result;
+  if (views.size() > 65535) throw Error("texture: at most 65535 views");
+
+  const FaceCandidates fc = CollectCandidates(mesh, views, options);
+  const double seconds_visibility = std::chrono::duration<double>(Clock::now() - start).count();
+  size_t rejected = 0;
+  const std::vector<char> consistent = ConsistentCandidates(fc, adjacency, nf, options, &rejected);
+  const nlohmann::json changes = LabelFaces(fc, consistent, adjacency, options, result.labels);
 
   size_t labelled = 0;
-  for (int l : labels) labelled += l >= 0;
+  for (int l : result.labels) labelled += l >= 0;
   auto& st = result.stats;
   st["faces"] = nf;
   st["views"] = views.size();
-  st["candidates"] = cand.size();
-  st["mean_candidates_per_face"] = static_cast<double>(cand.size()) / nf;
+  st["candidates"] = fc.cand.size();
+  st["mean_candidates_per_face"] = static_cast<double>(fc.cand.size()) / nf;
   st["inconsistent_candidates"] = rejected;
   st["labelled_faces"] = labelled;
   st["labelled_share"] = static_cast<double>(labelled) / nf;
   st["smoothing_changes"] = changes;
   st["seconds_visibility"] = seconds_visibility;
   st["seconds"] = std::chrono::duration<double>(Clock::now() - start).count();
-  spdlog::info("texture: {} of {} faces seen ({:.1f} candidate views per face, {} inconsistent dropped)", labelled,
-               nf, st["mean_candidates_per_face"].get<double>(), rejected);
+  spdlog::info("texture: {} of {} faces seen ({:.1f} candidate views per face, {} inconsistent dropped)", labelled, nf,
+               st["mean_candidates_per_face"].get<double>(), rejected);
   return result;
 }
 
