@@ -1,4 +1,4 @@
-// Scaled ICP and global registration against known similarities (issue 7: B is A's point set under a random
+// Scaled ICP and global registration against known similarities (B is A's point set under a random
 // similarity — scale 0.2–5, any rotation — plus noise; recovered to 1e-4 relative).
 #include <gtest/gtest.h>
 

@@ -1,15 +1,15 @@
-// Issue 7 end to end: two synthetic flights of one scene — different path, focal length, image size, lens
+// Track alignment end to end: two synthetic flights of one scene — different path, focal length, image size, lens
 // distortion, sun direction, exposure and seed — reconstructed separately (frames → features → match →
 // sparse), then `fmv3d align`. The recovered similarity B → A is checked against the truth composed from each
 // model's own alignment to the ground truth (sfm::EvaluateSparse, camera centres, Umeyama):
 //   truth(B → A) = S_A⁻¹ ∘ S_B.
 // Errors are measured in the ground-truth frame: E = S_A ∘ found ∘ S_B⁻¹ should be the identity; rotation
 // angle of E, |scale − 1|, and the displacement E moves the centroid of B's points by, as a fraction of the
-// scene size (the largest distance between two true camera centres of A, the same extent issue 4 uses).
+// scene size (the largest distance between two true camera centres of A, the extent the sparse figures use).
 // Note the yardstick: S_A and S_B carry each model's own error (centre RMSE of a few 0.01% of the extent).
 // CI cost: 30 frames of 800x450 and 864x486, 3000 features per image, sequential matching (each frame with
 // the next 5, 2^k and loop-closure pairs) instead of 36 frames of ~1000x560, 8000 features, exhaustive
-// pairs (469 s in session 2). The two flights run concurrently (their sparse stages are largely serial).
+// pairs (469 s). The two flights run concurrently (their sparse stages are largely serial).
 // The merged model then gets the joint bundle adjustment; its reprojection RMS is checked too. Then both
 // tracks get a small dense cloud (240 px) and are merged again, by default (dense recomputed over the merged
 // model) and with --union: the recomputed cloud must be no less accurate than the union (median) and as
@@ -125,7 +125,7 @@ TEST(E2eAlign, TwoSyntheticFlightsOfOneScene) {
             << " deg, scale " << 100 * merged_err.scale << " %, translation " << 100 * merged_err.translation_fraction
             << " %\n";
   // The merged model must meet the issue's bounds; the coarse similarity alone (cross-track correspondences +
-  // refit) measured 0.044°, 0.116%, 0.046% in session 3 and 0.007°, 0.125%, 0.008% in session 6 — bounded at twice.
+  // refit) measured 0.007°, 0.125%, 0.008% — bounded at twice.
   EXPECT_LE(merged_err.rotation_deg, 0.05);
   EXPECT_LE(merged_err.scale, 0.001);
   EXPECT_LE(merged_err.translation_fraction, 0.001);

@@ -11,7 +11,7 @@
 // scale, and — weighed by their own scatter — the rotation: the figure, the absolute error over the true
 // surface, must be ≤ 0.5 m RMS (measured 0.15 m, nearly all the frame-centre elevation's 2-byte encoding step)
 // and below the positions-only fit's. DSM from the sparse points: ≤ 1 m RMS on flat cells (measured 0.65).
-// See bench/RESULTS.md "Session 8" and "Session 9" for the sweeps over flights.
+// bench/RESULTS.md "Georeference and DSM" has the figures over other flights.
 #include <gtest/gtest.h>
 
 #include "fmv3d/core/files.h"

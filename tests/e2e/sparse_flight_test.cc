@@ -1,6 +1,6 @@
 // End to end, as a user runs it: `fmv3d synth` renders an orbit with exact cameras and an unknown lens
 // (focal starts from the 1.2·max(w,h) guess, k1 = −0.08), then frames → features → match → sparse, and
-// evaluate-sparse compares the result with the truth. Issue 4's figures are for 80 frames at 1280x720 (measured
+// evaluate-sparse compares the result with the truth. The bench's figures are for 80 frames at 1280x720 (measured
 // in bench/RESULTS.md: 0.0035%, 0.0148°, 0.016%); to fit CI this flight is 36 frames at 960x540, where the
 // angular precision per frame is 4/3 lower and there are fewer pairs, so the rotation bound is 0.05° here
 // (measured 0.030°); the other bounds are the issue's.

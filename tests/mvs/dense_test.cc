@@ -165,7 +165,7 @@ DepthCheck CheckFirstViewDepth(const Relight& relight) {
 TEST(PatchMatch, DepthMatchesRenderedTruth) {
   const DepthCheck c = CheckFirstViewDepth([](int, View*) {});
   ASSERT_GT(c.seen, 1000);
-  // Measured (session 4): valid 90.4% of the seen pixels, 57.4% of them within 1%, median 0.34%.
+  // Measured: valid 90.4% of the seen pixels, 57.4% of them within 1%, median 0.34%.
   EXPECT_GT(static_cast<double>(c.valid) / c.seen, 0.85) << c.valid << " of " << c.seen;
   // The photometric map alone keeps some wrong planes on weak texture (the geometric pass and fusion remove
   // them); most pixels must be right and the median well below 1%.

@@ -48,7 +48,7 @@ TEST(MeshStage, NoisyBuildingCloudMeetsTheAccuracyTargets) {
   const MeshAccuracy acc = EvaluateMesh(mesh, truth, cloud.seen_surface, 0.1, 0.01 * h);
   RecordProperty("rms_percent", std::to_string(100 * acc.rms / h));
   RecordProperty("completeness", std::to_string(acc.completeness));
-  // Issue 6: RMS ≤ 0.5% of the building height, ≥ 95% of the seen surface within 1%.
+  // RMS ≤ 0.5% of the building height, ≥ 95% of the seen surface within 1%.
   EXPECT_LE(acc.rms, 0.005 * h) << "median " << acc.median << " p90 " << acc.p90;
   EXPECT_GE(acc.completeness, 0.95);
 }

@@ -92,7 +92,7 @@ TEST(TextureStage, HeldOutViewIsReproduced) {
   const Comparison cmp = CompareWithFrame(ws.path(), testing::kHeldOut, frame);
   RecordProperty("held_out_psnr", std::to_string(cmp.psnr));
   EXPECT_GT(cmp.covered, 0.05);  // the building and its apron (the cloud covers ±18 m) in a wide view
-  EXPECT_GE(cmp.psnr, 25.0);  // issue 6
+  EXPECT_GE(cmp.psnr, 25.0);
 
   // The vertex-coloured PLY agrees with the texture: same faces, colours present.
   const ColoredMesh colored = ReadMeshPly(ws / "mesh/textured.ply");

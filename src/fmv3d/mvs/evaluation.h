@@ -1,5 +1,4 @@
-// Accuracy and completeness of a dense cloud against a synthetic scene (`fmv3d synth` output), as issue 5
-// measures them:
+// Accuracy and completeness of a dense cloud against a synthetic scene (`fmv3d synth` output):
 //  - the sparse model is aligned to the true cameras by a similarity (sfm::EvaluateSparse, images by name)
 //    and the cloud is carried along;
 //  - accuracy: distance of every fused point to the true mesh (median, 90th percentile), also as a fraction

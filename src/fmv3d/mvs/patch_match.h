@@ -30,9 +30,9 @@ struct PatchMatchOptions {
   double sigma_spatial = 5;     // bilateral weight on distance to the centre, pixels
   int iterations = 5;           // photometric rounds (red + black each); with coarse_to_fine, at half resolution
   // coarse_to_fine: rounds at full resolution after upsampling the coarse planes. Further rounds lower the cost
-  // but do not bring depths closer to the truth (bench/RESULTS.md, session 4); session 3 ran 3.
+  // but do not bring depths closer to the truth (measured on synthetic flights).
   int fine_iterations = 2;
-  int geom_iterations = 1;      // rounds of the geometric pass (session 3: 2; see bench/RESULTS.md, session 4)
+  int geom_iterations = 1;      // rounds of the geometric pass (a second did not bring depths closer)
   int top_k = 3;                // best source costs averaged per pixel
   double geom_weight = 0.3;     // cost per pixel of reprojection error in the geometric pass
   double geom_max_error_px = 3;
