@@ -1,3 +1,6 @@
+// The rasteriser in one file (over 500 lines): face set-up, the visibility raster and shading share the per-face
+// plane matrices and the per-thread buffers, and are the inner loop of every synthetic frame, so they stay
+// together where the compiler sees them whole.
 #include "fmv3d/render/renderer.h"
 
 #include <tbb/blocked_range.h>
