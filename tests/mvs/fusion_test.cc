@@ -1,6 +1,8 @@
 // Fusion of depth maps: the occluding-edge filter (fusion.h). PatchMatch "fattens" a foreground surface past
 // its occluding edges (its window straddles the edge); neighbouring views fatten alike, so the extension is
 // multi-view consistent and only removing the foreground side of depth discontinuities takes it away.
+#include "fmv3d/mvs/fusion.h"
+
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -8,13 +10,11 @@
 #include <filesystem>
 #include <limits>
 #include <map>
-#include <random>
-
 #include <opencv2/imgproc.hpp>
+#include <random>
 
 #include "fmv3d/core/error.h"
 #include "fmv3d/io/point_cloud.h"
-#include "fmv3d/mvs/fusion.h"
 #include "test_util.h"
 
 namespace fmv3d::mvs {
@@ -156,7 +156,7 @@ TEST(NormalUncertainty, MatchesTheTwoViewStereoFormula) {
 // Ground at z = 0 for x < kCliffX, a floor 90 m lower beyond: seen from 30 m, the floor is 4x farther, so its
 // points are resolved 16x more coarsely along the normal (footprint x4, triangulation angle /4). Each view's
 // depth has stereo-like noise growing with z² (the same disparity error everywhere), so the floor's points are
-// 16x less accurate. The filter must drop the floor and keep the ground.
+// 16x less accurate. Far surface resolved as well as its distance allows is kept, stating its larger σ.
 constexpr double kCliffX = 6.0, kFloorZ = -90.0, kDisparityNoise = 1.2e-5;  // depth noise σ = k z²
 
 FusionView CliffView(const ViewGeometry& g, const std::vector<uint32_t>& neighbours, uint32_t seed) {
@@ -201,7 +201,7 @@ CliffCounts ClassifyCliff(const io::OrientedPointCloud& cloud) {
   return c;
 }
 
-TEST(Fusion, UncertaintyFilterDropsTheCoarselyResolvedFloorAndKeepsTheGround) {
+TEST(Fusion, UncertaintyFilterKeepsTheFarFloorAndStatesItsLargerSigma) {
   const double offsets[5][2] = {{0, 0}, {1.5, 1.5}, {-1.5, 1.5}, {1.5, -1.5}, {-1.5, -1.5}};
   std::map<uint32_t, FusionView> views;
   for (uint32_t id = 1; id <= 5; ++id) {
@@ -218,19 +218,35 @@ TEST(Fusion, UncertaintyFilterDropsTheCoarselyResolvedFloorAndKeepsTheGround) {
   FusionOptions on;  // the default
   ASSERT_GT(on.max_relative_uncertainty, 0);
   FusionStats st;
-  const CliffCounts after = ClassifyCliff(FuseDepthMaps(views, on, &st));
-  std::printf("ground %zu -> %zu, floor %zu -> %zu, p90 %.4f -> %.4f m, median sigma %.3f m\n", before.ground,
-              after.ground, before.floor, after.floor, before.p90_error, after.p90_error, st.median_uncertainty);
-  // Without the filter, the floor is a large share of the cloud (a quarter of each view) and dominates its tail.
+  const io::OrientedPointCloud cloud = FuseDepthMaps(views, on, &st);
+  const CliffCounts after = ClassifyCliff(cloud);
+  std::printf("ground %zu -> %zu, floor %zu -> %zu, median sigma/footprint %.3f\n", before.ground, after.ground,
+              before.floor, after.floor, st.median_uncertainty);
   ASSERT_GT(before.floor, before.ground / 5);
-  EXPECT_GT(before.p90_error, 0.05);
-  // With it, the floor is gone, the ground stays, and the tail is the ground's.
-  EXPECT_LT(after.floor, before.floor / 50);
+  // The floor is 4x farther but seen through the same baselines: as well resolved as its distance allows, kept.
+  EXPECT_GT(after.floor, before.floor * 95 / 100);
   EXPECT_GT(after.ground, before.ground * 99 / 100);
-  EXPECT_LT(after.p90_error, 0.02);
+  // Its stated σ is larger and still honest.
+  ASSERT_TRUE(cloud.has_sigma());
+  size_t n[2] = {0, 0}, over[2] = {0, 0};
+  std::vector<double> sig[2];
+  for (size_t i = 0; i < cloud.size(); ++i) {
+    const bool floor = cloud.positions[i].z() < kFloorZ / 2;
+    ++n[floor];
+    over[floor] += std::abs(cloud.positions[i].z() - (floor ? kFloorZ : 0.0)) > cloud.sigma[i];
+    sig[floor].push_back(cloud.sigma[i]);
+  }
+  for (int part = 0; part < 2; ++part) {
+    ASSERT_GT(n[part], 100u);
+    std::nth_element(sig[part].begin(), sig[part].begin() + sig[part].size() / 2, sig[part].end());
+    std::printf("%s: %.2f%% over sigma, median sigma %.4f m\n", part ? "floor" : "ground", 100.0 * over[part] / n[part],
+                sig[part][sig[part].size() / 2]);
+    EXPECT_LE(static_cast<double>(over[part]) / n[part], 0.05) << part;
+  }
+  EXPECT_GT(sig[1][sig[1].size() / 2], 8 * sig[0][sig[0].size() / 2]);
   EXPECT_EQ(st.rejected_uncertainty, before.floor + before.ground - after.floor - after.ground);
   size_t hist = 0;
-  for (const auto& [k, n] : st.views_histogram) hist += n;
+  for (const auto& [k, h] : st.views_histogram) hist += h;
   EXPECT_EQ(hist, after.floor + after.ground);
 }
 
@@ -338,7 +354,7 @@ TEST(Fusion, StreamingToPlyMatchesTheInMemoryCloud) {
     std::vector<uint32_t> nbs;
     for (uint32_t j = 1; j <= 5; ++j)
       if (j != id) nbs.push_back(j);
-    views.emplace(id, CliffView(NadirView(id, offsets[id - 1][0], offsets[id - 1][1]), nbs, id));
+    views.emplace(id, TexturedGroundView(NadirView(id, offsets[id - 1][0], offsets[id - 1][1]), nbs, id, true));
   }
   FusionStats mem_st, ply_st;
   const io::OrientedPointCloud mem = FuseDepthMaps(views, FusionOptions{}, &mem_st);

@@ -158,8 +158,9 @@ struct FusedPoint {
   io::Rgb8 color;
   std::vector<uint32_t> visibility;
   int support = 0;
-  float sigma = 0;     // σ_n (0 when neither the uncertainty filter nor the stated σ is on)
-  float scatter = -1;  // RMS spread of the consistent views' points along the normal (-1: fewer than 2)
+  float sigma = 0;      // σ_n (0 when neither the uncertainty filter nor the stated σ is on)
+  float footprint = 0;  // the reference pixel's footprint at the point (depth / focal), world units
+  float scatter = -1;   // RMS spread of the consistent views' points along the normal (-1: fewer than 2)
 };
 
 // The fusion proper over (eroded) maps; every accepted point goes to emit(FusedPoint&&).
@@ -266,6 +267,7 @@ void FuseMaps(const std::map<uint32_t, FusionView>& maps, const FusionOptions& o
                 h.view->texture.empty() ? 1.0 : static_cast<double>(h.view->texture.at<cv::float16_t>(h.y, h.x)));
           }
           p.sigma = static_cast<float>(NormalUncertainty(pos, p.normal.cast<double>(), hit_views, hit_px));
+          p.footprint = static_cast<float>(d / (0.5 * (ref.geom.K(0, 0) + ref.geom.K(1, 1))));
         }
         emit(std::move(p));
       }
@@ -273,12 +275,21 @@ void FuseMaps(const std::map<uint32_t, FusionView>& maps, const FusionOptions& o
   }
 }
 
-// Sets the filter's median and threshold in *st from the points' σ_n.
-void SetUncertaintyThreshold(std::vector<float> sigmas, const FusionOptions& opt, FusionStats* st) {
-  if (!(opt.max_relative_uncertainty > 0) || sigmas.empty()) return;
-  const size_t mid = sigmas.size() / 2;
-  std::nth_element(sigmas.begin(), sigmas.begin() + static_cast<std::ptrdiff_t>(mid), sigmas.end());
-  st->median_uncertainty = sigmas[mid];
+// σ_n in units of the reference pixel's footprint: how well the point is resolved for its distance (the
+// triangulation angle and the texture), not how far it is.
+std::vector<float> RelativeSigmas(const std::vector<float>& sigmas, const std::vector<float>& footprints) {
+  std::vector<float> r(sigmas.size());
+  for (size_t i = 0; i < sigmas.size(); ++i)
+    r[i] = footprints[i] > 0 ? sigmas[i] / footprints[i] : std::numeric_limits<float>::infinity();
+  return r;
+}
+
+// Sets the filter's median and threshold in *st from the points' footprint-relative σ_n.
+void SetUncertaintyThreshold(std::vector<float> relative, const FusionOptions& opt, FusionStats* st) {
+  if (!(opt.max_relative_uncertainty > 0) || relative.empty()) return;
+  const size_t mid = relative.size() / 2;
+  std::nth_element(relative.begin(), relative.begin() + static_cast<std::ptrdiff_t>(mid), relative.end());
+  st->median_uncertainty = relative[mid];
   st->max_uncertainty = opt.max_relative_uncertainty * st->median_uncertainty;
 }
 
@@ -298,8 +309,8 @@ float StatedSigma(float sigma_n, double scale, const FusionOptions& opt) {
   return std::isfinite(s) ? static_cast<float>(s) : std::numeric_limits<float>::max();
 }
 
-bool Keep(float sigma, const FusionOptions& opt, const FusionStats& st) {
-  return !(opt.max_relative_uncertainty > 0) || sigma <= st.max_uncertainty;
+bool Keep(float relative_sigma, const FusionOptions& opt, const FusionStats& st) {
+  return !(opt.max_relative_uncertainty > 0) || relative_sigma <= st.max_uncertainty;
 }
 
 }  // namespace
@@ -322,7 +333,7 @@ io::OrientedPointCloud FuseDepthMaps(const std::map<uint32_t, FusionView>& views
   }
   io::OrientedPointCloud cloud;
   std::vector<int> support_of;
-  std::vector<float> sigma_of, scatter_of;
+  std::vector<float> sigma_of, scatter_of, footprint_of;
   FuseMaps(*maps, opt, &st, [&](FusedPoint&& p) {
     cloud.positions.push_back(p.position);
     cloud.normals.push_back(p.normal);
@@ -331,14 +342,16 @@ io::OrientedPointCloud FuseDepthMaps(const std::map<uint32_t, FusionView>& views
     support_of.push_back(p.support);
     sigma_of.push_back(p.sigma);
     scatter_of.push_back(p.scatter);
+    footprint_of.push_back(p.footprint);
   });
-  SetUncertaintyThreshold(sigma_of, opt, &st);
+  const std::vector<float> relative = RelativeSigmas(sigma_of, footprint_of);
+  SetUncertaintyThreshold(relative, opt, &st);
   st.sigma_scale = opt.write_sigma ? SigmaScale(sigma_of, scatter_of) : 0;
   if (opt.write_sigma) cloud.sigma.resize(cloud.size());
   // In place (no second copy of the cloud).
   size_t j = 0;
   for (size_t i = 0; i < cloud.size(); ++i) {
-    if (!Keep(sigma_of[i], opt, st)) {
+    if (!Keep(relative[i], opt, st)) {
       ++st.rejected_uncertainty;
       continue;
     }
@@ -380,7 +393,7 @@ size_t FuseDepthMapsToPly(std::map<uint32_t, FusionView> views, const FusionOpti
       std::filesystem::remove(path, ec);
     }
   } scratch_guard{scratch};
-  std::vector<float> sigma_of, scatter_of;
+  std::vector<float> sigma_of, scatter_of, footprint_of;
   std::vector<uint8_t> support_of;
   {
     std::ofstream out(scratch, std::ios::binary);
@@ -403,18 +416,21 @@ size_t FuseDepthMapsToPly(std::map<uint32_t, FusionView> views, const FusionOpti
       out.write(rec.data(), static_cast<std::streamsize>(rec.size()));
       sigma_of.push_back(p.sigma);
       scatter_of.push_back(p.scatter);
+      footprint_of.push_back(p.footprint);
       support_of.push_back(static_cast<uint8_t>(std::min(p.support, 255)));
     });
     out.flush();
     if (!out) throw Error(scratch.string() + ": write failed (" + std::strerror(errno) + ")");
   }
   views.clear();
-  SetUncertaintyThreshold(sigma_of, opt, &st);
+  const std::vector<float> relative = RelativeSigmas(sigma_of, footprint_of);
+  footprint_of = {};
+  SetUncertaintyThreshold(relative, opt, &st);
   st.sigma_scale = opt.write_sigma ? SigmaScale(sigma_of, scatter_of) : 0;
   scatter_of = {};
   size_t kept = 0;
   for (size_t i = 0; i < sigma_of.size(); ++i)
-    if (Keep(sigma_of[i], opt, st)) ++kept, ++st.views_histogram[support_of[i]];
+    if (Keep(relative[i], opt, st)) ++kept, ++st.views_histogram[support_of[i]];
   st.rejected_uncertainty = sigma_of.size() - kept;
   // Pass 2: the kept records, behind the header of io::WritePointCloudPly's layout.
   core::WriteAtomically(ply, [&](const std::filesystem::path& tmp) {
@@ -433,7 +449,7 @@ size_t FuseDepthMapsToPly(std::map<uint32_t, FusionView> views, const FusionOpti
       const size_t n = static_cast<uint8_t>(rec[kFixed - 1]);
       if (n > 0 && !in.read(rec + kFixed, static_cast<std::streamsize>(4 * n)))
         throw Error(scratch.string() + ": truncated");
-      if (!Keep(sigma_of[i], opt, st)) continue;
+      if (!Keep(relative[i], opt, st)) continue;
       if (opt.write_sigma) {  // between the colour and the visibility list, as io::WritePointCloudPly puts it
         out.write(rec, static_cast<std::streamsize>(kFixed - 1));
         const float sigma = StatedSigma(sigma_of[i], st.sigma_scale, opt);

@@ -32,12 +32,14 @@
 //     Weak, blurred or ramp-like texture makes p_i large (TexturePrecisionMap; the unknown noise level
 //     cancels below). Without a texture map p_i = 1.
 // Then Λ = Σ_i (I − d_i d_iᵀ) / σ_i² and σ_n = sqrt(nᵀ Λ⁻¹ n), which also grows when the view directions
-// are close together (small triangulation angle). Points whose σ_n exceeds max_relative_uncertainty times the
-// median σ_n of the cloud are dropped: surface resolved an order of magnitude worse than the scene's typical
-// surface (far, weakly textured land seen at grazing angles), which makes the tail of the cloud's error
-// distribution. The threshold is relative, so it does not depend on the scene's units, the working
-// resolution or the image noise; COLMAP's and OpenMVS's filters on triangulation angle and view count aim at
-// the same points with absolute thresholds.
+// are close together (small triangulation angle). The filter compares σ_n with the reference pixel's
+// footprint at the point (depth / focal): that ratio says how well the point is resolved for its distance
+// (triangulation angle, texture), not how far it is. Points whose ratio exceeds max_relative_uncertainty times
+// the cloud's median ratio are dropped: low parallax for their distance or weak texture, which make the tail
+// of the cloud's error distribution. Far surface resolved by a wide enough baseline is kept, with the large σ
+// it states (below): the relative threshold does not depend on the scene's units, the working resolution or
+// the image noise; COLMAP's and OpenMVS's filters on triangulation angle and view count aim at the same points
+// with absolute thresholds.
 //
 // Stated σ (write_sigma): σ_n in world units, written per point (PLY property "sigma"). σ_n is known up to the
 // common pixel-precision factor; the cloud measures that factor itself: for every point fused from two or more
@@ -68,7 +70,7 @@ struct FusionOptions {
   bool visibility_filter = true;
   int edge_erosion_px = 4;               // 0 = off; about PatchMatch's window radius
   double edge_depth_jump = 0.05;         // relative depth step that makes an occluding edge
-  double max_relative_uncertainty = 10;  // 0 = off; drop points with σ_n > this · the median σ_n (above)
+  double max_relative_uncertainty = 10;  // 0 = off; drop points with σ_n / footprint > this · its median (above)
   bool write_sigma = true;               // compute and write each point's stated σ (above)
   double sigma_coverage = 3;             // stated σ = this × the measured per-point standard deviation
   void Check() const;
@@ -89,14 +91,14 @@ FusionView MakeFusionView(const ViewGeometry& geom, const DepthMap& map, const c
                           std::vector<uint32_t> neighbours);
 
 struct FusionStats {
-  size_t candidates = 0;                  // pixels with depth examined
-  size_t rejected_support = 0;            // too few consistent views
-  size_t rejected_visibility = 0;         // free-space conflicts
-  size_t edge_pixels = 0;                 // pixels removed on the foreground side of depth discontinuities
-  size_t rejected_uncertainty = 0;        // fused points dropped by the uncertainty filter
-  double median_uncertainty = 0;          // median σ_n of the fused points before that filter (world units)
-  double max_uncertainty = 0;             // the threshold applied (0 when the filter is off)
-  double sigma_scale = 0;                 // world units per unit of σ_n (stated σ, above); 0 when not measured
+  size_t candidates = 0;            // pixels with depth examined
+  size_t rejected_support = 0;      // too few consistent views
+  size_t rejected_visibility = 0;   // free-space conflicts
+  size_t edge_pixels = 0;           // pixels removed on the foreground side of depth discontinuities
+  size_t rejected_uncertainty = 0;  // fused points dropped by the uncertainty filter
+  double median_uncertainty = 0;    // median σ_n / footprint of the fused points before that filter (pixels, up to p)
+  double max_uncertainty = 0;       // the threshold applied to σ_n / footprint (0 when the filter is off)
+  double sigma_scale = 0;           // world units per unit of σ_n (stated σ, above); 0 when not measured
   std::map<int, size_t> views_histogram;  // number of consistent views → points
 };
 
