@@ -99,7 +99,7 @@ double Rms3d(const std::vector<GcpResult>& points, GcpStatus status, int* n) {
   return *n ? std::sqrt(sse / *n) : 0.0;
 }
 
-// RMS reprojection error (pixels) of the clicks of the GCPs `ids` at their known coordinates (the points' priors).
+// RMS reprojection error (pixels) of the observations of the points `known` at the given positions.
 double ClickRms(const core::Reconstruction& rec, const std::map<uint64_t, Eigen::Vector3d>& known) {
   double sse = 0;
   size_t n = 0;
@@ -142,8 +142,16 @@ void AdjustWithGcps(const std::vector<GroundControlPoint>& gcps, const std::vect
     rec.points.emplace(P.id, std::move(P));
   }
   adj->gcp_rms_px_before = ClickRms(rec, config.point_priors);
-  sfm::BundleAdjustmentOptions bo;  // the intrinsics stay the sparse stage's: a few clicks should not move them
-  bo.refine_focal = bo.refine_k1 = bo.refine_k2 = false;
+  // The clicks weigh by their accuracy against the automatic observations': (σ_auto / σ_click)², both measured.
+  std::map<uint64_t, Eigen::Vector3d> automatic;
+  for (const auto& [id, P] : enu->points) automatic[id] = P.xyz;
+  const double auto_rms = automatic.empty() ? 1.0 : ClickRms(*enu, automatic);
+  config.point_prior_observation_weight =
+      adj->gcp_rms_px_before > auto_rms ? std::pow(auto_rms / adj->gcp_rms_px_before, 2) : 1.0;
+  adj->click_weight = config.point_prior_observation_weight;
+  sfm::BundleAdjustmentOptions bo;  // the focal is free: with the GCPs it is no longer traded against depth
+  bo.refine_focal = options.refine_focal;
+  bo.refine_k1 = bo.refine_k2 = false;
   const sfm::BundleAdjustmentSummary summary = sfm::BundleAdjust(&rec, config, bo);
   adj->seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   if (!summary.success) {
@@ -254,6 +262,7 @@ nlohmann::json AdjustmentJson(const GcpAdjustment& a) {
   if (!a.applied) return {{"applied", false}, {"why_not", a.why_not}};
   return {{"applied", true},
           {"gcp_observations", a.observations},
+          {"click_weight", a.click_weight},
           {"gcp_reprojection_rms_px_before", a.gcp_rms_px_before},
           {"gcp_reprojection_rms_px_after", a.gcp_rms_px_after},
           {"reprojection_rms_px_before", a.rms_px_before},

@@ -35,6 +35,7 @@ struct GcpGeorefOptions {
   std::optional<GeoPoint> origin;  // default: the centroid of the GCPs (WGS84)
   int min_control_points = 3;
   bool adjust = true;         // step 4
+  bool refine_focal = true;   // step 4 adjusts the focal too (an orbit trades it against the cameras' distance)
   double gcp_sigma_m = 0.02;  // survey accuracy of a control point's coordinates, per axis (step 4's priors)
   void Check() const;
 };
@@ -62,8 +63,9 @@ struct GcpResult {
 // Step 4's bundle adjustment, as georef.json reports it.
 struct GcpAdjustment {
   bool applied = false;
-  std::string why_not;                                 // when not applied
-  int observations = 0;                                // control-point clicks in the adjustment
+  std::string why_not;      // when not applied
+  int observations = 0;     // control-point clicks in the adjustment
+  double click_weight = 1;  // their weight against an automatic observation: (σ_auto / σ_click)²
   double gcp_rms_px_before = 0, gcp_rms_px_after = 0;  // RMS reprojection error of those clicks
   double rms_px_before = 0, rms_px_after = 0;          // of every observation
   double max_camera_shift_m = 0;                       // largest camera centre move against the similarity placement

@@ -171,9 +171,12 @@ class BundleProblem {
                                                            ceres::DO_NOT_TAKE_OWNERSHIP);
     }
     if (!config.point_priors.empty()) {
-      if (!(config.point_prior_sigma > 0) || !(config.point_prior_loss_px > 0))
-        throw Error("bundle adjustment: point_prior_sigma and point_prior_loss_px must be positive");
-      prior_point_loss_ = std::make_unique<ceres::HuberLoss>(config.point_prior_loss_px);
+      if (!(config.point_prior_sigma > 0) || !(config.point_prior_loss_px > 0) ||
+          !(config.point_prior_observation_weight > 0))
+        throw Error("bundle adjustment: point_prior_sigma, _loss_px and _observation_weight must be positive");
+      prior_point_loss_ =
+          std::make_unique<ceres::ScaledLoss>(new ceres::HuberLoss(config.point_prior_loss_px),
+                                              config.point_prior_observation_weight, ceres::TAKE_OWNERSHIP);
     }
     AllocateCameraBlocks();
   }
