@@ -10,10 +10,11 @@
 //      Jacobians of its projections): ≥ 3 control points, not collinear.
 //   4. Bundle adjustment with GCP constraints (unless options.adjust is off): the model, carried to ENU by that
 //      similarity, is adjusted with the control points as extra 3D points held (softly, σ = gcp_sigma_m) at their
-//      coordinates and their clicks as reprojection residuals beside every automatic observation. The datum is then
-//      fitted to the clicks themselves, each weighed by its actual geometry (not by one scalar per point), and the
-//      cameras and points move with it, so the model's shape, not only its placement, follows the GCPs. The
-//      intrinsics stay as the sparse stage left them. `sim` becomes the least-squares similarity of the sparse
+//      coordinates and their clicks as reprojection residuals beside every automatic observation, weighted by
+//      (σ_auto / σ_click)², both measured, so that a camera's pose does not bend towards its own few noisy clicks.
+//      The datum is then fitted to the clicks themselves, each weighed by its actual geometry (not by one scalar
+//      per point), and cameras, points and the focal move with it, so the model's shape, not only its placement,
+//      follows the GCPs (k1, k2 stay the sparse stage's). `sim` becomes the least-squares similarity of the sparse
 //      model's camera centres onto the adjusted ones (for products made from sparse/).
 //   5. Each point's residual |X − X_enu| in metres, X triangulated again with the final (adjusted) cameras: for
 //      control points the fit's own residual, for check points (left out of the fit) the independent accuracy.
