@@ -1,11 +1,16 @@
-// `fmv3d calibrate --board 9x6 --square 0.025 IMAGES... -o camera.json [--save-as NAME]`: chessboard
-// calibration. Writes camera.json, camera.yaml (OpenCV), camera-distortion.png and camera-corners/NAME.png.
+// `fmv3d calibrate --board 9x6 --square 0.025 INPUTS... -o camera.json [--save-as NAME] [--drop NAME]...`:
+// chessboard calibration from images, folders of them, or calibration videos (calib/board_video.h: frames sampled,
+// boards detected, a spread subset kept). Writes camera.json, camera.yaml (OpenCV), camera-distortion.png,
+// camera-corners/NAME.png and, for videos, the kept frames as camera-frames/NAME.png.
 #include <spdlog/spdlog.h>
 
 #include <cstdio>
 #include <memory>
+#include <nlohmann/json.hpp>
+#include <set>
 
 #include "command.h"
+#include "fmv3d/calib/board_video.h"
 #include "fmv3d/calib/camera_file.h"
 #include "fmv3d/calib/chessboard.h"
 #include "fmv3d/calib/sensor_db.h"
@@ -25,26 +30,58 @@ struct CalibArgs {
   std::vector<std::string> images;
   std::string output;
   std::string save_as;
+  std::vector<std::string> drop;
+  calib::VideoBoardOptions video;
 };
+
+// The board views of every input: images as they are (unless dropped), videos through DetectBoardsInVideo.
+// Video frames are written to frames_dir, so that they can be looked at (the console's window shows them).
+void CollectViews(const CalibArgs& a, const calib::BoardSpec& board, const fs::path& frames_dir,
+                  std::vector<calib::BoardDetection>* detections, std::vector<cv::Mat>* images,
+                  nlohmann::json* videos) {
+  const std::set<std::string> drop(a.drop.begin(), a.drop.end());
+  const auto files = ingest::ExpandInputs(std::vector<fs::path>(a.images.begin(), a.images.end()));
+  core::Progress progress("detect", files.size());
+  for (const auto& file : files) {
+    if (io::HasVideoExtension(file)) {
+      calib::VideoBoardViews v = calib::DetectBoardsInVideo(file, board, a.video, drop);
+      core::EnsureDirectory(frames_dir);
+      for (size_t k = 0; k < v.detections.size(); ++k) {
+        io::WriteImage(frames_dir / v.detections[k].name, v.images[k]);
+        detections->push_back(std::move(v.detections[k]));
+        images->push_back(std::move(v.images[k]));
+      }
+      std::printf("%s: %d frames sampled, board found in %d, %zu kept (spread)%s\n", file.filename().c_str(), v.sampled,
+                  v.found, v.images.size(),
+                  v.excluded.empty() ? "" : (", " + std::to_string(v.excluded.size()) + " dropped").c_str());
+      videos->push_back({{"video", file.filename().string()},
+                         {"sampled", v.sampled},
+                         {"found", v.found},
+                         {"kept", v.images.size()},
+                         {"dropped", v.excluded}});
+    } else if (!drop.count(file.filename().string())) {
+      images->push_back(ingest::ReadInputImage(file));
+      detections->push_back(calib::DetectChessboard(images->back(), board, file.filename().string()));
+    }
+    progress.Add();
+  }
+}
 
 void Run(const CalibArgs& a) {
   const calib::BoardSpec board = calib::BoardSpec::Parse(a.board, a.square);
-  const auto files = ingest::ExpandInputs(std::vector<fs::path>(a.images.begin(), a.images.end()));
   const fs::path out(a.output);
   const fs::path stem = out.parent_path() / out.stem();
-  const fs::path corners_dir = stem.string() + "-corners";
+  const fs::path corners_dir = stem.string() + "-corners", frames_dir = stem.string() + "-frames";
+  std::error_code ec;
+  fs::remove_all(frames_dir, ec);  // a previous run's video frames
   core::EnsureDirectory(corners_dir);
-
-  std::vector<calib::BoardDetection> detections(files.size());
-  {
-    core::Progress progress("detect", files.size());
-    for (size_t i = 0; i < files.size(); ++i) {
-      const cv::Mat img = ingest::ReadInputImage(files[i]);
-      detections[i] = calib::DetectChessboard(img, board, files[i].filename().string());
-      io::WriteImage(corners_dir / (files[i].stem().string() + ".png"), calib::DrawCorners(img, detections[i], board));
-      progress.Add();
-    }
-  }
+  std::vector<calib::BoardDetection> detections;
+  std::vector<cv::Mat> images;
+  nlohmann::json videos = nlohmann::json::array();
+  CollectViews(a, board, frames_dir, &detections, &images, &videos);
+  for (size_t i = 0; i < detections.size(); ++i)
+    io::WriteImage(corners_dir / (fs::path(detections[i].name).stem().string() + ".png"),
+                   calib::DrawCorners(images[i], detections[i], board));
   const calib::CalibrationResult r = calib::Calibrate(detections, board);
   std::printf("%-28s %s\n", "image", "RMS px");
   for (size_t i = 0; i < r.used.size(); ++i) std::printf("%-28s %.4f\n", r.used[i].c_str(), r.per_image_rms[i]);
@@ -63,6 +100,12 @@ void Run(const CalibArgs& a) {
   std::printf("p2     %12.6f  +- %.6f\n", c.p2, s[core::kP2]);
 
   calib::WriteCameraJson(out, r);
+  if (!videos.empty()) {  // where the kept frames came from
+    nlohmann::json j = core::ReadJson(out);
+    j["videos"] = videos;
+    j["frames_dir"] = frames_dir.filename().string();
+    core::WriteJson(out, j);
+  }
   const fs::path yaml = stem.string() + ".yaml";
   calib::WriteOpenCvYaml(yaml, c, r.rms);
   const fs::path field = stem.string() + "-distortion.png";
@@ -82,7 +125,12 @@ void Add(CLI::App& app) {
   auto a = std::make_shared<CalibArgs>();
   cmd->add_option("--board", a->board, "Inner corners COLSxROWS")->capture_default_str();
   cmd->add_option("--square", a->square, "Square side in metres")->capture_default_str();
-  cmd->add_option("IMAGES", a->images, "Board images or folders")->required();
+  cmd->add_option("INPUTS", a->images, "Board images, folders of them, or calibration videos")->required();
+  cmd->add_option("--drop", a->drop, "Leave out this image or video frame (file name, e.g. calib-000120.png)");
+  cmd->add_option("--video-samples", a->video.samples, "Videos: frames sampled evenly over each")
+      ->capture_default_str();
+  cmd->add_option("--max-views", a->video.max_views, "Videos: views kept per video, spread over image and pose")
+      ->capture_default_str();
   cmd->add_option("-o,--output", a->output, "camera.json to write (also .yaml, -distortion.png, -corners/)")
       ->required();
   cmd->add_option("--save-as", a->save_as, "Also add the camera to your sensor database under NAME");

@@ -43,7 +43,11 @@ void Add(CLI::App& app) {
                   "Ground control points (OpenDroneMap gcp_list.txt) instead of "
                   "WS/manual/gcp_list.txt; GCPs outrank telemetry");
   auto* no_gcp = cmd->add_flag("--no-gcp", "Ignore WS/manual/gcp_list.txt (georeference from telemetry)");
-  cmd->callback([a, kf_only, no_fc, no_gcp] {
+  auto* no_adjust = cmd->add_flag("--gcp-no-adjust",
+                                  "GCPs: the similarity from the triangulated GCPs only, without the bundle adjustment "
+                                  "that holds the control points at their coordinates");
+  cmd->callback([a, kf_only, no_fc, no_gcp, no_adjust] {
+    a->opt.gcp_adjust = no_adjust->count() == 0;
     if (!a->gcp.empty()) a->opt.gcp_file = a->gcp;
     a->opt.use_gcps = no_gcp->count() == 0;
     a->opt.use_track = kf_only->count() == 0;

@@ -56,6 +56,8 @@ TEST(ManualMatches, TiePointsAddedKeptAndReported) {
   pairs[0].image_id2 = 2;
   pairs[0].F = SidewaysF();
   pairs[0].inliers = {{3, 4}, {5, 6}};
+  pairs[0].geometry = PairGeometry::kUncalibrated;
+  pairs[0].num_inliers_F = 40;  // an F that can judge (see below)
   io::TiePoints t;
   // On the epipolar line in f0/f1 (same row), and seen in f2 (no automatic pair with either).
   t.tie_points.push_back({"a", "", {{"f0.png", 100, 200}, {"f1.png", 150, 200.5}, {"f2.png", 300, 100}}});
@@ -64,6 +66,17 @@ TEST(ManualMatches, TiePointsAddedKeptAndReported) {
   t.deleted_matches.push_back({"f1.png", "f0.png", 6, 5});  // frame order reversed: still found
   t.deleted_matches.push_back({"f0.png", "f1.png", 7, 7});  // not a match
   ManualMatchOptions o;
+  // An F from matches on one plane, or from a few inliers, is not determined off them: nothing is judged by it.
+  for (const auto& [geometry, inliers] :
+       {std::make_pair(PairGeometry::kPlanarOrRotation, 40u), std::make_pair(PairGeometry::kUncalibrated, 15u)}) {
+    std::vector<FeatureSet> f2 = feats;
+    std::vector<VerifiedPair> p2 = pairs;
+    p2[0].geometry = geometry;
+    p2[0].num_inliers_F = inliers;
+    ManualMatches m2 = AppendManualKeypoints(t, index, {}, &f2, o);
+    ApplyManualMatches(t, index, f2, o, &m2, &p2);
+    EXPECT_TRUE(m2.disagreeing.empty()) << inliers;
+  }
   ManualMatches m = AppendManualKeypoints(t, index, {}, &feats, o);
   ASSERT_EQ(m.appended.size(), 3u);
   EXPECT_EQ(m.appended.at(0).first_index, 50u);

@@ -1,5 +1,6 @@
-// The camera calibration window (#/calibration/WS): choose uploaded chessboard images (or upload more), board
-// size and square; run `fmv3d calibrate` on the server; then each image with its detected corners and the
+// The camera calibration window (#/calibration/WS): choose uploaded chessboard images or calibration videos (or
+// upload more), board size and square; run `fmv3d calibrate` on the server (a video's frames are sampled, the
+// board detected in each and a spread subset kept); then each image with its detected corners and the
 // reprojection residual vectors (exaggerated), the per-image RMS as a bar chart (drop an image with one click and
 // re-run), the distortion field and the fitted parameters with their standard deviations; save the camera as a
 // sensor-database entry (`fmv3d frames --sensor NAME` then uses it).
@@ -16,6 +17,8 @@ export function mountCalibration(el: HTMLElement, ws: string | null): () => void
   const msg = h('div', { class: 'msg', id: 'cal-msg' });
   const say = (text: string, kind: 'ok' | 'error' | '' = '') => { msg.textContent = text; msg.className = `msg ${kind}`; };
   const chosen = new Set<string>();
+  const dropped = new Set<string>();  // video frames left out (an image is dropped by unticking it)
+  const isVideo = (p: string) => /\.(mp4|m4v|mov|avi|mkv|ts|mts|m2ts|mpg|mpeg|webm)$/i.test(p);
   let candidates: string[] = [];
   let timer: number | undefined;
   let disposed = false;
@@ -23,7 +26,7 @@ export function mountCalibration(el: HTMLElement, ws: string | null): () => void
 
   const boardIn = h('input', { id: 'cal-board', value: '9x6', size: 6 });
   const squareIn = h('input', { id: 'cal-square', value: '0.025', size: 7 });
-  const uploadIn = h('input', { type: 'file', id: 'cal-upload', multiple: true, accept: 'image/*' });
+  const uploadIn = h('input', { type: 'file', id: 'cal-upload', multiple: true, accept: 'image/*,video/*' });
   const imageList = h('div', { class: 'cal-images', id: 'cal-images' });
   const params = h('div', { id: 'cal-params' });
   const bars = h('div', { id: 'cal-bars' });
@@ -32,7 +35,7 @@ export function mountCalibration(el: HTMLElement, ws: string | null): () => void
   const sensorName = h('input', { id: 'cal-sensor-name', placeholder: 'sensor name', size: 16 });
   const logBox = h('pre', { class: 'log', id: 'cal-log' });
   el.append(h('div', { class: 'cal' },
-    h('div', { class: 'card' }, h('h2', {}, 'Chessboard images'),
+    h('div', { class: 'card' }, h('h2', {}, 'Chessboard images or calibration video'),
       h('div', { class: 'row' }, h('label', { class: 'inline' }, 'upload ', uploadIn),
         h('label', { class: 'inline' }, 'inner corners ', boardIn), h('label', { class: 'inline' }, 'square (m) ', squareIn),
         h('button', { id: 'cal-run', onclick: () => void run() }, 'Calibrate')),
@@ -50,7 +53,8 @@ export function mountCalibration(el: HTMLElement, ws: string | null): () => void
       h('input', { type: 'checkbox', checked: chosen.has(p), 'data-path': p, onchange: (e: Event) => {
         if ((e.target as HTMLInputElement).checked) chosen.add(p); else chosen.delete(p);
       } }),
-      h('img', { src: fileURL(ws!, p), alt: p }), h('span', {}, p.replace(/^uploads\//, '')))));
+      isVideo(p) ? h('span', { class: 'cal-video' }, '▶ video') : h('img', { src: fileURL(ws!, p), alt: p }),
+      h('span', {}, p.replace(/^uploads\//, '')))));
   }
 
   uploadIn.addEventListener('change', async () => {
@@ -59,14 +63,15 @@ export function mountCalibration(el: HTMLElement, ws: string | null): () => void
       const r = await api.upload(ws!, uploadIn.files);
       for (const p of r.paths) { if (!candidates.includes(p)) candidates.push(p); chosen.add(p); }
       renderImages();
-      say(`uploaded ${r.paths.length} image(s)`, 'ok');
+      say(`uploaded ${r.paths.length} file(s)`, 'ok');
     } catch (e) { say(`upload failed: ${(e as Error).message}`, 'error'); }
     uploadIn.value = '';
   });
 
   async function run() {
     try {
-      const c = await manualApi.runCalibration(ws!, { images: [...chosen], board: boardIn.value.trim(), square: Number(squareIn.value) });
+      const c = await manualApi.runCalibration(ws!, { images: [...chosen], board: boardIn.value.trim(), square: Number(squareIn.value),
+        drop: [...dropped] });
       say('calibrating…');
       show(c);
       poll();
@@ -91,7 +96,10 @@ export function mountCalibration(el: HTMLElement, ws: string | null): () => void
     if (c.request) {
       boardIn.value = `${c.request.board.cols}x${c.request.board.rows}`;
       squareIn.value = String(c.request.square);
-      if (c.state !== 'running') { chosen.clear(); for (const p of c.request.images) chosen.add(p); }
+      if (c.state !== 'running') {
+        chosen.clear(); for (const p of c.request.images) chosen.add(p);
+        dropped.clear(); for (const d of c.request.drop ?? []) dropped.add(d);
+      }
       for (const p of c.request.images) if (!candidates.includes(p)) candidates.push(p);
     }
     renderImages();
@@ -100,7 +108,8 @@ export function mountCalibration(el: HTMLElement, ws: string | null): () => void
       say(`calibration failed: ${last}`, 'error');
     }
     if (c.state !== 'done' || !c.result) { params.replaceChildren(); bars.replaceChildren(); viewer.replaceChildren(); field.replaceChildren(); return; }
-    say(`calibrated: RMS ${fmtNumber(c.result.rms, 3)} px over ${c.result.images.length} images` +
+    const videos = (c.result.videos ?? []).map((v) => `; ${v.video}: ${v.sampled} frames sampled, board in ${v.found}, ${v.kept} kept`).join('');
+    say(`calibrated: RMS ${fmtNumber(c.result.rms, 3)} px over ${c.result.images.length} images${videos}` +
       (c.result.rejected.length ? ` (${c.result.rejected.length} without a board: ${c.result.rejected.join(', ')})` : ''), 'ok');
     renderParams(c.result);
     renderBars(c);
@@ -156,7 +165,9 @@ export function mountCalibration(el: HTMLElement, ws: string | null): () => void
   }
 
   function dropImage(c: Calibration, name: string) {
-    for (const p of [...chosen]) if (p.split('/').pop() === name) chosen.delete(p);
+    let image = false;
+    for (const p of [...chosen]) if (p.split('/').pop() === name) { chosen.delete(p); image = true; }
+    if (!image) dropped.add(name);  // a frame of a video
     say(`dropped ${name}; re-running…`);
     void run();
     void c;
@@ -166,7 +177,8 @@ export function mountCalibration(el: HTMLElement, ws: string | null): () => void
     shownImage = name;
     const r = c.result!;
     const im = r.images.find((i) => i.name === name);
-    const path = c.request?.images.find((p) => p.split('/').pop() === name);
+    const path = c.request?.images.find((p) => p.split('/').pop() === name) ??
+      (c.frames_dir ? `${c.frames_dir}/${name}` : undefined);
     if (!im || !path) return;
     const canvas = h('canvas', { class: 'cal-canvas', id: 'cal-canvas', 'data-image': name });
     // Residual vectors exaggerated so that the largest of all images is ~25 px long, in steps of 1-2-5.

@@ -1,6 +1,6 @@
 // One frame on a canvas for the hand tools: fitted to its box, zoom with the wheel (about the cursor), pan by
-// dragging with the right or middle button, a zoom loupe that follows the cursor, and overlays drawn by the
-// page in image coordinates. Image coordinates are fmv3d's: origin at the image's top-left corner, pixel centres
+// dragging with the right or middle button, drag with the left button what the page lets grab (its markers), a
+// zoom loupe that follows the cursor, and overlays drawn by the page in image coordinates. Image coordinates are fmv3d's: origin at the image's top-left corner, pixel centres
 // at +0.5, so a click at canvas position p is the image point (p − offset) / scale, unrounded.
 import { h } from './dom';
 
@@ -24,6 +24,14 @@ export class FrameView {
   private drag: { x: number; y: number; ox: number; oy: number } | null = null;
   overlays: Overlay[] = [];
   onClick: ((x: number, y: number, ev: MouseEvent) => void) | null = null;
+  /** Left-button drag of something the page owns: onGrab says whether a press at image point (x, y) takes hold of
+   *  it; onDrag follows the mouse once it has moved (≥ 2 CSS px); onDrop ends a drag. A press that never moves
+   *  stays a click. */
+  onGrab: ((x: number, y: number) => boolean) | null = null;
+  onDrag: ((x: number, y: number) => void) | null = null;
+  onDrop: ((x: number, y: number) => void) | null = null;
+  private grab: { x: number; y: number; moved: boolean } | null = null;
+  private swallowClick = false;
   private resize = new ResizeObserver(() => this.fit());
 
   constructor(readonly id: string, readonly title: HTMLElement = h('div', { class: 'fv-title' })) {
@@ -43,11 +51,27 @@ export class FrameView {
       this.draw();
     }, { passive: false });
     this.canvas.addEventListener('mousedown', (e) => {
-      if (e.button === 0) return;
+      this.swallowClick = false;
+      if (e.button === 0) {
+        if (this.img && this.onGrab?.(...this.toImage(e.offsetX, e.offsetY))) this.grab = { x: e.clientX, y: e.clientY, moved: false };
+        return;
+      }
       this.drag = { x: e.clientX, y: e.clientY, ox: this.offX, oy: this.offY };
     });
-    window.addEventListener('mouseup', () => { this.drag = null; });
+    window.addEventListener('mouseup', (e) => {
+      this.drag = null;
+      const g = this.grab;
+      this.grab = null;
+      if (!g?.moved) return;
+      this.swallowClick = true;  // the click that follows this mouseup ends the drag, it adds nothing
+      const r = this.canvas.getBoundingClientRect();
+      this.onDrop?.(...this.clampToImage(e.clientX - r.left, e.clientY - r.top));
+    });
     this.canvas.addEventListener('mousemove', (e) => {
+      if (this.grab) {
+        this.grab.moved ||= Math.hypot(e.clientX - this.grab.x, e.clientY - this.grab.y) >= 2;
+        if (this.grab.moved) this.onDrag?.(...this.clampToImage(e.offsetX, e.offsetY));
+      }
       if (this.drag) {
         this.offX = this.drag.ox + e.clientX - this.drag.x;
         this.offY = this.drag.oy + e.clientY - this.drag.y;
@@ -57,6 +81,7 @@ export class FrameView {
     });
     this.canvas.addEventListener('mouseleave', () => { this.cursor = null; this.draw(); });
     this.canvas.addEventListener('click', (e) => {
+      if (this.swallowClick) { this.swallowClick = false; return; }
       if (!this.img || e.button !== 0) return;
       const [x, y] = this.toImage(e.offsetX, e.offsetY);
       if (x < 0 || y < 0 || x > this.imageWidth || y > this.imageHeight) return;
@@ -80,6 +105,10 @@ export class FrameView {
 
   /** Image coordinates of a canvas (CSS px) position. */
   toImage(cx: number, cy: number): [number, number] { return [(cx - this.offX) / this.scale, (cy - this.offY) / this.scale]; }
+  private clampToImage(cx: number, cy: number): [number, number] {
+    const [x, y] = this.toImage(cx, cy);
+    return [Math.min(this.imageWidth, Math.max(0, x)), Math.min(this.imageHeight, Math.max(0, y))];
+  }
   /** Canvas (CSS px) position of an image point. */
   toCanvas(x: number, y: number): [number, number] { return [this.offX + x * this.scale, this.offY + y * this.scale]; }
   /** Page (client) position of an image point: what a test clicks. */

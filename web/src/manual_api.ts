@@ -27,11 +27,12 @@ export interface CalibResult {
   width: number; height: number; f: number; aspect: number; u0: number; v0: number; k1: number; k2: number;
   p1: number; p2: number; rms: number; stddev: Record<string, number>; images: CalibImage[]; rejected: string[];
   board: { cols: number; rows: number; square: number };
+  videos?: { video: string; sampled: number; found: number; kept: number; dropped: string[] }[];
 }
 export interface Calibration {
   state: 'none' | 'running' | 'done' | 'failed'; log: string[];
-  request: { board: { cols: number; rows: number }; square: number; images: string[] } | null;
-  result: CalibResult | null; distortion_png?: string; corners_dir?: string; uploads: string[];
+  request: { board: { cols: number; rows: number }; square: number; images: string[]; drop?: string[] } | null;
+  result: CalibResult | null; distortion_png?: string; corners_dir?: string; frames_dir?: string; uploads: string[];
 }
 
 const w = (ws: string) => `api/workspaces/${encodeURIComponent(ws)}`;
@@ -51,7 +52,7 @@ export const manualApi = {
   },
   gcpExportPath: (ws: string) => `${w(ws)}/gcp_list.txt`,
   calibration: (ws: string) => request<Calibration>('GET', `${w(ws)}/calibration`),
-  runCalibration: (ws: string, body: { images: string[]; board: string; square: number }) =>
+  runCalibration: (ws: string, body: { images: string[]; board: string; square: number; drop?: string[] }) =>
     request<Calibration>('POST', `${w(ws)}/calibration`, body),
   saveSensor: (ws: string, name: string) =>
     request<{ name: string; database: string }>('POST', `${w(ws)}/calibration/save`, { name }),

@@ -1,9 +1,11 @@
 // The keypoint and tie-point editor (#/tiepoints/WS): a frame strip (registered / left out and why), two frames
 // side by side with their SIFT keypoints (scale circles, orientation ticks) and the verified matches of the pair
 // (inliers / rejected). The operator clicks the same ground point in two or more frames (loupe; the epipolar
-// line of the point in the other frame when the pair's geometry is known), moves points by clicking again,
+// line of the point in the other frame when the pair's geometry is known), moves points by dragging them (or by
+// clicking again with the tie point chosen),
 // deletes tie points and wrong automatic matches, adds single-frame points of interest, undoes / redoes, saves
-// manual/tiepoints.json and re-runs the reconstruction from matching with one button.
+// manual/tiepoints.json (or imports one, checked whole by the server) and re-runs the reconstruction from matching
+// with one button.
 import { api, fileURL, ApiError, type Job } from './api';
 import { h } from './dom';
 import { store } from './store';
@@ -58,6 +60,7 @@ export function mountTiePoints(el: HTMLElement, ws: string | null): () => void {
       show[key] = (e.target as HTMLInputElement).checked; redraw();
     } }), label);
   const jobLine = h('div', { class: 'muted', id: 'tp-job' });
+  const fileIn = h('input', { type: 'file', id: 'tp-import', accept: '.json,application/json' });
   const side = h('div', { class: 'side tp-side' },
     h('h3', {}, 'Frames'), leftOut,
     h('h3', {}, 'Show'), toggle('keypoints', 'keypoints (scale, orientation)'), toggle('inliers', 'verified matches'),
@@ -71,6 +74,7 @@ export function mountTiePoints(el: HTMLElement, ws: string | null): () => void {
     h('div', { class: 'row' },
       h('button', { id: 'tp-save', onclick: () => void save() }, 'Save'),
       h('button', { id: 'tp-rerun', onclick: () => void rerun() }, 'Re-run from matching')),
+    h('div', { class: 'row' }, h('label', { class: 'inline' }, 'import tiepoints.json ', fileIn)),
     msg, jobLine, manualInfo);
   const titleA = views.a.title, titleB = views.b.title;
   el.append(h('div', { class: 'tp' }, stripBox,
@@ -136,6 +140,43 @@ export function mountTiePoints(el: HTMLElement, ws: string | null): () => void {
   }
   views.a.onClick = (x, y) => clicked('a', x, y);
   views.b.onClick = (x, y) => clicked('b', x, y);
+
+  // Dragging a tie point's marker moves that observation: one undo step per drag.
+  let held: { id: string; frame: string; before: string } | null = null;
+  for (const which of ['a', 'b'] as const) {
+    const v = views[which];
+    v.onGrab = (x, y) => {
+      const frame = which === 'a' ? frameA : frameB;
+      held = null;
+      if (mode !== 'tie' || !frame) return false;
+      let bestD = 8 / v.scale;  // within 8 CSS px of the marker
+      for (const t of doc.tie_points) {
+        const o = t.observations.find((p) => p.frame === frame);
+        const d = o ? Math.hypot(o.x - x, o.y - y) : Infinity;
+        if (d < bestD) { bestD = d; held = { id: t.id, frame, before: snapshot() }; }
+      }
+      return held !== null;
+    };
+    v.onDrag = (x, y) => {
+      const o = held && doc.tie_points.find((t) => t.id === held!.id)?.observations.find((p) => p.frame === held!.frame);
+      if (!o) return;
+      o.x = x; o.y = y;
+      current = held!.id;
+      redraw();
+    };
+    v.onDrop = (x, y) => {
+      if (!held) return;
+      const o = doc.tie_points.find((t) => t.id === held!.id)?.observations.find((p) => p.frame === held!.frame);
+      if (o) {
+        o.x = x; o.y = y;
+        undo.push(held.before);
+        redo.length = 0;
+        say(`${held.id} moved in ${held.frame} to ${x.toFixed(2)}, ${y.toFixed(2)}`);
+      }
+      held = null;
+      renderList(); redraw();
+    };
+  }
 
   function isRemoved(m: number[]): boolean {
     return doc.deleted_matches.some((r) => pair && ((r.frame1 === pair.a && r.frame2 === pair.b && r.feature1 === m[0] && r.feature2 === m[1]) ||
@@ -276,6 +317,25 @@ export function mountTiePoints(el: HTMLElement, ws: string | null): () => void {
       return false;
     }
   }
+
+  // An imported file replaces the document only when the server accepted and saved all of it.
+  fileIn.addEventListener('change', async () => {
+    const file = fileIn.files?.[0];
+    if (!file) return;
+    try {
+      let parsed: TiePoints;
+      try { parsed = JSON.parse(await file.text()) as TiePoints; } catch (e) { throw new Error(`${file.name} is not JSON (${(e as Error).message})`); }
+      const before = snapshot();
+      doc = await manualApi.saveTiepoints(ws!, parsed);
+      undo.push(before);
+      redo.length = 0;
+      saved = JSON.stringify(doc);
+      current = null;
+      say(`imported ${file.name}: ${doc.tie_points.length} tie points (saved)`, 'ok');
+      renderList(); redraw();
+    } catch (e) { say(`not imported: ${(e as Error).message}`, 'error'); }
+    fileIn.value = '';
+  });
 
   async function rerun() {
     if (!(await save())) return;

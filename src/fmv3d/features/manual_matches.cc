@@ -156,6 +156,16 @@ void ApplyManualMatches(const io::TiePoints& t, const io::FramesIndex& index, co
     *F = a < b ? f : Eigen::Matrix3d(f.transpose());
     return true;
   };
+  // Whether a pair's automatic F can judge a tie point: not when its matches lie on one plane (planar or rotation:
+  // F is then free off that plane, and exact clicks on a roof were 18–25 px "off" it) nor when it rests on a few
+  // inliers (a degraded frame's chance matches).
+  auto f_determined = [&](uint32_t a, uint32_t b) {
+    const auto it = where.find({std::min(a, b) + 1, std::max(a, b) + 1});
+    if (it == where.end()) return false;
+    const VerifiedPair& p = (*pairs)[it->second];
+    return p.geometry != PairGeometry::kPlanarOrRotation &&
+           p.num_inliers_F >= static_cast<uint32_t>(options.min_check_inliers);
+  };
   auto pixel = [&](const ManualObservation& o) {
     const Keypoint& k = features[o.image].keypoints[o.keypoint];
     return Eigen::Vector2d(k.x, k.y);
@@ -200,7 +210,8 @@ void ApplyManualMatches(const io::TiePoints& t, const io::FramesIndex& index, co
       for (size_t b = a + 1; b < obs.size(); ++b) {
         if (track.kind == ManualTrackKind::kKeypoint && a != 0) break;
         Eigen::Matrix3d F;
-        if (track.kind == ManualTrackKind::kTiePoint && automatic_f(obs[a].image, obs[b].image, &F)) {
+        if (track.kind == ManualTrackKind::kTiePoint && automatic_f(obs[a].image, obs[b].image, &F) &&
+            f_determined(obs[a].image, obs[b].image)) {
           const Eigen::Vector2d x1 = pixel(obs[a]), x2 = pixel(obs[b]);
           const double d = std::max(LineDistance(F, x1, x2), LineDistance(F.transpose(), x2, x1));
           if (d > options.max_epipolar_px)

@@ -4,7 +4,8 @@
 //     rank), with an upright SIFT descriptor computed there and the image's colour;
 //   - a tie point adds a correspondence to every pair of frames it links, which verification never discards
 //     (pairs that automatic matching rejected are created with the tie points alone); one that lies farther
-//     than max_epipolar_px from the epipolar line of the pair's automatic F is reported, and kept;
+//     than max_epipolar_px from the epipolar line of the pair's automatic F is reported, and kept — for pairs
+//     whose F is determined (not planar-or-rotation, ≥ min_check_inliers F inliers);
 //   - a single-frame keypoint is searched in every frame that verified a pair with its frame: the keypoints of
 //     that frame within max_epipolar_px of its epipolar line, nearest by descriptor under Lowe's ratio; the
 //     matches found make a track like a tie point's;
@@ -29,6 +30,7 @@ namespace fmv3d::features {
 
 struct ManualMatchOptions {
   double max_epipolar_px = 4;    // tie points farther than this from the automatic epipolar line are reported
+  int min_check_inliers = 30;    // ... of pairs with at least this many F inliers, not planar (F determined)
   double keypoint_scale_px = 4;  // the descriptor's scale at a clicked point
   double keypoint_ratio = 0.8;   // single-frame keypoints: Lowe's ratio among the candidates on the line
   void Check() const;

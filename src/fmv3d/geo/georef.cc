@@ -185,16 +185,21 @@ nlohmann::json RunGcpGeoref(const core::Workspace& ws, const fs::path& gcp_file,
   const GcpCrs crs(list.crs);
   GcpGeorefOptions go;
   go.origin = o.origin;
+  go.adjust = o.gcp_adjust;
   GcpGeoref g = EstimateGcpGeoref(model, GroupGcps(list), crs, go);
   g.crs = list.crs;
   core::EnsureDirectory(ws.geo_dir());
-  core::Reconstruction enu = model;
-  enu.Transform(g.sim);
-  io::WriteColmapText(enu, ws.sparse_enu_dir());
+  io::WriteColmapText(g.enu, ws.sparse_enu_dir());
   nlohmann::json j = g.ToJson();
   j["gcps"]["file"] = gcp_file.string();
   j["cameras"] = model.images.size();
   core::WriteJson(ws.georef_json(), j);
+  if (g.adjustment.applied)
+    spdlog::info(
+        "georef: bundle adjustment with {} GCP clicks: their reprojection RMS {:.2f} → {:.2f} px, cameras moved up "
+        "to {:.3f} m from the similarity's placement",
+        g.adjustment.observations, g.adjustment.gcp_rms_px_before, g.adjustment.gcp_rms_px_after,
+        g.adjustment.max_camera_shift_m);
   spdlog::info("georef: {} control points (RMS {:.3f} m), {} check points{}, scale {:.4f} → {}", g.control_used,
                g.control_rms_m, g.check_used,
                g.check_used ? fmt::format(" (RMS {:.3f} m, the independent accuracy)", g.check_rms_m) : "", g.sim.s,

@@ -51,6 +51,7 @@ struct GeorefOptions {
   // exists (unless use_gcps is false).
   std::optional<std::filesystem::path> gcp_file;
   bool use_gcps = true;
+  bool gcp_adjust = true;  // the bundle adjustment with GCP constraints after their similarity (georef_gcp.h)
   void Check() const;
 };
 

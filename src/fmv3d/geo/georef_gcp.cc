@@ -4,19 +4,23 @@
 
 #include <Eigen/LU>
 #include <algorithm>
+#include <chrono>
 #include <cmath>
 #include <limits>
+#include <map>
 
 #include "fmv3d/core/error.h"
 #include "fmv3d/core/stats.h"
 #include "fmv3d/geo/georef_estimate.h"
 #include "fmv3d/geometry/similarity.h"
 #include "fmv3d/geometry/triangulation.h"
+#include "fmv3d/sfm/bundle_adjustment.h"
 
 namespace fmv3d::geo {
 
 void GcpGeorefOptions::Check() const {
   if (min_control_points < 3) throw Error("georef: a GCP fit needs at least 3 control points");
+  if (!(gcp_sigma_m > 0)) throw Error("georef: the GCPs' σ must be positive");
 }
 
 const char* GcpStatusName(GcpStatus s) {
@@ -95,6 +99,89 @@ double Rms3d(const std::vector<GcpResult>& points, GcpStatus status, int* n) {
   return *n ? std::sqrt(sse / *n) : 0.0;
 }
 
+// RMS reprojection error (pixels) of the observations of the points `known` at the given positions.
+double ClickRms(const core::Reconstruction& rec, const std::map<uint64_t, Eigen::Vector3d>& known) {
+  double sse = 0;
+  size_t n = 0;
+  for (const auto& [id, X] : known)
+    for (const auto& el : rec.points.at(id).track) {
+      const double e = sfm::ObservationError(rec, el.image_id, el.point2d_idx, X);
+      sse += e * e;
+      ++n;
+    }
+  return n ? std::sqrt(sse / n) : 0.0;
+}
+
+// Step 4 (georef_gcp.h) on `enu`, the model already placed by the similarity: the control points are appended as
+// points with priors at their coordinates and their clicks as observations, adjusted with everything else, then
+// removed again. On failure `enu` is left as it was and adj->why_not says why.
+void AdjustWithGcps(const std::vector<GroundControlPoint>& gcps, const std::vector<GcpResult>& points,
+                    const GcpGeorefOptions& options, core::Reconstruction* enu, GcpAdjustment* adj) {
+  const auto start = std::chrono::steady_clock::now();
+  core::Reconstruction rec = *enu;
+  std::map<uint32_t, size_t> automatic_size;  // per image: its observations before the clicks were appended
+  for (const auto& [id, im] : rec.images) automatic_size[id] = im.points2d.size();
+  sfm::BundleAdjustmentConfig config;
+  config.point_prior_sigma = options.gcp_sigma_m;
+  uint64_t next_id = rec.points.empty() ? 1 : rec.points.rbegin()->first + 1;
+  for (size_t i = 0; i < gcps.size(); ++i) {
+    if (points[i].status != GcpStatus::kControl) continue;
+    core::Point3D P;
+    P.id = next_id++;
+    P.xyz = points[i].enu;
+    for (const auto& o : gcps[i].observations) {
+      const core::Image* found = rec.FindImageByName(o.frame);
+      if (!found) continue;
+      core::Image& im = rec.images.at(found->id);
+      P.track.push_back({im.id, static_cast<uint32_t>(im.points2d.size())});
+      im.points2d.emplace_back(o.x, o.y);
+      im.point3d_ids.push_back(static_cast<int64_t>(P.id));
+    }
+    adj->observations += static_cast<int>(P.track.size());
+    config.point_priors[P.id] = P.xyz;
+    rec.points.emplace(P.id, std::move(P));
+  }
+  adj->gcp_rms_px_before = ClickRms(rec, config.point_priors);
+  // The clicks weigh by their accuracy against the automatic observations': (σ_auto / σ_click)², both measured.
+  std::map<uint64_t, Eigen::Vector3d> automatic;
+  for (const auto& [id, P] : enu->points) automatic[id] = P.xyz;
+  const double auto_rms = automatic.empty() ? 1.0 : ClickRms(*enu, automatic);
+  config.point_prior_observation_weight =
+      adj->gcp_rms_px_before > auto_rms ? std::pow(auto_rms / adj->gcp_rms_px_before, 2) : 1.0;
+  adj->click_weight = config.point_prior_observation_weight;
+  sfm::BundleAdjustmentOptions bo;  // the focal is free: with the GCPs it is no longer traded against depth
+  bo.refine_focal = options.refine_focal;
+  bo.refine_k1 = bo.refine_k2 = false;
+  const sfm::BundleAdjustmentSummary summary = sfm::BundleAdjust(&rec, config, bo);
+  adj->seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  if (!summary.success) {
+    adj->why_not = "the bundle adjustment did not converge";
+    return;
+  }
+  adj->gcp_rms_px_after = ClickRms(rec, config.point_priors);
+  adj->rms_px_before = summary.initial_rms_px;
+  adj->rms_px_after = summary.final_rms_px;
+  for (const auto& [id, X] : config.point_priors) rec.points.erase(id);
+  for (auto& [id, im] : rec.images) {
+    im.points2d.resize(automatic_size.at(id));
+    im.point3d_ids.resize(automatic_size.at(id));
+    adj->max_camera_shift_m =
+        std::max(adj->max_camera_shift_m, (im.pose.Centre() - enu->images.at(id).pose.Centre()).norm());
+  }
+  adj->applied = true;
+  *enu = std::move(rec);
+}
+
+// The similarity of the sparse model's camera centres onto the adjusted model's (same image ids).
+bool FitToAdjusted(const core::Reconstruction& model, const core::Reconstruction& enu, core::Sim3* sim) {
+  std::vector<Eigen::Vector3d> src, dst;
+  for (const auto& [id, im] : model.images) {
+    src.push_back(im.pose.Centre());
+    dst.push_back(enu.images.at(id).pose.Centre());
+  }
+  return src.size() >= 3 && geometry::EstimateSimilarity(src, dst, std::vector<double>(src.size(), 1.0), true, sim);
+}
+
 }  // namespace
 
 GcpGeoref EstimateGcpGeoref(const core::Reconstruction& model, const std::vector<GroundControlPoint>& gcps,
@@ -151,12 +238,39 @@ GcpGeoref EstimateGcpGeoref(const core::Reconstruction& model, const std::vector
   if (!geometry::EstimateSimilarity(src, dst, weights, true, &out.sim) || geometry::Collinearity(dst) < 1e-3)
     throw Error("georef: the control points (" + fmt::format("{}", fmt::join(control_names, ", ")) +
                 ") are collinear; add a GCP off their line");
-  for (auto& p : out.points)
-    if (p.triangulated_ok()) p.residual_enu = out.sim.Apply(p.triangulated) - p.enu;
+  out.enu = model;
+  out.enu.Transform(out.sim);
+  if (!options.adjust) out.adjustment.why_not = "turned off";
+  if (options.adjust) AdjustWithGcps(gcps, out.points, options, &out.enu, &out.adjustment);
+  if (out.adjustment.applied && !FitToAdjusted(model, out.enu, &out.sim))
+    throw Error("georef: no similarity between the sparse and the GCP-adjusted cameras");
+  // Residuals: each point triangulated again with the final cameras (for the similarity alone this equals S·X).
+  for (size_t i = 0; i < gcps.size(); ++i) {
+    GcpResult& p = out.points[i];
+    GcpResult again;
+    if (p.triangulated_ok())
+      p.residual_enu =
+          (Triangulate(out.enu, gcps[i], &again) ? again.triangulated : out.sim.Apply(p.triangulated)) - p.enu;
+  }
   out.control_rms_m = Rms3d(out.points, GcpStatus::kControl, &out.control_used);
   out.check_rms_m = Rms3d(out.points, GcpStatus::kCheck, &out.check_used);
   return out;
 }
+
+namespace {
+nlohmann::json AdjustmentJson(const GcpAdjustment& a) {
+  if (!a.applied) return {{"applied", false}, {"why_not", a.why_not}};
+  return {{"applied", true},
+          {"gcp_observations", a.observations},
+          {"click_weight", a.click_weight},
+          {"gcp_reprojection_rms_px_before", a.gcp_rms_px_before},
+          {"gcp_reprojection_rms_px_after", a.gcp_rms_px_after},
+          {"reprojection_rms_px_before", a.rms_px_before},
+          {"reprojection_rms_px_after", a.rms_px_after},
+          {"max_camera_shift_m", a.max_camera_shift_m},
+          {"seconds", a.seconds}};
+}
+}  // namespace
 
 nlohmann::json GcpGeoref::ToJson() const {
   const LocalFrame frame(origin);
@@ -197,7 +311,10 @@ nlohmann::json GcpGeoref::ToJson() const {
       {"check_rms_m", check_used ? nlohmann::json(check_rms_m) : nlohmann::json()},
       {"fit",
        "least-squares similarity (Umeyama) of the triangulated control points to their coordinates, each "
-       "weighted by 1/σ² of its triangulation (sigma_m_per_px: its σ in metres for a 1 px click)"},
+       "weighted by 1/σ² of its triangulation (sigma_m_per_px: its σ in metres for a 1 px click), then a bundle "
+       "adjustment with the control points held at their coordinates and their clicks as reprojection residuals "
+       "(adjustment); residuals from the points triangulated again with the final cameras"},
+      {"adjustment", AdjustmentJson(adjustment)},
       {"independent_accuracy", check_used ? "check_rms_m: check points left out of the fit"
                                           : "none: mark GCPs as check points (extra field \"check\") to measure it"}};
   // The keys the telemetry georeference writes and later stages read.

@@ -7,6 +7,7 @@
 
 #include "fmv3d/core/error.h"
 #include "fmv3d/geo/gcp_list.h"
+#include "fmv3d/io/image_io.h"
 #include "fmv3d/server/validation.h"
 
 namespace fmv3d::server {
@@ -168,14 +169,24 @@ json LoadGcps(const fs::path& path) {
 
 CalibrationRequest ParseCalibrationRequest(std::string_view body) {
   const json j = ParseObject(body);
-  OnlyKeys(j, {"images", "board", "square"}, "calibration");
+  OnlyKeys(j, {"images", "board", "square", "drop"}, "calibration");
   CalibrationRequest r;
   const json images = Array(j, "images");
-  if (images.size() < 3) throw RequestError(400, "'images': choose at least 3 chessboard images", "images");
+  bool any_video = false;
   for (const auto& i : images) {
     if (!i.is_string() || i.get<std::string>().empty())
       throw RequestError(400, "'images' must be workspace-relative paths", "images");
     r.images.push_back(i.get<std::string>());
+    any_video = any_video || io::HasVideoExtension(r.images.back());
+  }
+  if (images.size() < 3 && !any_video)
+    throw RequestError(400, "'images': choose at least 3 chessboard images, or a calibration video", "images");
+  if (j.contains("drop")) {
+    for (const auto& d : Array(j, "drop")) {
+      if (!d.is_string() || !std::regex_match(d.get<std::string>(), std::regex(R"([A-Za-z0-9._ -]{1,255})")))
+        throw RequestError(400, "'drop': file names of images or video frames (no folders)", "drop");
+      r.drop.push_back(d.get<std::string>());
+    }
   }
   if (j.contains("board")) {
     const json& b = j["board"];

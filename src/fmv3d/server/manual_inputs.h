@@ -33,8 +33,11 @@ nlohmann::json LoadGcps(const std::filesystem::path& path);
 
 // POST /api/workspaces/{ws}/calibration: {"images": [workspace-relative paths], "board": "9x6" or
 // {"cols", "rows"}, "square": metres}.
+// {"images": [workspace paths: ≥ 3 chessboard images, or calibration videos], "board", "square",
+//  "drop": [file names of images or video frames to leave out]}
 struct CalibrationRequest {
   std::vector<std::string> images;
+  std::vector<std::string> drop;
   int cols = 9, rows = 6;
   double square = 0.025;
 };

@@ -15,6 +15,7 @@
 #include "fmv3d/features/matcher.h"
 #include "fmv3d/io/colmap_model.h"
 #include "fmv3d/io/frames_index.h"
+#include "fmv3d/io/image_io.h"
 #include "fmv3d/io/tiepoints.h"
 #include "fmv3d/server/manual_inputs.h"
 #include "fmv3d/server/process.h"
@@ -183,6 +184,7 @@ class CalibrationRuns {
     core::EnsureDirectory(out);
     std::error_code ec;
     fs::remove_all(out / "camera-corners", ec);
+    fs::remove_all(out / "camera-frames", ec);
     for (const char* f : {"camera.json", "camera.yaml", "camera-distortion.png", "calibrate.log"})
       fs::remove(out / f, ec);
     std::vector<std::string> argv = {exe.string(), "calibrate",
@@ -190,9 +192,11 @@ class CalibrationRuns {
                                      "--square",   std::to_string(r.square)};
     nlohmann::json names = nlohmann::json::array();
     for (const auto& i : images) argv.push_back(i.string()), names.push_back(fs::relative(i, ws_dir).string());
+    for (const auto& d : r.drop) argv.insert(argv.end(), {"--drop", d});
     argv.insert(argv.end(), {"-o", (out / "camera.json").string()});
-    core::WriteJson(out / "request.json",
-                    {{"board", {{"cols", r.cols}, {"rows", r.rows}}}, {"square", r.square}, {"images", names}});
+    core::WriteJson(
+        out / "request.json",
+        {{"board", {{"cols", r.cols}, {"rows", r.rows}}}, {"square", r.square}, {"images", names}, {"drop", r.drop}});
     running_[ws_dir] = SpawnProcess(argv, out / "calibrate.log");
   }
   // "running", "done", "failed" or "none".
@@ -234,10 +238,7 @@ nlohmann::json CalibrationJson(CalibrationRuns& runs, const fs::path& dir) {
   std::error_code ec;
   if (fs::is_directory(dir / "uploads", ec))
     for (const auto& e : fs::directory_iterator(dir / "uploads", ec)) {
-      std::string ext = e.path().extension().string();
-      for (auto& c : ext) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
-      if (e.is_regular_file(ec) &&
-          (ext == ".png" || ext == ".jpg" || ext == ".jpeg" || ext == ".tif" || ext == ".tiff" || ext == ".bmp"))
+      if (e.is_regular_file(ec) && (io::HasImageExtension(e.path()) || io::HasVideoExtension(e.path())))
         uploads.push_back("uploads/" + e.path().filename().string());
     }
   std::sort(uploads.begin(), uploads.end());
@@ -245,6 +246,7 @@ nlohmann::json CalibrationJson(CalibrationRuns& runs, const fs::path& dir) {
   if (state == "done") {
     j["distortion_png"] = "calib/camera-distortion.png";
     j["corners_dir"] = "calib/camera-corners";
+    if (j["result"].contains("frames_dir")) j["frames_dir"] = "calib/camera-frames";  // frames of videos
   }
   return j;
 }

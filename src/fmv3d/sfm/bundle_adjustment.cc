@@ -113,6 +113,20 @@ struct SightPrior {
   double range_, inv_sigma_;
 };
 
+// (X − prior) / σ: a 3D point against its known position.
+struct PointPrior {
+  PointPrior(const Eigen::Vector3d& prior, double sigma) : prior_(prior), inv_sigma_(1 / sigma) {}
+  template <typename T>
+  bool operator()(const T* X, T* residual) const {
+    for (int k = 0; k < 3; ++k) residual[k] = (X[k] - T(prior_[k])) * T(inv_sigma_);
+    return true;
+  }
+
+ private:
+  Eigen::Vector3d prior_;
+  double inv_sigma_;
+};
+
 // A pose's parameter blocks, inside BundleProblem's one array of camera parameters.
 struct PoseBlock {
   double* q;  // 4, Eigen order x y z w
@@ -137,7 +151,8 @@ std::vector<uint64_t> PointsOfImages(const core::Reconstruction& rec, const std:
 // owned here (the problem does not own them): a global adjustment has hundreds of thousands of residuals, and one
 // allocation each (plus Ceres' bookkeeping of owned objects) was a visible share of a short adjustment's time.
 // The blocks are declared before the problem, so they outlive it. Residual blocks are added in a fixed order
-// (reprojection errors, pose priors, the gauge), which keeps a single-threaded solve bit-for-bit repeatable.
+// (reprojection errors, pose priors, point priors, the gauge), which keeps a single-threaded solve bit-for-bit
+// repeatable.
 class BundleProblem {
  public:
   BundleProblem(core::Reconstruction* rec, const BundleAdjustmentConfig& config, const BundleAdjustmentOptions& options,
@@ -155,13 +170,22 @@ class BundleProblem {
       weighted_loss_ = std::make_unique<ceres::ScaledLoss>(shared_loss_.get(), config.observation_weight,
                                                            ceres::DO_NOT_TAKE_OWNERSHIP);
     }
+    if (!config.point_priors.empty()) {
+      if (!(config.point_prior_sigma > 0) || !(config.point_prior_loss_px > 0) ||
+          !(config.point_prior_observation_weight > 0))
+        throw Error("bundle adjustment: point_prior_sigma, _loss_px and _observation_weight must be positive");
+      prior_point_loss_ =
+          std::make_unique<ceres::ScaledLoss>(new ceres::HuberLoss(config.point_prior_loss_px),
+                                              config.point_prior_observation_weight, ceres::TAKE_OWNERSHIP);
+    }
     AllocateCameraBlocks();
   }
 
   void Build() {
     AddReprojectionErrors();
     const bool any_constant = HoldConstantPoses();
-    const size_t anchors = AddPosePriors();
+    const size_t pose_anchors = AddPosePriors();
+    const size_t anchors = std::max(pose_anchors, AddPointPriors());
     if (!any_constant && anchors < 3) FixGauge();
     FreeIntrinsics();
   }
@@ -320,13 +344,15 @@ class BundleProblem {
       auto& P = rec_->points.at(point_ids_[i]);
       auto& X = pts_[i];
       X = {P.xyz.x(), P.xyz.y(), P.xyz.z()};
+      const bool has_prior = config_.point_priors.count(point_ids_[i]) > 0;
       for (const auto& el : P.track) {
         auto& image = rec_->images.at(el.image_id);
         const PoseBlock& pose = poses_.at(el.image_id);
         costs_.emplace_back(image.points2d[el.point2d_idx]);
         residual_params_.push_back({intr_.at(image.camera_id), pose.q, pose.t, X.data()});
-        problem_.AddResidualBlock(&costs_.back(), LossOf(el.image_id, el.point2d_idx), residual_params_.back().data(),
-                                  4);
+        problem_.AddResidualBlock(&costs_.back(),
+                                  has_prior ? prior_point_loss_.get() : LossOf(el.image_id, el.point2d_idx),
+                                  residual_params_.back().data(), 4);
       }
       if (!options_.refine_points) problem_.SetParameterBlockConstant(X.data());
     }
@@ -385,6 +411,20 @@ class BundleProblem {
         ++sight_count;
       }
       if (sight_count >= 3) anchors = std::max(anchors, sight_count);
+    }
+    return anchors;
+  }
+
+  // Point priors (see the header) on the adjusted points. Returns how many: three or more fix the gauge.
+  size_t AddPointPriors() {
+    size_t anchors = 0;
+    for (const auto& [pid, prior] : config_.point_priors) {
+      const auto it = std::lower_bound(point_ids_.begin(), point_ids_.end(), pid);
+      if (it == point_ids_.end() || *it != pid) continue;
+      prior_costs_.emplace_back(
+          new ceres::AutoDiffCostFunction<PointPrior, 3, 3>(new PointPrior(prior, config_.point_prior_sigma)));
+      problem_.AddResidualBlock(prior_costs_.back().get(), nullptr, pts_[it - point_ids_.begin()].data());
+      ++anchors;
     }
     return anchors;
   }
@@ -455,7 +495,7 @@ class BundleProblem {
   std::vector<std::unique_ptr<ceres::Manifold>> subset_manifolds_;
   std::unique_ptr<ceres::CostFunction> gauge_prior_;
   std::vector<std::unique_ptr<ceres::CostFunction>> prior_costs_;
-  std::unique_ptr<ceres::LossFunction> prior_loss_, sight_loss_;
+  std::unique_ptr<ceres::LossFunction> prior_loss_, sight_loss_, prior_point_loss_;
   ceres::Problem problem_;
 };
 

@@ -75,6 +75,18 @@ struct BundleAdjustmentConfig {
   // observation_weight times (their robust loss scaled by it).
   std::map<uint32_t, uint32_t> weighted_from;
   double observation_weight = 1;
+  // Soft priors on 3D points (e.g. ground control points at their surveyed coordinates, the model in local
+  // metres): residual (X − prior) / point_prior_sigma per axis. The observations of these points use a Huber loss
+  // at point_prior_loss_px instead of the shared robust loss: they are clicked by hand (σ ≈ 1 px), and a Cauchy
+  // at the automatic keypoints' scale would discount their honest 2–3 px errors. Priors on three or more points
+  // of the adjusted set (not collinear) anchor the gauge, like centre priors.
+  // point_prior_observation_weight scales those observations' loss: (σ of the other observations / σ of these)²
+  // weighs hand clicks by their real accuracy, so that they place the model without bending each camera's pose
+  // towards its own few noisy clicks.
+  std::map<uint64_t, Eigen::Vector3d> point_priors;
+  double point_prior_sigma = 0.02;
+  double point_prior_loss_px = 3;
+  double point_prior_observation_weight = 1;
 };
 
 struct BundleAdjustmentSummary {
