@@ -1,12 +1,13 @@
 // Scaled ICP and global registration against known similarities (B is A's point set under a random
 // similarity — scale 0.2–5, any rotation — plus noise; recovered to 1e-4 relative).
+#include "fmv3d/align/icp.h"
+
 #include <gtest/gtest.h>
 
 #include <cmath>
 #include <random>
 
 #include "fmv3d/align/global_registration.h"
-#include "fmv3d/align/icp.h"
 #include "fmv3d/core/error.h"
 #include "fmv3d/geometry/mesh_distance.h"
 #include "fmv3d/synth/scene.h"

@@ -1,16 +1,15 @@
 // Dense stereo on small synthetic flights rendered with exact cameras (`fmv3d synth`'s library entry): the
 // true model is the sparse model, so depth maps and fused points are checked against the true depth and mesh.
 #include <gtest/gtest.h>
-
-#include <functional>
+#include <tbb/global_control.h>
 
 #include <algorithm>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <functional>
 #include <opencv2/core.hpp>
 #include <opencv2/imgcodecs.hpp>
-#include <tbb/global_control.h>
 
 #include "fmv3d/core/error.h"
 #include "fmv3d/core/files.h"
@@ -132,8 +131,8 @@ DepthCheck CheckFirstViewDepth(const Relight& relight) {
 
   // Truth depth of the same (undistorted, full-size) pixels.
   const auto& name = rec.images.at(ref_id).name;
-  const cv::Mat truth = cv::imread((flight.dir / "depth" / (fs::path(name).stem().string() + ".tiff")).string(),
-                                   cv::IMREAD_UNCHANGED);
+  const cv::Mat truth =
+      cv::imread((flight.dir / "depth" / (fs::path(name).stem().string() + ".tiff")).string(), cv::IMREAD_UNCHANGED);
   EXPECT_EQ(truth.type(), CV_32F);
   DepthCheck c;
   std::vector<float> rel;
@@ -171,8 +170,8 @@ TEST(PatchMatch, DepthMatchesRenderedTruth) {
   // them); most pixels must be right and the median well below 1%.
   EXPECT_LT(c.median, 0.0045);
   EXPECT_GT(static_cast<double>(c.good) / c.valid, 0.53)
-      << c.good << " of " << c.valid << " within 1% of the true depth; relative error median " << c.median
-      << ", p90 " << c.p90;
+      << c.good << " of " << c.valid << " within 1% of the true depth; relative error median " << c.median << ", p90 "
+      << c.p90;
 }
 
 // Sources exposed differently (gain 0.55–1.6, offsets, clipped and quantised like an 8-bit frame): the
@@ -195,8 +194,8 @@ TEST(PatchMatch, SourcesWithOtherGainAndBiasMatchAsWell) {
   const double good_same = static_cast<double>(same.good) / same.valid;
   const double good_relit = static_cast<double>(relit.good) / relit.valid;
   EXPECT_GT(good_relit, good_same - 0.05);
-  EXPECT_LT(relit.median, 1.25 * same.median + 1e-4) << "median relative depth error " << same.median << " → "
-                                                      << relit.median;
+  EXPECT_LT(relit.median, 1.25 * same.median + 1e-4)
+      << "median relative depth error " << same.median << " → " << relit.median;
 }
 
 // Same seed, same maps — whatever the thread count (red–black updates, per-pixel random streams, and the
@@ -266,12 +265,11 @@ TEST(DenseStage, FusedPointsLieOnTheTrueSurface) {
   const io::TexturedMesh scene = io::ReadObj(flight.dir / "scene.obj", false);
   const auto truth_json = core::ReadJson(flight.dir / "truth.json");
   DenseEvaluationOptions eo;
-  eo.region = Eigen::AlignedBox3d(Eigen::Vector3d(truth_json["bounds"]["min"][0], truth_json["bounds"]["min"][1],
-                                                  truth_json["bounds"]["min"][2]),
-                                  Eigen::Vector3d(truth_json["bounds"]["max"][0], truth_json["bounds"]["max"][1],
-                                                  truth_json["bounds"]["max"][2]));
-  const auto ev = EvaluateDense(cloud, flight.result.truth, flight.result.truth, scene,
-                                flight.result.characteristic_length, eo);
+  eo.region = Eigen::AlignedBox3d(
+      Eigen::Vector3d(truth_json["bounds"]["min"][0], truth_json["bounds"]["min"][1], truth_json["bounds"]["min"][2]),
+      Eigen::Vector3d(truth_json["bounds"]["max"][0], truth_json["bounds"]["max"][1], truth_json["bounds"]["max"][2]));
+  const auto ev =
+      EvaluateDense(cloud, flight.result.truth, flight.result.truth, scene, flight.result.characteristic_length, eo);
   std::printf("fused: %zu points, median %.5f, p90 %.5f of the height, completeness %.4f\n", cloud.size(),
               ev.median_fraction(), ev.p90_fraction(), ev.completeness);
   // At 320x240 a pixel covers ~0.2 m of the 30 m building: points within a fraction of a pixel.
@@ -325,8 +323,8 @@ TEST(DenseStage, ReferenceCoverMapsASubsetOfTheViews) {
   const io::OrientedPointCloud cloud = io::ReadPointCloudPly(ws / "dense" / "fused.ply");
   ASSERT_GT(cloud.size(), 5000u);
   const io::TexturedMesh scene = io::ReadObj(flight.dir / "scene.obj", false);
-  const auto ev = EvaluateDense(cloud, flight.result.truth, flight.result.truth, scene,
-                                flight.result.characteristic_length, {});
+  const auto ev =
+      EvaluateDense(cloud, flight.result.truth, flight.result.truth, scene, flight.result.characteristic_length, {});
   std::printf("cover of 2: %d of 10 views mapped, %zu points, median %.5f, p90 %.5f of the height\n", refs,
               cloud.size(), ev.median_fraction(), ev.p90_fraction());
   EXPECT_LT(ev.median_fraction(), 0.004) << ev.ToJson().dump();

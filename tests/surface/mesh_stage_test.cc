@@ -1,12 +1,13 @@
 // `fmv3d mesh` on a synthetic workspace: an oriented cloud sampled from the true building scene (with noise
 // and outliers, as a dense stage delivers) → Poisson mesh, measured against the true surface; and the
 // errors a user sees for missing or unusable input.
+#include "fmv3d/surface/mesh_stage.h"
+
 #include <gtest/gtest.h>
 
 #include "fmv3d/core/error.h"
 #include "fmv3d/core/files.h"
 #include "fmv3d/io/obj_io.h"
-#include "fmv3d/surface/mesh_stage.h"
 #include "fmv3d/surface/synthetic_cloud.h"
 #include "synthetic_flight.h"
 #include "test_util.h"

@@ -4,8 +4,10 @@
 #define TINYGLTF_NO_STB_IMAGE
 #define TINYGLTF_NO_STB_IMAGE_WRITE
 #define TINYGLTF_NO_EXTERNAL_IMAGE
-#include <tiny_gltf.h>  // declarations only: the implementation lives in fmv3d_surface
+#include "fmv3d/surface/texture_stage.h"
+
 #include <gtest/gtest.h>
+#include <tiny_gltf.h>  // declarations only: the implementation lives in fmv3d_surface
 
 #include <memory>
 #include <opencv2/imgcodecs.hpp>
@@ -19,7 +21,6 @@
 #include "fmv3d/surface/gltf_writer.h"
 #include "fmv3d/surface/mesh_stage.h"
 #include "fmv3d/surface/synthetic_cloud.h"
-#include "fmv3d/surface/texture_stage.h"
 #include "synthetic_flight.h"
 #include "test_util.h"
 

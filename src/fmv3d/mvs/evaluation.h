@@ -10,9 +10,9 @@
 
 #include <Eigen/Geometry>
 #include <cstddef>
+#include <nlohmann/json.hpp>
 #include <string>
 #include <vector>
-#include <nlohmann/json.hpp>
 
 #include "fmv3d/core/pose.h"
 #include "fmv3d/core/reconstruction.h"

@@ -26,19 +26,19 @@ struct PatchMatchOptions {
   // (5 and 2: 5x5 samples over 9x9 pixels; sparse sampling keeps the support, at a fraction of the cost).
   int window_radius = 5;
   int window_step = 2;
-  double sigma_color = 0.2;     // bilateral weight on grey-value difference to the centre (0..1 grey)
-  double sigma_spatial = 5;     // bilateral weight on distance to the centre, pixels
-  int iterations = 5;           // photometric rounds (red + black each); with coarse_to_fine, at half resolution
+  double sigma_color = 0.2;  // bilateral weight on grey-value difference to the centre (0..1 grey)
+  double sigma_spatial = 5;  // bilateral weight on distance to the centre, pixels
+  int iterations = 5;        // photometric rounds (red + black each); with coarse_to_fine, at half resolution
   // coarse_to_fine: rounds at full resolution after upsampling the coarse planes. Further rounds lower the cost
   // but do not bring depths closer to the truth (measured on synthetic flights).
   int fine_iterations = 2;
-  int geom_iterations = 1;      // rounds of the geometric pass (a second did not bring depths closer)
-  int top_k = 3;                // best source costs averaged per pixel
-  double geom_weight = 0.3;     // cost per pixel of reprojection error in the geometric pass
+  int geom_iterations = 1;   // rounds of the geometric pass (a second did not bring depths closer)
+  int top_k = 3;             // best source costs averaged per pixel
+  double geom_weight = 0.3;  // cost per pixel of reprojection error in the geometric pass
   double geom_max_error_px = 3;
-  double max_cost = 0.7;        // final filter: pixels whose aggregated 1-NCC stays above are dropped
-  bool coarse_to_fine = true;   // first solve at half resolution and upsample (faster convergence)
-  int coarse_min_size = 320;    // no coarse level when the view's longer side is below this
+  double max_cost = 0.7;       // final filter: pixels whose aggregated 1-NCC stays above are dropped
+  bool coarse_to_fine = true;  // first solve at half resolution and upsample (faster convergence)
+  int coarse_min_size = 320;   // no coarse level when the view's longer side is below this
   uint64_t seed = 0;
   void Check() const;
 };
@@ -46,8 +46,8 @@ struct PatchMatchOptions {
 struct PatchMatchInput {
   const View* ref = nullptr;
   std::vector<const View*> sources;
-  double depth_min = 0, depth_max = 0;     // camera-frame z range of the reference
-  std::vector<Eigen::Vector3d> seeds;      // world points the reference sees (sparse model)
+  double depth_min = 0, depth_max = 0;  // camera-frame z range of the reference
+  std::vector<Eigen::Vector3d> seeds;   // world points the reference sees (sparse model)
   // Geometric pass: the sources' depth maps (same order as sources; null = no geometric term for it) and
   // the reference's photometric map to start from.
   std::vector<const DepthMap*> source_maps;
