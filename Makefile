@@ -53,7 +53,7 @@ web/node_modules/.package-lock.json: web/package-lock.json
 # The tests of the multithreaded stages (PatchMatch and fusion, matching, bundle adjustment) under ThreadSanitizer.
 $(TSAN_BUILD)/build.ninja: | deps
 	cmake -S . -B $(TSAN_BUILD) -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo -DCMAKE_CXX_FLAGS_RELWITHDEBINFO="-O1 -g1 -DNDEBUG" \
-	  -DFMV3D_TSAN=ON
+	  -DFMV3D_TSAN=ON -DFMV3D_UNITY=$(UNITY)
 
 test-tsan: deps $(TSAN_BUILD)/build.ninja
 	cmake --build $(TSAN_BUILD) -j $(JOBS) --target test_mvs test_features test_sfm
