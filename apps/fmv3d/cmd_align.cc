@@ -7,7 +7,7 @@
 #include "command.h"
 #include "fmv3d/align/merge.h"
 
-namespace fmv3d::app {
+namespace fmv3d::app::cmd_align {
 namespace {
 
 void Add(CLI::App& app) {
@@ -27,7 +27,9 @@ void Add(CLI::App& app) {
     align::MergeOptions merge;
   };
   auto a = std::make_shared<Args>();
-  cmd->add_option("WS", a->ws, "Workspaces to align (two or more)")->required()->expected(2, -1)
+  cmd->add_option("WS", a->ws, "Workspaces to align (two or more)")
+      ->required()
+      ->expected(2, -1)
       ->check(CLI::ExistingDirectory);
   cmd->add_option("-o,--output", a->out, "Merged workspace")->required();
   cmd->add_option("--candidates", a->opt.candidates_per_image,
@@ -60,17 +62,18 @@ void Add(CLI::App& app) {
     std::cout << fmt::format("align: {} tracks merged into {} (reference {})\n", ws.size(), a->out,
                              report.at("reference").get<std::string>());
     for (const auto& e : report.at("tree"))
-      std::cout << fmt::format("  {} -> {}: scale {:.6g}, {} 3D inliers, overlap {:.0f}%, residual RMS {:.4g} -> {:.4g}\n",
-                               e.at("moving").get<std::string>(), e.at("reference").get<std::string>(),
-                               e.at("similarity").at("scale").get<double>(), e.at("inliers_3d").get<size_t>(),
-                               100 * e.at("overlap_fraction").get<double>(), e.at("residual_rms_before").get<double>(),
-                               e.at("residual_rms_after").get<double>());
+      std::cout << fmt::format(
+          "  {} -> {}: scale {:.6g}, {} 3D inliers, overlap {:.0f}%, residual RMS {:.4g} -> {:.4g}\n",
+          e.at("moving").get<std::string>(), e.at("reference").get<std::string>(),
+          e.at("similarity").at("scale").get<double>(), e.at("inliers_3d").get<size_t>(),
+          100 * e.at("overlap_fraction").get<double>(), e.at("residual_rms_before").get<double>(),
+          e.at("residual_rms_after").get<double>());
     if (report.contains("joint_bundle_adjustment")) {
       const auto& j = report.at("joint_bundle_adjustment");
-      std::cout << fmt::format("  joint bundle adjustment: {} of {} cross-track links fused, reprojection RMS {:.3f} -> {:.3f} px\n",
-                               j.at("links_fused").get<size_t>(), j.at("links").get<size_t>(),
-                               j.at("reprojection_rms_before_px").get<double>(),
-                               j.at("reprojection_rms_after_px").get<double>());
+      std::cout << fmt::format(
+          "  joint bundle adjustment: {} of {} cross-track links fused, reprojection RMS {:.3f} -> {:.3f} px\n",
+          j.at("links_fused").get<size_t>(), j.at("links").get<size_t>(),
+          j.at("reprojection_rms_before_px").get<double>(), j.at("reprojection_rms_after_px").get<double>());
     }
     const auto& m = report.at("merged");
     const auto& d = report.at("dense");
@@ -83,4 +86,4 @@ void Add(CLI::App& app) {
 const RegisterCommand reg(820, Add);
 
 }  // namespace
-}  // namespace fmv3d::app
+}  // namespace fmv3d::app::cmd_align

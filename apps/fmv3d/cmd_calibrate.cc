@@ -20,7 +20,7 @@
 #include "fmv3d/ingest/video_reader.h"
 #include "fmv3d/io/image_io.h"
 
-namespace fmv3d::app {
+namespace fmv3d::app::cmd_calibrate {
 namespace {
 namespace fs = std::filesystem;
 
@@ -140,4 +140,4 @@ void Add(CLI::App& app) {
 const RegisterCommand reg(90, Add);
 
 }  // namespace
-}  // namespace fmv3d::app
+}  // namespace fmv3d::app::cmd_calibrate

@@ -5,7 +5,7 @@
 #include "command.h"
 #include "fmv3d/calib/sensor_db.h"
 
-namespace fmv3d::app {
+namespace fmv3d::app::cmd_cameras {
 namespace {
 
 void Add(CLI::App& app) {
@@ -24,12 +24,14 @@ void Add(CLI::App& app) {
       std::printf("%s\n", j.dump(2).c_str());
       return;
     }
-    std::printf("shipped: %s\nuser:    %s\n\n", calib::ShippedDatabasePath().c_str(), calib::UserDatabasePath().c_str());
+    std::printf("shipped: %s\nuser:    %s\n\n", calib::ShippedDatabasePath().c_str(),
+                calib::UserDatabasePath().c_str());
     std::printf("%-34s %-12s %-22s %-13s %-9s %-7s %s\n", "name", "make", "EXIF model", "sensor mm", "focal mm",
                 "35mm eq", "resolution / calibration");
     for (const auto& e : db.entries()) {
       char sensor[32] = "-", focal[16] = "-", f35[16] = "-", res[96] = "-";
-      if (e.sensor_width_mm > 0) std::snprintf(sensor, sizeof(sensor), "%.2fx%.2f", e.sensor_width_mm, e.sensor_height_mm);
+      if (e.sensor_width_mm > 0)
+        std::snprintf(sensor, sizeof(sensor), "%.2fx%.2f", e.sensor_width_mm, e.sensor_height_mm);
       if (e.focal_mm > 0) std::snprintf(focal, sizeof(focal), "%.2f", e.focal_mm);
       if (e.focal_35mm > 0) std::snprintf(f35, sizeof(f35), "%.0f", e.focal_35mm);
       if (e.calibration)
@@ -48,4 +50,4 @@ void Add(CLI::App& app) {
 const RegisterCommand reg(95, Add);
 
 }  // namespace
-}  // namespace fmv3d::app
+}  // namespace fmv3d::app::cmd_cameras

@@ -8,7 +8,7 @@
 #include "command.h"
 #include "fmv3d/align/compare.h"
 
-namespace fmv3d::app {
+namespace fmv3d::app::cmd_compare {
 namespace {
 
 void Add(CLI::App& app) {
@@ -92,4 +92,4 @@ void Add(CLI::App& app) {
 const RegisterCommand reg(850, Add);
 
 }  // namespace
-}  // namespace fmv3d::app
+}  // namespace fmv3d::app::cmd_compare

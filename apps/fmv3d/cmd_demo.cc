@@ -8,7 +8,7 @@
 #include "fmv3d/pipeline/demo.h"
 #include "fmv3d/server/server.h"
 
-namespace fmv3d::app {
+namespace fmv3d::app::cmd_demo {
 namespace {
 
 void Add(CLI::App& app) {
@@ -33,4 +33,4 @@ void Add(CLI::App& app) {
 const RegisterCommand reg(1000, Add);
 
 }  // namespace
-}  // namespace fmv3d::app
+}  // namespace fmv3d::app::cmd_demo

@@ -3,7 +3,7 @@
 #include "command.h"
 #include "fmv3d/mvs/dense_stage.h"
 
-namespace fmv3d::app {
+namespace fmv3d::app::cmd_dense {
 namespace {
 
 void Add(CLI::App& app) {
@@ -30,10 +30,8 @@ void Add(CLI::App& app) {
       ->capture_default_str();
   cmd->add_option("--geom-iterations", o.patch_match.geom_iterations, "PatchMatch rounds of the geometric pass")
       ->capture_default_str();
-  cmd->add_option("--window-radius", o.patch_match.window_radius, "NCC patch half-size, pixels")
-      ->capture_default_str();
-  cmd->add_option("--window-step", o.patch_match.window_step, "NCC patch sampling step, pixels")
-      ->capture_default_str();
+  cmd->add_option("--window-radius", o.patch_match.window_radius, "NCC patch half-size, pixels")->capture_default_str();
+  cmd->add_option("--window-step", o.patch_match.window_step, "NCC patch sampling step, pixels")->capture_default_str();
   cmd->add_option("--max-cost", o.patch_match.max_cost, "Drop pixels whose 1-NCC stays above this (0-2]")
       ->capture_default_str();
   cmd->add_option("--min-views", o.fusion.min_views, "Consistent views per fused point (reference included)")
@@ -74,4 +72,4 @@ void Add(CLI::App& app) {
 const RegisterCommand reg(500, Add);
 
 }  // namespace
-}  // namespace fmv3d::app
+}  // namespace fmv3d::app::cmd_dense

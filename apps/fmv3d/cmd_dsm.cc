@@ -5,7 +5,7 @@
 #include "command.h"
 #include "fmv3d/geo/dsm.h"
 
-namespace fmv3d::app {
+namespace fmv3d::app::cmd_dsm {
 namespace {
 
 void Add(CLI::App& app) {
@@ -17,7 +17,8 @@ void Add(CLI::App& app) {
   };
   auto a = std::make_shared<Args>();
   cmd->add_option("WS", a->ws, "Workspace folder (after `fmv3d georef`)")->required();
-  auto* gsd = cmd->add_option("--gsd", a->gsd, "Cell size, metres (default: from the data)")->check(CLI::PositiveNumber);
+  auto* gsd =
+      cmd->add_option("--gsd", a->gsd, "Cell size, metres (default: from the data)")->check(CLI::PositiveNumber);
   cmd->add_flag("--no-las", a->no_las, "Do not write geo/points.las");
   cmd->callback([a, gsd] {
     geo::DsmOptions o;
@@ -34,4 +35,4 @@ void Add(CLI::App& app) {
 const RegisterCommand reg(710, Add);
 
 }  // namespace
-}  // namespace fmv3d::app
+}  // namespace fmv3d::app::cmd_dsm

@@ -4,11 +4,11 @@
 
 #include "command.h"
 #include "fmv3d/core/files.h"
-#include "fmv3d/io/colmap_model.h"
 #include "fmv3d/core/workspace.h"
+#include "fmv3d/io/colmap_model.h"
 #include "fmv3d/sfm/evaluation.h"
 
-namespace fmv3d::app {
+namespace fmv3d::app::cmd_evaluate {
 namespace {
 
 void Add(CLI::App& app) {
@@ -49,4 +49,4 @@ void Add(CLI::App& app) {
 const RegisterCommand reg(410, Add);
 
 }  // namespace
-}  // namespace fmv3d::app
+}  // namespace fmv3d::app::cmd_evaluate

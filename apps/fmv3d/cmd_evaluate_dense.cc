@@ -5,16 +5,16 @@
 #include "command.h"
 #include "fmv3d/core/error.h"
 #include "fmv3d/core/files.h"
+#include "fmv3d/core/workspace.h"
+#include "fmv3d/geometry/mesh_distance.h"
 #include "fmv3d/io/colmap_model.h"
 #include "fmv3d/io/obj_io.h"
 #include "fmv3d/io/point_cloud.h"
 #include "fmv3d/mvs/evaluation.h"
-#include "fmv3d/core/workspace.h"
-#include "fmv3d/geometry/mesh_distance.h"
 #include "fmv3d/sfm/evaluation.h"
 #include "fmv3d/surface/colored_mesh.h"
 
-namespace fmv3d::app {
+namespace fmv3d::app::cmd_evaluate_dense {
 namespace {
 
 void Add(CLI::App& app) {
@@ -111,4 +111,4 @@ void Add(CLI::App& app) {
 const RegisterCommand reg(510, Add);
 
 }  // namespace
-}  // namespace fmv3d::app
+}  // namespace fmv3d::app::cmd_evaluate_dense

@@ -7,7 +7,7 @@
 #include "fmv3d/core/workspace.h"
 #include "fmv3d/geo/evaluation.h"
 
-namespace fmv3d::app {
+namespace fmv3d::app::cmd_evaluate_geo {
 namespace {
 
 void Add(CLI::App& app) {
@@ -27,4 +27,4 @@ void Add(CLI::App& app) {
 const RegisterCommand reg(960, Add);
 
 }  // namespace
-}  // namespace fmv3d::app
+}  // namespace fmv3d::app::cmd_evaluate_geo

@@ -8,13 +8,13 @@
 #include "command.h"
 #include "fmv3d/core/error.h"
 #include "fmv3d/core/files.h"
+#include "fmv3d/core/workspace.h"
 #include "fmv3d/io/colmap_model.h"
 #include "fmv3d/pipeline/demo.h"
-#include "fmv3d/core/workspace.h"
 #include "fmv3d/render/renderer.h"
 #include "fmv3d/sfm/evaluation.h"
 
-namespace fmv3d::app {
+namespace fmv3d::app::cmd_evaluate_texture {
 namespace {
 
 void Add(CLI::App& app) {
@@ -66,4 +66,4 @@ void Add(CLI::App& app) {
 const RegisterCommand reg(705, Add);
 
 }  // namespace
-}  // namespace fmv3d::app
+}  // namespace fmv3d::app::cmd_evaluate_texture

@@ -2,10 +2,10 @@
 #include <spdlog/spdlog.h>
 
 #include "command.h"
-#include "fmv3d/features/sift.h"
 #include "fmv3d/core/workspace.h"
+#include "fmv3d/features/sift.h"
 
-namespace fmv3d::app {
+namespace fmv3d::app::cmd_features {
 namespace {
 
 void Add(CLI::App& app) {
@@ -40,4 +40,4 @@ void Add(CLI::App& app) {
 const RegisterCommand reg(200, Add);
 
 }  // namespace
-}  // namespace fmv3d::app
+}  // namespace fmv3d::app::cmd_features

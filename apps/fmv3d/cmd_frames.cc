@@ -8,7 +8,7 @@
 #include "fmv3d/core/workspace.h"
 #include "fmv3d/ingest/frames.h"
 
-namespace fmv3d::app {
+namespace fmv3d::app::cmd_frames {
 namespace {
 
 struct FramesArgs {
@@ -66,4 +66,4 @@ void Add(CLI::App& app) {
 const RegisterCommand reg(100, Add);
 
 }  // namespace
-}  // namespace fmv3d::app
+}  // namespace fmv3d::app::cmd_frames

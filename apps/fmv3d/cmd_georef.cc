@@ -11,7 +11,7 @@
 #include "fmv3d/core/error.h"
 #include "fmv3d/geo/georef.h"
 
-namespace fmv3d::app {
+namespace fmv3d::app::cmd_georef {
 namespace {
 
 void Add(CLI::App& app) {
@@ -93,4 +93,4 @@ void Add(CLI::App& app) {
 const RegisterCommand reg(700, Add);
 
 }  // namespace
-}  // namespace fmv3d::app
+}  // namespace fmv3d::app::cmd_georef

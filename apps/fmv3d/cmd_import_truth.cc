@@ -7,7 +7,7 @@
 #include "fmv3d/io/colmap_model.h"
 #include "fmv3d/io/ground_truth.h"
 
-namespace fmv3d::app {
+namespace fmv3d::app::cmd_import_truth {
 namespace {
 
 struct Options {
@@ -25,7 +25,8 @@ void Add(CLI::App& app) {
   cmd->add_option("-o,--output", opt->out, "Output folder for cameras.txt, images.txt, points3D.txt")->required();
   cmd->add_option("--size", opt->width, "krtd: image width")->check(CLI::PositiveNumber);
   cmd->add_option("--height", opt->height, "krtd: image height")->check(CLI::PositiveNumber);
-  cmd->add_option("--index-offset", opt->index_offset, "krtd: KWIVER frame number of our frame 0")->capture_default_str();
+  cmd->add_option("--index-offset", opt->index_offset, "krtd: KWIVER frame number of our frame 0")
+      ->capture_default_str();
   cmd->callback([opt] {
     core::Reconstruction rec;
     if (opt->format == "strecha") {
@@ -44,4 +45,4 @@ void Add(CLI::App& app) {
 const RegisterCommand reg(950, Add);
 
 }  // namespace
-}  // namespace fmv3d::app
+}  // namespace fmv3d::app::cmd_import_truth

@@ -9,7 +9,7 @@
 #include "fmv3d/core/files.h"
 #include "fmv3d/telemetry/telemetry.h"
 
-namespace fmv3d::app {
+namespace fmv3d::app::cmd_klv {
 namespace {
 
 struct Options {
@@ -59,4 +59,4 @@ void Add(CLI::App& app) {
 const RegisterCommand reg(110, Add);
 
 }  // namespace
-}  // namespace fmv3d::app
+}  // namespace fmv3d::app::cmd_klv

@@ -7,7 +7,7 @@
 #include "fmv3d/core/error.h"
 #include "fmv3d/pipeline/manual_check.h"
 
-namespace fmv3d::app {
+namespace fmv3d::app::cmd_manual {
 namespace {
 
 void Add(CLI::App& app) {
@@ -54,4 +54,4 @@ void Add(CLI::App& app) {
 const RegisterCommand reg(690, Add);
 
 }  // namespace
-}  // namespace fmv3d::app
+}  // namespace fmv3d::app::cmd_manual

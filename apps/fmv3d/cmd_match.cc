@@ -7,7 +7,7 @@
 #include "fmv3d/core/workspace.h"
 #include "fmv3d/features/match_stage.h"
 
-namespace fmv3d::app {
+namespace fmv3d::app::cmd_match {
 namespace {
 
 void Add(CLI::App& app) {
@@ -83,4 +83,4 @@ void Add(CLI::App& app) {
 const RegisterCommand reg(300, Add);
 
 }  // namespace
-}  // namespace fmv3d::app
+}  // namespace fmv3d::app::cmd_match

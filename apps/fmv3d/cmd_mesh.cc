@@ -5,7 +5,7 @@
 #include "command.h"
 #include "fmv3d/surface/mesh_stage.h"
 
-namespace fmv3d::app {
+namespace fmv3d::app::cmd_mesh {
 namespace {
 
 void Add(CLI::App& app) {
@@ -53,4 +53,4 @@ void Add(CLI::App& app) {
 const RegisterCommand reg(600, Add);
 
 }  // namespace
-}  // namespace fmv3d::app
+}  // namespace fmv3d::app::cmd_mesh

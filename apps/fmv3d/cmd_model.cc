@@ -6,7 +6,7 @@
 #include "command.h"
 #include "fmv3d/io/colmap_model.h"
 
-namespace fmv3d::app {
+namespace fmv3d::app::cmd_model {
 namespace {
 
 void Add(CLI::App& app) {
@@ -28,4 +28,4 @@ void Add(CLI::App& app) {
 const RegisterCommand reg(900, Add);
 
 }  // namespace
-}  // namespace fmv3d::app
+}  // namespace fmv3d::app::cmd_model

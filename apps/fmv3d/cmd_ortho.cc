@@ -5,7 +5,7 @@
 #include "command.h"
 #include "fmv3d/geo/dsm.h"
 
-namespace fmv3d::app {
+namespace fmv3d::app::cmd_ortho {
 namespace {
 
 void Add(CLI::App& app) {
@@ -23,4 +23,4 @@ void Add(CLI::App& app) {
 const RegisterCommand reg(720, Add);
 
 }  // namespace
-}  // namespace fmv3d::app
+}  // namespace fmv3d::app::cmd_ortho

@@ -7,7 +7,7 @@
 #include "fmv3d/core/progress_log.h"
 #include "fmv3d/pipeline/reconstruct.h"
 
-namespace fmv3d::app {
+namespace fmv3d::app::cmd_reconstruct {
 namespace {
 
 void Add(CLI::App& app) {
@@ -56,4 +56,4 @@ void Add(CLI::App& app) {
 const RegisterCommand reg(900, Add);
 
 }  // namespace
-}  // namespace fmv3d::app
+}  // namespace fmv3d::app::cmd_reconstruct

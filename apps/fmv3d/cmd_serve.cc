@@ -2,16 +2,16 @@
 #include <signal.h>
 #include <unistd.h>
 
+#include <atomic>
 #include <cstdio>
 #include <filesystem>
-#include <atomic>
 #include <memory>
 #include <thread>
 
 #include "command.h"
 #include "fmv3d/server/server.h"
 
-namespace fmv3d::app {
+namespace fmv3d::app::cmd_serve {
 namespace {
 
 std::atomic<server::Server*> g_server{nullptr};
@@ -74,4 +74,4 @@ void Add(CLI::App& app) {
 const RegisterCommand reg(1100, Add);
 
 }  // namespace
-}  // namespace fmv3d::app
+}  // namespace fmv3d::app::cmd_serve

@@ -4,7 +4,7 @@
 #include "command.h"
 #include "fmv3d/sfm/sparse_stage.h"
 
-namespace fmv3d::app {
+namespace fmv3d::app::cmd_sparse {
 namespace {
 
 void Add(CLI::App& app) {
@@ -72,4 +72,4 @@ void Add(CLI::App& app) {
 const RegisterCommand reg(400, Add);
 
 }  // namespace
-}  // namespace fmv3d::app
+}  // namespace fmv3d::app::cmd_sparse

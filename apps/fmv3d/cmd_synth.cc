@@ -17,7 +17,7 @@
 #include "fmv3d/geo/geodesy.h"
 #include "fmv3d/synth/synth.h"
 
-namespace fmv3d::app {
+namespace fmv3d::app::cmd_synth {
 namespace {
 
 std::vector<double> ParseList(const std::string& s) {
@@ -220,4 +220,4 @@ void Add(CLI::App& app) {
 const RegisterCommand reg(50, Add);
 
 }  // namespace
-}  // namespace fmv3d::app
+}  // namespace fmv3d::app::cmd_synth

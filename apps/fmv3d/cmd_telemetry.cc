@@ -7,7 +7,7 @@
 #include "fmv3d/core/files.h"
 #include "fmv3d/telemetry/telemetry_dump.h"
 
-namespace fmv3d::app {
+namespace fmv3d::app::cmd_telemetry {
 namespace {
 
 struct Options {
@@ -47,4 +47,4 @@ void Add(CLI::App& app) {
 const RegisterCommand reg(111, Add);
 
 }  // namespace
-}  // namespace fmv3d::app
+}  // namespace fmv3d::app::cmd_telemetry

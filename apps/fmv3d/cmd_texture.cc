@@ -3,7 +3,7 @@
 #include "command.h"
 #include "fmv3d/surface/texture_stage.h"
 
-namespace fmv3d::app {
+namespace fmv3d::app::cmd_texture {
 namespace {
 
 void Add(CLI::App& app) {
@@ -40,4 +40,4 @@ void Add(CLI::App& app) {
 const RegisterCommand reg(700, Add);
 
 }  // namespace
-}  // namespace fmv3d::app
+}  // namespace fmv3d::app::cmd_texture

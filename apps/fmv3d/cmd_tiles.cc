@@ -5,7 +5,7 @@
 #include "command.h"
 #include "fmv3d/pipeline/tiles_stage.h"
 
-namespace fmv3d::app {
+namespace fmv3d::app::cmd_tiles {
 namespace {
 
 void Add(CLI::App& app) {
@@ -25,4 +25,4 @@ void Add(CLI::App& app) {
 const RegisterCommand reg(760, Add);
 
 }  // namespace
-}  // namespace fmv3d::app
+}  // namespace fmv3d::app::cmd_tiles

@@ -18,7 +18,7 @@
 #include "fmv3d/io/tiepoints.h"
 #include "fmv3d/synth/truth_points.h"
 
-namespace fmv3d::app {
+namespace fmv3d::app::cmd_truth_projections {
 namespace {
 
 std::vector<std::string> SplitList(const std::string& s) {
@@ -163,4 +163,4 @@ void Add(CLI::App& app) {
 const RegisterCommand reg(1020, Add);
 
 }  // namespace
-}  // namespace fmv3d::app
+}  // namespace fmv3d::app::cmd_truth_projections

@@ -1,6 +1,7 @@
 // Subcommand registry: each cmd_<name>.cc registers a function that adds its CLI11 subcommand, so adding a
 // stage's command never touches main.cc. Commands hold no algorithms: they parse options, call the library
-// and report. A command signals failure by throwing fmv3d::Error.
+// and report. A command signals failure by throwing fmv3d::Error. Each cmd_<name>.cc keeps its helpers in
+// namespace fmv3d::app::cmd_<name>, so a unity build can compile several commands as one translation unit.
 #pragma once
 
 #include <CLI/CLI.hpp>

@@ -15,7 +15,7 @@
 namespace fmv3d::align {
 namespace {
 
-constexpr double kH = 30;
+constexpr double kLength = 30;
 
 TEST(ErrorMesh, VerticesCarryTheErrorOfThePointsNearThemAndHolesAreUnknown) {
   const io::TexturedMesh cad = synth::MakeBuilding(synth::BuildingSpec{}, 0);
@@ -30,14 +30,14 @@ TEST(ErrorMesh, VerticesCarryTheErrorOfThePointsNearThemAndHolesAreUnknown) {
     const Eigen::Vector3d n = md.Normal(faces[i]);
     if (samples[i].y() >= -0.5 || n.z() < -0.9) continue;
     const double e = samples[i].z() < 12 ? 0.004 : -0.006;
-    points.push_back(samples[i] + e * kH * n);
+    points.push_back(samples[i] + e * kLength * n);
     errors.push_back(e);
   }
   ErrorMeshOptions o;
   o.max_edge = 0.5;
   o.radius = 0.6;
   o.scale = 0.008;
-  o.length = kH;
+  o.length = kLength;
   const ErrorMesh m = BuildErrorMesh(cad, points, errors, o);
   ASSERT_EQ(m.error.size(), m.vertices.size());
   ASSERT_EQ(m.colors.size(), m.vertices.size());

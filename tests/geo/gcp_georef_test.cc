@@ -20,10 +20,10 @@
 namespace fmv3d::geo {
 namespace {
 
-const GeoPoint kOrigin{46.95, 7.44, 540};
+const GeoPoint kGcpOrigin{46.95, 7.44, 540};
 
 struct Flight {
-  core::Reconstruction truth;  // metres, local ENU at kOrigin
+  core::Reconstruction truth;  // metres, local ENU at kGcpOrigin
   core::Reconstruction model;  // the SfM model in its own frame
   std::vector<uint64_t> gcp_points;
   double extent = 0;
@@ -76,7 +76,7 @@ Flight MakeFlight() {
 // The GCPs clicked in every camera that sees them, at the true projection plus noise (σ px per axis); the last
 // one a check point.
 std::vector<GroundControlPoint> Click(const Flight& f, double sigma, uint64_t seed) {
-  const LocalFrame enu(kOrigin);
+  const LocalFrame enu(kGcpOrigin);
   std::mt19937_64 rng(seed);
   std::normal_distribution<double> noise(0, sigma);
   std::vector<GroundControlPoint> gcps;
@@ -101,7 +101,7 @@ std::vector<GroundControlPoint> Click(const Flight& f, double sigma, uint64_t se
 }
 
 // Largest camera centre error of the georeferenced model against the truth, in the georeference's ENU frame.
-// (The georeference's origin is kOrigin: options.origin.)
+// (The georeference's origin is kGcpOrigin: options.origin.)
 double WorstCameraError(const Flight& f, const GcpGeoref& g) {
   double worst = 0;
   for (const auto& [id, im] : g.enu.images)
@@ -114,7 +114,7 @@ TEST(GcpGeoref, AdjustmentWithGcpConstraintsOverNoiseSeeds) {
   const GcpCrs crs("EPSG:4326");
   GcpGeorefOptions similarity_only, adjusted;
   similarity_only.adjust = false;
-  similarity_only.origin = adjusted.origin = kOrigin;
+  similarity_only.origin = adjusted.origin = kGcpOrigin;
   // Exact clicks: both place the cameras within the model's own shape error.
   {
     const auto gcps = Click(f, 0, 1);

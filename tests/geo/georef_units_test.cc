@@ -21,7 +21,7 @@ namespace fmv3d::geo {
 namespace {
 
 constexpr double kDeg = M_PI / 180;
-const GeoPoint kOrigin{38.16, -77.35, 60};
+const GeoPoint kUnitsOrigin{38.16, -77.35, 60};
 
 core::Sim3 TrueModelToEnu() {
   core::Sim3 s;
@@ -213,7 +213,7 @@ Eigen::Vector3d Ahead(const Eigen::Vector3d& c) { return {c.x(), 0, 0}; }
 Eigen::Vector3d Beyond(const Eigen::Vector3d& c) { return {c.x(), 120, -30}; }
 
 TEST(LineOfSightCheck, AgreesWhereTheModelSeesTheTelemetrysFootprint) {
-  const LocalFrame frame(kOrigin);
+  const LocalFrame frame(kUnitsOrigin);
   const SightCase c = MakeSightCase(frame, Ahead, Ahead);
   const LineOfSightCheck r = CheckLinesOfSight(c.model, c.keyframes, VerticalDatum::kEllipsoid, frame, nullptr, {});
   EXPECT_EQ(r.verdict, LineOfSightCheck::Verdict::kAgrees) << r.Why();
@@ -224,7 +224,7 @@ TEST(LineOfSightCheck, AgreesWhereTheModelSeesTheTelemetrysFootprint) {
 }
 
 TEST(LineOfSightCheck, DisagreesAndSaysWhereWhenTheGroundIsBeyond) {
-  const LocalFrame frame(kOrigin);
+  const LocalFrame frame(kUnitsOrigin);
   // The model looks 120 m beyond the stated frame centre (and the frame centre is stated 30 m higher).
   const SightCase c = MakeSightCase(frame, Ahead, Beyond);
   GeorefAccuracy acc;
@@ -255,7 +255,7 @@ TEST(LineOfSightCheck, DisagreesAndSaysWhereWhenTheGroundIsBeyond) {
 // The model's ground on the telemetry's rays but 40 m below the frame centres (beyond them along the rays): the
 // angle agrees, the height does not.
 TEST(LineOfSightCheck, DisagreesWhenTheGroundIsBelowTheFrameCentres) {
-  const LocalFrame frame(kOrigin);
+  const LocalFrame frame(kUnitsOrigin);
   const auto above = [](const Eigen::Vector3d& c) {  // on the ray c → (x, 0, 0), 40 m above the ground
     const Eigen::Vector3d g(c.x(), 0, 0);
     return Eigen::Vector3d(c + (g - c) * (1 - 40 / c.z()));
@@ -274,7 +274,7 @@ TEST(LineOfSightCheck, DisagreesWhenTheGroundIsBelowTheFrameCentres) {
 TEST(LineOfSightCheck, StageMarksAModelOffTheLinesOfSightAsNotTrusted) {
   for (const bool off : {false, true}) {
     test::TempDir dir("georef-los");
-    const LocalFrame frame(kOrigin);
+    const LocalFrame frame(kUnitsOrigin);
     const SightCase c = off ? MakeSightCase(frame, Beyond, Ahead) : MakeSightCase(frame, Ahead, Ahead);
     core::EnsureDirectory(dir / "frames");
     io::WriteFramesIndex(c.index, dir / "frames/frames.json");
@@ -283,7 +283,7 @@ TEST(LineOfSightCheck, StageMarksAModelOffTheLinesOfSightAsNotTrusted) {
     model.Transform(model_from_enu);
     io::WriteColmapText(model, dir / "sparse");
     GeorefOptions o;
-    o.origin = kOrigin;
+    o.origin = kUnitsOrigin;
     o.constrain = GeorefOptions::Constrain::kNever;
     o.use_frame_centres = false;  // the check alone decides
     const auto j = RunGeorefStage(dir.path(), o);

@@ -21,7 +21,7 @@ TEST(Validation, WorkspaceNames) {
 }
 
 TEST(Validation, ResolveInsideRefusesEveryEscape) {
-  test::TempDir tmp("resolve");
+  fmv3d::test::TempDir tmp("resolve");
   fs::create_directories(tmp / "root" / "sub");
   std::ofstream(tmp / "root" / "sub" / "f.txt") << "x";
   std::ofstream(tmp / "secret.txt") << "s";
