@@ -30,9 +30,12 @@ echo "tidy: ${#files[@]} file(s) changed since $(git rev-parse --short "$base")"
 log=$(mktemp)
 trap 'rm -f "$log"' EXIT
 printf '%s\0' "${files[@]}" | xargs -0 -n 1 -P "$(nproc)" clang-tidy -p "$build" --quiet >"$log" 2>/dev/null || true
-if grep -q ': warning: \|: error: ' "$log"; then
-  grep -A3 ': warning: \|: error: ' "$log" >&2
-  echo "tidy: $(grep -c ': warning: \|: error: ' "$log") finding(s) in the changed files" >&2
+# Only findings in the changed files count (a header's findings show once per file that includes it).
+pattern=$(printf '%s\n' "${changed[@]}" | sed 's/[.[\*^$]/\\&/g; s#^#/#; s#$#:[0-9]+:[0-9]+: (warning|error): #' | paste -sd'|')
+findings=$(grep -E "$pattern" "$log" | sort -u || true)
+if [[ -n "$findings" ]]; then
+  echo "$findings" >&2
+  echo "tidy: $(echo "$findings" | wc -l) finding(s) in the changed files" >&2
   exit 1
 fi
 echo "tidy: ${#files[@]} file(s) clean"
