@@ -3,8 +3,10 @@
 #include <spdlog/spdlog.h>
 #include <tbb/parallel_for.h>
 
+#include <algorithm>
 #include <atomic>
 #include <chrono>
+#include <functional>
 #include <mutex>
 #include <opencv2/imgcodecs.hpp>
 #include <set>
@@ -12,6 +14,7 @@
 #include "fmv3d/core/error.h"
 #include "fmv3d/core/files.h"
 #include "fmv3d/core/logging.h"
+#include "fmv3d/core/threading.h"
 #include "fmv3d/core/workspace.h"
 #include "fmv3d/features/feature_io.h"
 #include "fmv3d/features/spatial_pairs.h"
@@ -24,6 +27,10 @@ namespace fs = std::filesystem;
 namespace {
 
 using Clock = std::chrono::steady_clock;
+
+// Bytes a keypoint costs while its image is matched: its descriptor as u8, float (FLANN) and int16 + int8 rows
+// and blocks (brute force), the kd-forest's nodes.
+constexpr double kBytesPerKeypoint = 1400;
 double Since(Clock::time_point t) { return std::chrono::duration<double>(Clock::now() - t).count(); }
 
 PairGeometry ToPairGeometry(geometry::TwoViewClass c) {
@@ -52,37 +59,76 @@ const char* GeometryName(PairGeometry g) {
   }
 }
 
-// Float descriptors + kd-trees per image, created on first use and released once every pair that needs the
-// image is done, so sequential matching of long videos keeps only a sliding window in memory.
+// Each image's descriptors with their search structures (float rows, kd-forest or SIMD blocks: ~1.3 KB per
+// keypoint), read from its feature file on first use. An image is released once every pair that needs it is done;
+// and since quadratic and loop-closure pairs reach far beyond the sequential window, at most `capacity` images are
+// held: the least recently used one that no thread is matching is evicted, and read again if a later pair needs it.
+// Matching is deterministic whatever the evictions (the kd-forest is seeded per image).
 class DescriptorCache {
  public:
-  DescriptorCache(const std::vector<FeatureSet>& features, const std::vector<ImagePair>& pairs)
-      : features_(features), entries_(features.size()), remaining_(features.size()) {
+  struct Entry {
+    explicit Entry(Descriptors d, uint32_t id) : u8(std::move(d)), search(u8, id) {}
+    Descriptors u8;
+    ImageDescriptors search;  // points into u8
+  };
+  DescriptorCache(std::function<Descriptors(uint32_t)> load, size_t num_images, const std::vector<ImagePair>& pairs,
+                  size_t capacity)
+      : load_(std::move(load)),
+        entries_(num_images),
+        last_use_(num_images, 0),
+        remaining_(num_images),
+        capacity_(std::max<size_t>(capacity, 2)) {
     for (const auto& p : pairs) {
       ++remaining_[p.first];
       ++remaining_[p.second];
     }
   }
-  std::shared_ptr<ImageDescriptors> Get(uint32_t i) {
+  std::shared_ptr<Entry> Get(uint32_t i) {
     std::lock_guard<std::mutex> lock(mutex_);
-    if (!entries_[i]) entries_[i] = std::make_shared<ImageDescriptors>(features_[i].descriptors, i + 1);
+    last_use_[i] = ++tick_;
+    if (entries_[i]) return entries_[i];
+    while (held_ >= capacity_ && EvictOne()) {
+    }
+    entries_[i] = std::make_shared<Entry>(load_(i), i + 1);
+    ++held_;
+    ++loads_;
+    peak_ = std::max(peak_, held_);
     return entries_[i];
   }
   void Done(uint32_t i) {
     std::lock_guard<std::mutex> lock(mutex_);
-    if (--remaining_[i] == 0) entries_[i].reset();
+    if (--remaining_[i] == 0 && entries_[i]) {
+      entries_[i].reset();
+      --held_;
+    }
   }
+  size_t loads() const { return loads_; }
+  size_t peak() const { return peak_; }
+  size_t capacity() const { return capacity_; }
 
  private:
-  const std::vector<FeatureSet>& features_;
+  bool EvictOne() {  // the least recently used entry no thread holds; false when every held entry is in use
+    int64_t victim = -1;
+    for (size_t k = 0; k < entries_.size(); ++k)
+      if (entries_[k] && entries_[k].use_count() == 1 && (victim < 0 || last_use_[k] < last_use_[victim]))
+        victim = static_cast<int64_t>(k);
+    if (victim < 0) return false;
+    entries_[victim].reset();
+    --held_;
+    return true;
+  }
+  std::function<Descriptors(uint32_t)> load_;
   std::mutex mutex_;
-  std::vector<std::shared_ptr<ImageDescriptors>> entries_;
+  std::vector<std::shared_ptr<Entry>> entries_;
+  std::vector<uint64_t> last_use_;
   std::vector<int> remaining_;
+  size_t capacity_, held_ = 0, loads_ = 0, peak_ = 0;
+  uint64_t tick_ = 0;
 };
 
 // The features of every frame, with each frame's camera prior; everything is checked against the index first.
 struct LoadedFeatures {
-  std::vector<FeatureSet> features;
+  std::vector<FeatureSet> features;  // keypoints and colours; descriptors only where ApplyOperatorInput loads them
   std::vector<const core::Camera*> cameras;
   std::vector<bool> trusted;  // the camera is known (sensor database, EXIF, calibration), not a focal guess
 };
@@ -97,7 +143,7 @@ LoadedFeatures LoadFeatures(const core::Workspace& ws, const io::FramesIndex& in
     try {
       const fs::path p = FeaturePath(ws.features_dir(), index.frames[i].name);
       if (!fs::exists(p)) throw Error(p.string() + " is missing; run `fmv3d features " + ws.name() + "` first");
-      out.features[i] = ReadFeatures(p);
+      out.features[i] = ReadFeatures(p, /*descriptors=*/false);
       if (out.features[i].image_name != index.frames[i].name)
         throw Error(p.string() + ": holds features of '" + out.features[i].image_name + "', not '" +
                     index.frames[i].name + "' (re-run `fmv3d features --force`)");
@@ -126,19 +172,18 @@ LoadedFeatures LoadFeatures(const core::Workspace& ws, const io::FramesIndex& in
   return out;
 }
 
-std::vector<ImagePair> ChoosePairs(const io::FramesIndex& index, const std::vector<FeatureSet>& features,
+std::vector<ImagePair> ChoosePairs(const io::FramesIndex& index, const DescriptorLoader& load,
                                    const PairOptions& options, PairMode* mode, MatchStageStats* stats) {
-  std::vector<const Descriptors*> descs(features.size());
-  for (size_t i = 0; i < features.size(); ++i) descs[i] = &features[i].descriptors;
+  const size_t n = index.frames.size();
   PairOptions pair_options = options;
   std::vector<Footprint> footprints;
   if (pair_options.mode == PairMode::kSpatial || pair_options.mode == PairMode::kAuto)
     footprints = FootprintsFromTelemetry(index);
   if (pair_options.mode == PairMode::kAuto && PreferSpatialPairs(index, footprints, pair_options)) {
     pair_options.mode = PairMode::kSpatial;
-    spdlog::info("match: {} photos with GPS: pairs by overlapping ground footprints", features.size());
+    spdlog::info("match: {} photos with GPS: pairs by overlapping ground footprints", n);
   }
-  return SelectPairs(descs, pair_options, mode, &stats->loop_closure_pairs, &footprints);
+  return SelectPairs(n, load, pair_options, mode, &stats->loop_closure_pairs, &footprints);
 }
 
 // Putative matches + two-view verification of one pair; `verified` is false when the pair is rejected.
@@ -149,7 +194,7 @@ VerifiedPair MatchPair(const LoadedFeatures& in, DescriptorCache* cache, uint32_
   std::vector<FeatureMatch> putative;
   {
     auto a = cache->Get(i), b = cache->Get(j);
-    putative = MatchDescriptors(*a, *b, options.match);
+    putative = MatchDescriptors(a->search, b->search, options.match);
   }
   cache->Done(i);
   cache->Done(j);
@@ -195,12 +240,18 @@ VerifiedPair MatchPair(const LoadedFeatures& in, DescriptorCache* cache, uint32_
 
 // Every pair matched and verified in parallel over pairs (OpenCV's own threads stay off meanwhile). Returns the
 // verified pairs in pair order; `per_pair` gets one summary row per pair tried.
-std::vector<VerifiedPair> MatchAndVerify(const LoadedFeatures& in, const std::vector<ImagePair>& pairs,
-                                         const MatchStageOptions& options, MatchStageStats* stats,
-                                         nlohmann::json* per_pair, size_t* total_inliers) {
+std::vector<VerifiedPair> MatchAndVerify(const LoadedFeatures& in, const DescriptorLoader& load,
+                                         const std::vector<ImagePair>& pairs, const MatchStageOptions& options,
+                                         MatchStageStats* stats, nlohmann::json* per_pair, size_t* total_inliers) {
   const int cv_threads = cv::getNumThreads();
   cv::setNumThreads(1);
-  DescriptorCache cache(in.features, pairs);
+  size_t keypoints = 0;
+  for (const auto& f : in.features) keypoints += f.keypoints.size();
+  const double per_image =
+      kBytesPerKeypoint * std::max(1.0, double(keypoints) / std::max<size_t>(1, in.features.size()));
+  const size_t capacity =
+      std::max<size_t>(2 * core::NumThreads() + 2, static_cast<size_t>(options.max_memory_mb * 1048576.0 / per_image));
+  DescriptorCache cache([&load](uint32_t i) { return load(i); }, in.features.size(), pairs, capacity);
   std::vector<VerifiedPair> results(pairs.size());
   std::vector<char> verified(pairs.size(), 0);
   std::atomic<int64_t> ns_match{0}, ns_verify{0};
@@ -217,6 +268,9 @@ std::vector<VerifiedPair> MatchAndVerify(const LoadedFeatures& in, const std::ve
   cv::setNumThreads(cv_threads);
   stats->cpu_seconds_match = ns_match * 1e-9;
   stats->cpu_seconds_verify = ns_verify * 1e-9;
+  stats->descriptor_cache_capacity = cache.capacity();
+  stats->descriptor_loads = cache.loads();
+  stats->peak_cached_images = cache.peak();
 
   std::vector<VerifiedPair> kept;
   *per_pair = nlohmann::json::array();
@@ -244,7 +298,7 @@ std::vector<VerifiedPair> MatchAndVerify(const LoadedFeatures& in, const std::ve
 
 // The operator's tie points, keypoints and deleted matches, applied to `kept` (and `features`, which gain the
 // clicked keypoints). Returns the summary for matches.json.
-nlohmann::json ApplyOperatorInput(const core::Workspace& ws, const io::FramesIndex& index,
+nlohmann::json ApplyOperatorInput(const core::Workspace& ws, const io::FramesIndex& index, const DescriptorLoader& load,
                                   const MatchStageOptions& options, std::vector<FeatureSet>* features,
                                   std::vector<VerifiedPair>* kept) {
   const fs::path tiepoints_path = options.tiepoints_file.value_or(ws.manual_dir() / "tiepoints.json");
@@ -268,6 +322,19 @@ nlohmann::json ApplyOperatorInput(const core::Workspace& ws, const io::FramesInd
       if (images[i].empty())
         spdlog::warn("match: cannot read frames/{}: its tie points get no descriptor", index.frames[i].name);
     }
+  // Descriptors where the operator's points need them: the clicked frames and the frames they verified a pair
+  // with (a keypoint clicked in one frame is searched for along its epipolar lines there).
+  std::set<uint32_t> involved;
+  for (size_t i = 0; i < n; ++i)
+    if (clicked.count(index.frames[i].name)) involved.insert(static_cast<uint32_t>(i));
+  for (const auto& vp : *kept)
+    if (involved.count(vp.image_id1 - 1) || involved.count(vp.image_id2 - 1)) {
+      involved.insert(vp.image_id1 - 1);
+      involved.insert(vp.image_id2 - 1);
+    }
+  for (uint32_t i : involved)
+    if ((*features)[i].descriptors.rows() != static_cast<Eigen::Index>((*features)[i].keypoints.size()))
+      (*features)[i].descriptors = load(i);
   ManualMatches manual = AppendManualKeypoints(tie_points, index, images, features, options.manual);
   const size_t pairs_before = kept->size();
   ApplyManualMatches(tie_points, index, *features, options.manual, &manual, kept);
@@ -318,6 +385,11 @@ nlohmann::json SummaryJson(const MatchStageStats& stats, PairMode mode, const Ma
             {"loop_closure_candidates", options.pairs.loop_closure_candidates},
             {"max_error_px", options.verify.max_error_px},
             {"min_inliers", options.verify.min_inliers}}},
+          {"memory",
+           {{"max_memory_mb", options.max_memory_mb},
+            {"descriptor_cache_images", stats.descriptor_cache_capacity},
+            {"peak_cached_images", stats.peak_cached_images},
+            {"descriptor_loads", stats.descriptor_loads}}},
           {"manual", std::move(manual_summary)},
           {"pairs", std::move(per_pair)}};
 }
@@ -335,7 +407,10 @@ MatchStageStats RunMatchStage(const core::Workspace& ws, const MatchStageOptions
 
   const auto t_pairs = Clock::now();
   PairMode mode = PairMode::kAuto;
-  const auto pairs = ChoosePairs(index, in.features, options.pairs, &mode, &stats);
+  const DescriptorLoader load = [&](size_t i) {
+    return ReadFeatures(FeaturePath(ws.features_dir(), index.frames[i].name)).descriptors;
+  };
+  const auto pairs = ChoosePairs(index, load, options.pairs, &mode, &stats);
   stats.pairs_tried = pairs.size();
   stats.seconds_pairs = Since(t_pairs);
   spdlog::info("match: {} images, {} pairs ({}{})", stats.images, pairs.size(), PairModeName(mode),
@@ -345,9 +420,9 @@ MatchStageStats RunMatchStage(const core::Workspace& ws, const MatchStageOptions
 
   nlohmann::json per_pair;
   size_t total_inliers = 0;
-  std::vector<VerifiedPair> kept = MatchAndVerify(in, pairs, options, &stats, &per_pair, &total_inliers);
+  std::vector<VerifiedPair> kept = MatchAndVerify(in, load, pairs, options, &stats, &per_pair, &total_inliers);
   core::EnsureDirectory(ws.matches_dir());
-  nlohmann::json manual_summary = ApplyOperatorInput(ws, index, options, &in.features, &kept);
+  nlohmann::json manual_summary = ApplyOperatorInput(ws, index, load, options, &in.features, &kept);
   stats.pairs_verified = kept.size();
   WriteMatches(kept, MatchesPath(ws.matches_dir()));
   stats.seconds_total = Since(t_start);
