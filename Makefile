@@ -80,6 +80,11 @@ fuzz: build $(FUZZ_BUILD)/build.ninja
 check-format:
 	@scripts/check-format.sh
 
+# clang-tidy (.clang-tidy) on the sources changed since BASE (default: the merge base with main); see scripts/tidy.sh.
+.PHONY: tidy
+tidy: $(BUILD)/build.ninja
+	@scripts/tidy.sh "$(BASE)" $(BUILD)
+
 bench: build
 	@echo "benchmarks: $(BUILD)/bench/ (see bench/README.md)"
 

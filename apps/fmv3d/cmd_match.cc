@@ -48,6 +48,10 @@ void Add(CLI::App& app) {
       ->capture_default_str();
   cmd->add_option("--min-inliers", a->opt.verify.min_inliers, "Pairs with fewer inliers are dropped")
       ->capture_default_str();
+  cmd->add_option("--max-memory", a->opt.max_memory_mb,
+                  "MB for the descriptors of the images being matched; beyond it the least recently used image is "
+                  "dropped and read again when needed")
+      ->capture_default_str();
   cmd->add_option("--seed", a->seed, "Random seed (results are deterministic for a seed)")->capture_default_str();
   cmd->add_option("--tiepoints", a->tiepoints,
                   "The operator's tie points (docs/manual-inputs.md) instead of WS/manual/tiepoints.json");

@@ -5,6 +5,7 @@
 // gcp: an OpenDroneMap gcp_list.txt in --crs, the world taken as the ENU frame at --origin (default: the
 // flight's geo origin in truth.json).
 #include <cstdio>
+#include <optional>
 #include <sstream>
 
 #include "command.h"
@@ -27,6 +28,68 @@ std::vector<std::string> SplitList(const std::string& s) {
   for (std::string item; std::getline(in, item, ',');)
     if (!item.empty()) out.push_back(item);
   return out;
+}
+
+// The synth world's geo origin: --origin when given, else truth.json's (absent for a flight without telemetry).
+std::optional<geo::GeoPoint> GeoOrigin(const std::string& option, const std::filesystem::path& synth_dir) {
+  if (!option.empty()) {
+    geo::GeoPoint g;
+    char extra = 0;
+    if (std::sscanf(option.c_str(), "%lf,%lf,%lf%c", &g.lat, &g.lon, &g.alt, &extra) != 3)
+      throw CLI::ValidationError("--origin", "expected LAT,LON,ALT, e.g. 46.95,7.44,540");
+    return g;
+  }
+  if (!std::filesystem::exists(synth_dir / "truth.json")) return std::nullopt;
+  const auto tj = core::ReadJson(synth_dir / "truth.json");
+  if (!tj.contains("geo_origin")) return std::nullopt;
+  return geo::GeoPoint{tj["geo_origin"].at("lat").get<double>(), tj["geo_origin"].at("lon").get<double>(),
+                       tj["geo_origin"].at("alt").get<double>()};
+}
+
+nlohmann::json PointsJson(const std::vector<synth::TruthPoint>& points, const std::optional<geo::GeoPoint>& origin,
+                          const std::filesystem::path& truth_dir) {
+  nlohmann::json arr = nlohmann::json::array();
+  std::optional<geo::LocalFrame> frame;
+  if (origin) frame.emplace(*origin);
+  for (size_t i = 0; i < points.size(); ++i) {
+    nlohmann::json obs = nlohmann::json::array();
+    for (const auto& o : points[i].observations) obs.push_back({{"frame", o.frame}, {"x", o.x}, {"y", o.y}});
+    nlohmann::json p = {{"id", "p" + std::to_string(i + 1)},
+                        {"xyz", {points[i].xyz.x(), points[i].xyz.y(), points[i].xyz.z()}},
+                        {"observations", obs}};
+    if (frame) {
+      const geo::GeoPoint g = frame->ToGeodetic(points[i].xyz);
+      p["wgs84"] = {{"lat", g.lat}, {"lon", g.lon}, {"alt", g.alt}};
+    }
+    arr.push_back(p);
+  }
+  return {{"truth", truth_dir.string()},
+          {"pixel_convention", "origin at the top-left corner, pixel centres at +0.5"},
+          {"points", arr}};
+}
+
+// One line per observation; the last `check` points are marked as check points.
+geo::GcpList GcpListOf(const std::vector<synth::TruthPoint>& points, const geo::GeoPoint& origin,
+                       const std::string& crs_name, int check_points) {
+  const geo::LocalFrame frame(origin);
+  const geo::GcpCrs crs(crs_name);
+  geo::GcpList list;
+  list.crs = crs_name;
+  for (size_t i = 0; i < points.size(); ++i) {
+    const bool check = static_cast<int>(i) >= static_cast<int>(points.size()) - check_points;
+    const Eigen::Vector3d geo = crs.FromWgs84(frame.ToGeodetic(points[i].xyz));
+    for (const auto& o : points[i].observations) {
+      geo::GcpLine l;
+      l.geo = geo;
+      l.im_x = o.x;
+      l.im_y = o.y;
+      l.image = o.frame;
+      l.name = (check ? "chk" : "gcp") + std::to_string(i + 1);
+      if (check) l.extra = {"check"};
+      list.lines.push_back(l);
+    }
+  }
+  return list;
 }
 
 void Add(CLI::App& app) {
@@ -81,43 +144,12 @@ void Add(CLI::App& app) {
     const auto points = synth::SelectTruthPoints(truth, a->opt);
     if (a->check < 0 || a->check >= static_cast<int>(points.size()))
       throw Error("truth-projections: --check must leave at least one control point");
-    std::optional<geo::GeoPoint> origin;
-    if (!a->origin.empty()) {
-      geo::GeoPoint g;
-      char extra = 0;
-      if (std::sscanf(a->origin.c_str(), "%lf,%lf,%lf%c", &g.lat, &g.lon, &g.alt, &extra) != 3)
-        throw CLI::ValidationError("--origin", "expected LAT,LON,ALT, e.g. 46.95,7.44,540");
-      origin = g;
-    } else if (fs::exists(fs::path(a->synth) / "truth.json")) {
-      const auto tj = core::ReadJson(fs::path(a->synth) / "truth.json");
-      if (tj.contains("geo_origin"))
-        origin = geo::GeoPoint{tj["geo_origin"].at("lat").get<double>(), tj["geo_origin"].at("lon").get<double>(),
-                               tj["geo_origin"].at("alt").get<double>()};
-    }
+    const std::optional<geo::GeoPoint> origin = GeoOrigin(a->origin, fs::path(a->synth));
     if (a->format == "gcp" && !origin)
       throw Error("truth-projections: --format gcp needs --origin LAT,LON,ALT (the synth world has no geo origin)");
     std::string text;
     if (a->format == "json") {
-      nlohmann::json arr = nlohmann::json::array();
-      std::optional<geo::LocalFrame> frame;
-      if (origin) frame.emplace(*origin);
-      for (size_t i = 0; i < points.size(); ++i) {
-        nlohmann::json obs = nlohmann::json::array();
-        for (const auto& o : points[i].observations) obs.push_back({{"frame", o.frame}, {"x", o.x}, {"y", o.y}});
-        nlohmann::json p = {{"id", "p" + std::to_string(i + 1)},
-                            {"xyz", {points[i].xyz.x(), points[i].xyz.y(), points[i].xyz.z()}},
-                            {"observations", obs}};
-        if (frame) {
-          const geo::GeoPoint g = frame->ToGeodetic(points[i].xyz);
-          p["wgs84"] = {{"lat", g.lat}, {"lon", g.lon}, {"alt", g.alt}};
-        }
-        arr.push_back(p);
-      }
-      text = nlohmann::json{{"truth", truth_dir.string()},
-                            {"pixel_convention", "origin at the top-left corner, pixel centres at +0.5"},
-                            {"points", arr}}
-                 .dump(2) +
-             "\n";
+      text = PointsJson(points, origin, truth_dir).dump(2) + "\n";
     } else if (a->format == "tiepoints") {
       io::TiePoints t;
       for (size_t i = 0; i < points.size(); ++i)
@@ -128,24 +160,7 @@ void Add(CLI::App& app) {
       }
       text = io::TiePointsToJson(t).dump(2) + "\n";
     } else {
-      const geo::LocalFrame frame(*origin);
-      const geo::GcpCrs crs(a->crs);
-      geo::GcpList list;
-      list.crs = a->crs;
-      for (size_t i = 0; i < points.size(); ++i) {
-        const bool check = static_cast<int>(i) >= static_cast<int>(points.size()) - a->check;
-        const Eigen::Vector3d geo = crs.FromWgs84(frame.ToGeodetic(points[i].xyz));
-        for (const auto& o : points[i].observations) {
-          geo::GcpLine l;
-          l.geo = geo;
-          l.im_x = o.x;
-          l.im_y = o.y;
-          l.image = o.frame;
-          l.name = (check ? "chk" : "gcp") + std::to_string(i + 1);
-          if (check) l.extra = {"check"};
-          list.lines.push_back(l);
-        }
-      }
+      const geo::GcpList list = GcpListOf(points, *origin, a->crs, a->check);
       if (!a->output.empty()) {
         geo::WriteGcpList(list, a->output, table ? &*table : nullptr);
         return;

@@ -65,6 +65,13 @@ TEST(FeatureIo, FeaturesRoundTrip) {
   EXPECT_TRUE(g.descriptors == f.descriptors);
   EXPECT_EQ(g.contrast_threshold, 0.0);
 
+  // Keypoints only: the same keypoints and colours, no descriptors; a truncated descriptor block still fails.
+  const auto k = ReadFeatures(path, /*descriptors=*/false);
+  ASSERT_EQ(k.keypoints.size(), 321u);
+  EXPECT_EQ(k.descriptors.rows(), 0);
+  EXPECT_EQ(k.keypoints[320].y, f.keypoints[320].y);
+  EXPECT_EQ(k.colors[320], f.colors[320]);
+
   // The contrast threshold the keypoints were found with is kept (a resumed run reports it unchanged).
   auto faint = RandomFeatures(4, 5);
   faint.contrast_threshold = 0.04 * 0.5 * 0.5;

@@ -123,6 +123,45 @@ TEST(Stage, FeaturesAndMatchThroughTheCli) {
   EXPECT_NE(r.err.find("is 480x320 but camera 1 is 500x320"), std::string::npos) << r.err;
 }
 
+// A memory budget too small for the images a pair list reaches (quadratic and loop-closure pairs run far ahead of
+// the sequential window) evicts images and reads them again: the matches are the same as with room for all.
+TEST(Stage, MatchingWithinAMemoryBudgetGivesTheSameMatches) {
+  test::TempDir tmp;
+  const fs::path ws = tmp / "ws";
+  const int n = 12;
+  MakeWorkspace(ws, n);
+  auto r = test::RunCli("-q features '" + ws.string() + "' --max-features 800");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const std::string match =  // two threads: the budget floor (two images per thread + 2) is then 6 < n
+      "-q --threads 2 match '" + ws.string() + "' --pairs sequential --overlap 2 --loop-closure 2";
+  r = test::RunCli(match);
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const auto roomy = ReadMatches(MatchesPath(ws / "matches"));
+  const auto roomy_memory = core::ReadJson(MatchesSummaryPath(ws / "matches")).at("memory");
+  EXPECT_EQ(roomy_memory.at("descriptor_loads").get<int>(), n);  // each image read once
+
+  r = test::RunCli(match + " --max-memory 0.01");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const auto tight = ReadMatches(MatchesPath(ws / "matches"));
+  const auto memory = core::ReadJson(MatchesSummaryPath(ws / "matches")).at("memory");
+  const int capacity = memory.at("descriptor_cache_images").get<int>();
+  EXPECT_LT(capacity, n);
+  EXPECT_LE(memory.at("peak_cached_images").get<int>(), capacity);
+  EXPECT_GT(memory.at("descriptor_loads").get<int>(), n);  // evicted images were read again
+  ASSERT_EQ(tight.size(), roomy.size());
+  ASSERT_GT(roomy.size(), static_cast<size_t>(n));
+  for (size_t k = 0; k < roomy.size(); ++k) {
+    EXPECT_EQ(tight[k].image_id1, roomy[k].image_id1);
+    EXPECT_EQ(tight[k].image_id2, roomy[k].image_id2);
+    ASSERT_EQ(tight[k].inliers.size(), roomy[k].inliers.size());
+    EXPECT_EQ(tight[k].F, roomy[k].F);
+  }
+
+  r = test::RunCli(match + " --max-memory 0");
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_NE(r.err.find("--max-memory must be > 0"), std::string::npos) << r.err;
+}
+
 // Strecha ground truth: K (3 rows), distortion row, R camera-to-world (3 rows), C, size.
 struct GtCamera {
   Eigen::Matrix3d K, R_c2w;

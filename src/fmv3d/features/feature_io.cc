@@ -56,6 +56,12 @@ class Reader {
     std::memcpy(p, buf_.data() + pos_, n);
     pos_ += n;
   }
+  void Skip(size_t n, const char* what) {
+    if (n > Remaining())
+      throw Error(path_.string() + ": truncated file (" + what + " needs " + std::to_string(n) + " bytes, " +
+                  std::to_string(Remaining()) + " left)");
+    pos_ += n;
+  }
   template <typename T>
   T Get(const char* what) {
     T v;
@@ -124,7 +130,7 @@ void WriteFeatures(const FeatureSet& f, const fs::path& path) {
   w.Save(path);
 }
 
-FeatureSet ReadFeatures(const fs::path& path) {
+FeatureSet ReadFeatures(const fs::path& path, bool descriptors) {
   Reader r(path);
   r.Magic(kFeatMagic, "an fmv3d feature file");
   const auto version = r.Get<uint32_t>("version");
@@ -155,8 +161,12 @@ FeatureSet ReadFeatures(const fs::path& path) {
     k.scale = r.Get<float>("keypoint");
     k.orientation = r.Get<float>("keypoint");
   }
-  f.descriptors.resize(n, 128);
-  if (n > 0) r.Bytes(f.descriptors.data(), size_t{n} * 128, "descriptors");
+  if (descriptors) {
+    f.descriptors.resize(n, 128);
+    if (n > 0) r.Bytes(f.descriptors.data(), size_t{n} * 128, "descriptors");
+  } else {
+    r.Skip(size_t{n} * 128, "descriptors");
+  }
   f.colors.resize(n);
   for (auto& c : f.colors) r.Bytes(c.data(), 3, "colours");
   r.End(kFeatEnd);

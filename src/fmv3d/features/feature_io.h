@@ -32,7 +32,9 @@ inline constexpr uint32_t kMatchFileVersion = 1;
 
 // Written atomically (temporary + rename).
 void WriteFeatures(const FeatureSet& features, const std::filesystem::path& path);
-FeatureSet ReadFeatures(const std::filesystem::path& path);
+// With `descriptors` false the descriptor block is checked but not kept (descriptors has 0 rows): what a stage
+// that holds every image's keypoints needs, at a ninth of the memory (16 + 3 bytes per keypoint instead of 147).
+FeatureSet ReadFeatures(const std::filesystem::path& path, bool descriptors = true);
 
 void WriteMatches(const std::vector<VerifiedPair>& pairs, const std::filesystem::path& path);
 std::vector<VerifiedPair> ReadMatches(const std::filesystem::path& path);

@@ -3,8 +3,10 @@
 #include <spdlog/spdlog.h>
 #include <tbb/parallel_for.h>
 
+#include <algorithm>
 #include <atomic>
 #include <chrono>
+#include <functional>
 #include <mutex>
 #include <opencv2/imgcodecs.hpp>
 #include <set>
@@ -12,6 +14,7 @@
 #include "fmv3d/core/error.h"
 #include "fmv3d/core/files.h"
 #include "fmv3d/core/logging.h"
+#include "fmv3d/core/threading.h"
 #include "fmv3d/core/workspace.h"
 #include "fmv3d/features/feature_io.h"
 #include "fmv3d/features/spatial_pairs.h"
@@ -24,6 +27,10 @@ namespace fs = std::filesystem;
 namespace {
 
 using Clock = std::chrono::steady_clock;
+
+// Bytes a keypoint costs while its image is matched: its descriptor as u8, float (FLANN) and int16 + int8 rows
+// and blocks (brute force), the kd-forest's nodes.
+constexpr double kBytesPerKeypoint = 1400;
 double Since(Clock::time_point t) { return std::chrono::duration<double>(Clock::now() - t).count(); }
 
 PairGeometry ToPairGeometry(geometry::TwoViewClass c) {
@@ -52,86 +59,123 @@ const char* GeometryName(PairGeometry g) {
   }
 }
 
-// Float descriptors + kd-trees per image, created on first use and released once every pair that needs the
-// image is done, so sequential matching of long videos keeps only a sliding window in memory.
+// Each image's descriptors with their search structures (float rows, kd-forest or SIMD blocks: ~1.3 KB per
+// keypoint), read from its feature file on first use. An image is released once every pair that needs it is done;
+// and since quadratic and loop-closure pairs reach far beyond the sequential window, at most `capacity` images are
+// held: the least recently used one that no thread is matching is evicted, and read again if a later pair needs it.
+// Matching is deterministic whatever the evictions (the kd-forest is seeded per image).
 class DescriptorCache {
  public:
-  DescriptorCache(const std::vector<FeatureSet>& features, const std::vector<ImagePair>& pairs)
-      : features_(features), entries_(features.size()), remaining_(features.size()) {
+  struct Entry {
+    explicit Entry(Descriptors d, uint32_t id) : u8(std::move(d)), search(u8, id) {}
+    Descriptors u8;
+    ImageDescriptors search;  // points into u8
+  };
+  DescriptorCache(std::function<Descriptors(uint32_t)> load, size_t num_images, const std::vector<ImagePair>& pairs,
+                  size_t capacity)
+      : load_(std::move(load)),
+        entries_(num_images),
+        last_use_(num_images, 0),
+        remaining_(num_images),
+        capacity_(std::max<size_t>(capacity, 2)) {
     for (const auto& p : pairs) {
       ++remaining_[p.first];
       ++remaining_[p.second];
     }
   }
-  std::shared_ptr<ImageDescriptors> Get(uint32_t i) {
+  std::shared_ptr<Entry> Get(uint32_t i) {
     std::lock_guard<std::mutex> lock(mutex_);
-    if (!entries_[i]) entries_[i] = std::make_shared<ImageDescriptors>(features_[i].descriptors, i + 1);
+    last_use_[i] = ++tick_;
+    if (entries_[i]) return entries_[i];
+    while (held_ >= capacity_ && EvictOne()) {
+    }
+    entries_[i] = std::make_shared<Entry>(load_(i), i + 1);
+    ++held_;
+    ++loads_;
+    peak_ = std::max(peak_, held_);
     return entries_[i];
   }
   void Done(uint32_t i) {
     std::lock_guard<std::mutex> lock(mutex_);
-    if (--remaining_[i] == 0) entries_[i].reset();
+    if (--remaining_[i] == 0 && entries_[i]) {
+      entries_[i].reset();
+      --held_;
+    }
   }
+  size_t loads() const { return loads_; }
+  size_t peak() const { return peak_; }
+  size_t capacity() const { return capacity_; }
 
  private:
-  const std::vector<FeatureSet>& features_;
+  bool EvictOne() {  // the least recently used entry no thread holds; false when every held entry is in use
+    int64_t victim = -1;
+    for (size_t k = 0; k < entries_.size(); ++k)
+      if (entries_[k] && entries_[k].use_count() == 1 && (victim < 0 || last_use_[k] < last_use_[victim]))
+        victim = static_cast<int64_t>(k);
+    if (victim < 0) return false;
+    entries_[victim].reset();
+    --held_;
+    return true;
+  }
+  std::function<Descriptors(uint32_t)> load_;
   std::mutex mutex_;
-  std::vector<std::shared_ptr<ImageDescriptors>> entries_;
+  std::vector<std::shared_ptr<Entry>> entries_;
+  std::vector<uint64_t> last_use_;
   std::vector<int> remaining_;
+  size_t capacity_, held_ = 0, loads_ = 0, peak_ = 0;
+  uint64_t tick_ = 0;
 };
 
-}  // namespace
+// The features of every frame, with each frame's camera prior; everything is checked against the index first.
+struct LoadedFeatures {
+  std::vector<FeatureSet> features;  // keypoints and colours; descriptors only where ApplyOperatorInput loads them
+  std::vector<const core::Camera*> cameras;
+  std::vector<bool> trusted;  // the camera is known (sensor database, EXIF, calibration), not a focal guess
+};
 
-MatchStageStats RunMatchStage(const core::Workspace& ws, const MatchStageOptions& options) {
-  options.Check();
-  const auto t_start = Clock::now();
-  MatchStageStats stats;
-  const fs::path frames_json = ws.frames_json();
-  const fs::path features_dir = ws.features_dir(), matches_dir = ws.matches_dir();
-  const auto index = io::ReadFramesIndex(frames_json);
+LoadedFeatures LoadFeatures(const core::Workspace& ws, const io::FramesIndex& index) {
   const size_t n = index.frames.size();
-  stats.images = n;
-
-  // --- Load features (parallel) and check them against the index.
-  std::vector<FeatureSet> features(n);
+  const fs::path frames_json = ws.frames_json();
+  LoadedFeatures out;
+  out.features.resize(n);
   std::vector<std::string> errors(n);
   tbb::parallel_for(size_t{0}, n, [&](size_t i) {
     try {
-      const fs::path p = FeaturePath(features_dir, index.frames[i].name);
+      const fs::path p = FeaturePath(ws.features_dir(), index.frames[i].name);
       if (!fs::exists(p)) throw Error(p.string() + " is missing; run `fmv3d features " + ws.name() + "` first");
-      features[i] = ReadFeatures(p);
-      if (features[i].image_name != index.frames[i].name)
-        throw Error(p.string() + ": holds features of '" + features[i].image_name + "', not '" + index.frames[i].name +
-                    "' (re-run `fmv3d features --force`)");
+      out.features[i] = ReadFeatures(p, /*descriptors=*/false);
+      if (out.features[i].image_name != index.frames[i].name)
+        throw Error(p.string() + ": holds features of '" + out.features[i].image_name + "', not '" +
+                    index.frames[i].name + "' (re-run `fmv3d features --force`)");
     } catch (const std::exception& e) {
       errors[i] = e.what();
     }
   });
   for (const auto& e : errors)
     if (!e.empty()) throw Error(e);
-  std::vector<const core::Camera*> cameras(n);
-  std::vector<bool> trusted(n);
+  out.cameras.resize(n);
+  out.trusted.resize(n);
   for (size_t i = 0; i < n; ++i) {
     const auto* prior = index.FindCamera(index.frames[i].camera_id);
     if (!prior)
       throw Error(frames_json.string() + ": frame '" + index.frames[i].name + "' refers to camera " +
                   std::to_string(index.frames[i].camera_id) + ", which is not in \"cameras\"");
-    cameras[i] = &prior->camera;
-    if (features[i].width != prior->camera.width || features[i].height != prior->camera.height)
-      throw Error(frames_json.string() + ": frame '" + index.frames[i].name + "' is " +
-                  std::to_string(features[i].width) + "x" + std::to_string(features[i].height) + " but camera " +
-                  std::to_string(prior->camera.id) + " is " + std::to_string(prior->camera.width) + "x" +
-                  std::to_string(prior->camera.height) + " (stale features? re-run `fmv3d features --force`)");
-    trusted[i] = !prior->prior_source.empty() && prior->prior_source != "guess";
+    out.cameras[i] = &prior->camera;
+    const auto& f = out.features[i];
+    if (f.width != prior->camera.width || f.height != prior->camera.height)
+      throw Error(frames_json.string() + ": frame '" + index.frames[i].name + "' is " + std::to_string(f.width) + "x" +
+                  std::to_string(f.height) + " but camera " + std::to_string(prior->camera.id) + " is " +
+                  std::to_string(prior->camera.width) + "x" + std::to_string(prior->camera.height) +
+                  " (stale features? re-run `fmv3d features --force`)");
+    out.trusted[i] = !prior->prior_source.empty() && prior->prior_source != "guess";
   }
-  stats.seconds_load = Since(t_start);
+  return out;
+}
 
-  // --- Pairs.
-  const auto t_pairs = Clock::now();
-  std::vector<const Descriptors*> descs(n);
-  for (size_t i = 0; i < n; ++i) descs[i] = &features[i].descriptors;
-  PairMode mode = PairMode::kAuto;
-  PairOptions pair_options = options.pairs;
+std::vector<ImagePair> ChoosePairs(const io::FramesIndex& index, const DescriptorLoader& load,
+                                   const PairOptions& options, PairMode* mode, MatchStageStats* stats) {
+  const size_t n = index.frames.size();
+  PairOptions pair_options = options;
   std::vector<Footprint> footprints;
   if (pair_options.mode == PairMode::kSpatial || pair_options.mode == PairMode::kAuto)
     footprints = FootprintsFromTelemetry(index);
@@ -139,173 +183,251 @@ MatchStageStats RunMatchStage(const core::Workspace& ws, const MatchStageOptions
     pair_options.mode = PairMode::kSpatial;
     spdlog::info("match: {} photos with GPS: pairs by overlapping ground footprints", n);
   }
-  const auto pairs = SelectPairs(descs, pair_options, &mode, &stats.loop_closure_pairs, &footprints);
-  stats.pairs_tried = pairs.size();
-  stats.seconds_pairs = Since(t_pairs);
-  spdlog::info("match: {} images, {} pairs ({}{})", n, pairs.size(), PairModeName(mode),
-               mode == PairMode::kSequential
-                   ? ", " + std::to_string(stats.loop_closure_pairs) + " loop-closure candidates"
-                   : std::string());
+  return SelectPairs(n, load, pair_options, mode, &stats->loop_closure_pairs, &footprints);
+}
 
-  // --- Match + verify every pair in parallel. OpenCV's own threads stay off (parallelism is over pairs).
+// Putative matches + two-view verification of one pair; `verified` is false when the pair is rejected.
+VerifiedPair MatchPair(const LoadedFeatures& in, DescriptorCache* cache, uint32_t i, uint32_t j,
+                       const MatchStageOptions& options, bool* verified, std::atomic<int64_t>* ns_match,
+                       std::atomic<int64_t>* ns_verify) {
+  const auto t0 = Clock::now();
+  std::vector<FeatureMatch> putative;
+  {
+    auto a = cache->Get(i), b = cache->Get(j);
+    putative = MatchDescriptors(a->search, b->search, options.match);
+  }
+  cache->Done(i);
+  cache->Done(j);
+  const auto t1 = Clock::now();
+  *ns_match += std::chrono::duration_cast<std::chrono::nanoseconds>(t1 - t0).count();
+  VerifiedPair vp;
+  vp.image_id1 = i + 1;
+  vp.image_id2 = j + 1;
+  vp.num_putative = static_cast<uint32_t>(putative.size());
+  *verified = false;
+  if (putative.size() >= static_cast<size_t>(options.verify.min_inliers)) {
+    geometry::Points2 x1(putative.size()), x2(putative.size());
+    for (size_t m = 0; m < putative.size(); ++m) {
+      const auto& k1 = in.features[i].keypoints[putative[m].idx1];
+      const auto& k2 = in.features[j].keypoints[putative[m].idx2];
+      x1[m] = {k1.x, k1.y};
+      x2[m] = {k2.x, k2.y};
+    }
+    geometry::TwoViewOptions vopt = options.verify;
+    vopt.seed = options.verify.seed ^ (uint64_t(i) << 32 | j);
+    const auto r =
+        geometry::VerifyTwoView(x1, x2, *in.cameras[i], *in.cameras[j], in.trusted[i] && in.trusted[j], vopt);
+    vp.num_inliers_F = r.num_inliers_F;
+    vp.num_inliers_E = r.num_inliers_E;
+    vp.num_inliers_H = r.num_inliers_H;
+    vp.geometry = ToPairGeometry(r.geometry);
+    if (r.geometry != geometry::TwoViewClass::kRejected) {
+      vp.F = r.F;
+      vp.E = r.E;
+      vp.H = r.H;
+      vp.has_pose = r.has_pose;
+      vp.R = r.R;
+      vp.t = r.t;
+      vp.median_triangulation_angle_deg = r.median_triangulation_angle_deg;
+      vp.inliers.reserve(r.inliers.size());
+      for (int m : r.inliers) vp.inliers.push_back(putative[m]);
+      *verified = true;
+    }
+  }
+  *ns_verify += std::chrono::duration_cast<std::chrono::nanoseconds>(Clock::now() - t1).count();
+  return vp;
+}
+
+// Every pair matched and verified in parallel over pairs (OpenCV's own threads stay off meanwhile). Returns the
+// verified pairs in pair order; `per_pair` gets one summary row per pair tried.
+std::vector<VerifiedPair> MatchAndVerify(const LoadedFeatures& in, const DescriptorLoader& load,
+                                         const std::vector<ImagePair>& pairs, const MatchStageOptions& options,
+                                         MatchStageStats* stats, nlohmann::json* per_pair, size_t* total_inliers) {
   const int cv_threads = cv::getNumThreads();
   cv::setNumThreads(1);
-  DescriptorCache cache(features, pairs);
+  size_t keypoints = 0;
+  for (const auto& f : in.features) keypoints += f.keypoints.size();
+  const double per_image =
+      kBytesPerKeypoint * std::max(1.0, double(keypoints) / std::max<size_t>(1, in.features.size()));
+  const size_t capacity =
+      std::max<size_t>(2 * core::NumThreads() + 2, static_cast<size_t>(options.max_memory_mb * 1048576.0 / per_image));
+  DescriptorCache cache([&load](uint32_t i) { return load(i); }, in.features.size(), pairs, capacity);
   std::vector<VerifiedPair> results(pairs.size());
   std::vector<char> verified(pairs.size(), 0);
   std::atomic<int64_t> ns_match{0}, ns_verify{0};
   core::Progress progress("match", pairs.size());
   tbb::parallel_for(tbb::blocked_range<size_t>(0, pairs.size(), 1), [&](const tbb::blocked_range<size_t>& range) {
     for (size_t k = range.begin(); k != range.end(); ++k) {
-      const auto [i, j] = pairs[k];
-      auto t0 = Clock::now();
-      std::vector<FeatureMatch> putative;
-      {
-        auto a = cache.Get(i), b = cache.Get(j);
-        putative = MatchDescriptors(*a, *b, options.match);
-      }
-      cache.Done(i);
-      cache.Done(j);
-      auto t1 = Clock::now();
-      ns_match += std::chrono::duration_cast<std::chrono::nanoseconds>(t1 - t0).count();
-      VerifiedPair& vp = results[k];
-      vp.image_id1 = i + 1;
-      vp.image_id2 = j + 1;
-      vp.num_putative = static_cast<uint32_t>(putative.size());
-      if (putative.size() >= static_cast<size_t>(options.verify.min_inliers)) {
-        geometry::Points2 x1(putative.size()), x2(putative.size());
-        for (size_t m = 0; m < putative.size(); ++m) {
-          const auto& k1 = features[i].keypoints[putative[m].idx1];
-          const auto& k2 = features[j].keypoints[putative[m].idx2];
-          x1[m] = {k1.x, k1.y};
-          x2[m] = {k2.x, k2.y};
-        }
-        geometry::TwoViewOptions vopt = options.verify;
-        vopt.seed = options.verify.seed ^ (uint64_t(i) << 32 | j);
-        const auto r = geometry::VerifyTwoView(x1, x2, *cameras[i], *cameras[j], trusted[i] && trusted[j], vopt);
-        vp.num_inliers_F = r.num_inliers_F;
-        vp.num_inliers_E = r.num_inliers_E;
-        vp.num_inliers_H = r.num_inliers_H;
-        vp.geometry = ToPairGeometry(r.geometry);
-        if (r.geometry != geometry::TwoViewClass::kRejected) {
-          vp.F = r.F;
-          vp.E = r.E;
-          vp.H = r.H;
-          vp.has_pose = r.has_pose;
-          vp.R = r.R;
-          vp.t = r.t;
-          vp.median_triangulation_angle_deg = r.median_triangulation_angle_deg;
-          vp.inliers.reserve(r.inliers.size());
-          for (int m : r.inliers) vp.inliers.push_back(putative[m]);
-          verified[k] = 1;
-        }
-      }
-      ns_verify += std::chrono::duration_cast<std::chrono::nanoseconds>(Clock::now() - t1).count();
+      bool ok = false;
+      results[k] = MatchPair(in, &cache, pairs[k].first, pairs[k].second, options, &ok, &ns_match, &ns_verify);
+      verified[k] = ok;
       progress.Add();
     }
   });
   progress.Finish();
   cv::setNumThreads(cv_threads);
-  stats.cpu_seconds_match = ns_match * 1e-9;
-  stats.cpu_seconds_verify = ns_verify * 1e-9;
+  stats->cpu_seconds_match = ns_match * 1e-9;
+  stats->cpu_seconds_verify = ns_verify * 1e-9;
+  stats->descriptor_cache_capacity = cache.capacity();
+  stats->descriptor_loads = cache.loads();
+  stats->peak_cached_images = cache.peak();
 
-  // --- Outputs.
   std::vector<VerifiedPair> kept;
-  nlohmann::json per_pair = nlohmann::json::array();
-  size_t total_inliers = 0;
+  *per_pair = nlohmann::json::array();
+  *total_inliers = 0;
   for (size_t k = 0; k < pairs.size(); ++k) {
     const auto& vp = results[k];
-    per_pair.push_back({{"image1", vp.image_id1},
-                        {"image2", vp.image_id2},
-                        {"putative", vp.num_putative},
-                        {"inliers_F", vp.num_inliers_F},
-                        {"inliers_E", vp.num_inliers_E},
-                        {"inliers_H", vp.num_inliers_H},
-                        {"inliers", vp.inliers.size()},
-                        {"geometry", verified[k] ? GeometryName(vp.geometry) : "rejected"},
-                        {"median_triangulation_angle_deg", vp.median_triangulation_angle_deg}});
+    per_pair->push_back({{"image1", vp.image_id1},
+                         {"image2", vp.image_id2},
+                         {"putative", vp.num_putative},
+                         {"inliers_F", vp.num_inliers_F},
+                         {"inliers_E", vp.num_inliers_E},
+                         {"inliers_H", vp.num_inliers_H},
+                         {"inliers", vp.inliers.size()},
+                         {"geometry", verified[k] ? GeometryName(vp.geometry) : "rejected"},
+                         {"median_triangulation_angle_deg", vp.median_triangulation_angle_deg}});
     if (!verified[k]) continue;
-    total_inliers += vp.inliers.size();
-    stats.calibrated += vp.geometry == PairGeometry::kCalibrated;
-    stats.uncalibrated += vp.geometry == PairGeometry::kUncalibrated;
-    stats.planar_or_rotation += vp.geometry == PairGeometry::kPlanarOrRotation;
-    kept.push_back(vp);
+    *total_inliers += vp.inliers.size();
+    stats->calibrated += vp.geometry == PairGeometry::kCalibrated;
+    stats->uncalibrated += vp.geometry == PairGeometry::kUncalibrated;
+    stats->planar_or_rotation += vp.geometry == PairGeometry::kPlanarOrRotation;
+    kept.push_back(std::move(results[k]));
   }
-  // --- The operator's tie points, keypoints and deleted matches.
+  return kept;
+}
+
+// The operator's tie points, keypoints and deleted matches, applied to `kept` (and `features`, which gain the
+// clicked keypoints). Returns the summary for matches.json.
+nlohmann::json ApplyOperatorInput(const core::Workspace& ws, const io::FramesIndex& index, const DescriptorLoader& load,
+                                  const MatchStageOptions& options, std::vector<FeatureSet>* features,
+                                  std::vector<VerifiedPair>* kept) {
   const fs::path tiepoints_path = options.tiepoints_file.value_or(ws.manual_dir() / "tiepoints.json");
-  const fs::path manual_path = ManualMatchesPath(matches_dir);
-  nlohmann::json manual_summary = {{"used", false}};
-  core::EnsureDirectory(matches_dir);
-  if (options.tiepoints_file || (options.use_tiepoints && fs::exists(tiepoints_path))) {
-    io::FrameTable table = io::FrameTableOf(index);
-    for (size_t i = 0; i < n; ++i) table[index.frames[i].name].num_keypoints = features[i].keypoints.size();
-    const io::TiePoints tie_points = io::ReadTiePoints(tiepoints_path, &table);
-    std::set<std::string> clicked;
-    for (const auto& tp : tie_points.tie_points)
-      for (const auto& o : tp.observations) clicked.insert(o.frame);
-    for (const auto& kp : tie_points.keypoints) clicked.insert(kp.point.frame);
-    std::map<uint32_t, cv::Mat> images;
-    for (size_t i = 0; i < n; ++i)
-      if (clicked.count(index.frames[i].name)) {
-        images[i] = cv::imread((ws.frames_dir() / index.frames[i].name).string(), cv::IMREAD_COLOR);
-        if (images[i].empty())
-          spdlog::warn("match: cannot read frames/{}: its tie points get no descriptor", index.frames[i].name);
-      }
-    ManualMatches manual = AppendManualKeypoints(tie_points, index, images, &features, options.manual);
-    const size_t pairs_before = kept.size();
-    ApplyManualMatches(tie_points, index, features, options.manual, &manual, &kept);
-    core::WriteJson(manual_path, manual.ToJson(index));
-    nlohmann::json disagreeing = manual.ToJson(index)["disagreeing"];
-    manual_summary = {{"used", true},
-                      {"file", tiepoints_path.string()},
-                      {"tie_points", tie_points.tie_points.size()},
-                      {"keypoints", tie_points.keypoints.size()},
-                      {"keypoint_matches_found", manual.keypoints_matched},
-                      {"deleted_matches_removed", manual.deleted},
-                      {"deleted_matches_not_found", manual.deleted_not_found},
-                      {"pairs_added", kept.size() > pairs_before ? kept.size() - pairs_before : 0},
-                      {"max_epipolar_px", options.manual.max_epipolar_px},
-                      {"disagreeing", disagreeing}};
-    for (const auto& d : manual.disagreeing)
-      spdlog::warn("match: tie point \"{}\" is {:.1f} px from the epipolar line of {} / {} (kept)", d.id, d.epipolar_px,
-                   index.frames[d.image1].name, index.frames[d.image2].name);
-    spdlog::info("match: {} tie points, {} keypoints ({} matches found), {} deleted matches removed",
-                 tie_points.tie_points.size(), tie_points.keypoints.size(), manual.keypoints_matched, manual.deleted);
-  } else if (fs::exists(manual_path)) {
-    fs::remove(manual_path);
+  const fs::path manual_path = ManualMatchesPath(ws.matches_dir());
+  if (!options.tiepoints_file && !(options.use_tiepoints && fs::exists(tiepoints_path))) {
+    if (fs::exists(manual_path)) fs::remove(manual_path);
+    return {{"used", false}};
   }
+  const size_t n = index.frames.size();
+  io::FrameTable table = io::FrameTableOf(index);
+  for (size_t i = 0; i < n; ++i) table[index.frames[i].name].num_keypoints = (*features)[i].keypoints.size();
+  const io::TiePoints tie_points = io::ReadTiePoints(tiepoints_path, &table);
+  std::set<std::string> clicked;
+  for (const auto& tp : tie_points.tie_points)
+    for (const auto& o : tp.observations) clicked.insert(o.frame);
+  for (const auto& kp : tie_points.keypoints) clicked.insert(kp.point.frame);
+  std::map<uint32_t, cv::Mat> images;
+  for (size_t i = 0; i < n; ++i)
+    if (clicked.count(index.frames[i].name)) {
+      images[i] = cv::imread((ws.frames_dir() / index.frames[i].name).string(), cv::IMREAD_COLOR);
+      if (images[i].empty())
+        spdlog::warn("match: cannot read frames/{}: its tie points get no descriptor", index.frames[i].name);
+    }
+  // Descriptors where the operator's points need them: the clicked frames and the frames they verified a pair
+  // with (a keypoint clicked in one frame is searched for along its epipolar lines there).
+  std::set<uint32_t> involved;
+  for (size_t i = 0; i < n; ++i)
+    if (clicked.count(index.frames[i].name)) involved.insert(static_cast<uint32_t>(i));
+  for (const auto& vp : *kept)
+    if (involved.count(vp.image_id1 - 1) || involved.count(vp.image_id2 - 1)) {
+      involved.insert(vp.image_id1 - 1);
+      involved.insert(vp.image_id2 - 1);
+    }
+  for (uint32_t i : involved)
+    if ((*features)[i].descriptors.rows() != static_cast<Eigen::Index>((*features)[i].keypoints.size()))
+      (*features)[i].descriptors = load(i);
+  ManualMatches manual = AppendManualKeypoints(tie_points, index, images, features, options.manual);
+  const size_t pairs_before = kept->size();
+  ApplyManualMatches(tie_points, index, *features, options.manual, &manual, kept);
+  const nlohmann::json manual_json = manual.ToJson(index);
+  core::WriteJson(manual_path, manual_json);
+  for (const auto& d : manual.disagreeing)
+    spdlog::warn("match: tie point \"{}\" is {:.1f} px from the epipolar line of {} / {} (kept)", d.id, d.epipolar_px,
+                 index.frames[d.image1].name, index.frames[d.image2].name);
+  spdlog::info("match: {} tie points, {} keypoints ({} matches found), {} deleted matches removed",
+               tie_points.tie_points.size(), tie_points.keypoints.size(), manual.keypoints_matched, manual.deleted);
+  return {{"used", true},
+          {"file", tiepoints_path.string()},
+          {"tie_points", tie_points.tie_points.size()},
+          {"keypoints", tie_points.keypoints.size()},
+          {"keypoint_matches_found", manual.keypoints_matched},
+          {"deleted_matches_removed", manual.deleted},
+          {"deleted_matches_not_found", manual.deleted_not_found},
+          {"pairs_added", kept->size() > pairs_before ? kept->size() - pairs_before : 0},
+          {"max_epipolar_px", options.manual.max_epipolar_px},
+          {"disagreeing", manual_json["disagreeing"]}};
+}
+
+nlohmann::json SummaryJson(const MatchStageStats& stats, PairMode mode, const MatchStageOptions& options,
+                           size_t total_inliers, nlohmann::json manual_summary, nlohmann::json per_pair) {
+  return {{"images", stats.images},
+          {"pair_mode", PairModeName(mode)},
+          {"pairs_tried", stats.pairs_tried},
+          {"loop_closure_pairs", stats.loop_closure_pairs},
+          {"pairs_verified", stats.pairs_verified},
+          {"calibrated", stats.calibrated},
+          {"uncalibrated", stats.uncalibrated},
+          {"planar_or_rotation", stats.planar_or_rotation},
+          {"total_inliers", total_inliers},
+          {"mean_inliers_per_verified_pair",
+           stats.pairs_verified == 0 ? 0.0 : double(total_inliers) / stats.pairs_verified},
+          {"timing",
+           {{"seconds_total", stats.seconds_total},
+            {"seconds_load", stats.seconds_load},
+            {"seconds_pair_selection", stats.seconds_pairs},
+            {"cpu_seconds_matching", stats.cpu_seconds_match},
+            {"cpu_seconds_verification", stats.cpu_seconds_verify}}},
+          {"options",
+           {{"ratio", options.match.ratio},
+            {"mutual", options.match.mutual},
+            {"flann_checks", options.match.flann_checks},
+            {"overlap", options.pairs.overlap},
+            {"quadratic", options.pairs.quadratic},
+            {"loop_closure_candidates", options.pairs.loop_closure_candidates},
+            {"max_error_px", options.verify.max_error_px},
+            {"min_inliers", options.verify.min_inliers}}},
+          {"memory",
+           {{"max_memory_mb", options.max_memory_mb},
+            {"descriptor_cache_images", stats.descriptor_cache_capacity},
+            {"peak_cached_images", stats.peak_cached_images},
+            {"descriptor_loads", stats.descriptor_loads}}},
+          {"manual", std::move(manual_summary)},
+          {"pairs", std::move(per_pair)}};
+}
+
+}  // namespace
+
+MatchStageStats RunMatchStage(const core::Workspace& ws, const MatchStageOptions& options) {
+  options.Check();
+  const auto t_start = Clock::now();
+  MatchStageStats stats;
+  const auto index = io::ReadFramesIndex(ws.frames_json());
+  stats.images = index.frames.size();
+  LoadedFeatures in = LoadFeatures(ws, index);
+  stats.seconds_load = Since(t_start);
+
+  const auto t_pairs = Clock::now();
+  PairMode mode = PairMode::kAuto;
+  const DescriptorLoader load = [&](size_t i) {
+    return ReadFeatures(FeaturePath(ws.features_dir(), index.frames[i].name)).descriptors;
+  };
+  const auto pairs = ChoosePairs(index, load, options.pairs, &mode, &stats);
+  stats.pairs_tried = pairs.size();
+  stats.seconds_pairs = Since(t_pairs);
+  spdlog::info("match: {} images, {} pairs ({}{})", stats.images, pairs.size(), PairModeName(mode),
+               mode == PairMode::kSequential
+                   ? ", " + std::to_string(stats.loop_closure_pairs) + " loop-closure candidates"
+                   : std::string());
+
+  nlohmann::json per_pair;
+  size_t total_inliers = 0;
+  std::vector<VerifiedPair> kept = MatchAndVerify(in, load, pairs, options, &stats, &per_pair, &total_inliers);
+  core::EnsureDirectory(ws.matches_dir());
+  nlohmann::json manual_summary = ApplyOperatorInput(ws, index, load, options, &in.features, &kept);
   stats.pairs_verified = kept.size();
-  WriteMatches(kept, MatchesPath(matches_dir));
+  WriteMatches(kept, MatchesPath(ws.matches_dir()));
   stats.seconds_total = Since(t_start);
-  const nlohmann::json summary = {
-      {"images", n},
-      {"pair_mode", PairModeName(mode)},
-      {"pairs_tried", stats.pairs_tried},
-      {"loop_closure_pairs", stats.loop_closure_pairs},
-      {"pairs_verified", stats.pairs_verified},
-      {"calibrated", stats.calibrated},
-      {"uncalibrated", stats.uncalibrated},
-      {"planar_or_rotation", stats.planar_or_rotation},
-      {"total_inliers", total_inliers},
-      {"mean_inliers_per_verified_pair", kept.empty() ? 0.0 : double(total_inliers) / kept.size()},
-      {"timing",
-       {{"seconds_total", stats.seconds_total},
-        {"seconds_load", stats.seconds_load},
-        {"seconds_pair_selection", stats.seconds_pairs},
-        {"cpu_seconds_matching", stats.cpu_seconds_match},
-        {"cpu_seconds_verification", stats.cpu_seconds_verify}}},
-      {"options",
-       {{"ratio", options.match.ratio},
-        {"mutual", options.match.mutual},
-        {"flann_checks", options.match.flann_checks},
-        {"overlap", options.pairs.overlap},
-        {"quadratic", options.pairs.quadratic},
-        {"loop_closure_candidates", options.pairs.loop_closure_candidates},
-        {"max_error_px", options.verify.max_error_px},
-        {"min_inliers", options.verify.min_inliers}}},
-      {"manual", manual_summary},
-      {"pairs", per_pair}};
-  core::WriteJson(MatchesSummaryPath(matches_dir), summary);
+  core::WriteJson(MatchesSummaryPath(ws.matches_dir()),
+                  SummaryJson(stats, mode, options, total_inliers, std::move(manual_summary), std::move(per_pair)));
   spdlog::info(
       "match: {} / {} pairs verified ({} calibrated, {} uncalibrated, {} planar/rotation), {:.1f} s "
       "(matching {:.1f} s, verification {:.1f} s CPU)",

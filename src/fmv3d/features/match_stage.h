@@ -16,6 +16,7 @@
 #include <filesystem>
 #include <optional>
 
+#include "fmv3d/core/error.h"
 #include "fmv3d/core/workspace.h"
 #include "fmv3d/features/manual_matches.h"
 #include "fmv3d/features/matcher.h"
@@ -31,7 +32,11 @@ struct MatchStageOptions {
   ManualMatchOptions manual;
   std::optional<std::filesystem::path> tiepoints_file;  // default: WS/manual/tiepoints.json when it exists
   bool use_tiepoints = true;
+  // Memory for the descriptors and search structures of the images being matched: as many images are held as
+  // fit (at ~1.4 KB per keypoint), so a video of thousands of frames is matched in a bounded window.
+  double max_memory_mb = 2048;
   void Check() const {
+    if (!(max_memory_mb > 0)) throw Error("match: --max-memory must be > 0 MB");
     manual.Check();
     pairs.Check();
     match.Check();
@@ -44,6 +49,9 @@ struct MatchStageStats {
   size_t calibrated = 0, uncalibrated = 0, planar_or_rotation = 0;
   double seconds_total = 0, seconds_load = 0, seconds_pairs = 0;
   double cpu_seconds_match = 0, cpu_seconds_verify = 0;  // summed over threads
+  size_t descriptor_cache_capacity = 0;                  // images the memory budget holds at once
+  size_t peak_cached_images = 0;
+  size_t descriptor_loads = 0;  // feature files read for matching (more than `images` when some were evicted)
 };
 
 MatchStageStats RunMatchStage(const core::Workspace& workspace, const MatchStageOptions& options);

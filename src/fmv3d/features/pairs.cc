@@ -1,5 +1,6 @@
 #include "fmv3d/features/pairs.h"
 
+#include <spdlog/spdlog.h>
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
@@ -7,8 +8,6 @@
 #include <numeric>
 #include <opencv2/core.hpp>
 #include <set>
-
-#include <spdlog/spdlog.h>
 
 #include "fmv3d/core/error.h"
 #include "fmv3d/features/spatial_pairs.h"
@@ -25,10 +24,14 @@ PairMode ParsePairMode(const std::string& name) {
 
 const char* PairModeName(PairMode mode) {
   switch (mode) {
-    case PairMode::kAuto: return "auto";
-    case PairMode::kExhaustive: return "exhaustive";
-    case PairMode::kSequential: return "sequential";
-    case PairMode::kSpatial: return "spatial";
+    case PairMode::kAuto:
+      return "auto";
+    case PairMode::kExhaustive:
+      return "exhaustive";
+    case PairMode::kSequential:
+      return "sequential";
+    case PairMode::kSpatial:
+      return "spatial";
   }
   return "?";
 }
@@ -60,24 +63,40 @@ std::vector<ImagePair> SequentialPairs(size_t n, int overlap, bool quadratic) {
   return {s.begin(), s.end()};
 }
 
-std::vector<std::vector<float>> GlobalDescriptors(const std::vector<const Descriptors*>& images,
-                                                  const PairOptions& o) {
-  const size_t n = images.size();
+namespace {
+
+DescriptorLoader LoaderOf(const std::vector<const Descriptors*>& images) {
+  return [&images](size_t i) { return *images[i]; };
+}
+
+}  // namespace
+
+std::vector<std::vector<float>> GlobalDescriptors(const std::vector<const Descriptors*>& images, const PairOptions& o) {
+  return GlobalDescriptors(images.size(), LoaderOf(images), o);
+}
+
+std::vector<std::vector<float>> GlobalDescriptors(size_t n, const DescriptorLoader& load, const PairOptions& o) {
   // Deterministic strided sample of every image's descriptors for the vocabulary.
-  std::vector<cv::Mat> samples;
-  int total = 0;
-  for (const auto* d : images) {
-    const int rows = static_cast<int>(d->rows());
+  std::vector<cv::Mat> per_image(n);
+  tbb::parallel_for(size_t{0}, n, [&](size_t i) {
+    const Descriptors d = load(i);
+    const int rows = static_cast<int>(d.rows());
     const int take = std::min(rows, o.vocabulary_samples_per_image);
-    if (take == 0) continue;
+    if (take == 0) return;
     cv::Mat m(take, 128, CV_32F);
     for (int k = 0; k < take; ++k) {
       const int r = static_cast<int>(int64_t(k) * rows / take);
-      for (int c = 0; c < 128; ++c) m.at<float>(k, c) = (*d)(r, c);
+      for (int c = 0; c < 128; ++c) m.at<float>(k, c) = d(r, c);
     }
-    samples.push_back(m);
-    total += take;
-  }
+    per_image[i] = m;
+  });
+  std::vector<cv::Mat> samples;
+  int total = 0;
+  for (const auto& m : per_image)
+    if (!m.empty()) {
+      samples.push_back(m);
+      total += m.rows;
+    }
   std::vector<std::vector<float>> out(n);
   const int k = std::min(o.vocabulary_size, total);
   if (k < 2) {
@@ -93,7 +112,7 @@ std::vector<std::vector<float>> GlobalDescriptors(const std::vector<const Descri
   // Word histograms (every descriptor votes for its nearest centre), then tf-idf, centred, and unit norm.
   std::vector<std::vector<float>> hist(n, std::vector<float>(k, 0.f));
   tbb::parallel_for(size_t{0}, n, [&](size_t i) {
-    const auto& d = *images[i];
+    const Descriptors d = load(i);
     if (d.rows() == 0) return;
     cv::Mat u8(static_cast<int>(d.rows()), 128, CV_8U, const_cast<uint8_t*>(d.data())), f;
     u8.convertTo(f, CV_32F);
@@ -178,50 +197,57 @@ std::vector<ImagePair> LoopClosurePairs(const std::vector<std::vector<float>>& g
 std::vector<ImagePair> SelectPairs(const std::vector<const Descriptors*>& images, const PairOptions& o,
                                    PairMode* used_mode, size_t* num_loop_closure_pairs,
                                    const std::vector<Footprint>* footprints) {
+  return SelectPairs(images.size(), LoaderOf(images), o, used_mode, num_loop_closure_pairs, footprints);
+}
+
+std::vector<ImagePair> SelectPairs(size_t num_images, const DescriptorLoader& load, const PairOptions& o,
+                                   PairMode* used_mode, size_t* num_loop_closure_pairs,
+                                   const std::vector<Footprint>* footprints) {
   o.Check();
   PairMode mode = o.mode;
-  const PairMode by_count = images.size() <= static_cast<size_t>(o.auto_exhaustive_max_images)
-                                ? PairMode::kExhaustive
-                                : PairMode::kSequential;
+  const PairMode by_count =
+      num_images <= static_cast<size_t>(o.auto_exhaustive_max_images) ? PairMode::kExhaustive : PairMode::kSequential;
   if (mode == PairMode::kAuto) mode = by_count;
   if (num_loop_closure_pairs) *num_loop_closure_pairs = 0;
   if (mode == PairMode::kSpatial) {
     size_t valid = 0;
     std::string why = "no footprints given";
     if (footprints) {
-      if (footprints->size() != images.size())
-        throw Error("match: " + std::to_string(footprints->size()) + " footprints for " +
-                    std::to_string(images.size()) + " images");
+      if (footprints->size() != num_images)
+        throw Error("match: " + std::to_string(footprints->size()) + " footprints for " + std::to_string(num_images) +
+                    " images");
       for (const auto& f : *footprints) {
         valid += f.valid;
         if (!f.valid) why = f.why_invalid;
       }
     }
     if (valid == 0) {
-      spdlog::warn("match: --pairs spatial needs per-frame telemetry (sensor latitude/longitude and altitude in "
-                   "frames.json) and none of the {} frames has it ({}); falling back to {} pairs",
-                   images.size(), why, PairModeName(by_count));
+      spdlog::warn(
+          "match: --pairs spatial needs per-frame telemetry (sensor latitude/longitude and altitude in "
+          "frames.json) and none of the {} frames has it ({}); falling back to {} pairs",
+          num_images, why, PairModeName(by_count));
       mode = by_count;
     } else {
       if (used_mode) *used_mode = mode;
       std::set<ImagePair> s;
       for (const auto& p : SpatialPairs(*footprints, o.spatial_overlap_factor, o.spatial_max_neighbours)) s.insert(p);
       // Frames without a footprint: their sequential neighbours (the index is in flight order for video).
-      const auto seq = SequentialPairs(images.size(), o.overlap, false);
+      const auto seq = SequentialPairs(num_images, o.overlap, false);
       for (const auto& p : seq)
         if (!(*footprints)[p.first].valid || !(*footprints)[p.second].valid) s.insert(p);
-      if (valid < images.size())
-        spdlog::warn("match: {} of {} frames have no telemetry footprint ({}); paired with their {} sequential "
-                     "neighbours",
-                     images.size() - valid, images.size(), why, o.overlap);
+      if (valid < num_images)
+        spdlog::warn(
+            "match: {} of {} frames have no telemetry footprint ({}); paired with their {} sequential "
+            "neighbours",
+            num_images - valid, num_images, why, o.overlap);
       return {s.begin(), s.end()};
     }
   }
   if (used_mode) *used_mode = mode;
-  if (mode == PairMode::kExhaustive) return ExhaustivePairs(images.size());
-  auto seq = SequentialPairs(images.size(), o.overlap, o.quadratic);
-  if (o.loop_closure_candidates > 0 && images.size() > static_cast<size_t>(o.overlap) + 1) {
-    const auto loops = LoopClosurePairs(GlobalDescriptors(images, o), o.loop_closure_candidates, o.overlap);
+  if (mode == PairMode::kExhaustive) return ExhaustivePairs(num_images);
+  auto seq = SequentialPairs(num_images, o.overlap, o.quadratic);
+  if (o.loop_closure_candidates > 0 && num_images > static_cast<size_t>(o.overlap) + 1) {
+    const auto loops = LoopClosurePairs(GlobalDescriptors(num_images, load, o), o.loop_closure_candidates, o.overlap);
     std::set<ImagePair> s(seq.begin(), seq.end());
     size_t added = 0;
     for (const auto& p : loops) added += s.insert(p).second;

@@ -5,6 +5,7 @@
 #pragma once
 
 #include <cstdint>
+#include <functional>
 #include <string>
 #include <utility>
 #include <vector>
@@ -44,6 +45,12 @@ std::vector<ImagePair> SequentialPairs(size_t num_images, int overlap, bool quad
 std::vector<std::vector<float>> GlobalDescriptors(const std::vector<const Descriptors*>& images,
                                                   const PairOptions& options);
 
+// Image i's descriptors, read when a pass needs them (from its feature file in the match stage), so the passes
+// over every image hold one image's descriptors per thread instead of all of them.
+using DescriptorLoader = std::function<Descriptors(size_t image)>;
+std::vector<std::vector<float>> GlobalDescriptors(size_t num_images, const DescriptorLoader& load,
+                                                  const PairOptions& options);
+
 // For each image, the `k` most similar images more than `min_gap` frames away (cosine similarity of the
 // global descriptors), as sorted unique pairs.
 std::vector<ImagePair> LoopClosurePairs(const std::vector<std::vector<float>>& global, int k, int min_gap);
@@ -52,6 +59,9 @@ std::vector<ImagePair> LoopClosurePairs(const std::vector<std::vector<float>>& g
 // kSpatial needs `footprints` (one per image): frames without a valid footprint are paired sequentially with
 // their neighbours; when no frame has one, it falls back (with a warning naming what is missing) to what kAuto
 // would choose.
+std::vector<ImagePair> SelectPairs(size_t num_images, const DescriptorLoader& load, const PairOptions& options,
+                                   PairMode* used_mode = nullptr, size_t* num_loop_closure_pairs = nullptr,
+                                   const std::vector<Footprint>* footprints = nullptr);
 std::vector<ImagePair> SelectPairs(const std::vector<const Descriptors*>& images, const PairOptions& options,
                                    PairMode* used_mode = nullptr, size_t* num_loop_closure_pairs = nullptr,
                                    const std::vector<Footprint>* footprints = nullptr);

@@ -12,8 +12,8 @@
 #include <chrono>
 #include <cmath>
 #include <cstdlib>
-#include <string>
 #include <limits>
+#include <string>
 
 #include "fmv3d/core/error.h"
 #include "fmv3d/core/threading.h"
@@ -136,19 +136,14 @@ int AutomaticDepth(const Eigen::AlignedBox3d& bounds, double spacing, const Pois
   return std::clamp(depth, options.min_depth, options.max_depth);
 }
 
-ColoredMesh ReconstructPoisson(const io::OrientedPointCloud& cloud, const PoissonOptions& options,
-                               nlohmann::json* stats) {
-  options.Check();
-  cloud.Validate();
-  if (cloud.empty()) throw Error("poisson: the point cloud is empty");
-  if (!cloud.has_normals()) throw Error("poisson: the point cloud has no normals");
-  if (cloud.size() < 16) throw Error("poisson: too few points (" + std::to_string(cloud.size()) + ") for a surface");
-  nlohmann::json st;
-  const auto start = Clock::now();
+namespace {
 
-  // Stray points far from the scene would blow up Poisson's cube (and so coarsen every cell): the working
-  // box is the 0.1–99.9% quantile box of the points, enlarged by the crop margin; points outside are dropped.
-  Eigen::AlignedBox3d bounds = RobustBounds(cloud.positions, 0.001);
+// Stray points far from the scene would blow up Poisson's cube (and so coarsen every cell): the working box is
+// the 0.1–99.9% quantile box of the points, enlarged by the crop margin; points outside are dropped.
+open3d::geometry::PointCloud WorkingCloud(const io::OrientedPointCloud& cloud, const PoissonOptions& options,
+                                          Eigen::AlignedBox3d* working_box, nlohmann::json* st) {
+  Eigen::AlignedBox3d& bounds = *working_box;
+  bounds = RobustBounds(cloud.positions, 0.001);
   {
     const double margin = options.crop_margin * bounds.diagonal().norm();
     bounds.min().array() -= margin;
@@ -169,9 +164,148 @@ ColoredMesh ReconstructPoisson(const io::OrientedPointCloud& cloud, const Poisso
     pc.colors_.reserve(kept.size());
     for (size_t i : kept) pc.colors_.push_back(cloud.colors[i].cast<double>() / 255.0);
   }
-  st["points_outside_bounds"] = cloud.size() - kept.size();
+  (*st)["points_outside_bounds"] = cloud.size() - kept.size();
   if (pc.points_.size() < 16)
     throw Error("poisson: too few points (" + std::to_string(pc.points_.size()) + ") for a surface");
+  return pc;
+}
+
+// Open surfaces: trim by density and by distance to the samples, in one vertex mask.
+void TrimOpenSurface(const open3d::geometry::KDTreeFlann& tree, const open3d::geometry::PointCloud& pc,
+                     const std::vector<double>& densities, double spacing, double cell, const PoissonOptions& options,
+                     O3dMesh* mesh_out, nlohmann::json* stats) {
+  O3dMesh& mesh = *mesh_out;
+  nlohmann::json& st = *stats;
+  std::vector<double> dist;
+  const std::vector<int> nearest = NearestPoints(tree, mesh.vertices_, &dist);
+  std::vector<bool> remove(mesh.vertices_.size(), false);
+  size_t density_trimmed = 0, distance_trimmed = 0;
+  if (options.density_quantile > 0 && densities.size() == mesh.vertices_.size()) {
+    std::vector<double> sorted = densities;
+    const size_t k = std::min(sorted.size() - 1, static_cast<size_t>(options.density_quantile * sorted.size()));
+    std::nth_element(sorted.begin(), sorted.begin() + k, sorted.end());
+    const double threshold = sorted[k];
+    st["density_threshold"] = threshold;
+    for (size_t i = 0; i < densities.size(); ++i)
+      if (densities[i] < threshold && dist[i] > cell) remove[i] = true, ++density_trimmed;
+  }
+  if (options.max_point_distance > 0 && spacing > 0) {
+    // The local spacing of each vertex's nearest point (computed once per point that is someone's nearest):
+    // a sparsely sampled surface (far land) keeps its mesh; the limit never goes below one cell (Poisson
+    // vertices sit on the cell grid) nor below the median spacing.
+    std::vector<int> unique = nearest;
+    std::sort(unique.begin(), unique.end());
+    unique.erase(std::unique(unique.begin(), unique.end()), unique.end());
+    if (!unique.empty() && unique.front() < 0) unique.erase(unique.begin());
+    std::vector<Eigen::Vector3d> queries(unique.size());
+    for (size_t i = 0; i < unique.size(); ++i) queries[i] = pc.points_[unique[i]];
+    const std::vector<double> local = LocalSpacings(tree, queries);
+    std::vector<double> local_of(pc.points_.size(), 0);
+    for (size_t i = 0; i < unique.size(); ++i) local_of[unique[i]] = local[i];
+    for (size_t i = 0; i < dist.size(); ++i) {
+      if (remove[i] || nearest[i] < 0) continue;
+      // A point at the edge of an evenly sampled surface has a local spacing up to ~1.5x the median (its
+      // neighbours are on one side): only a surface sampled clearly sparser gets its own spacing.
+      const double local_spacing = local_of[nearest[i]] > 2 * spacing ? local_of[nearest[i]] : spacing;
+      const double limit = options.max_point_distance * local_spacing;
+      if (dist[i] > std::max(limit, cell)) remove[i] = true, ++distance_trimmed;
+    }
+  }
+  mesh.RemoveVerticesByMask(remove);
+  st["trimmed"] = {{"vertices", mesh.vertices_.size()},
+                   {"faces", mesh.triangles_.size()},
+                   {"by_density", density_trimmed},
+                   {"by_distance", distance_trimmed}};
+  if (mesh.triangles_.empty()) throw Error("poisson: nothing left after trimming low-density vertices");
+}
+
+// Every piece the points support.
+void KeepSupportedPieces(const open3d::geometry::PointCloud& pc, double spacing, double cell,
+                         const PoissonOptions& options, O3dMesh* mesh_out, nlohmann::json* stats) {
+  O3dMesh& mesh = *mesh_out;
+  nlohmann::json& st = *stats;
+  const ComponentSelection sel =
+      SelectComponents(mesh.vertices_, mesh.triangles_, pc.points_, cell, spacing, options.components);
+  std::vector<bool> drop(mesh.triangles_.size(), false);
+  for (size_t i = 0; i < drop.size(); ++i)
+    drop[i] = sel.components[sel.face_component[i]].decision != ComponentDecision::kKept;
+  mesh.RemoveTrianglesByMask(drop);
+  mesh.RemoveUnreferencedVertices();
+  nlohmann::json dropped = nlohmann::json::object();
+  double kept_area = 0, dropped_area = 0;
+  for (const auto& c : sel.components) {
+    if (c.decision == ComponentDecision::kKept) {
+      kept_area += c.area;
+    } else {
+      dropped_area += c.area;
+      auto& d = dropped[ToString(c.decision)];
+      d = d.is_null() ? 1 : d.get<int>() + 1;
+    }
+  }
+  st["components"] = {{"found", sel.components.size()},
+                      {"kept", sel.kept()},
+                      {"kept_area", kept_area},
+                      {"dropped_area", dropped_area},
+                      {"dropped", dropped}};
+  spdlog::info("poisson: {} of {} connected pieces kept ({:.1f}% of their area)", sel.kept(), sel.components.size(),
+               100 * kept_area / std::max(kept_area + dropped_area, 1e-300));
+}
+
+// Open3D's mesh as ours, its triangles wound the way the input normals face (renderer back-face culling and the
+// signed distances of the comparison rely on it), with the points' colours.
+ColoredMesh ToColoredMesh(const O3dMesh& mesh, const open3d::geometry::KDTreeFlann& tree,
+                          const open3d::geometry::PointCloud& pc, const io::OrientedPointCloud& cloud) {
+  ColoredMesh out;
+  out.vertices = mesh.vertices_;
+  out.triangles = mesh.triangles_;
+  // Vote over the faces with their nearest point's normal.
+  std::vector<Eigen::Vector3d> centroids(out.triangles.size());
+  for (size_t i = 0; i < out.triangles.size(); ++i) {
+    const auto& f = out.triangles[i];
+    centroids[i] = (out.vertices[f[0]] + out.vertices[f[1]] + out.vertices[f[2]]) / 3.0;
+  }
+  const std::vector<int> nearest_face_point = NearestPoints(tree, centroids, nullptr);
+  double vote = 0;
+  for (size_t i = 0; i < out.triangles.size(); ++i) {
+    const auto& f = out.triangles[i];
+    const Eigen::Vector3d n = (out.vertices[f[1]] - out.vertices[f[0]]).cross(out.vertices[f[2]] - out.vertices[f[0]]);
+    if (nearest_face_point[i] >= 0) vote += n.dot(pc.normals_[nearest_face_point[i]]) > 0 ? 1 : -1;
+  }
+  if (vote < 0)
+    for (auto& f : out.triangles) std::swap(f[1], f[2]);
+  out.ComputeVertexNormals();
+
+  if (cloud.has_colors()) {
+    if (mesh.vertex_colors_.size() == mesh.vertices_.size()) {
+      out.colors.reserve(mesh.vertices_.size());
+      for (const auto& c : mesh.vertex_colors_) {
+        io::Rgb8 rgb;
+        for (int k = 0; k < 3; ++k) rgb[k] = static_cast<uint8_t>(std::clamp(std::lround(c[k] * 255.0), 0L, 255L));
+        out.colors.push_back(rgb);
+      }
+    } else {  // decimation may drop the interpolated colours: take the nearest point's
+      const std::vector<int> nearest = NearestPoints(tree, out.vertices, nullptr);
+      out.colors.reserve(out.vertices.size());
+      for (int p : nearest) out.colors.push_back(p >= 0 ? cloud.colors[p] : io::Rgb8(128, 128, 128));
+    }
+  }
+  return out;
+}
+
+}  // namespace
+
+ColoredMesh ReconstructPoisson(const io::OrientedPointCloud& cloud, const PoissonOptions& options,
+                               nlohmann::json* stats) {
+  options.Check();
+  cloud.Validate();
+  if (cloud.empty()) throw Error("poisson: the point cloud is empty");
+  if (!cloud.has_normals()) throw Error("poisson: the point cloud has no normals");
+  if (cloud.size() < 16) throw Error("poisson: too few points (" + std::to_string(cloud.size()) + ") for a surface");
+  nlohmann::json st;
+  const auto start = Clock::now();
+
+  Eigen::AlignedBox3d bounds;
+  const open3d::geometry::PointCloud pc = WorkingCloud(cloud, options, &bounds, &st);
   const open3d::geometry::KDTreeFlann tree(pc);
   const double spacing = SpacingFromTree(tree, pc.points_, 20000);
   Eigen::AlignedBox3d kept_box;  // Open3D's cube is 1.1 × the largest extent of the points it is given
@@ -203,78 +337,9 @@ ColoredMesh ReconstructPoisson(const io::OrientedPointCloud& cloud, const Poisso
   // 2 + 3: trim by density and by distance to the samples, in one vertex mask (open surfaces only).
   const double cell = st["cell_width"].get<double>();
   st["kind"] = ToString(options.kind);
-  if (options.kind == SurfaceKind::kOpen) {
-    std::vector<double> dist;
-    const std::vector<int> nearest = NearestPoints(tree, mesh.vertices_, &dist);
-    std::vector<bool> remove(mesh.vertices_.size(), false);
-    size_t density_trimmed = 0, distance_trimmed = 0;
-    if (options.density_quantile > 0 && densities.size() == mesh.vertices_.size()) {
-      std::vector<double> sorted = densities;
-      const size_t k = std::min(sorted.size() - 1, static_cast<size_t>(options.density_quantile * sorted.size()));
-      std::nth_element(sorted.begin(), sorted.begin() + k, sorted.end());
-      const double threshold = sorted[k];
-      st["density_threshold"] = threshold;
-      for (size_t i = 0; i < densities.size(); ++i)
-        if (densities[i] < threshold && dist[i] > cell) remove[i] = true, ++density_trimmed;
-    }
-    if (options.max_point_distance > 0 && spacing > 0) {
-      // The local spacing of each vertex's nearest point (computed once per point that is someone's nearest):
-      // a sparsely sampled surface (far land) keeps its mesh; the limit never goes below one cell (Poisson
-      // vertices sit on the cell grid) nor below the median spacing.
-      std::vector<int> unique = nearest;
-      std::sort(unique.begin(), unique.end());
-      unique.erase(std::unique(unique.begin(), unique.end()), unique.end());
-      if (!unique.empty() && unique.front() < 0) unique.erase(unique.begin());
-      std::vector<Eigen::Vector3d> queries(unique.size());
-      for (size_t i = 0; i < unique.size(); ++i) queries[i] = pc.points_[unique[i]];
-      const std::vector<double> local = LocalSpacings(tree, queries);
-      std::vector<double> local_of(pc.points_.size(), 0);
-      for (size_t i = 0; i < unique.size(); ++i) local_of[unique[i]] = local[i];
-      for (size_t i = 0; i < dist.size(); ++i) {
-        if (remove[i] || nearest[i] < 0) continue;
-        // A point at the edge of an evenly sampled surface has a local spacing up to ~1.5x the median (its
-        // neighbours are on one side): only a surface sampled clearly sparser gets its own spacing.
-        const double local_spacing = local_of[nearest[i]] > 2 * spacing ? local_of[nearest[i]] : spacing;
-        const double limit = options.max_point_distance * local_spacing;
-        if (dist[i] > std::max(limit, cell)) remove[i] = true, ++distance_trimmed;
-      }
-    }
-    mesh.RemoveVerticesByMask(remove);
-    st["trimmed"] = {{"vertices", mesh.vertices_.size()},
-                     {"faces", mesh.triangles_.size()},
-                     {"by_density", density_trimmed},
-                     {"by_distance", distance_trimmed}};
-    if (mesh.triangles_.empty()) throw Error("poisson: nothing left after trimming low-density vertices");
-  }
+  if (options.kind == SurfaceKind::kOpen) TrimOpenSurface(tree, pc, densities, spacing, cell, options, &mesh, &st);
 
-  // 4. Every piece the points support.
-  {
-    const ComponentSelection sel =
-        SelectComponents(mesh.vertices_, mesh.triangles_, pc.points_, cell, spacing, options.components);
-    std::vector<bool> drop(mesh.triangles_.size(), false);
-    for (size_t i = 0; i < drop.size(); ++i)
-      drop[i] = sel.components[sel.face_component[i]].decision != ComponentDecision::kKept;
-    mesh.RemoveTrianglesByMask(drop);
-    mesh.RemoveUnreferencedVertices();
-    nlohmann::json dropped = nlohmann::json::object();
-    double kept_area = 0, dropped_area = 0;
-    for (const auto& c : sel.components) {
-      if (c.decision == ComponentDecision::kKept) {
-        kept_area += c.area;
-      } else {
-        dropped_area += c.area;
-        auto& d = dropped[ToString(c.decision)];
-        d = d.is_null() ? 1 : d.get<int>() + 1;
-      }
-    }
-    st["components"] = {{"found", sel.components.size()},
-                        {"kept", sel.kept()},
-                        {"kept_area", kept_area},
-                        {"dropped_area", dropped_area},
-                        {"dropped", dropped}};
-    spdlog::info("poisson: {} of {} connected pieces kept ({:.1f}% of their area)", sel.kept(), sel.components.size(),
-                 100 * kept_area / std::max(kept_area + dropped_area, 1e-300));
-  }
+  KeepSupportedPieces(pc, spacing, cell, options, &mesh, &st);
 
   // 5. Crop to the working box (the points' robust bounds, enlarged); a watertight surface stays closed.
   if (options.kind == SurfaceKind::kOpen) {
@@ -299,41 +364,7 @@ ColoredMesh ReconstructPoisson(const io::OrientedPointCloud& cloud, const Poisso
   }
   st["seconds_cleanup"] = Seconds(t);
 
-  ColoredMesh out;
-  out.vertices = mesh.vertices_;
-  out.triangles = mesh.triangles_;
-  // Winding: the triangles must face the way the input normals do (renderer back-face culling and the
-  // signed distances of the comparison rely on it). Vote over the faces with their nearest point's normal.
-  std::vector<Eigen::Vector3d> centroids(out.triangles.size());
-  for (size_t i = 0; i < out.triangles.size(); ++i) {
-    const auto& f = out.triangles[i];
-    centroids[i] = (out.vertices[f[0]] + out.vertices[f[1]] + out.vertices[f[2]]) / 3.0;
-  }
-  const std::vector<int> nearest_face_point = NearestPoints(tree, centroids, nullptr);
-  double vote = 0;
-  for (size_t i = 0; i < out.triangles.size(); ++i) {
-    const auto& f = out.triangles[i];
-    const Eigen::Vector3d n = (out.vertices[f[1]] - out.vertices[f[0]]).cross(out.vertices[f[2]] - out.vertices[f[0]]);
-    if (nearest_face_point[i] >= 0) vote += n.dot(pc.normals_[nearest_face_point[i]]) > 0 ? 1 : -1;
-  }
-  if (vote < 0)
-    for (auto& f : out.triangles) std::swap(f[1], f[2]);
-  out.ComputeVertexNormals();
-
-  if (cloud.has_colors()) {
-    if (mesh.vertex_colors_.size() == mesh.vertices_.size()) {
-      out.colors.reserve(mesh.vertices_.size());
-      for (const auto& c : mesh.vertex_colors_) {
-        io::Rgb8 rgb;
-        for (int k = 0; k < 3; ++k) rgb[k] = static_cast<uint8_t>(std::clamp(std::lround(c[k] * 255.0), 0L, 255L));
-        out.colors.push_back(rgb);
-      }
-    } else {  // decimation may drop the interpolated colours: take the nearest point's
-      const std::vector<int> nearest = NearestPoints(tree, out.vertices, nullptr);
-      out.colors.reserve(out.vertices.size());
-      for (int p : nearest) out.colors.push_back(p >= 0 ? cloud.colors[p] : io::Rgb8(128, 128, 128));
-    }
-  }
+  ColoredMesh out = ToColoredMesh(mesh, tree, pc, cloud);
   st["vertices"] = out.vertices.size();
   st["faces"] = out.triangles.size();
   st["area"] = out.SurfaceArea();

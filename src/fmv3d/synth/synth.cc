@@ -145,6 +145,120 @@ std::vector<Eigen::Vector3d> SampleSurface(const io::TexturedMesh& mesh, int n) 
   return pts;
 }
 
+// One still frame as PNG or JPEG; with EXIF/XMP GPS when the flight asks for photos with metadata.
+void WriteStill(const cv::Mat& image, const fs::path& path, const SynthOptions& o, const core::Camera& camera,
+                const telemetry::klv::St0601Record* record) {
+  std::vector<int> params;
+  if (o.format == "jpg")
+    params = {cv::IMWRITE_JPEG_QUALITY, o.jpeg_quality};
+  else
+    params = {cv::IMWRITE_PNG_COMPRESSION, 3};
+  if (o.exif_gps) {
+    std::vector<uint8_t> jpeg;
+    if (!cv::imencode(".jpg", image, jpeg, params)) throw Error(path.string() + ": cannot encode frame");
+    const PhotoMetadata meta = MakePhotoMetadata(*record, camera, o.klv_options);
+    const std::vector<uint8_t> bytes = io::InsertJpegMetadata(jpeg, io::EncodeTiffExif(meta.exif), meta.xmp);
+    core::WriteAtomically(path, [&](const fs::path& tmp) {
+      std::ofstream out(tmp, std::ios::binary);
+      out.write(reinterpret_cast<const char*>(bytes.data()), static_cast<std::streamsize>(bytes.size()));
+      if (!out) throw Error(path.string() + ": cannot write frame");
+    });
+  } else {
+    core::WriteAtomically(path, [&](const fs::path& tmp) {
+      if (!cv::imwrite(tmp.string(), image, params)) throw Error(path.string() + ": cannot write frame");
+    });
+  }
+}
+
+// Ground-truth observations of one frame: sampled points whose projection lands on the surface they lie on.
+void AddTrueObservations(const std::vector<Eigen::Vector3d>& samples, const core::Camera& camera,
+                         const core::Pose& pose, const render::RenderResult& frame, const SynthOptions& o,
+                         core::Image* image, std::vector<std::vector<core::TrackElement>>* tracks,
+                         std::vector<Eigen::Matrix<uint8_t, 3, 1>>* colours) {
+  core::Image& img = *image;
+  for (size_t p = 0; p < samples.size(); ++p) {
+    const Eigen::Vector3d xc = pose.Transform(samples[p]);
+    if (xc.z() <= o.render.near_plane) continue;
+    const Eigen::Vector2d uv = camera.Project(xc);
+    if (!camera.InImage(uv, 0.5)) continue;
+    const int col = static_cast<int>(uv.x()), row = static_cast<int>(uv.y());
+    if (col < 0 || row < 0 || col >= o.width || row >= o.height) continue;
+    const float d = frame.depth.at<float>(row, col);
+    if (!(d > 0) || std::abs(d - xc.z()) > 0.01 * xc.z() + 0.05) continue;
+    (*tracks)[p].push_back({img.id, static_cast<uint32_t>(img.points2d.size())});
+    img.points2d.push_back(uv);
+    img.point3d_ids.push_back(core::kNoPoint3D);
+    if ((*tracks)[p].size() == 1) {
+      const cv::Vec3b c = frame.image.at<cv::Vec3b>(row, col);
+      (*colours)[p] << c[2], c[1], c[0];
+    }
+  }
+}
+
+// Samples seen by two frames or more become the truth's 3D points; the others stay untriangulated 2D points.
+void AddTruthPoints(const std::vector<Eigen::Vector3d>& samples,
+                    const std::vector<std::vector<core::TrackElement>>& tracks,
+                    const std::vector<Eigen::Matrix<uint8_t, 3, 1>>& colours, core::Reconstruction* truth) {
+  core::Reconstruction& rec = *truth;
+  uint64_t next_id = 1;
+  for (size_t p = 0; p < samples.size(); ++p) {
+    if (tracks[p].size() < 2) continue;
+    core::Point3D pt;
+    pt.id = next_id++;
+    pt.xyz = samples[p];
+    pt.rgb = colours[p];
+    pt.error = 0;
+    pt.track = tracks[p];
+    for (const auto& te : pt.track) rec.images[te.image_id].point3d_ids[te.point2d_idx] = static_cast<int64_t>(pt.id);
+    rec.points[pt.id] = std::move(pt);
+  }
+}
+
+nlohmann::json TruthJson(const Scene& scene, const SynthOptions& o, const FlightGeometry& geo,
+                         const core::Camera& camera, int frames, size_t truth_points, const fs::path& video_path) {
+  const auto box = scene.Bounds();
+  const auto world_box = scene.mesh.Bounds();
+  nlohmann::json j;
+  j["scene"] = scene.name;
+  j["characteristic_length"] = scene.characteristic_length;
+  j["bounds"] = {{"min", {box.min().x(), box.min().y(), box.min().z()}},
+                 {"max", {box.max().x(), box.max().y(), box.max().z()}}};
+  j["world_bounds"] = {{"min", {world_box.min().x(), world_box.min().y(), world_box.min().z()}},
+                       {"max", {world_box.max().x(), world_box.max().y(), world_box.max().z()}}};
+  j["seed"] = o.flight.seed;
+  j["fps"] = o.fps;
+  j["frames"] = frames;
+  j["format"] = o.format;
+  j["video"] = o.IsVideo() ? video_path.filename().string() : "";
+  j["frame_names"] =
+      std::string("flight-NNNNNN.") + (o.format == "jpg" ? "jpg" : "png") + " (6 digits, from 0 in decode order)";
+  j["camera"] = core::CameraToJson(camera);
+  j["flight"] = {{"path", o.flight.path},
+                 {"altitude", geo.altitude},
+                 {"radius", geo.radius},
+                 {"look_at", {geo.look_at.x(), geo.look_at.y(), geo.look_at.z()}}};
+  j["world"] = "metres, z up, ground around z = 0; poses world-to-camera (x_cam = R X + t)";
+  j["depth"] = "camera-frame z along the optical axis, metres; 0 = nothing";
+  j["truth_points"] = truth_points;
+  j["buildings"] = nlohmann::json::array();
+  for (const auto& b : scene.buildings)
+    j["buildings"].push_back({{"name", b.name},
+                              {"base", {b.base.x(), b.base.y(), b.base.z()}},
+                              {"width", b.width},
+                              {"depth", b.depth},
+                              {"eave_height", b.eave_height},
+                              {"ridge_height", b.ridge_height},
+                              {"heading_deg", b.heading_deg}});
+  if (o.HasTelemetry()) {
+    const GeoPoint& g = o.klv_options.origin;
+    j["geo_origin"] = {{"lat", g.lat}, {"lon", g.lon}, {"alt", g.alt}};
+    j["geo_frame"] = "world x = east, y = north, z = up (metres) at geo_origin; alt = WGS84 ellipsoidal height";
+    j["geoid_undulation_m"] = o.klv_options.geoid_undulation;  // KLV heights MSL = ellipsoidal − this
+  }
+  j["options"] = o.ToJson();
+  return j;
+}
+
 }  // namespace
 
 SynthResult RunSynth(const SynthOptions& o) {
@@ -208,27 +322,8 @@ SynthResult RunSynth(const SynthOptions& o) {
             static_cast<int64_t>(k), static_cast<int64_t>(last - k));
       }
     } else {
-      const fs::path path = frames_dir / FrameName(static_cast<int>(k), o.format);
-      std::vector<int> params;
-      if (o.format == "jpg")
-        params = {cv::IMWRITE_JPEG_QUALITY, o.jpeg_quality};
-      else
-        params = {cv::IMWRITE_PNG_COMPRESSION, 3};
-      if (o.exif_gps) {
-        std::vector<uint8_t> jpeg;
-        if (!cv::imencode(".jpg", frame.image, jpeg, params)) throw Error(path.string() + ": cannot encode frame");
-        const PhotoMetadata meta = MakePhotoMetadata(result.klv[k], camera, o.klv_options);
-        const std::vector<uint8_t> bytes = io::InsertJpegMetadata(jpeg, io::EncodeTiffExif(meta.exif), meta.xmp);
-        core::WriteAtomically(path, [&](const fs::path& tmp) {
-          std::ofstream out(tmp, std::ios::binary);
-          out.write(reinterpret_cast<const char*>(bytes.data()), static_cast<std::streamsize>(bytes.size()));
-          if (!out) throw Error(path.string() + ": cannot write frame");
-        });
-      } else {
-        core::WriteAtomically(path, [&](const fs::path& tmp) {
-          if (!cv::imwrite(tmp.string(), frame.image, params)) throw Error(path.string() + ": cannot write frame");
-        });
-      }
+      WriteStill(frame.image, frames_dir / FrameName(static_cast<int>(k), o.format), o, camera,
+                 o.HasTelemetry() ? &result.klv[k] : nullptr);
     }
     if (o.write_depth) {
       const fs::path path = depth_dir / fmt::format("flight-{:06d}.tiff", k);
@@ -241,24 +336,7 @@ SynthResult RunSynth(const SynthOptions& o) {
     img.camera_id = 1;
     img.name = FrameName(static_cast<int>(k), o.format == "jpg" ? "jpg" : "png");  // as the files / extractor name them
     img.pose = poses[k];
-    // Ground-truth observations: sampled points whose projection lands on the surface they lie on.
-    for (size_t p = 0; p < samples.size(); ++p) {
-      const Eigen::Vector3d xc = poses[k].Transform(samples[p]);
-      if (xc.z() <= o.render.near_plane) continue;
-      const Eigen::Vector2d uv = camera.Project(xc);
-      if (!camera.InImage(uv, 0.5)) continue;
-      const int col = static_cast<int>(uv.x()), row = static_cast<int>(uv.y());
-      if (col < 0 || row < 0 || col >= o.width || row >= o.height) continue;
-      const float d = frame.depth.at<float>(row, col);
-      if (!(d > 0) || std::abs(d - xc.z()) > 0.01 * xc.z() + 0.05) continue;
-      tracks[p].push_back({img.id, static_cast<uint32_t>(img.points2d.size())});
-      img.points2d.push_back(uv);
-      img.point3d_ids.push_back(core::kNoPoint3D);
-      if (tracks[p].size() == 1) {
-        const cv::Vec3b c = frame.image.at<cv::Vec3b>(row, col);
-        colours[p] << c[2], c[1], c[0];
-      }
-    }
+    AddTrueObservations(samples, camera, poses[k], frame, o, &img, &tracks, &colours);
     rec.images[img.id] = std::move(img);
     progress.Add();
   }
@@ -272,65 +350,12 @@ SynthResult RunSynth(const SynthOptions& o) {
   } else {
     result.frames = static_cast<int>(poses.size());
   }
-  uint64_t next_id = 1;
-  for (size_t p = 0; p < samples.size(); ++p) {
-    if (tracks[p].size() < 2) {
-      // Not a usable point: keep its observations as untriangulated 2D points.
-      continue;
-    }
-    core::Point3D pt;
-    pt.id = next_id++;
-    pt.xyz = samples[p];
-    pt.rgb = colours[p];
-    pt.error = 0;
-    pt.track = tracks[p];
-    for (const auto& te : pt.track) rec.images[te.image_id].point3d_ids[te.point2d_idx] = static_cast<int64_t>(pt.id);
-    rec.points[pt.id] = std::move(pt);
-  }
+  AddTruthPoints(samples, tracks, colours, &rec);
   rec.Validate();
   io::WriteColmapText(rec, o.output / "truth");
   if (o.write_scene) io::WriteObj(scene.mesh, o.output / "scene.obj");
 
-  const auto box = scene.Bounds();
-  const auto world_box = scene.mesh.Bounds();
-  nlohmann::json j;
-  j["scene"] = scene.name;
-  j["characteristic_length"] = scene.characteristic_length;
-  j["bounds"] = {{"min", {box.min().x(), box.min().y(), box.min().z()}},
-                 {"max", {box.max().x(), box.max().y(), box.max().z()}}};
-  j["world_bounds"] = {{"min", {world_box.min().x(), world_box.min().y(), world_box.min().z()}},
-                       {"max", {world_box.max().x(), world_box.max().y(), world_box.max().z()}}};
-  j["seed"] = o.flight.seed;
-  j["fps"] = o.fps;
-  j["frames"] = result.frames;
-  j["format"] = o.format;
-  j["video"] = o.IsVideo() ? video_path.filename().string() : "";
-  j["frame_names"] =
-      std::string("flight-NNNNNN.") + (o.format == "jpg" ? "jpg" : "png") + " (6 digits, from 0 in decode order)";
-  j["camera"] = core::CameraToJson(camera);
-  j["flight"] = {{"path", o.flight.path},
-                 {"altitude", geo.altitude},
-                 {"radius", geo.radius},
-                 {"look_at", {geo.look_at.x(), geo.look_at.y(), geo.look_at.z()}}};
-  j["world"] = "metres, z up, ground around z = 0; poses world-to-camera (x_cam = R X + t)";
-  j["depth"] = "camera-frame z along the optical axis, metres; 0 = nothing";
-  j["truth_points"] = rec.points.size();
-  j["buildings"] = nlohmann::json::array();
-  for (const auto& b : scene.buildings)
-    j["buildings"].push_back({{"name", b.name},
-                              {"base", {b.base.x(), b.base.y(), b.base.z()}},
-                              {"width", b.width},
-                              {"depth", b.depth},
-                              {"eave_height", b.eave_height},
-                              {"ridge_height", b.ridge_height},
-                              {"heading_deg", b.heading_deg}});
-  if (o.HasTelemetry()) {
-    const GeoPoint& g = o.klv_options.origin;
-    j["geo_origin"] = {{"lat", g.lat}, {"lon", g.lon}, {"alt", g.alt}};
-    j["geo_frame"] = "world x = east, y = north, z = up (metres) at geo_origin; alt = WGS84 ellipsoidal height";
-    j["geoid_undulation_m"] = o.klv_options.geoid_undulation;  // KLV heights MSL = ellipsoidal − this
-  }
-  j["options"] = o.ToJson();
+  const nlohmann::json j = TruthJson(scene, o, geo, camera, result.frames, rec.points.size(), video_path);
   core::WriteJson(o.output / "truth.json", j);
   result.characteristic_length = scene.characteristic_length;
   spdlog::info("synth: {} frames, {} truth points → {}", result.frames, rec.points.size(), o.output.string());
