@@ -1,10 +1,13 @@
 // The nested-model test of self-calibration on synthetic observations with exact truth: a principal point off
-// the image centre is freed and recovered; a centred one stays held.
+// the image centre is freed and recovered; a centred one stays held; radial terms the images do not have go back
+// to zero, a distorted lens keeps k1 (recovered) and drops the k2 it does not need.
+#include "fmv3d/sfm/self_calibration.h"
+
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cstdio>
 
-#include "fmv3d/sfm/self_calibration.h"
 #include "fmv3d/sfm/synthetic_correspondences.h"
 
 namespace fmv3d::sfm {
@@ -61,6 +64,45 @@ TEST(SelfCalibration, CentredPrincipalPointStaysHeld) {
   EXPECT_EQ(rec.cameras.at(1).u0, before.cameras.at(1).u0);
   EXPECT_EQ(rec.images.at(3).pose.t, before.images.at(3).pose.t);
   EXPECT_NEAR(r.freed.u0, 0.5 * so.width, 2.0);  // the free fit, not kept, is near the centre anyway
+}
+
+// The observed truth with the radial terms at zero (the prior of a photo with no calibration).
+core::Reconstruction RadialStart(double k1) {
+  SyntheticSceneOptions so = Scene(0, 0);
+  so.k1 = k1;
+  core::Reconstruction rec = TrueModelWithObservations(so);
+  rec.cameras.at(1).k1 = rec.cameras.at(1).k2 = 0;
+  return rec;
+}
+
+TEST(SelfCalibration, RadialTermsOfAnUndistortedCameraStayAtZero) {
+  core::Reconstruction rec = RadialStart(0);
+  BundleAdjustmentOptions o;  // focal and k1 free in both models
+  const NestedModelTestResult k2 = TestNestedModel(&rec, {}, o, IntrinsicGroup::kK2, {});
+  EXPECT_NE(k2.decision, NestedModelDecision::kFreed);
+  EXPECT_NE(k2.decision, NestedModelDecision::kFailed);
+  o.refine_k2 = false;
+  const NestedModelTestResult k1 = TestNestedModel(&rec, {}, o, IntrinsicGroup::kK1, {});
+  EXPECT_NE(k1.decision, NestedModelDecision::kFreed);
+  EXPECT_NE(k1.decision, NestedModelDecision::kFailed);
+  EXPECT_LT(k1.delta_chi2, k1.threshold);
+  EXPECT_EQ(rec.cameras.at(1).k1, 0);
+  EXPECT_EQ(rec.cameras.at(1).k2, 0);
+}
+
+TEST(SelfCalibration, DistortedLensKeepsK1AndDropsK2) {
+  core::Reconstruction rec = RadialStart(-0.08);
+  BundleAdjustmentOptions o;
+  o.refine_k2 = false;  // k2 = 0 is the truth: its own test is below
+  const NestedModelTestResult k1 = TestNestedModel(&rec, {}, o, IntrinsicGroup::kK1, {});
+  ASSERT_EQ(k1.decision, NestedModelDecision::kFreed);
+  ASSERT_EQ(k1.sigmas.size(), 1u);
+  EXPECT_NEAR(rec.cameras.at(1).k1, -0.08, std::max(3 * k1.sigmas[0], 1e-4));
+  EXPECT_NEAR(rec.cameras.at(1).f, 1000, 1.0);
+  o.refine_k2 = true;
+  const NestedModelTestResult k2 = TestNestedModel(&rec, {}, o, IntrinsicGroup::kK2, {});
+  EXPECT_NE(k2.decision, NestedModelDecision::kFreed);
+  EXPECT_EQ(rec.cameras.at(1).k2, 0);
 }
 
 }  // namespace

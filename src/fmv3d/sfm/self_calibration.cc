@@ -15,6 +15,10 @@ const char* ToString(IntrinsicGroup group) {
       return "aspect";
     case IntrinsicGroup::kTangential:
       return "tangential";
+    case IntrinsicGroup::kK1:
+      return "k1";
+    case IntrinsicGroup::kK2:
+      return "k2";
   }
   return "?";
 }
@@ -43,6 +47,10 @@ std::vector<core::IntrinsicIndex> Parameters(IntrinsicGroup group) {
       return {core::kAspect};
     case IntrinsicGroup::kTangential:
       return {core::kP1, core::kP2};
+    case IntrinsicGroup::kK1:
+      return {core::kK1};
+    case IntrinsicGroup::kK2:
+      return {core::kK2};
   }
   return {};
 }
@@ -60,6 +68,12 @@ void SetRefine(IntrinsicGroup group, bool refine, BundleAdjustmentOptions* o) {
       break;
     case IntrinsicGroup::kTangential:
       o->refine_tangential = refine;
+      break;
+    case IntrinsicGroup::kK1:
+      o->refine_k1 = refine;
+      break;
+    case IntrinsicGroup::kK2:
+      o->refine_k2 = refine;
       break;
   }
 }
@@ -113,6 +127,7 @@ NestedModelTestResult TestNestedModel(core::Reconstruction* rec, const BundleAdj
   r.delta_chi2 = (ss0 - ss1) / std::max(ss0 / r.dof, 1e-12);
   r.threshold =
       test_options.min_delta_chi2 > 0 ? test_options.min_delta_chi2 : r.num_parameters * std::log(std::max(2.0, 2 * n));
+  r.fixed_threshold = test_options.min_delta_chi2 > 0;
   r.rms_held_px = s0.final_rms_px;
   r.rms_freed_px = s1.final_rms_px;
   const uint32_t cid = held.cameras.begin()->first;

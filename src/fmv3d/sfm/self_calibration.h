@@ -24,7 +24,9 @@
 
 namespace fmv3d::sfm {
 
-enum class IntrinsicGroup { kFocal, kPrincipalPoint, kAspect, kTangential };
+// k2 and k1 are refined through growth (a guessed lens may be strongly distorted); their final tests ask whether
+// the data need them at all, against the prior's values (0 for photos that were undistorted).
+enum class IntrinsicGroup { kFocal, kPrincipalPoint, kAspect, kTangential, kK1, kK2 };
 
 const char* ToString(IntrinsicGroup group);
 // The parameters the group frees (per camera), in core::IntrinsicIndex.
@@ -55,7 +57,8 @@ struct NestedModelTestResult {
   int num_parameters = 0;  // extra parameters freed
   double dof = 0;          // 2 · observations − pose and point parameters
   double delta_chi2 = 0;
-  double threshold = 0;  // Δχ² needed: k · ln(2 · observations), or the fixed threshold
+  double threshold = 0;          // Δχ² needed: k · ln(2 · observations), or the fixed threshold
+  bool fixed_threshold = false;  // threshold is NestedModelTestOptions::min_delta_chi2, not BIC's
   double rms_held_px = 0, rms_freed_px = 0;
   std::vector<core::IntrinsicIndex> parameters;
   std::vector<double> held_values, freed_values, sigmas;  // per parameter; sigmas empty without covariance
