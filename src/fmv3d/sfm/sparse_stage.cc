@@ -131,6 +131,8 @@ nlohmann::json ToJson(const NestedModelTestResult& r) {
                             " and each freed parameter moves by more than its posterior sigma (BA covariance)"},
           {"extra_parameters", r.num_parameters},
           {"observations", r.num_observations},
+          {"observations_outside_gaussian_core", r.observations_left_out},
+          {"core_sigma_px", r.core_sigma_px},
           {"corner_displacement_1sigma_px", r.max_sigma_px},
           {"rms_held_px", r.rms_held_px},
           {"rms_free_px", r.rms_freed_px},
