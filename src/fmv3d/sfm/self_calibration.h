@@ -1,7 +1,7 @@
 // Self-calibration by nested-model tests: is an intrinsic parameter group (focal, principal point, aspect,
 // tangential distortion) worth freeing in the final bundle adjustment? The model with the group held (the null
-// model) is nested in the one with it free; both are fitted to the same observations with plain squared errors
-// (outliers are filtered by then). Two questions decide, each answered from the data:
+// model) is nested in the one with it free; both are fitted to the same observations (the Gaussian core, below)
+// with plain squared errors. Two questions decide, each answered from the data:
 //
 //  1. Does freeing it explain the observations better than pure noise would? The drop of the squared error in
 //     units of the noise variance, Δχ² = (SSE₀ − SSE₁) / σ² with σ² = SSE₀ / dof, is compared with the Bayesian
@@ -10,10 +10,10 @@
 //     Δχ² is a χ² only for Gaussian errors, and reprojection errors are heavy-tailed: features on occlusion
 //     contours and near-repeats inside the filter's tolerance (on a 30-frame synthetic orbit 15% of the
 //     observations lie beyond 3.4σ of the core and make 82% of the squared error). Such errors move with the
-//     viewpoint, so they are not noise: they pull a weakly determined parameter (a principal point trading against
-//     a common tilt: 8.5 px, with the focal 0.9% off) while inflating σ², and the test read that pull as signal.
-//     Both fits therefore use only the observations inside the Gaussian core (the bound a χ²(2) exceeds with
-//     probability 1 − core_mass, σ from the median error), and σ² comes from them.
+//     viewpoint, so they are not noise: they pull a weakly determined parameter (there a centred principal point
+//     went 8.5 px off, trading against a common tilt, with the focal 0.9% short) while inflating σ², and the
+//     pull passed for signal. Both fits therefore use only the observations inside the Gaussian core of the null
+//     model's fit: within the bound a χ²(2) exceeds with probability 1 − core_mass, σ from the median error.
 //  2. Do the data determine it? The posterior covariance of the freed parameters (the BA's covariance, Ceres)
 //     gives each one's standard deviation σ_θ. Holding a parameter costs the squared shift Δθ² the data ask for
 //     (its bias), freeing it costs σ_θ² (its variance): each freed parameter must move by more than its σ. One
