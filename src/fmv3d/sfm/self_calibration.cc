@@ -113,7 +113,7 @@ constexpr double kNearOptimumTrustRegion = 1e12;
 
 // Leaves out of *rec the observations outside the Gaussian core of the reprojection errors: the core's σ per axis
 // from the median 2D error (for Gaussian errors it is Rayleigh-distributed, median σ·√(2 ln 2)), the bound where a
-// χ²(2) exceeds 1 − kCoreMass. Returns (observations left out, σ).
+// χ²(2) exceeds 1 − core_mass. Returns (observations left out, σ).
 std::pair<int, double> KeepGaussianCore(core::Reconstruction* rec, double core_mass) {
   std::vector<double> errors;
   for (const auto& [pid, p] : rec->points)
@@ -143,9 +143,9 @@ NestedModelTestResult TestNestedModel(core::Reconstruction* rec, const BundleAdj
   options.compute_intrinsics_covariance = false;
   auto s0 = BundleAdjust(&held, config, options);
   if (!s0.success || held.cameras.empty()) return r;
+  // From here on each fit starts at a neighbouring optimum: nearly Gauss–Newton steps (initial_trust_region_radius).
   // The core is that of the null model's fit (outliers are defined under the hypothesis tested); the held fit
   // then continues on it from where it stopped.
-  // From here on each fit starts at a neighbouring optimum: nearly Gauss–Newton steps (initial_trust_region_radius).
   options.initial_trust_region_radius = std::max(options.initial_trust_region_radius, kNearOptimumTrustRegion);
   if (test_options.core_mass < 1) {
     std::tie(r.observations_left_out, r.core_sigma_px) = KeepGaussianCore(&held, test_options.core_mass);
