@@ -134,6 +134,10 @@ void Add(CLI::App& app) {
   cmd->add_option("--supersample", o->render.supersample, "Anti-aliasing samples per pixel axis (1-4)")
       ->check(CLI::Range(1, 4))
       ->capture_default_str();
+  cmd->add_option("--altitude-swing", o->flight.altitude_swing,
+                  "Orbit: altitude varies by +- this (metres) twice around the circle")
+      ->check(CLI::NonNegativeNumber)
+      ->capture_default_str();
   cmd->add_option("--jitter", o->flight.jitter_deg, "Gimbal attitude jitter, degrees (1 sigma)")
       ->check(CLI::Range(0.0, 19.0))
       ->capture_default_str();

@@ -1,12 +1,13 @@
 // The incremental triangulator on exact synthetic views: creation, transitive completion, merging, the
 // parallax rule and a wrong match, with exact counts.
+#include "fmv3d/sfm/triangulator.h"
+
 #include <gtest/gtest.h>
 
 #include <Eigen/Geometry>
 
 #include "fmv3d/sfm/correspondence_graph.h"
 #include "fmv3d/sfm/mapper_primitives.h"
-#include "fmv3d/sfm/triangulator.h"
 
 namespace fmv3d::sfm {
 namespace {
@@ -111,11 +112,34 @@ TEST(IncrementalTriangulator, RejectsAWrongMatchAndTooLittleParallax) {
   // Cameras 0.5° apart around the cloud: every ray pair is narrower than the 1.5° minimum.
   Views narrow = MakeViews({{1, 2}}, 0.5);
   const CorrespondenceGraph graph(narrow.num_kp, narrow.pairs);
-  IncrementalTriangulator tri(graph, &narrow.rec, {});
+  TriangulatorOptions two_views;
+  two_views.ignore_two_view_tracks = false;  // one pair: every track has two views
+  IncrementalTriangulator tri(graph, &narrow.rec, two_views);
   EXPECT_EQ(tri.CreatePoint({{1, 3}, {2, 3}}), core::kNoPoint3D);
   EXPECT_EQ(tri.TriangulateImage(1), 0);
   tri.set_min_angle_deg(0.05);
   EXPECT_EQ(tri.TriangulateImage(1), kPoints);
+}
+
+TEST(IncrementalTriangulator, SkipsTracksOfTwoViewsOnly) {
+  // Two separate pairs: every keypoint's track has two views, nothing is created unless asked.
+  Views v = MakeViews({{1, 2}, {3, 4}});
+  const CorrespondenceGraph graph(v.num_kp, v.pairs);
+  EXPECT_TRUE(graph.IsTwoViewObservation(1, 5));
+  IncrementalTriangulator tri(graph, &v.rec, {});
+  EXPECT_EQ(tri.TriangulateImage(1), 0);
+  EXPECT_EQ(tri.TriangulateImage(3), 0);
+  TriangulatorOptions keep;
+  keep.ignore_two_view_tracks = false;
+  IncrementalTriangulator tri_keep(graph, &v.rec, keep);
+  EXPECT_EQ(tri_keep.TriangulateImage(1), kPoints);
+  // A chain 1–2–3: image 1's keypoints have one correspondence, but image 2's have two — a three-view track.
+  Views chain = MakeViews({{1, 2}, {2, 3}});
+  const CorrespondenceGraph chain_graph(chain.num_kp, chain.pairs);
+  EXPECT_FALSE(chain_graph.IsTwoViewObservation(1, 5));
+  IncrementalTriangulator tri_chain(chain_graph, &chain.rec, {});
+  EXPECT_EQ(tri_chain.TriangulateImage(1), kPoints);
+  for (const auto& [pid, p] : chain.rec.points) EXPECT_EQ(p.track.size(), 3u);
 }
 
 TEST(MapperPrimitives, FilterDropsBadObservationsAndNarrowPoints) {

@@ -24,6 +24,7 @@ void BundleAdjustmentOptions::Check() const {
   if (!(loss_scale_px > 0)) throw Error("bundle adjustment: loss_scale_px must be > 0");
   if (max_iterations < 1) throw Error("bundle adjustment: max_iterations must be ≥ 1");
   if (!(function_tolerance > 0)) throw Error("bundle adjustment: function_tolerance must be > 0");
+  if (!(initial_trust_region_radius > 0)) throw Error("bundle adjustment: initial_trust_region_radius must be > 0");
 }
 
 double ObservationError(const core::Reconstruction& rec, uint32_t image_id, uint32_t point2d_idx,
@@ -207,6 +208,7 @@ class BundleProblem {
     sopts.function_tolerance = options_.function_tolerance;
     sopts.gradient_tolerance = options_.gradient_tolerance;
     sopts.parameter_tolerance = options_.parameter_tolerance;
+    sopts.initial_trust_region_radius = options_.initial_trust_region_radius;
     sopts.num_threads = NumThreads();
     sopts.minimizer_progress_to_stdout = false;
     sopts.logging_type = ceres::SILENT;

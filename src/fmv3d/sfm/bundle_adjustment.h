@@ -33,6 +33,11 @@ struct BundleAdjustmentOptions {
   double function_tolerance = 1e-6;
   double gradient_tolerance = 1e-10;
   double parameter_tolerance = 1e-8;
+  // Levenberg–Marquardt's damping starts at diag(JᵀJ) / this (Ceres' default 1e4). A fit that starts at a
+  // neighbouring optimum (a nested-model test) needs a larger one: along a direction that is nearly a gauge
+  // freedom (a principal point against a common tilt) the damped first step gains less than function_tolerance,
+  // and Ceres then stops without taking it.
+  double initial_trust_region_radius = 1e4;
   // Larger problems use SPARSE_SCHUR. Both spend their time forming the reduced camera system (the Schur
   // elimination), where the dense matrix's direct cell access beats the sparse one's look-ups and locks; the
   // dense factorisation (6n + 3 unknowns, n³ flops) only costs as much past a few hundred images. Measured on a

@@ -46,6 +46,11 @@ const std::vector<core::TrackElement>& CorrespondenceGraph::Correspondences(uint
   return it->second[kp];
 }
 
+bool CorrespondenceGraph::IsTwoViewObservation(uint32_t image_id, uint32_t kp) const {
+  const auto& corrs = Correspondences(image_id, kp);
+  return corrs.size() == 1 && Correspondences(corrs[0].image_id, corrs[0].point2d_idx).size() == 1;
+}
+
 int CorrespondenceGraph::NumPairs(uint32_t image_id) const {
   auto it = num_pairs_.find(image_id);
   return it == num_pairs_.end() ? 0 : it->second;

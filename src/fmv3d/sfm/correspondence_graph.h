@@ -22,6 +22,9 @@ class CorrespondenceGraph {
                       const std::vector<features::VerifiedPair>& pairs);
 
   const std::vector<core::TrackElement>& Correspondences(uint32_t image_id, uint32_t kp) const;
+  // True when the keypoint and its only correspondence have no other correspondence: a track of two views,
+  // which no third image can ever observe.
+  bool IsTwoViewObservation(uint32_t image_id, uint32_t kp) const;
   // Number of images matched to this one, and of its keypoints with ≥ 1 correspondence.
   int NumPairs(uint32_t image_id) const;
   int NumObservedKeypoints(uint32_t image_id) const;

@@ -2,6 +2,10 @@
 
 #include <algorithm>
 #include <cmath>
+#include <tuple>
+#include <utility>
+
+#include "fmv3d/sfm/mapper_primitives.h"
 
 namespace fmv3d::sfm {
 
@@ -15,6 +19,10 @@ const char* ToString(IntrinsicGroup group) {
       return "aspect";
     case IntrinsicGroup::kTangential:
       return "tangential";
+    case IntrinsicGroup::kK1:
+      return "k1";
+    case IntrinsicGroup::kK2:
+      return "k2";
   }
   return "?";
 }
@@ -43,6 +51,10 @@ std::vector<core::IntrinsicIndex> Parameters(IntrinsicGroup group) {
       return {core::kAspect};
     case IntrinsicGroup::kTangential:
       return {core::kP1, core::kP2};
+    case IntrinsicGroup::kK1:
+      return {core::kK1};
+    case IntrinsicGroup::kK2:
+      return {core::kK2};
   }
   return {};
 }
@@ -60,6 +72,12 @@ void SetRefine(IntrinsicGroup group, bool refine, BundleAdjustmentOptions* o) {
       break;
     case IntrinsicGroup::kTangential:
       o->refine_tangential = refine;
+      break;
+    case IntrinsicGroup::kK1:
+      o->refine_k1 = refine;
+      break;
+    case IntrinsicGroup::kK2:
+      o->refine_k2 = refine;
       break;
   }
 }
@@ -88,6 +106,30 @@ double CornerDisplacementPerUnit(const core::Camera& c, core::IntrinsicIndex p) 
   }
 }
 
+namespace {
+
+// LM damping of diag(JᵀJ) · 1e-12 at the first step: below a near-gauge direction's curvature, far above round-off.
+constexpr double kNearOptimumTrustRegion = 1e12;
+
+// Leaves out of *rec the observations outside the Gaussian core of the reprojection errors: the core's σ per axis
+// from the median 2D error (for Gaussian errors it is Rayleigh-distributed, median σ·√(2 ln 2)), the bound where a
+// χ²(2) exceeds 1 − core_mass. Returns (observations left out, σ).
+std::pair<int, double> KeepGaussianCore(core::Reconstruction* rec, double core_mass) {
+  std::vector<double> errors;
+  for (const auto& [pid, p] : rec->points)
+    for (const auto& el : p.track) errors.push_back(ObservationError(*rec, el.image_id, el.point2d_idx, p.xyz));
+  if (errors.empty()) return {0, 0};
+  auto mid = errors.begin() + errors.size() / 2;
+  std::nth_element(errors.begin(), mid, errors.end());
+  const double sigma = *mid / std::sqrt(2 * std::log(2.0));
+  const double bound = sigma * std::sqrt(-2 * std::log(1 - core_mass));
+  const int kept = static_cast<int>(std::count_if(errors.begin(), errors.end(), [&](double e) { return e <= bound; }));
+  FilterPoints(rec, nullptr, {bound, 0.0});
+  return {static_cast<int>(errors.size()) - kept, sigma};
+}
+
+}  // namespace
+
 NestedModelTestResult TestNestedModel(core::Reconstruction* rec, const BundleAdjustmentConfig& config,
                                       BundleAdjustmentOptions options, IntrinsicGroup group,
                                       const NestedModelTestOptions& test_options) {
@@ -99,8 +141,17 @@ NestedModelTestResult TestNestedModel(core::Reconstruction* rec, const BundleAdj
   core::Reconstruction held = *rec;
   SetRefine(group, false, &options);
   options.compute_intrinsics_covariance = false;
-  const auto s0 = BundleAdjust(&held, config, options);
+  auto s0 = BundleAdjust(&held, config, options);
   if (!s0.success || held.cameras.empty()) return r;
+  // From here on each fit starts at a neighbouring optimum: nearly Gauss–Newton steps (initial_trust_region_radius).
+  // The core is that of the null model's fit (outliers are defined under the hypothesis tested); the held fit
+  // then continues on it from where it stopped.
+  options.initial_trust_region_radius = std::max(options.initial_trust_region_radius, kNearOptimumTrustRegion);
+  if (test_options.core_mass < 1) {
+    std::tie(r.observations_left_out, r.core_sigma_px) = KeepGaussianCore(&held, test_options.core_mass);
+    s0 = BundleAdjust(&held, config, options);
+    if (!s0.success) return r;
+  }
   core::Reconstruction freed = held;  // starts at the held optimum: a few steps only
   SetRefine(group, true, &options);
   options.compute_intrinsics_covariance = test_options.require_determined;
@@ -109,10 +160,11 @@ NestedModelTestResult TestNestedModel(core::Reconstruction* rec, const BundleAdj
   const double n = s0.num_residuals;
   const double ss0 = s0.final_rms_px * s0.final_rms_px * n, ss1 = s1.final_rms_px * s1.final_rms_px * n;
   r.num_observations = s0.num_residuals;
-  r.dof = std::max(1.0, 2 * n - 6.0 * rec->images.size() - 3.0 * rec->points.size());
+  r.dof = std::max(1.0, 2 * n - 6.0 * held.images.size() - 3.0 * held.points.size());
   r.delta_chi2 = (ss0 - ss1) / std::max(ss0 / r.dof, 1e-12);
   r.threshold =
       test_options.min_delta_chi2 > 0 ? test_options.min_delta_chi2 : r.num_parameters * std::log(std::max(2.0, 2 * n));
+  r.fixed_threshold = test_options.min_delta_chi2 > 0;
   r.rms_held_px = s0.final_rms_px;
   r.rms_freed_px = s1.final_rms_px;
   const uint32_t cid = held.cameras.begin()->first;
@@ -149,7 +201,8 @@ NestedModelTestResult TestNestedModel(core::Reconstruction* rec, const BundleAdj
     }
   }
   r.decision = NestedModelDecision::kFreed;
-  *rec = std::move(freed);
+  // The fits ran on the core only: the caller's model keeps every observation and takes the freed intrinsics.
+  for (auto& [id, cam] : rec->cameras) cam = freed.cameras.at(id);
   return r;
 }
 

@@ -104,6 +104,7 @@ void IncrementalTriangulator::TriangulateKeypoint(uint32_t image_id, uint32_t kp
     return;
   }
   // Creation: this keypoint and its registered, untriangulated correspondences (one per image).
+  if (options_.ignore_two_view_tracks && graph_.IsTwoViewObservation(image_id, kp)) return;
   std::vector<core::TrackElement> obs = {{image_id, kp}};
   std::set<uint32_t> seen = {image_id};
   for (const auto& c : corrs)

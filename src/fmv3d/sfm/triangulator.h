@@ -22,6 +22,11 @@ namespace fmv3d::sfm {
 struct TriangulatorOptions {
   double max_error_px = 4;     // creation, continuation, completion and merging
   double min_angle_deg = 1.5;  // creation: the widest ray pair of the inliers
+  // Creation skips tracks of two views (IsTwoViewObservation), as COLMAP's mapper does: no third image can
+  // observe such a point, so it never helps a registration nor checks its match; it only ties its two images in
+  // bundle adjustment, which their many longer tracks already do. (The initial pair's points are created
+  // directly and keep them.)
+  bool ignore_two_view_tracks = true;
 };
 
 class IncrementalTriangulator {

@@ -28,6 +28,7 @@ void FlightOptions::Check() const {
   if (path != "orbit" && path != "grid" && path != "pass" && path != "oblique")
     throw Error("flight: unknown path '" + path + "' (expected orbit, grid, pass or oblique)");
   if (frames < 1) throw Error("flight: --frames must be at least 1");
+  if (!(altitude_swing >= 0)) throw Error("flight: --altitude-swing must be >= 0");
   if (altitude && !std::isfinite(*altitude)) throw Error("flight: altitude must be finite");
   if (radius && !(*radius > 0)) throw Error("flight: radius must be positive");
   if (!(jitter_deg >= 0 && jitter_deg < 20)) throw Error("flight: jitter must be in [0, 20) degrees");
@@ -71,7 +72,8 @@ std::vector<core::Pose> MakeFlight(const Scene& scene, const core::Camera& camer
   if (o.path == "orbit") {
     for (int k = 0; k < n; ++k) {
       const double a = 2 * M_PI * k / n - M_PI / 2;  // start south of the target, counter-clockwise
-      centres[k] = {g.look_at.x() + g.radius * std::cos(a), g.look_at.y() + g.radius * std::sin(a), g.altitude};
+      centres[k] = {g.look_at.x() + g.radius * std::cos(a), g.look_at.y() + g.radius * std::sin(a),
+                    g.altitude + o.altitude_swing * std::sin(2 * a)};
       rotations[k] = core::Pose::LookAt(centres[k], g.look_at).R();
     }
   } else if (o.path == "grid" && o.grid_overlap) {

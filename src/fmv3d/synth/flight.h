@@ -32,7 +32,11 @@ struct FlightOptions {
   std::optional<double> radius;                           // orbit radius / grid half-size / pass stand-off, metres
   std::optional<Eigen::Vector3d> look_at;                 // default: the scene's target
   std::optional<std::pair<double, double>> grid_overlap;  // grid: (forward, side), each in [0, 0.95]
-  double jitter_deg = 0.4;                                // attitude jitter (1 sigma), degrees
+  // orbit: the altitude swings by ± this (metres) twice around the circle. Cameras at one height all looking at
+  // one centre leave the principal point's row against a common tilt nearly undetermined; heights that differ
+  // determine it.
+  double altitude_swing = 0;
+  double jitter_deg = 0.4;       // attitude jitter (1 sigma), degrees
   double position_jitter = 0.3;  // metres (1 sigma) at >= 100 m from the target, less when closer
   uint64_t seed = 1;
   void Check() const;
