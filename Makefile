@@ -6,8 +6,9 @@ TSAN_BUILD ?= build-tsan
 FUZZ_SECONDS ?= 300
 JOBS       ?= $(shell nproc)
 DEMO_DIR   ?= demo-out
-# Unity build (CMakeLists.txt, FMV3D_UNITY): cheaper fresh builds; `make UNITY=OFF` for file-by-file rebuilds.
-UNITY      ?= ON
+# Unity build (CMakeLists.txt, FMV3D_UNITY): `make UNITY=ON` compiles each target's sources in batches. Off by default
+# until a whole unity build and test run is verified (bench/results/cibuild.md: -14% CPU on the subset measured).
+UNITY      ?= OFF
 
 .PHONY: all deps build demo test test-asan test-tsan fuzz bench clean
 
