@@ -1,3 +1,6 @@
+// One file (~600 lines) by design: the Solver's sampling, NCC cost, propagation and refinement share its per-level
+// state and SIMD vector types in one hot loop; split across files they would have to expose the kernel's internals
+// in a header. The public interface is patch_match.h.
 #include "fmv3d/mvs/patch_match.h"
 
 #include <Eigen/Dense>
