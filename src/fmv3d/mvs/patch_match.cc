@@ -5,17 +5,18 @@
 
 #include <Eigen/Dense>
 #include <algorithm>
+#include <atomic>
 #include <chrono>
 #include <cmath>
-#include <atomic>
 #include <cstdio>
 #ifdef __SSE2__
 #include <emmintrin.h>
 #endif
-#include <limits>
-#include <opencv2/imgproc.hpp>
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
+
+#include <limits>
+#include <opencv2/imgproc.hpp>
 
 #include "fmv3d/core/error.h"
 
