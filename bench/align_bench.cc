@@ -8,9 +8,9 @@
 // sides (A from the south over the east to the north, B from the north over the west to the south; they share
 // ~20° at each end), each reconstructed (frames, features, match, sparse, dense at 480 px), then
 // `fmv3d align --union A B -o AB` (the union of the two clouds) and `fmv3d align A B -o ABr` (the default:
-// dense recomputed over the merged model). The merged clouds and each track's part of the union are evaluated with mvs::EvaluateDense
-// against the reference track's truth (its full 36-frame orbit decides which surface is "seen"), so all three
-// figures share one alignment and one visible surface. Opt-in (tens of CPU-minutes):
+// dense recomputed over the merged model). The merged clouds and each track's part of the union are evaluated with
+// mvs::EvaluateDense against the reference track's truth (its full 36-frame orbit decides which surface is "seen"), so
+// all three figures share one alignment and one visible surface. Opt-in (tens of CPU-minutes):
 //   FMV3D_ALIGN_BENCH_DIR=<scratch folder> build/bench/align_bench --benchmark_filter=TwoFlights
 // The flights are kept in that folder and reused on the next run (delete it to rebuild them).
 #include <benchmark/benchmark.h>
@@ -172,7 +172,8 @@ void BM_TwoFlightsDifferentSides(benchmark::State& state) {
     // AB: the union of the two clouds (each track's part stays separable); ABr: the default, dense recomputed
     // over the merged model.
     fs::remove_all(root / "AB");
-    Run(fmv3d, "align --union " + (root / "A").string() + " " + (root / "B").string() + " -o " + (root / "AB").string());
+    Run(fmv3d,
+        "align --union " + (root / "A").string() + " " + (root / "B").string() + " -o " + (root / "AB").string());
     fs::remove_all(root / "ABr");
     Run(fmv3d, "align " + (root / "A").string() + " " + (root / "B").string() + " -o " + (root / "ABr").string());
   }
@@ -190,8 +191,8 @@ void BM_TwoFlightsDifferentSides(benchmark::State& state) {
   };
   std::vector<Row> rows;
   auto eval = [&](const std::string& what, const io::OrientedPointCloud& cloud) {
-    rows.push_back({what, mvs::EvaluateDense(cloud, merged_sparse, truth.cameras, truth.scene, truth.length,
-                                             truth.options)});
+    rows.push_back(
+        {what, mvs::EvaluateDense(cloud, merged_sparse, truth.cameras, truth.scene, truth.length, truth.options)});
   };
   eval(ref + " (reference)", Slice(merged, 0, ref_points));
   eval(mov + " (aligned)", Slice(merged, ref_points, merged.size()));
@@ -239,13 +240,13 @@ void BM_TwoFlightsDifferentSides(benchmark::State& state) {
     io::OrientedPointCloud both;
     for (size_t i = 0; i < recomputed.size(); ++i) {
       double da = 0, db = 0;
-      if (ia.Nearest(recomputed.positions[i], &da) >= 0 && da <= ra * ra && ib.Nearest(recomputed.positions[i], &db) >= 0 &&
-          db <= rb * rb)
+      if (ia.Nearest(recomputed.positions[i], &da) >= 0 && da <= ra * ra &&
+          ib.Nearest(recomputed.positions[i], &db) >= 0 && db <= rb * rb)
         both.positions.push_back(recomputed.positions[i]);
     }
-    rows.push_back({"recomputed where both", mvs::EvaluateDense(both, io::ReadColmapText(root / "ABr" / "sparse"),
-                                                                truth.cameras, truth.scene, truth.length,
-                                                                truth.options)});
+    rows.push_back(
+        {"recomputed where both", mvs::EvaluateDense(both, io::ReadColmapText(root / "ABr" / "sparse"), truth.cameras,
+                                                     truth.scene, truth.length, truth.options)});
   }
   // What no selection between the two clouds can beat: the better track's points wherever both see the surface
   // (chosen with the truth), the other track's elsewhere. Its median is worse than the union's: the surface only
@@ -271,10 +272,11 @@ void BM_TwoFlightsDifferentSides(benchmark::State& state) {
     std::printf("%-18s %9zu %14.3f %12.3f %13.2f%%\n", r.what.c_str(), r.ev.points, 100 * r.ev.median_fraction(),
                 100 * r.ev.p90_fraction(), 100 * r.ev.completeness);
   const double better = std::max(rows[0].ev.completeness, rows[1].ev.completeness);
-  std::printf("completeness gain over the better single track: %+.2f points union, %+.2f finer kept, %+.2f "
-              "recomputed (target >= +5)\n",
-              100 * (rows[2].ev.completeness - better), 100 * (rows[3].ev.completeness - better),
-              100 * (rows[7].ev.completeness - better));
+  std::printf(
+      "completeness gain over the better single track: %+.2f points union, %+.2f finer kept, %+.2f "
+      "recomputed (target >= +5)\n",
+      100 * (rows[2].ev.completeness - better), 100 * (rows[3].ev.completeness - better),
+      100 * (rows[7].ev.completeness - better));
   if (report.contains("joint_bundle_adjustment"))
     std::printf("joint BA: %s\n", report.at("joint_bundle_adjustment").dump().c_str());
   std::printf("alignment: %s\n", report.at("tree")[0].dump().c_str());
@@ -291,22 +293,27 @@ void BM_TwoFlightsDifferentSides(benchmark::State& state) {
               mov.c_str(), 100 * eval_mov.centre_rmse_fraction);
   for (const char* key : {"to_reference", "to_reference_after_joint_ba"}) {
     if (!moving_track.contains(key)) continue;
-    const auto e = sfm::CompareSimilarityToTruth(align::Sim3FromJson(moving_track.at(key)), eval_ref, eval_mov, centroid);
-    std::printf("similarity %s vs truth: rotation %.4f deg, scale %.4f%%, translation %.4f%% of the scene "
-                "(bounds 0.05 deg, 0.1%%, 0.1%%)\n",
-                key, e.rotation_deg, 100 * e.scale, 100 * e.translation_fraction);
+    const auto e =
+        sfm::CompareSimilarityToTruth(align::Sim3FromJson(moving_track.at(key)), eval_ref, eval_mov, centroid);
+    std::printf(
+        "similarity %s vs truth: rotation %.4f deg, scale %.4f%%, translation %.4f%% of the scene "
+        "(bounds 0.05 deg, 0.1%%, 0.1%%)\n",
+        key, e.rotation_deg, 100 * e.scale, 100 * e.translation_fraction);
     state.counters[std::string(key) + "_rotation_deg"] = e.rotation_deg;
     state.counters[std::string(key) + "_scale_pct"] = 100 * e.scale;
   }
   // B's registration onto A inside the merged model: each part aligned to its own truth (one world); the joint
   // BA moves the reference's cameras too, which the composed similarity above counts as error.
   const auto [merged_ref_part, merged_mov_part] = align::SplitByNamePrefix(merged_sparse, mov + "-");
-  const auto in_ref = sfm::EvaluateSparse(merged_ref_part, sfm::LoadTruth((root / ("synth_" + ref) / "truth").string()));
-  const auto in_mov = sfm::EvaluateSparse(merged_mov_part, sfm::LoadTruth((root / ("synth_" + mov) / "truth").string()));
+  const auto in_ref =
+      sfm::EvaluateSparse(merged_ref_part, sfm::LoadTruth((root / ("synth_" + ref) / "truth").string()));
+  const auto in_mov =
+      sfm::EvaluateSparse(merged_mov_part, sfm::LoadTruth((root / ("synth_" + mov) / "truth").string()));
   const auto m = sfm::CompareSimilarityToTruth(core::Sim3{}, in_ref, in_mov, centroid);
-  std::printf("in the merged model, %s registered onto %s vs truth: rotation %.4f deg, scale %.4f%%, translation "
-              "%.4f%% of the scene\n",
-              mov.c_str(), ref.c_str(), m.rotation_deg, 100 * m.scale, 100 * m.translation_fraction);
+  std::printf(
+      "in the merged model, %s registered onto %s vs truth: rotation %.4f deg, scale %.4f%%, translation "
+      "%.4f%% of the scene\n",
+      mov.c_str(), ref.c_str(), m.rotation_deg, 100 * m.scale, 100 * m.translation_fraction);
   state.counters["merged_rotation_deg"] = m.rotation_deg;
   state.counters["merged_scale_pct"] = 100 * m.scale;
   state.counters["completeness_ref"] = rows[0].ev.completeness;

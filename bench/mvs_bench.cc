@@ -28,10 +28,10 @@ double ProcessCpuSeconds() {
 }
 
 struct Views {
-  std::vector<mvs::View> views;  // 0 = reference, then neighbours by orbit distance
-  std::vector<int> frames;       // orbit frame index of each view
-  double dmin = 0, dmax = 0;     // the reference's depth range
-  cv::Mat truth_depth;           // the reference's rendered depth (0 = sky)
+  std::vector<mvs::View> views;                   // 0 = reference, then neighbours by orbit distance
+  std::vector<int> frames;                        // orbit frame index of each view
+  double dmin = 0, dmax = 0;                      // the reference's depth range
+  cv::Mat truth_depth;                            // the reference's rendered depth (0 = sky)
   std::vector<std::pair<double, double>> ranges;  // every view's depth range
   std::vector<cv::Mat> truths;                    // every view's rendered depth
 };

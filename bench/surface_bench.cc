@@ -7,13 +7,13 @@
 //                                                    FMV3D_BENCH_FRAMES (default 24), FMV3D_BENCH_SIZE (1280x720),
 //                                                    FMV3D_BENCH_DIR (scratch root), FMV3D_BENCH_KEEP (keep files)
 #include <benchmark/benchmark.h>
+#include <sys/resource.h>
+#include <unistd.h>
 
 #include <chrono>
 #include <cmath>
 #include <cstdlib>
 #include <memory>
-#include <sys/resource.h>
-#include <unistd.h>
 #include <opencv2/imgcodecs.hpp>
 
 #include "fmv3d/core/files.h"

@@ -36,8 +36,8 @@ CliResult RunCli(const std::string& args);
 }  // namespace fmv3d::test
 
 // Skips the current test when ../shared/data (or a path inside it) is missing.
-#define FMV3D_REQUIRE_SHARED_DATA(rel)                                                              \
-  do {                                                                                              \
+#define FMV3D_REQUIRE_SHARED_DATA(rel)                                                                        \
+  do {                                                                                                        \
     if (::fmv3d::test::SharedData().empty() || !std::filesystem::exists(::fmv3d::test::SharedData() / (rel))) \
-      GTEST_SKIP() << "shared data not present: " << (rel);                                         \
+      GTEST_SKIP() << "shared data not present: " << (rel);                                                   \
   } while (0)

@@ -42,8 +42,8 @@ void WriteTrack(const World& world, const fs::path& ws, const core::Sim3& frame,
   std::map<size_t, core::Point3D> pts;
   for (int c = 0; c < cameras; ++c) {
     const double a = phase + 2 * M_PI * c / cameras;
-    const core::Pose world_pose =
-        core::Pose::LookAt(Eigen::Vector3d(radius * std::cos(a), radius * std::sin(a), height), Eigen::Vector3d(0, 0, 3));
+    const core::Pose world_pose = core::Pose::LookAt(
+        Eigen::Vector3d(radius * std::cos(a), radius * std::sin(a), height), Eigen::Vector3d(0, 0, 3));
     core::Image im;
     im.id = c + 1;
     im.camera_id = 1;
@@ -230,8 +230,8 @@ TEST(AlignTracks, NoOverlapIsAnErrorAndWritesNothing) {
     EXPECT_NE(std::string(e.what()).find("no overlap found between A and B"), std::string::npos) << e.what();
   }
   EXPECT_FALSE(fs::exists(dir / "M"));
-  const auto r = test::RunCli("align " + (dir / "A").string() + " " + (dir / "B").string() + " -o " +
-                              (dir / "M2").string());
+  const auto r =
+      test::RunCli("align " + (dir / "A").string() + " " + (dir / "B").string() + " -o " + (dir / "M2").string());
   EXPECT_EQ(r.exit_code, 1);
   EXPECT_NE(r.err.find("no overlap found between A and B"), std::string::npos) << r.err;
   EXPECT_FALSE(fs::exists(dir / "M2"));

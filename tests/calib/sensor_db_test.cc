@@ -5,9 +5,8 @@
 #include <cmath>
 #include <cstdlib>
 #include <fstream>
-#include <set>
-
 #include <opencv2/imgcodecs.hpp>
+#include <set>
 
 #include "fmv3d/calib/camera_file.h"
 #include "fmv3d/calib/priors.h"

@@ -4,8 +4,8 @@
 #include <Eigen/Dense>
 #include <algorithm>
 #include <climits>
-#include <random>
 #include <opencv2/imgproc.hpp>
+#include <random>
 
 #include "fmv3d/core/error.h"
 #include "fmv3d/features/matcher.h"
@@ -117,9 +117,9 @@ TEST(SiftMatch, KnownHomographyGivesThousandsOfCorrectMatches) {
     EXPECT_EQ(r.geometry, geometry::TwoViewClass::kPlanarOrRotation);
     EXPECT_GT(r.num_inliers_H, 0.9 * m.size());
     const Eigen::Matrix3d Hn = r.H / r.H(2, 2), Ht = c.H / c.H(2, 2);
-    EXPECT_LT((Hn * Eigen::Vector3d(640, 360, 1)).hnormalized().x() -
-                  (Ht * Eigen::Vector3d(640, 360, 1)).hnormalized().x(),
-              0.5);
+    EXPECT_LT(
+        (Hn * Eigen::Vector3d(640, 360, 1)).hnormalized().x() - (Ht * Eigen::Vector3d(640, 360, 1)).hnormalized().x(),
+        0.5);
   }
 }
 
@@ -180,7 +180,8 @@ TEST(SiftMatch, KeypointsHaveNoCommonOffset) {
     }
     ASSERT_GT(n, static_cast<int>(blobs.size()) * 9 / 10) << "max_size " << max_size << ", sigma " << sigma;
     const Eigen::Vector2d mean = sum / n;
-    EXPECT_LT(mean.norm(), 0.04) << "max_size " << max_size << ", sigma " << sigma << ": mean offset " << mean.transpose();
+    EXPECT_LT(mean.norm(), 0.04) << "max_size " << max_size << ", sigma " << sigma << ": mean offset "
+                                 << mean.transpose();
   }
 }
 
@@ -223,7 +224,7 @@ TEST(BruteForce, SimdKernelEqualsExactReference) {
     for (int i = 0; i < n1; ++i)
       for (int k = 0; k < 128; ++k)
         a(i, k) = i % 2 == 0 && i / 2 < n2 ? static_cast<uint8_t>(std::clamp(b(i / 2, k) + noise(rng), 0, 255))
-                             : static_cast<uint8_t>(any(rng));
+                                           : static_cast<uint8_t>(any(rng));
     MatchOptions o;
     o.type = MatcherType::kBruteForce;
     ImageDescriptors da(a, 1), db(b, 2);
@@ -238,8 +239,20 @@ TEST(BruteForce, SimdKernelEqualsExactReference) {
     for (int i = 0; i < n1; ++i)
       for (int j = 0; j < n2; ++j) {
         const int d = dist(i, j);
-        if (d < r1[i]) { r2[i] = r1[i]; r1[i] = d; ri[i] = j; } else if (d < r2[i]) { r2[i] = d; }
-        if (d < c1[j]) { c2[j] = c1[j]; c1[j] = d; ci[j] = i; } else if (d < c2[j]) { c2[j] = d; }
+        if (d < r1[i]) {
+          r2[i] = r1[i];
+          r1[i] = d;
+          ri[i] = j;
+        } else if (d < r2[i]) {
+          r2[i] = d;
+        }
+        if (d < c1[j]) {
+          c2[j] = c1[j];
+          c1[j] = d;
+          ci[j] = i;
+        } else if (d < c2[j]) {
+          c2[j] = d;
+        }
       }
     const double q = o.ratio * o.ratio;
     std::vector<FeatureMatch> want;
@@ -307,7 +320,8 @@ TEST(Pairs, LoopClosureFindsTheReturnOfAnOrbit) {
       ++loop_total;
       loop_overlapping += std::abs(pos(a) - pos(b)) < 300;
     }
-    EXPECT_GT(loop_overlapping, 0.6 * loop_total) << loop_overlapping << " / " << loop_total << ", vocabulary " << vocabulary;
+    EXPECT_GT(loop_overlapping, 0.6 * loop_total)
+        << loop_overlapping << " / " << loop_total << ", vocabulary " << vocabulary;
   }
 }
 

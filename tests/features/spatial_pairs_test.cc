@@ -1,11 +1,12 @@
 // `spatial` pair selection from per-frame telemetry in frames.json: a nadir lawn-mower grid flight (DJI-style
 // gimbal angles, relative altitude) and an oblique KLV-style orbit with frame-centre coordinates.
+#include "fmv3d/features/spatial_pairs.h"
+
 #include <gtest/gtest.h>
 
 #include <cmath>
 #include <set>
 
-#include "fmv3d/features/spatial_pairs.h"
 #include "fmv3d/io/frames_index.h"
 #include "test_util.h"
 
@@ -35,9 +36,13 @@ io::FramesIndex GridFlight(const fs::path& dir, bool with_telemetry_on_all) {
       f.frame_index = line * 8 + k;
       const double east = 30.0 * (line % 2 ? 7 - k : k), north = 200.0 * line;
       if (with_telemetry_on_all || (line * 8 + k) % 5 != 0)
-        f.telemetry = {{"time", 0.0},          {"source", "DJI-SRT"},     {"sensor_latitude", LatOf(north)},
-                       {"sensor_longitude", LonOf(east)}, {"sensor_relative_altitude", 100.0},
-                       {"gimbal_yaw", 90.0},  {"gimbal_pitch", -90.0}};
+        f.telemetry = {{"time", 0.0},
+                       {"source", "DJI-SRT"},
+                       {"sensor_latitude", LatOf(north)},
+                       {"sensor_longitude", LonOf(east)},
+                       {"sensor_relative_altitude", 100.0},
+                       {"gimbal_yaw", 90.0},
+                       {"gimbal_pitch", -90.0}};
       index.frames.push_back(f);
     }
   io::WriteFramesIndex(index, dir / "frames.json");
@@ -85,7 +90,7 @@ TEST(SpatialPairs, FramesWithoutTelemetryGetSequentialNeighboursAndNoneFallsBack
   const std::set<ImagePair> s(pairs.begin(), pairs.end());
   EXPECT_TRUE(s.count({0, 1}) && s.count({0, 2}));  // frame 0 has no footprint: sequential neighbours
   EXPECT_FALSE(s.count({0, 3}));
-  EXPECT_TRUE(s.count({1, 4}));                     // both have footprints 90 m apart: spatial
+  EXPECT_TRUE(s.count({1, 4}));  // both have footprints 90 m apart: spatial
   // No telemetry at all: the mode kAuto would choose (24 images: exhaustive), not an error.
   std::vector<Footprint> none(24);
   const auto fallback = SelectPairs(d, po, &used, nullptr, &none);
@@ -103,9 +108,12 @@ TEST(SpatialPairs, ObliqueOrbitUsesTheFrameCentre) {
     io::FrameRecord f;
     f.name = "orbit-" + std::to_string(k) + ".png";
     const double a = k * 30 * kDeg;
-    f.telemetry = {{"sensor_latitude", LatOf(2000 * std::cos(a))}, {"sensor_longitude", LonOf(2000 * std::sin(a))},
-                   {"sensor_altitude_msl", 1300.0},               {"frame_center_latitude", LatOf(0)},
-                   {"frame_center_longitude", LonOf(0)},          {"frame_center_elevation", 300.0},
+    f.telemetry = {{"sensor_latitude", LatOf(2000 * std::cos(a))},
+                   {"sensor_longitude", LonOf(2000 * std::sin(a))},
+                   {"sensor_altitude_msl", 1300.0},
+                   {"frame_center_latitude", LatOf(0)},
+                   {"frame_center_longitude", LonOf(0)},
+                   {"frame_center_elevation", 300.0},
                    {"horizontal_fov", 2.0}};
     index.frames.push_back(f);
   }
@@ -113,7 +121,7 @@ TEST(SpatialPairs, ObliqueOrbitUsesTheFrameCentre) {
   for (const auto& f : fps) {
     ASSERT_TRUE(f.valid);
     EXPECT_LT((f.centre - fps[0].centre).norm(), 1.0);  // all at the orbit centre
-    EXPECT_NEAR(f.centre.norm(), 2000, 5);             // which is 2 km from the first sensor position
+    EXPECT_NEAR(f.centre.norm(), 2000, 5);              // which is 2 km from the first sensor position
   }
   // Every frame looks at the same spot: all pairs.
   EXPECT_EQ(SpatialPairs(fps, 0.8, 30).size(), 12u * 11 / 2);

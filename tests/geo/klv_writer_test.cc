@@ -11,12 +11,12 @@
 
 #include "fmv3d/core/error.h"
 #include "fmv3d/io/frames_index.h"
+#include "fmv3d/synth/synth.h"
+#include "fmv3d/telemetry/attitude.h"
 #include "fmv3d/telemetry/klv.h"
 #include "fmv3d/telemetry/klv_st0601.h"
-#include "fmv3d/telemetry/attitude.h"
 #include "fmv3d/telemetry/klv_st0601_writer.h"
 #include "fmv3d/telemetry/telemetry.h"
-#include "fmv3d/synth/synth.h"
 #include "test_util.h"
 
 namespace fmv3d {

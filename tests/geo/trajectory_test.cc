@@ -1,5 +1,7 @@
 // geo/trajectory: interpolation of the registered cameras in time, and georef's use of every telemetry packet
 // (frames/telemetry.json) against it.
+#include "fmv3d/geo/trajectory.h"
+
 #include <fmt/format.h>
 #include <gtest/gtest.h>
 
@@ -11,7 +13,6 @@
 #include "fmv3d/core/reconstruction.h"
 #include "fmv3d/geo/geodesy.h"
 #include "fmv3d/geo/georef.h"
-#include "fmv3d/geo/trajectory.h"
 #include "fmv3d/io/colmap_model.h"
 #include "fmv3d/io/frames_index.h"
 #include "fmv3d/telemetry/telemetry.h"

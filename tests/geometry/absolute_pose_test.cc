@@ -1,11 +1,12 @@
 // Absolute pose, triangulation and similarity estimators against synthetic ground truth (PoseLib's habit:
 // exact on noise-free data, bounded error with noise and outliers).
+#include "fmv3d/geometry/absolute_pose.h"
+
 #include <gtest/gtest.h>
 
 #include <random>
 
 #include "fmv3d/core/error.h"
-#include "fmv3d/geometry/absolute_pose.h"
 #include "fmv3d/geometry/similarity.h"
 #include "fmv3d/geometry/triangulation.h"
 
@@ -175,7 +176,8 @@ TEST(ReprojectionError, AnalyticJacobianMatchesAutodiff) {
   EXPECT_NEAR(ra[1], rb[1], 1e-9);
   const int sizes[4] = {core::kNumIntrinsics, 4, 3, 3};
   for (int b = 0; b < 4; ++b)
-    for (int k = 0; k < 2 * sizes[b]; ++k) EXPECT_NEAR(ja[b][k], jb[b][k], 1e-6 * (1 + std::abs(ja[b][k]))) << b << " " << k;
+    for (int k = 0; k < 2 * sizes[b]; ++k)
+      EXPECT_NEAR(ja[b][k], jb[b][k], 1e-6 * (1 + std::abs(ja[b][k]))) << b << " " << k;
 }
 
 }  // namespace

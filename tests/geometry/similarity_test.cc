@@ -1,4 +1,6 @@
 // The similarity module and the generic robust estimator on synthetic point sets with known answers.
+#include "fmv3d/geometry/similarity.h"
+
 #include <gtest/gtest.h>
 
 #include <random>
@@ -6,7 +8,6 @@
 #include "fmv3d/core/error.h"
 #include "fmv3d/core/stats.h"
 #include "fmv3d/geometry/robust.h"
-#include "fmv3d/geometry/similarity.h"
 
 namespace fmv3d::geometry {
 namespace {

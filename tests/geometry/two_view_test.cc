@@ -36,7 +36,8 @@ Scene MakeScene(uint32_t seed, int n_inliers, int n_outliers, double noise_px, b
   s.R = RandomRotation(rng, 15);
   std::normal_distribution<double> g(0, 1);
   // Camera 2 centre about 1 unit from camera 1; scene at depth 4..8: a healthy baseline.
-  const Eigen::Vector3d C2 = rotation_only ? Eigen::Vector3d::Zero() : Eigen::Vector3d(g(rng), 0.3 * g(rng), 0.2 * g(rng)).normalized();
+  const Eigen::Vector3d C2 =
+      rotation_only ? Eigen::Vector3d::Zero() : Eigen::Vector3d(g(rng), 0.3 * g(rng), 0.2 * g(rng)).normalized();
   s.t = -s.R * C2;
   std::uniform_real_distribution<double> ux(0, 1280), uy(0, 720), ud(4, 8);
   std::normal_distribution<double> noise(0, noise_px);

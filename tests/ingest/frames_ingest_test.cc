@@ -1,13 +1,11 @@
-#include "fmv3d/ingest/frames.h"
-
 #include <gtest/gtest.h>
 
 #include <fstream>
+#include <opencv2/imgcodecs.hpp>
 #include <regex>
 
-#include <opencv2/imgcodecs.hpp>
-
 #include "fmv3d/core/error.h"
+#include "fmv3d/ingest/frames.h"
 #include "test_util.h"
 #include "video_test_util.h"
 

@@ -1,14 +1,12 @@
-#include "fmv3d/ingest/keyframes.h"
-
 #include <gtest/gtest.h>
 
 #include <cmath>
 #include <cstdio>
+#include <opencv2/imgproc.hpp>
 #include <set>
 
-#include <opencv2/imgproc.hpp>
-
 #include "fmv3d/core/error.h"
+#include "fmv3d/ingest/keyframes.h"
 #include "video_test_util.h"
 
 namespace fmv3d::ingest {

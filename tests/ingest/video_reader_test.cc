@@ -4,7 +4,6 @@
 
 #include <cmath>
 #include <fstream>
-
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 

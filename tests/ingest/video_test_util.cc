@@ -9,11 +9,10 @@ extern "C" {
 
 #include <cmath>
 #include <fstream>
+#include <opencv2/imgproc.hpp>
 #include <random>
 #include <stdexcept>
 #include <vector>
-
-#include <opencv2/imgproc.hpp>
 
 namespace fmv3d::test {
 

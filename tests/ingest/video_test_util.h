@@ -4,9 +4,8 @@
 
 #include <filesystem>
 #include <functional>
-#include <string>
-
 #include <opencv2/core.hpp>
+#include <string>
 
 namespace fmv3d::test {
 

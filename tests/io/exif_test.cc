@@ -6,7 +6,6 @@
 
 #include <fstream>
 #include <iterator>
-
 #include <opencv2/imgcodecs.hpp>
 
 #include "fmv3d/core/error.h"

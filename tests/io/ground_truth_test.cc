@@ -37,7 +37,8 @@ TEST(GroundTruth, MiddleburyTempleProjectsConsistently) {
 
 TEST(GroundTruth, KrtdNamesFollowOurFrameConvention) {
   test::TempDir dir;
-  core::WriteTextFile(dir / "clip-00001.krtd", "1000 0 180\n0 1000 120\n0 0 1\n\n1 0 0\n0 1 0\n0 0 1\n\n0 0 5\n\n-0.1 0.01\n");
+  core::WriteTextFile(dir / "clip-00001.krtd",
+                      "1000 0 180\n0 1000 120\n0 0 1\n\n1 0 0\n0 1 0\n0 0 1\n\n0 0 5\n\n-0.1 0.01\n");
   const auto rec = ReadKrtdFolder(dir.path(), 360, 240);
   ASSERT_EQ(rec.images.size(), 1u);
   EXPECT_EQ(rec.images.begin()->second.name, "clip-000000.png");

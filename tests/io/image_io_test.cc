@@ -1,18 +1,17 @@
 #include "fmv3d/io/image_io.h"
-#include "fmv3d/io/exif.h"
 
 #include <gtest/gtest.h>
 
 #include <cstring>
 #include <fstream>
-#include <vector>
-
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
+#include <vector>
 
 #include "fmv3d/core/error.h"
-#include "test_util.h"
+#include "fmv3d/io/exif.h"
 #include "image_test_util.h"
+#include "test_util.h"
 
 namespace fmv3d::io {
 namespace {

@@ -14,10 +14,12 @@ namespace fmv3d::test {
 // A little-endian TIFF/EXIF block: IFD0 with Make, Model and the EXIF IFD pointer; the EXIF IFD with
 // FocalLength (rational) and FocalLengthIn35mmFilm (short).
 inline std::vector<unsigned char> MakeExif(const std::string& make, const std::string& model, uint32_t focal_num,
-                                    uint32_t focal_den, uint16_t focal35) {
+                                           uint32_t focal_den, uint16_t focal35) {
   std::vector<unsigned char> b;
   auto u16 = [&](uint16_t v) { b.push_back(v & 0xFF), b.push_back(v >> 8); };
-  auto u32 = [&](uint32_t v) { for (int i = 0; i < 4; ++i) b.push_back((v >> (8 * i)) & 0xFF); };
+  auto u32 = [&](uint32_t v) {
+    for (int i = 0; i < 4; ++i) b.push_back((v >> (8 * i)) & 0xFF);
+  };
   const uint32_t ifd0 = 8, ifd0_size = 2 + 3 * 12 + 4;
   const uint32_t make_off = ifd0 + ifd0_size, model_off = make_off + uint32_t(make.size()) + 1;
   uint32_t exif_off = model_off + uint32_t(model.size()) + 1;

@@ -91,8 +91,8 @@ TEST(ReferenceViews, CoverNeedsAFractionOfAVideoOrbitAndSeesEveryPointEnoughTime
   int enough = 0;
   for (const auto& [pid, p] : rec.points) {
     const Eigen::Vector3d& X = p.xyz;
-    const Eigen::Vector3d n = std::abs(std::abs(X.x()) - 10) < 1e-9 ? Eigen::Vector3d(X.x() / 10, 0, 0)
-                                                                    : Eigen::Vector3d(0, X.y() / 10, 0);
+    const Eigen::Vector3d n =
+        std::abs(std::abs(X.x()) - 10) < 1e-9 ? Eigen::Vector3d(X.x() / 10, 0, 0) : Eigen::Vector3d(0, X.y() / 10, 0);
     enough += FrontViews(X, n, chosen, geoms) >= 4 ? 1 : 0;
   }
   EXPECT_GE(enough, static_cast<int>(0.95 * rec.points.size())) << "of " << rec.points.size();

@@ -1,12 +1,13 @@
 // Per-view coverage (pipeline/coverage.h): the sky found in a rendered frame, and the shares of the non-sky
 // pixels that a mesh and a point cloud cover, against what the true geometry says.
+#include "fmv3d/pipeline/coverage.h"
+
 #include <gtest/gtest.h>
 
 #include <cmath>
 #include <opencv2/imgproc.hpp>
 
 #include "fmv3d/core/error.h"
-#include "fmv3d/pipeline/coverage.h"
 #include "fmv3d/render/renderer.h"
 
 namespace fmv3d::pipeline {

@@ -2,11 +2,12 @@
 // model rendered (unshaded) from the same viewpoint. Here the frames are rendered without sun shading, so
 // the scene's own mesh (albedo textures) is the perfect model up to the sensor noise, and scores high; the
 // same mesh half a metre off scores clearly lower.
+#include "fmv3d/pipeline/demo.h"
+
 #include <gtest/gtest.h>
 
 #include <filesystem>
 
-#include "fmv3d/pipeline/demo.h"
 #include "fmv3d/synth/synth.h"
 #include "test_util.h"
 

@@ -1,5 +1,7 @@
 // The rasteriser against analytic ground truth: marked points land at camera.Project(pose.Transform(X)),
 // the depth map equals ray–surface distances, and rendering is deterministic.
+#include "fmv3d/render/renderer.h"
+
 #include <gtest/gtest.h>
 
 #include <Eigen/Geometry>
@@ -7,7 +9,6 @@
 #include <random>
 
 #include "fmv3d/core/error.h"
-#include "fmv3d/render/renderer.h"
 #include "fmv3d/render/texture.h"
 
 namespace fmv3d::render {
@@ -40,9 +41,7 @@ io::TexturedMesh BlackGround() {
   return m;
 }
 
-core::Pose ObliqueView() {
-  return core::Pose::LookAt({-6, -25, 18}, {1, 2, 0});
-}
+core::Pose ObliqueView() { return core::Pose::LookAt({-6, -25, 18}, {1, 2, 0}); }
 
 RenderOptions Plain() {
   RenderOptions o;
@@ -90,13 +89,14 @@ void CheckMarkers(const core::Camera& cam) {
       }
     ASSERT_GT(sw, 255 * 20) << "marker " << k << " not visible";
     const Eigen::Vector2d centroid(su / sw, sv / sw);
-    EXPECT_LT((centroid - p).norm(), 0.5) << "marker " << k << " at " << p.transpose() << " drawn at "
-                                          << centroid.transpose();
+    EXPECT_LT((centroid - p).norm(), 0.5)
+        << "marker " << k << " at " << p.transpose() << " drawn at " << centroid.transpose();
     // Tighter: the area centroid of the projected marker outline (the centre's projection differs from it
     // by a perspective bias of a few hundredths of a pixel).
     std::vector<Eigen::Vector2d> q;
     const double h = halves[k];
-    for (const auto& c : {Eigen::Vector2d(-h, -h), Eigen::Vector2d(h, -h), Eigen::Vector2d(h, h), Eigen::Vector2d(-h, h)})
+    for (const auto& c :
+         {Eigen::Vector2d(-h, -h), Eigen::Vector2d(h, -h), Eigen::Vector2d(h, h), Eigen::Vector2d(-h, h)})
       q.push_back(cam.Project(pose.Transform(centres[k] + Eigen::Vector3d(c.x(), c.y(), 0))));
     double area = 0;
     Eigen::Vector2d pc = Eigen::Vector2d::Zero();
@@ -121,9 +121,7 @@ void CheckMarkers(const core::Camera& cam) {
               worst_proj, worst_outline);
 }
 
-TEST(Renderer, MarkedPointsLandAtTheirProjection) {
-  CheckMarkers(core::Camera::Pinhole(640, 480, 520));
-}
+TEST(Renderer, MarkedPointsLandAtTheirProjection) { CheckMarkers(core::Camera::Pinhole(640, 480, 520)); }
 
 TEST(Renderer, MarkedPointsLandAtTheirProjectionWithDistortion) {
   core::Camera cam = core::Camera::Pinhole(640, 480, 520);
@@ -142,7 +140,8 @@ TEST(Renderer, DepthEqualsRayDistanceToPlaneAndBox) {
   // A 4 x 3 x 5 m box standing on the ground (outward-wound faces).
   const Eigen::Vector3d lo(-1, -0.5, 0), hi(3, 2.5, 5);
   const int b = static_cast<int>(mesh.vertices.size());
-  for (int k = 0; k < 8; ++k) mesh.vertices.push_back({k & 1 ? hi.x() : lo.x(), k & 2 ? hi.y() : lo.y(), k & 4 ? hi.z() : lo.z()});
+  for (int k = 0; k < 8; ++k)
+    mesh.vertices.push_back({k & 1 ? hi.x() : lo.x(), k & 2 ? hi.y() : lo.y(), k & 4 ? hi.z() : lo.z()});
   const int quads[6][4] = {{0, 2, 3, 1}, {4, 5, 7, 6}, {0, 1, 5, 4}, {2, 6, 7, 3}, {0, 4, 6, 2}, {1, 3, 7, 5}};
   for (const auto& q : quads) {
     io::Face f;

@@ -1,10 +1,11 @@
 // Bundle adjustment: perturbed poses, points and intrinsics converge back to the truth.
+#include "fmv3d/sfm/bundle_adjustment.h"
+
 #include <gtest/gtest.h>
 
 #include <random>
 
 #include "fmv3d/core/error.h"
-#include "fmv3d/sfm/bundle_adjustment.h"
 #include "fmv3d/sfm/evaluation.h"
 #include "fmv3d/sfm/synthetic_correspondences.h"
 

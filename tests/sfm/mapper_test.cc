@@ -27,12 +27,12 @@ Outcome RunAndEvaluate(const SyntheticScene& scene, const MapperOptions& options
   std::printf("%s\n", out.result.stats.dump().c_str());
   if (!rec.cameras.empty()) {
     const auto& c = rec.cameras.begin()->second;
-    std::printf("registered %zu/%zu, points %zu, track %.2f, reproj %.3f px, centre %.4f%%, rot %.4f deg, "
-                "focal %.4f%% (f %.2f k1 %.4f k2 %.4f pp %.1f %.1f)\n",
-                rec.images.size(), scene.input.images.size(), rec.points.size(), rec.MeanTrackLength(),
-                rec.MeanReprojectionError(), 100 * out.eval.centre_rmse_fraction,
-                out.eval.median_rotation_error_deg, 100 * out.eval.focal_relative_error, c.f, c.k1, c.k2, c.u0,
-                c.v0);
+    std::printf(
+        "registered %zu/%zu, points %zu, track %.2f, reproj %.3f px, centre %.4f%%, rot %.4f deg, "
+        "focal %.4f%% (f %.2f k1 %.4f k2 %.4f pp %.1f %.1f)\n",
+        rec.images.size(), scene.input.images.size(), rec.points.size(), rec.MeanTrackLength(),
+        rec.MeanReprojectionError(), 100 * out.eval.centre_rmse_fraction, out.eval.median_rotation_error_deg,
+        100 * out.eval.focal_relative_error, c.f, c.k1, c.k2, c.u0, c.v0);
   }
   return out;
 }
@@ -48,7 +48,7 @@ TEST(IncrementalMapper, OrbitSelfCalibratesFocalAndDistortion) {
   EXPECT_LE(out.eval.median_rotation_error_deg, 0.03);
   EXPECT_LE(out.eval.focal_relative_error, 0.001);
   EXPECT_NEAR(rec.cameras.begin()->second.k1, so.k1, 0.01);  // k2 (truth 0) is free and trades with k1
-  EXPECT_LE(rec.MeanReprojectionError(), 0.9);  // ≈ the 0.5 px noise (mean of |2D noise| is 0.63 px)
+  EXPECT_LE(rec.MeanReprojectionError(), 0.9);               // ≈ the 0.5 px noise (mean of |2D noise| is 0.63 px)
   EXPECT_TRUE(out.result.left_out.empty());
   rec.Validate();
 }
@@ -88,8 +88,8 @@ TEST(IncrementalMapper, TelephotoOrbitFindsTheLongFocal) {
   const auto& rec = out.result.models[0];
   EXPECT_GE(rec.images.size(), 0.9 * scene.input.images.size());
   EXPECT_LE(out.eval.median_rotation_error_deg, 0.1);
-  EXPECT_LE(out.eval.focal_relative_error, 0.3);  // the guess is 95% off; near-affine views bound f weakly
-  EXPECT_EQ(rec.cameras.begin()->second.k1, 0.0);   // narrow field: held at the prior
+  EXPECT_LE(out.eval.focal_relative_error, 0.3);   // the guess is 95% off; near-affine views bound f weakly
+  EXPECT_EQ(rec.cameras.begin()->second.k1, 0.0);  // narrow field: held at the prior
   EXPECT_LE(rec.MeanReprojectionError(), 0.6);
 }
 

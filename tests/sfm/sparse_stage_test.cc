@@ -1,5 +1,7 @@
 // The sparse stage on a workspace written from synthetic correspondences: files in, COLMAP model + PLY + report
 // out, with the reason for an image that cannot be registered.
+#include "fmv3d/sfm/sparse_stage.h"
+
 #include <gtest/gtest.h>
 
 #include <filesystem>
@@ -10,7 +12,6 @@
 #include "fmv3d/io/colmap_model.h"
 #include "fmv3d/io/frames_index.h"
 #include "fmv3d/sfm/evaluation.h"
-#include "fmv3d/sfm/sparse_stage.h"
 #include "fmv3d/sfm/synthetic_correspondences.h"
 #include "test_util.h"
 
@@ -41,7 +42,8 @@ void WriteWorkspace(const SyntheticScene& scene, const std::filesystem::path& ws
     fs.image_name = im.name;
     fs.width = prior.camera.width;
     fs.height = prior.camera.height;
-    for (const auto& k : im.keypoints) fs.keypoints.push_back({static_cast<float>(k.x()), static_cast<float>(k.y()), 2, 0});
+    for (const auto& k : im.keypoints)
+      fs.keypoints.push_back({static_cast<float>(k.x()), static_cast<float>(k.y()), 2, 0});
     fs.descriptors.setZero(static_cast<Eigen::Index>(fs.keypoints.size()), 128);
     fs.colors = im.colors;
     if (fs.colors.size() != fs.keypoints.size()) fs.colors.assign(fs.keypoints.size(), {0, 0, 0});

@@ -1,5 +1,7 @@
 // Which connected pieces of a Poisson surface are kept: every piece the dense points support (terrain and
 // each separate building), none fitted to a few outliers; the watertight option keeps the surface closed.
+#include "fmv3d/surface/mesh_cleanup.h"
+
 #include <gtest/gtest.h>
 
 #include <map>
@@ -7,7 +9,6 @@
 
 #include "fmv3d/core/error.h"
 #include "fmv3d/geometry/mesh_distance.h"
-#include "fmv3d/surface/mesh_cleanup.h"
 #include "fmv3d/surface/poisson.h"
 
 namespace fmv3d::surface {

@@ -1,5 +1,7 @@
 // Poisson reconstruction and its clean-up on analytic shapes, the mesh PLY round trip, and the errors on
 // unusable clouds.
+#include "fmv3d/surface/poisson.h"
+
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -8,7 +10,6 @@
 #include "fmv3d/core/error.h"
 #include "fmv3d/geometry/mesh_distance.h"
 #include "fmv3d/surface/colored_mesh.h"
-#include "fmv3d/surface/poisson.h"
 #include "test_util.h"
 
 namespace fmv3d::surface {
@@ -44,7 +45,8 @@ TEST(Poisson, SphereIsAccurateOutwardAndColoured) {
   // Faces wound outwards (normals agree with the input normals).
   int outward = 0;
   for (const auto& t : mesh.triangles) {
-    const Eigen::Vector3d n = (mesh.vertices[t[1]] - mesh.vertices[t[0]]).cross(mesh.vertices[t[2]] - mesh.vertices[t[0]]);
+    const Eigen::Vector3d n =
+        (mesh.vertices[t[1]] - mesh.vertices[t[0]]).cross(mesh.vertices[t[2]] - mesh.vertices[t[0]]);
     outward += n.dot(mesh.vertices[t[0]]) > 0;
   }
   EXPECT_EQ(outward, static_cast<int>(mesh.triangles.size()));
@@ -68,7 +70,8 @@ TEST(Poisson, InwardNormalsGiveInwardFaces) {
   ASSERT_FALSE(mesh.empty());
   int inward = 0;
   for (const auto& t : mesh.triangles) {
-    const Eigen::Vector3d n = (mesh.vertices[t[1]] - mesh.vertices[t[0]]).cross(mesh.vertices[t[2]] - mesh.vertices[t[0]]);
+    const Eigen::Vector3d n =
+        (mesh.vertices[t[1]] - mesh.vertices[t[0]]).cross(mesh.vertices[t[2]] - mesh.vertices[t[0]]);
     inward += n.dot(mesh.vertices[t[0]]) < 0;
   }
   EXPECT_GT(inward, 0.99 * mesh.triangles.size());

@@ -1,4 +1,6 @@
 // fmv3d synth: output layout and ground truth, determinism, video round trip, option errors, realism (SIFT).
+#include "fmv3d/synth/synth.h"
+
 #include <gtest/gtest.h>
 
 #include <cstdlib>
@@ -17,7 +19,6 @@
 #include "fmv3d/render/renderer.h"
 #include "fmv3d/synth/flight.h"
 #include "fmv3d/synth/scene.h"
-#include "fmv3d/synth/synth.h"
 #include "test_util.h"
 
 namespace fmv3d::synth {
@@ -240,8 +241,10 @@ TEST(Synth, CliValidatesOptions) {
                           "--distortion", "--sun-azimuth", "--exposure", "--seed", "--format", "--fps"})
     EXPECT_NE(help.out.find(opt), std::string::npos) << opt;
   // Odd sizes work for image formats.
-  const auto r = test::RunCli("-q synth --scene terrain --path grid --frames 2 --size 343x259 --detail 0.1 "
-                              "--no-scene" + out);
+  const auto r = test::RunCli(
+      "-q synth --scene terrain --path grid --frames 2 --size 343x259 --detail 0.1 "
+      "--no-scene" +
+      out);
   ASSERT_EQ(r.exit_code, 0) << r.err;
   const cv::Mat img = cv::imread((dir / "frames/flight-000001.png").string());
   EXPECT_EQ(img.cols, 343);

@@ -138,7 +138,8 @@ void WriteErrorView(const PlotInput& in, ViewDirection view, const std::filesyst
   const int max_w = 1000, max_h = 800, margin = 30, bar = 110;
   const Eigen::Vector2d size = box.sizes().cwiseMax(1e-9);
   const double px = std::min((max_w - 2 * margin) / size.x(), (max_h - 2 * margin) / size.y());
-  const int W = static_cast<int>(size.x() * px) + 2 * margin + bar, H = static_cast<int>(size.y() * px) + 2 * margin + 40;
+  const int W = static_cast<int>(size.x() * px) + 2 * margin + bar,
+            H = static_cast<int>(size.y() * px) + 2 * margin + 40;
   cv::Mat img(H, W, CV_8UC3, kWhite);
   auto page = [&](const Eigen::Vector3d& q) {
     return cv::Point(static_cast<int>(std::lround(margin + (q.x() - box.min().x()) * px)),
@@ -152,8 +153,7 @@ void WriteErrorView(const PlotInput& in, ViewDirection view, const std::filesyst
     order.push_back({depth, f});
   }
   std::sort(order.begin(), order.end());
-  const Eigen::Vector3d to_viewer =
-      view == ViewDirection::kTop ? Eigen::Vector3d(0, 0, 1) : Eigen::Vector3d(0, -1, 0);
+  const Eigen::Vector3d to_viewer = view == ViewDirection::kTop ? Eigen::Vector3d(0, 0, 1) : Eigen::Vector3d(0, -1, 0);
   for (const auto& [depth, f] : order) {
     cv::Point tri[3];
     for (int k = 0; k < 3; ++k) tri[k] = page(project(in.cad.vertices[in.cad.faces[f].v[k]]));
@@ -181,8 +181,9 @@ void WriteErrorView(const PlotInput& in, ViewDirection view, const std::filesyst
   Text(img, Num(vmax) + "%", {bx + 22, by0 + 5}, 0.42);
   Text(img, Num(vmax / 2) + "%", {bx + 22, (by0 + by1) / 2 + 5}, 0.42);
   Text(img, "0", {bx + 22, by1 + 5}, 0.42);
-  Text(img, view == ViewDirection::kTop ? "Top view (x right, y up): |distance to CAD|, % of H"
-                                        : "Side view from -y (x right, z up): |distance to CAD|, % of H",
+  Text(img,
+       view == ViewDirection::kTop ? "Top view (x right, y up): |distance to CAD|, % of H"
+                                   : "Side view from -y (x right, z up): |distance to CAD|, % of H",
        {margin, 28}, 0.55);
   WritePng(img, png);
 }
@@ -206,8 +207,8 @@ void WriteCompareHtml(const nlohmann::json& j, const std::filesystem::path& html
   for (const char* k : {"x", "y", "z", "total"}) {
     const auto& e = j.at("error").at(k);
     h << "<tr><th>" << (std::string(k) == "total" ? "signed distance" : std::string(k) + " component") << "</th>";
-    for (const char* f : {"mean_percent", "std_percent", "rms_percent", "p50_abs_percent", "p90_abs_percent",
-                          "p99_abs_percent"})
+    for (const char* f :
+         {"mean_percent", "std_percent", "rms_percent", "p50_abs_percent", "p90_abs_percent", "p99_abs_percent"})
       h << "<td>" << fmt::format("{:.3f}%", e.at(f).get<double>()) << "</td>";
     h << "</tr>\n";
   }

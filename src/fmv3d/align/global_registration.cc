@@ -1,13 +1,13 @@
 #include "fmv3d/align/global_registration.h"
 
+#include <open3d/geometry/PointCloud.h>
+#include <open3d/pipelines/registration/Feature.h>
 #include <spdlog/spdlog.h>
 
 #include <Eigen/Eigenvalues>
 #include <algorithm>
 #include <array>
 #include <cmath>
-#include <open3d/geometry/PointCloud.h>
-#include <open3d/pipelines/registration/Feature.h>
 #include <unordered_map>
 
 #include "fmv3d/core/error.h"
@@ -72,11 +72,11 @@ std::vector<Eigen::Matrix3d> CubeRotations() {
 }
 
 std::shared_ptr<open3d::pipelines::registration::Feature> Fpfh(const io::OrientedPointCloud& c, double voxel,
-                                                                open3d::geometry::PointCloud* pc) {
+                                                               open3d::geometry::PointCloud* pc) {
   pc->points_ = c.positions;
   pc->EstimateNormals(open3d::geometry::KDTreeSearchParamHybrid(2 * voxel, 30));
-  return open3d::pipelines::registration::ComputeFPFHFeature(
-      *pc, open3d::geometry::KDTreeSearchParamHybrid(5 * voxel, 100));
+  return open3d::pipelines::registration::ComputeFPFHFeature(*pc,
+                                                             open3d::geometry::KDTreeSearchParamHybrid(5 * voxel, 100));
 }
 
 // Mutual nearest neighbours in feature space (brute force: a few thousand 33-dimensional FPFH vectors).
@@ -111,7 +111,8 @@ void GlobalRegistrationOptions::Check() const {
   if (!(scale_hint >= 0)) throw Error("global registration: scale_hint must be >= 0");
   if (max_points < 50) throw Error("global registration: max_points must be >= 50");
   if (!use_pca && !use_fpfh) throw Error("global registration: enable PCA or FPFH candidates");
-  if (ransac_iterations < 1 || refine_iterations < 1 || refine_candidates < 1) throw Error("global registration: iterations must be >= 1");
+  if (ransac_iterations < 1 || refine_iterations < 1 || refine_candidates < 1)
+    throw Error("global registration: iterations must be >= 1");
 }
 
 io::OrientedPointCloud VoxelThin(const io::OrientedPointCloud& cloud, double voxel) {
@@ -132,7 +133,10 @@ double VoxelForCount(const io::OrientedPointCloud& cloud, int target_points) {
   double hi = std::max(box.diagonal().maxCoeff(), 1e-12), lo = hi * 1e-5;
   for (int it = 0; it < 30; ++it) {
     const double mid = std::sqrt(lo * hi);
-    if (VoxelPick(cloud.positions, mid).size() > static_cast<size_t>(target_points)) lo = mid; else hi = mid;
+    if (VoxelPick(cloud.positions, mid).size() > static_cast<size_t>(target_points))
+      lo = mid;
+    else
+      hi = mid;
   }
   return hi;
 }
@@ -147,8 +151,9 @@ GlobalRegistrationResult GlobalRegistration(const io::OrientedPointCloud& source
   const double target_voxel = VoxelForCount(target, options.max_points);
   const io::OrientedPointCloud tgt = VoxelThin(target, target_voxel);
   const double s0 = options.scale_hint > 0 ? options.scale_hint
-                    : options.estimate_scale ? RmsRadius(target.positions) / std::max(RmsRadius(source.positions), 1e-300)
-                                             : 1.0;
+                    : options.estimate_scale
+                        ? RmsRadius(target.positions) / std::max(RmsRadius(source.positions), 1e-300)
+                        : 1.0;
   // The source in target units (scaled about the origin), thinned to a comparable count.
   core::Sim3 scale0;
   scale0.s = s0;

@@ -23,24 +23,24 @@
 namespace fmv3d::align {
 
 struct GlobalRegistrationOptions {
-  bool estimate_scale = true;   // false: s = 1 (rigid)
-  double scale_hint = 0;        // > 0: use this source → target scale instead of the radius ratio
-  int max_points = 4000;        // per set, after voxel thinning
+  bool estimate_scale = true;  // false: s = 1 (rigid)
+  double scale_hint = 0;       // > 0: use this source → target scale instead of the radius ratio
+  int max_points = 4000;       // per set, after voxel thinning
   bool use_pca = true;
   bool use_fpfh = true;
   int ransac_iterations = 20000;
-  int refine_candidates = 6;    // best-scoring candidates refined by ICP
-  int refine_iterations = 20;   // rigid ICP iterations per candidate
+  int refine_candidates = 6;   // best-scoring candidates refined by ICP
+  int refine_iterations = 20;  // rigid ICP iterations per candidate
   uint64_t seed = 42;
   void Check() const;
 };
 
 struct GlobalRegistrationResult {
-  core::Sim3 transform;      // source → target
+  core::Sim3 transform;        // source → target
   double inlier_fraction = 0;  // share of thinned source points within 2 voxels of the target
-  double voxel = 0;          // thinning voxel, target units
-  std::string method;        // "pca" or "fpfh" (which candidate won)
-  int candidates = 0;        // refined by ICP
+  double voxel = 0;            // thinning voxel, target units
+  std::string method;          // "pca" or "fpfh" (which candidate won)
+  int candidates = 0;          // refined by ICP
 };
 
 // Throws fmv3d::Error when either set has fewer than 10 points or no candidate overlaps at all.

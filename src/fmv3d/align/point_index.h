@@ -27,8 +27,8 @@ class PointIndex {
 
  private:
   struct Node {
-    int begin = 0, end = 0;      // range of order_ (leaves) ...
-    int left = -1, right = -1;   // ... or children (inner nodes)
+    int begin = 0, end = 0;     // range of order_ (leaves) ...
+    int left = -1, right = -1;  // ... or children (inner nodes)
     int axis = 0;
     double split = 0;
   };

@@ -9,11 +9,10 @@
 #pragma once
 
 #include <filesystem>
+#include <nlohmann/json.hpp>
 #include <optional>
 #include <string>
 #include <vector>
-
-#include <nlohmann/json.hpp>
 
 #include "fmv3d/core/camera.h"
 
@@ -24,12 +23,12 @@ struct SensorEntry {
   std::string make;                 // EXIF Make (case-insensitive prefix match)
   std::vector<std::string> models;  // EXIF Model strings (case-insensitive exact match)
   double sensor_width_mm = 0, sensor_height_mm = 0;
-  double focal_mm = 0;              // fixed lens; 0 for zoom/interchangeable lenses
-  double focal_35mm = 0;            // 35 mm-equivalent focal (diagonal based)
-  int width = 0, height = 0;        // native resolution
+  double focal_mm = 0;                      // fixed lens; 0 for zoom/interchangeable lenses
+  double focal_35mm = 0;                    // 35 mm-equivalent focal (diagonal based)
+  int width = 0, height = 0;                // native resolution
   std::optional<core::Camera> calibration;  // full intrinsics at calibration.width × height (user entries)
   std::string note;
-  std::string origin;               // the file it was read from
+  std::string origin;  // the file it was read from
 };
 
 class SensorDatabase {

@@ -65,8 +65,6 @@ Eigen::Vector3d OmegaPhiKappaFromRotation(const Eigen::Matrix3d& R) {
   return Eigen::Vector3d(std::atan2(R(2, 1), R(2, 2)), phi, std::atan2(R(1, 0), R(0, 0)));
 }
 
-double RotationAngle(const Eigen::Quaterniond& a, const Eigen::Quaterniond& b) {
-  return a.angularDistance(b);
-}
+double RotationAngle(const Eigen::Quaterniond& a, const Eigen::Quaterniond& b) { return a.angularDistance(b); }
 
 }  // namespace fmv3d::core

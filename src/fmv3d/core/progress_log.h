@@ -9,9 +9,8 @@
 
 #include <cstddef>
 #include <filesystem>
-#include <string>
-
 #include <nlohmann/json.hpp>
+#include <string>
 
 namespace fmv3d::core {
 

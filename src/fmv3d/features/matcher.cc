@@ -3,9 +3,9 @@
 #include <immintrin.h>
 
 #include <algorithm>
-#include <cstring>
-#include <cstdlib>
 #include <climits>
+#include <cstdlib>
+#include <cstring>
 #include <limits>
 #include <opencv2/core.hpp>
 #include <opencv2/flann.hpp>
@@ -134,8 +134,8 @@ struct BruteForceAccess {
   };
 
   // Rows i0..i0+3 of A against block b (descriptors 16b..16b+15) of B.
-  static void BlockScalar(const int16_t* a_rows, const int16_t* block, const int32_t* na, const int32_t* nb,
-                          int i0, int j0, Best2Arrays* rows, Best2Arrays* cols) {
+  static void BlockScalar(const int16_t* a_rows, const int16_t* block, const int32_t* na, const int32_t* nb, int i0,
+                          int j0, Best2Arrays* rows, Best2Arrays* cols) {
     for (int r = 0; r < 4; ++r)
       for (int m = 0; m < 16; ++m) {
         int32_t dot = 0;
@@ -148,9 +148,9 @@ struct BruteForceAccess {
       }
   }
 
-  __attribute__((target("avx2"))) static void BlockAvx2(const int16_t* a_rows, const int16_t* block,
-                                                         const int32_t* na, const int32_t* nb, int i0, int j0,
-                                                         Best2Arrays* rows, Best2Arrays* cols) {
+  __attribute__((target("avx2"))) static void BlockAvx2(const int16_t* a_rows, const int16_t* block, const int32_t* na,
+                                                        const int32_t* nb, int i0, int j0, Best2Arrays* rows,
+                                                        Best2Arrays* cols) {
     __m256i acc[4][2];
     for (auto& r : acc) r[0] = r[1] = _mm256_setzero_si256();
     for (int pair = 0; pair < 64; ++pair) {
@@ -194,9 +194,11 @@ struct BruteForceAccess {
   // and adds them into a 32-bit lane, so one instruction does 64 multiply-adds (the AVX2 kernel: 16, plus an
   // add). B is stored minus 128 to fit int8: a·b = a·(b − 128) + 128·Σa, exact in int32, so the distances and
   // hence the matches are identical to the other kernels'.
-  __attribute__((target("avx512f,avx512bw,avx512vnni"))) static void BlockVnni(
-      const uint8_t* a_rows, const int8_t* block, const int32_t* na, const int32_t* sa, const int32_t* nb, int i0,
-      int j0, Best2Arrays* rows, Best2Arrays* cols) {
+  __attribute__((target("avx512f,avx512bw,avx512vnni"))) static void BlockVnni(const uint8_t* a_rows,
+                                                                               const int8_t* block, const int32_t* na,
+                                                                               const int32_t* sa, const int32_t* nb,
+                                                                               int i0, int j0, Best2Arrays* rows,
+                                                                               Best2Arrays* cols) {
     // Two accumulators per row (even and odd groups): eight independent chains hide vpdpbusd's latency.
     __m512i acc[4][2];
     for (auto& r : acc) r[0] = r[1] = _mm512_setzero_si512();
@@ -214,8 +216,7 @@ struct BruteForceAccess {
     const __m512i nbv = _mm512_loadu_si512(nb);
     alignas(64) int32_t d[16];
     for (int r = 0; r < 4; ++r) {
-      const __m512i dot =
-          _mm512_add_epi32(_mm512_add_epi32(acc[r][0], acc[r][1]), _mm512_set1_epi32(128 * sa[r]));
+      const __m512i dot = _mm512_add_epi32(_mm512_add_epi32(acc[r][0], acc[r][1]), _mm512_set1_epi32(128 * sa[r]));
       const __m512i dv = _mm512_sub_epi32(_mm512_add_epi32(_mm512_set1_epi32(na[r]), nbv), _mm512_slli_epi32(dot, 1));
       // Lanes that beat the column's current second best, or this row's.
       const __m512i c = _mm512_loadu_si512(cols->d2.data() + j0);
@@ -260,8 +261,8 @@ struct BruteForceAccess {
       for (int i0 = 0; i0 < n1; i0 += 4) {
         const int16_t* a_rows = A.rows16_.data() + size_t(i0) * 128;
         for (int b = 0; b < num_blocks; ++b)
-          block_fn(a_rows, B.blocks16_.data() + size_t(b) * 64 * 32, A.norms_.data() + i0,
-                   B.norms_.data() + b * 16, i0, b * 16, &rows, &cols);
+          block_fn(a_rows, B.blocks16_.data() + size_t(b) * 64 * 32, A.norms_.data() + i0, B.norms_.data() + b * 16, i0,
+                   b * 16, &rows, &cols);
       }
     }
     std::vector<FeatureMatch> out;

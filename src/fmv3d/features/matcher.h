@@ -19,8 +19,8 @@ namespace fmv3d::features {
 enum class MatcherType { kAuto, kFlann, kBruteForce };
 
 struct MatchOptions {
-  double ratio = 0.8;   // Lowe: nearest / second-nearest distance must be below this
-  bool mutual = true;   // keep i↔j only if j's best match in image 1 is i (ratio test both ways)
+  double ratio = 0.8;  // Lowe: nearest / second-nearest distance must be below this
+  bool mutual = true;  // keep i↔j only if j's best match in image 1 is i (ratio test both ways)
   MatcherType type = MatcherType::kAuto;
   int flann_trees = 4;
   int flann_checks = 128;  // leaves visited per query: accuracy / speed trade-off
@@ -55,13 +55,13 @@ class ImageDescriptors {
   std::once_flag once_float_, once_index_, once_int16_, once_int8_;
   cv::Mat data_;
   std::unique_ptr<cv::flann::Index> index_;
-  std::vector<int16_t> rows16_;     // n_padded4 x 128, row-major (zero padding rows)
-  std::vector<int16_t> blocks16_;   // per 16 descriptors: 64 dim pairs x 16 descriptors x 2 dims
-  std::vector<int32_t> norms_;      // |d|^2 per descriptor (padding: a huge norm, never a neighbour)
+  std::vector<int16_t> rows16_;    // n_padded4 x 128, row-major (zero padding rows)
+  std::vector<int16_t> blocks16_;  // per 16 descriptors: 64 dim pairs x 16 descriptors x 2 dims
+  std::vector<int32_t> norms_;     // |d|^2 per descriptor (padding: a huge norm, never a neighbour)
   // For the AVX-512 VNNI kernel (u8 x s8 dot products, 4 dimensions per 32-bit lane):
-  std::vector<uint8_t> rows8_;      // n_padded4 x 128, row-major (zero padding rows)
-  std::vector<int8_t> blocks8_;     // per 16 descriptors: 32 groups of 4 dims x 16 descriptors x 4, value − 128
-  std::vector<int32_t> sums_;       // sum of the u8 values per descriptor (restores the −128 offset)
+  std::vector<uint8_t> rows8_;   // n_padded4 x 128, row-major (zero padding rows)
+  std::vector<int8_t> blocks8_;  // per 16 descriptors: 32 groups of 4 dims x 16 descriptors x 4, value − 128
+  std::vector<int32_t> sums_;    // sum of the u8 values per descriptor (restores the −128 offset)
 };
 
 // Which brute-force distance kernel this CPU runs ("avx512-vnni", "avx2" or "scalar"); all give identical

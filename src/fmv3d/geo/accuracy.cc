@@ -43,8 +43,9 @@ nlohmann::json GeorefAccuracy::ToJson() const {
                       {"scale_sigma_relative", scale_sigma_rel},
                       {"rotation_known", rotation_known},
                       {"from", from},
-                      {"note", "1σ, from the telemetry's own scatter and effective sample counts; the model's own "
-                               "shape error is not included"}};
+                      {"note",
+                       "1σ, from the telemetry's own scatter and effective sample counts; the model's own "
+                       "shape error is not included"}};
   if (rotation_known) {
     j["rotation_cov_deg2"] = Rows(rotation_cov, kDeg2);
     j["tilt_deg"] = std::sqrt(std::max(0.0, (rotation_cov(0, 0) + rotation_cov(1, 1)) * kDeg2));

@@ -14,12 +14,12 @@
 namespace fmv3d::geo {
 
 struct GeorefAccuracy {
-  Eigen::Vector3d pivot = Eigen::Vector3d::Zero();              // ENU point the covariances refer to
-  Eigen::Matrix3d position_cov = Eigen::Matrix3d::Zero();       // m², of the georeferenced model at the pivot
-  Eigen::Matrix3d rotation_cov = Eigen::Matrix3d::Zero();       // rad², a small ENU rotation about the pivot
-  double scale_sigma_rel = 0;                                   // σ of the scale, relative
-  bool rotation_known = true;  // false: a rotation the measurements leave free (roll about a straight track)
-  std::vector<std::string> from;                                // the measurements weighed
+  Eigen::Vector3d pivot = Eigen::Vector3d::Zero();         // ENU point the covariances refer to
+  Eigen::Matrix3d position_cov = Eigen::Matrix3d::Zero();  // m², of the georeferenced model at the pivot
+  Eigen::Matrix3d rotation_cov = Eigen::Matrix3d::Zero();  // rad², a small ENU rotation about the pivot
+  double scale_sigma_rel = 0;                              // σ of the scale, relative
+  bool rotation_known = true;     // false: a rotation the measurements leave free (roll about a straight track)
+  std::vector<std::string> from;  // the measurements weighed
 
   // 1σ height error of the georeferenced point at ENU offset d from the pivot (translation, tilt, scale).
   // Requires rotation_known.

@@ -1,12 +1,12 @@
 #include "fmv3d/geo/dsm.h"
 
 #include <fmt/format.h>
+#include <open3d/geometry/TriangleMesh.h>
+#include <open3d/io/TriangleMeshIO.h>
 #include <spdlog/spdlog.h>
 
 #include <algorithm>
 #include <cmath>
-#include <open3d/io/TriangleMeshIO.h>
-#include <open3d/geometry/TriangleMesh.h>
 #include <opencv2/imgcodecs.hpp>
 #include <unordered_set>
 

@@ -20,7 +20,7 @@ struct GeoPoint {
 };
 
 struct UtmZone {
-  int zone = 0;        // 1..60
+  int zone = 0;  // 1..60
   bool north = true;
   int Epsg() const { return (north ? 32600 : 32700) + zone; }
   std::string Name() const;  // "WGS 84 / UTM zone 18N"

@@ -68,9 +68,9 @@ void WriteLas(const fs::path& path, const std::vector<Eigen::Vector3d>& pts, con
 
   Buf h;
   h.PutString("LASF", 4);
-  h.Put<uint16_t>(0);       // file source id
+  h.Put<uint16_t>(0);        // file source id
   h.Put<uint16_t>(1u << 4);  // global encoding: CRS is WKT
-  h.PutString("", 16);      // project GUID
+  h.PutString("", 16);       // project GUID
   h.Put<uint8_t>(1);
   h.Put<uint8_t>(4);
   h.PutString("fmv3d", 32);
@@ -82,7 +82,7 @@ void WriteLas(const fs::path& path, const std::vector<Eigen::Vector3d>& pts, con
   h.Put<uint16_t>(static_cast<uint16_t>(tm.tm_year + 1900));
   h.Put<uint16_t>(kHeaderSize);
   h.Put<uint32_t>(static_cast<uint32_t>(kHeaderSize + kVlrHeaderSize + wkt_z.size()));  // offset to points
-  h.Put<uint32_t>(1);  // one VLR
+  h.Put<uint32_t>(1);                                                                   // one VLR
   h.Put<uint8_t>(kFormat);
   h.Put<uint16_t>(kRecordLength);
   h.Put<uint32_t>(0);  // legacy point count: 0 for formats 6-10
@@ -119,14 +119,14 @@ void WriteLas(const fs::path& path, const std::vector<Eigen::Vector3d>& pts, con
       rec.Put<int32_t>(static_cast<int32_t>(q.x()));
       rec.Put<int32_t>(static_cast<int32_t>(q.y()));
       rec.Put<int32_t>(static_cast<int32_t>(q.z()));
-      rec.Put<uint16_t>(0);     // intensity
-      rec.Put<uint8_t>(0x11);   // return 1 of 1
-      rec.Put<uint8_t>(0);      // flags, channel, scan direction, edge
-      rec.Put<uint8_t>(1);      // classification: unclassified
-      rec.Put<uint8_t>(0);      // user data
-      rec.Put<int16_t>(0);      // scan angle
-      rec.Put<uint16_t>(0);     // point source
-      rec.Put<double>(0);       // GPS time
+      rec.Put<uint16_t>(0);    // intensity
+      rec.Put<uint8_t>(0x11);  // return 1 of 1
+      rec.Put<uint8_t>(0);     // flags, channel, scan direction, edge
+      rec.Put<uint8_t>(1);     // classification: unclassified
+      rec.Put<uint8_t>(0);     // user data
+      rec.Put<int16_t>(0);     // scan angle
+      rec.Put<uint16_t>(0);    // point source
+      rec.Put<double>(0);      // GPS time
       const io::Rgb8 c = colors.empty() ? io::Rgb8(255, 255, 255) : colors[i];
       for (int k = 0; k < 3; ++k) rec.Put<uint16_t>(static_cast<uint16_t>(c[k] * 257));  // 16-bit colour
       if (rec.size() >= (1 << 20) || i + 1 == pts.size()) {
@@ -162,18 +162,21 @@ LasInfo ReadLas(const fs::path& path, bool read_points) {
   size_t at = header_size;
   for (uint32_t v = 0; v < nvlr; ++v) {
     if (at + kVlrHeaderSize > b.size()) throw Error(path.string() + ": truncated VLR");
-    const std::string user(reinterpret_cast<const char*>(&b[at + 2]), strnlen(reinterpret_cast<const char*>(&b[at + 2]), 16));
+    const std::string user(reinterpret_cast<const char*>(&b[at + 2]),
+                           strnlen(reinterpret_cast<const char*>(&b[at + 2]), 16));
     const uint16_t id = Get<uint16_t>(b, at + 18), len = Get<uint16_t>(b, at + 20);
     if (at + kVlrHeaderSize + len > b.size()) throw Error(path.string() + ": truncated VLR");
     if (user == "LASF_Projection" && id == 2112)
-      info.wkt.assign(reinterpret_cast<const char*>(&b[at + kVlrHeaderSize]), strnlen(reinterpret_cast<const char*>(&b[at + kVlrHeaderSize]), len));
+      info.wkt.assign(reinterpret_cast<const char*>(&b[at + kVlrHeaderSize]),
+                      strnlen(reinterpret_cast<const char*>(&b[at + kVlrHeaderSize]), len));
     at += kVlrHeaderSize + len;
   }
   if (info.num_points > b.size() || offset_points > b.size() ||
       offset_points + info.num_points * info.point_record_length > b.size())
     throw Error(path.string() + ": truncated point data");
   if (read_points) {
-    if (info.point_format < 6 || info.point_record_length < 30) throw Error(path.string() + ": unsupported point format");
+    if (info.point_format < 6 || info.point_record_length < 30)
+      throw Error(path.string() + ": unsupported point format");
     for (uint64_t i = 0; i < info.num_points; ++i) {
       const size_t p = offset_points + i * info.point_record_length;
       Eigen::Vector3d x;

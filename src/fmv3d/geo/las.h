@@ -23,7 +23,7 @@ struct LasInfo {
   int point_format = 0, point_record_length = 0;
   uint64_t num_points = 0;
   Eigen::Vector3d scale, offset, min, max;
-  std::string wkt;  // from the LASF_Projection 2112 record, empty if none
+  std::string wkt;                      // from the LASF_Projection 2112 record, empty if none
   std::vector<Eigen::Vector3d> points;  // decoded coordinates (when read_points)
 };
 // Reads a LAS 1.4 header (and optionally the points of formats 6-10); throws fmv3d::Error when the file is

@@ -21,9 +21,7 @@ struct GridSpec {
   int width = 0, height = 0;
   UtmZone zone;
   // Cell-centre coordinates and the (fractional) column/row of a point.
-  Eigen::Vector2d CellCentre(int row, int col) const {
-    return {min_e + (col + 0.5) * gsd, max_n - (row + 0.5) * gsd};
-  }
+  Eigen::Vector2d CellCentre(int row, int col) const { return {min_e + (col + 0.5) * gsd, max_n - (row + 0.5) * gsd}; }
   double Col(double e) const { return (e - min_e) / gsd; }
   double Row(double n) const { return (max_n - n) / gsd; }
   // A grid covering the box with a margin of one cell, snapped to multiples of gsd.

@@ -17,8 +17,8 @@
 namespace fmv3d::geo {
 
 struct TrajectoryKnot {
-  double time = 0;          // seconds
-  Eigen::Vector3d centre;   // camera centre
+  double time = 0;                                               // seconds
+  Eigen::Vector3d centre;                                        // camera centre
   Eigen::Quaterniond rotation = Eigen::Quaterniond::Identity();  // world-to-camera
 };
 

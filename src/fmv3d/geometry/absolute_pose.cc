@@ -73,8 +73,8 @@ bool RefineAbsolutePose(const std::vector<Eigen::Vector2d>& points2d, const std:
 }
 
 AbsolutePoseResult EstimateAbsolutePose(const std::vector<Eigen::Vector2d>& points2d,
-                                        const std::vector<Eigen::Vector3d>& points3d,
-                                        const core::Camera& camera, const AbsolutePoseOptions& options) {
+                                        const std::vector<Eigen::Vector3d>& points3d, const core::Camera& camera,
+                                        const AbsolutePoseOptions& options) {
   options.Check();
   AbsolutePoseResult result;
   result.camera = camera;
@@ -96,8 +96,7 @@ AbsolutePoseResult EstimateAbsolutePose(const std::vector<Eigen::Vector2d>& poin
   bool ok = false;
   try {
     ok = cv::solvePnPRansac(obj, img, K, cv::noArray(), rvec, tvec, false, options.max_iterations,
-                            static_cast<float>(options.max_error_px), options.confidence, inliers,
-                            cv::SOLVEPNP_AP3P);
+                            static_cast<float>(options.max_error_px), options.confidence, inliers, cv::SOLVEPNP_AP3P);
   } catch (const cv::Exception&) {
     ok = false;  // degenerate input (e.g. all points identical): a failed registration, not a crash
   }
@@ -125,9 +124,7 @@ AbsolutePoseResult EstimateAbsolutePose(const std::vector<Eigen::Vector2d>& poin
       core::Pose p2 = pose;
       core::Camera c2 = cam;
       const bool free_intr = a.size() >= 30;  // too few points cannot carry a focal estimate
-      if (!RefineAbsolutePose(a, b, &c2, &p2, options.refine_focal && free_intr,
-                              options.refine_k1 && free_intr))
-        break;
+      if (!RefineAbsolutePose(a, b, &c2, &p2, options.refine_focal && free_intr, options.refine_k1 && free_intr)) break;
       if (!(c2.f > 0)) break;
       pose = p2;
       cam = c2;

@@ -24,8 +24,8 @@ double BoxDistanceSq(const Eigen::AlignedBox3d& box, const Eigen::Vector3d& p) {
 }
 }  // namespace
 
-Eigen::Vector3d ClosestPointOnTriangle(const Eigen::Vector3d& p, const Eigen::Vector3d& a,
-                                       const Eigen::Vector3d& b, const Eigen::Vector3d& c) {
+Eigen::Vector3d ClosestPointOnTriangle(const Eigen::Vector3d& p, const Eigen::Vector3d& a, const Eigen::Vector3d& b,
+                                       const Eigen::Vector3d& c) {
   // Voronoi-region walk: vertex regions, then edge regions, else the interior.
   const Eigen::Vector3d ab = b - a, ac = c - a, ap = p - a;
   const double d1 = ab.dot(ap), d2 = ac.dot(ap);
@@ -41,8 +41,7 @@ Eigen::Vector3d ClosestPointOnTriangle(const Eigen::Vector3d& p, const Eigen::Ve
   const double vb = d5 * d2 - d1 * d6;
   if (vb <= 0 && d2 >= 0 && d6 <= 0) return a + (d2 / (d2 - d6)) * ac;
   const double va = d3 * d6 - d5 * d4;
-  if (va <= 0 && (d4 - d3) >= 0 && (d5 - d6) >= 0)
-    return b + ((d4 - d3) / ((d4 - d3) + (d5 - d6))) * (c - b);
+  if (va <= 0 && (d4 - d3) >= 0 && (d5 - d6) >= 0) return b + ((d4 - d3) / ((d4 - d3) + (d5 - d6))) * (c - b);
   const double denom = va + vb + vc;
   if (!(std::abs(denom) > 0)) return a;  // degenerate triangle
   const double v = vb / denom, w = vc / denom;
@@ -84,7 +83,9 @@ void MeshDistance::Build() {
   }
   nodes_.reserve(2 * triangles_.size() / kLeafSize + 2);
   // Iterative build: split the longest axis of the centroid box at the median.
-  struct Task { int node, begin, end; };
+  struct Task {
+    int node, begin, end;
+  };
   std::vector<Task> stack;
   nodes_.push_back({});
   stack.push_back({0, 0, static_cast<int>(order_.size())});
@@ -174,8 +175,7 @@ Eigen::Vector3d MeshDistance::Normal(int face) const {
   return len > 0 ? Eigen::Vector3d(n / len) : Eigen::Vector3d::Zero();
 }
 
-std::vector<Eigen::Vector3d> MeshDistance::SampleSurface(double spacing, std::vector<int>* faces,
-                                                         uint64_t seed) const {
+std::vector<Eigen::Vector3d> MeshDistance::SampleSurface(double spacing, std::vector<int>* faces, uint64_t seed) const {
   if (!(spacing > 0)) throw Error("mesh distance: sample spacing must be positive");
   std::mt19937_64 rng(seed);
   std::uniform_real_distribution<double> uni(0.0, 1.0);

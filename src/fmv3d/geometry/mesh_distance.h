@@ -12,9 +12,9 @@
 namespace fmv3d::geometry {
 
 struct ClosestPoint {
-  double distance = 0;        // Euclidean distance to the closest point on the mesh
-  Eigen::Vector3d point;      // that closest point
-  int face = -1;              // its triangle index
+  double distance = 0;    // Euclidean distance to the closest point on the mesh
+  Eigen::Vector3d point;  // that closest point
+  int face = -1;          // its triangle index
   // Signed distance: + on the side the face normal points to ((b − a) × (c − a), outwards for a closed,
   // counter-clockwise mesh), − behind it.
   double signed_distance = 0;
@@ -52,7 +52,7 @@ class MeshDistance {
 };
 
 // Closest point on triangle (a, b, c) to p (Ericson, Real-Time Collision Detection, 5.1.5).
-Eigen::Vector3d ClosestPointOnTriangle(const Eigen::Vector3d& p, const Eigen::Vector3d& a,
-                                       const Eigen::Vector3d& b, const Eigen::Vector3d& c);
+Eigen::Vector3d ClosestPointOnTriangle(const Eigen::Vector3d& p, const Eigen::Vector3d& a, const Eigen::Vector3d& b,
+                                       const Eigen::Vector3d& c);
 
 }  // namespace fmv3d::geometry

@@ -23,8 +23,7 @@ void RefinePoint(const std::vector<core::Pose>& poses, const std::vector<Eigen::
                  Eigen::Vector3d* point, int iterations = 5);
 
 // Angle (radians) between the rays from two camera centres to a point.
-double TriangulationAngle(const Eigen::Vector3d& centre1, const Eigen::Vector3d& centre2,
-                          const Eigen::Vector3d& point);
+double TriangulationAngle(const Eigen::Vector3d& centre1, const Eigen::Vector3d& centre2, const Eigen::Vector3d& point);
 
 // Largest pairwise ray angle (radians) over the given centres (O(N²), N is a track length).
 double MaxTriangulationAngle(const std::vector<Eigen::Vector3d>& centres, const Eigen::Vector3d& point);

@@ -25,21 +25,20 @@ double SampsonErrorSq(const Eigen::Matrix3d& M, const Eigen::Vector2d& x1, const
 // Returns false for fewer than 8 points or a degenerate configuration. F is scaled to unit Frobenius norm.
 bool EightPointFundamental(const Points2& x1, const Points2& x2, Eigen::Matrix3d* F);
 
-// Non-linear least squares (our Levenberg–Marquardt, analytic Jacobian) of the sum of squared Sampson errors over the given
-// correspondences, on the rank-2 manifold F = U diag(1, s, 0) V^T (U, V rotations; Hartley-normalised inside
-// for conditioning). Returns false when the problem is too small or the solver fails; F is then unchanged.
+// Non-linear least squares (our Levenberg–Marquardt, analytic Jacobian) of the sum of squared Sampson errors over the
+// given correspondences, on the rank-2 manifold F = U diag(1, s, 0) V^T (U, V rotations; Hartley-normalised inside for
+// conditioning). Returns false when the problem is too small or the solver fails; F is then unchanged.
 bool RefineFundamental(const Points2& x1, const Points2& x2, Eigen::Matrix3d* F);
 
 // Non-linear refinement of a relative pose (R, t with |t| = 1) minimising squared Sampson errors of
 // E = [t]x R on normalised correspondences, each weighted by `focal` so the cost is in pixels².
-bool RefineRelativePose(const Points2& n1, const Points2& n2, double focal, Eigen::Matrix3d* R,
-                        Eigen::Vector3d* t);
+bool RefineRelativePose(const Points2& n1, const Points2& n2, double focal, Eigen::Matrix3d* R, Eigen::Vector3d* t);
 
 struct TwoViewOptions {
-  double max_error_px = 0;            // RANSAC inlier threshold (pixels); 0 = auto: max(1.5, max(w, h) / 2000)
+  double max_error_px = 0;  // RANSAC inlier threshold (pixels); 0 = auto: max(1.5, max(w, h) / 2000)
   double confidence = 0.9999;
   int max_iterations = 10000;
-  int min_inliers = 15;               // a pair with fewer F (or H) inliers is rejected
+  int min_inliers = 15;                // a pair with fewer F (or H) inliers is rejected
   double min_E_F_inlier_ratio = 0.95;  // E explains ≥ this share of the F inliers → calibrated
   double max_H_inlier_ratio = 0.8;     // H explains > this share of the F inliers → planar or pure rotation
   bool refine = true;                  // non-linear refinement of F and of the relative pose

@@ -22,10 +22,10 @@
 #include <vector>
 
 #include "fmv3d/core/camera.h"
+#include "fmv3d/ingest/keyframes.h"
 #include "fmv3d/io/exif.h"
 #include "fmv3d/io/frames_index.h"
 #include "fmv3d/io/image_io.h"
-#include "fmv3d/ingest/keyframes.h"
 #include "fmv3d/telemetry/photo_telemetry.h"
 
 namespace fmv3d::ingest {

@@ -78,9 +78,8 @@ void WriteColmapText(const core::Reconstruction& rec, const std::filesystem::pat
        << "#   CAMERA_ID, MODEL, WIDTH, HEIGHT, PARAMS[]\n"
        << "# Number of cameras: " << rec.cameras.size() << "\n";
   for (const auto& [id, c] : rec.cameras)
-    cams << id << " OPENCV " << c.width << " " << c.height << " " << G(c.fx()) << " " << G(c.fy()) << " "
-         << G(c.u0) << " " << G(c.v0) << " " << G(c.k1) << " " << G(c.k2) << " " << G(c.p1) << " " << G(c.p2)
-         << "\n";
+    cams << id << " OPENCV " << c.width << " " << c.height << " " << G(c.fx()) << " " << G(c.fy()) << " " << G(c.u0)
+         << " " << G(c.v0) << " " << G(c.k1) << " " << G(c.k2) << " " << G(c.p1) << " " << G(c.p2) << "\n";
 
   size_t n_obs = 0;
   for (const auto& [id, im] : rec.images)

@@ -31,8 +31,7 @@ Eigen::AlignedBox3d TexturedMesh::Bounds() const {
 
 Eigen::Vector3d TexturedMesh::FaceNormal(size_t i) const {
   const Face& f = faces[i];
-  const Eigen::Vector3d n =
-      (vertices[f.v[1]] - vertices[f.v[0]]).cross(vertices[f.v[2]] - vertices[f.v[0]]);
+  const Eigen::Vector3d n = (vertices[f.v[1]] - vertices[f.v[0]]).cross(vertices[f.v[2]] - vertices[f.v[0]]);
   const double len = n.norm();
   return len > 0 ? Eigen::Vector3d(n / len) : Eigen::Vector3d::Zero();
 }

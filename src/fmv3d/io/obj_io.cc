@@ -176,7 +176,8 @@ void WriteObj(const TexturedMesh& mesh, const fs::path& path, int png_compressio
   fmt::memory_buffer out;
   fmt::format_to(std::back_inserter(out), "# fmv3d mesh: {} vertices, {} faces, metres\nmtllib {}.mtl\n",
                  mesh.vertices.size(), mesh.faces.size(), stem);
-  for (const auto& v : mesh.vertices) fmt::format_to(std::back_inserter(out), "v {:.17g} {:.17g} {:.17g}\n", v.x(), v.y(), v.z());
+  for (const auto& v : mesh.vertices)
+    fmt::format_to(std::back_inserter(out), "v {:.17g} {:.17g} {:.17g}\n", v.x(), v.y(), v.z());
   for (const auto& t : mesh.uvs) fmt::format_to(std::back_inserter(out), "vt {:.9g} {:.9g}\n", t.x(), t.y());
   for (const auto& n : mesh.normals)
     fmt::format_to(std::back_inserter(out), "vn {:.9g} {:.9g} {:.9g}\n", n.x(), n.y(), n.z());

@@ -23,16 +23,16 @@
 namespace fmv3d::mvs {
 
 struct DenseStageOptions {
-  int max_size = 960;          // working resolution: longer image side, pixels (0 = full frames)
-  int max_sources = 5;         // stereo source views per reference
-  bool geometric = true;       // run the geometric-consistency pass
-  bool previews = true;        // write the PNG previews of every map
+  int max_size = 960;             // working resolution: longer image side, pixels (0 = full frames)
+  int max_sources = 5;            // stereo source views per reference
+  bool geometric = true;          // run the geometric-consistency pass
+  bool previews = true;           // write the PNG previews of every map
   bool keep_photometric = false;  // keep the photometric-pass maps (<name>.photometric.dmap)
-  int cache_views = 16;        // undistorted views kept in memory
+  int cache_views = 16;           // undistorted views kept in memory
   // Depth maps only for a subset of views that sees every sparse point reference_coverage times
   // (SelectReferenceViews); the others are stereo sources only.
   ReferenceCoverOptions references;  // .coverage 0 = a map for every view
-  bool fuse_only = false;      // reuse the final maps already in WS/dense/maps (e.g. to re-fuse with other options)
+  bool fuse_only = false;  // reuse the final maps already in WS/dense/maps (e.g. to re-fuse with other options)
   ViewSelectionOptions selection;
   PatchMatchOptions patch_match;
   FusionOptions fusion;

@@ -25,8 +25,8 @@ struct DepthMap {
 void WriteDepthMap(const DepthMap& map, const std::filesystem::path& path);
 // Throws fmv3d::Error naming the file when it is not a depth map of this version or is truncated.
 DepthMap ReadDepthMap(const std::filesystem::path& path);
-// False-colour previews: depth (turbo colour map from near = blue to far = red, 2nd to 98th percentile; black = none) and normals
-// (RGB = 0.5·(n + 1); black = none).
+// False-colour previews: depth (turbo colour map from near = blue to far = red, 2nd to 98th percentile; black = none)
+// and normals (RGB = 0.5·(n + 1); black = none).
 void WriteDepthPreview(const DepthMap& map, const std::filesystem::path& depth_png,
                        const std::filesystem::path& normal_png);
 

@@ -63,7 +63,7 @@ View LoadView(const core::Reconstruction& rec, const ViewGeometry& geom, const s
     for (int y = 0; y < geom.height; ++y) {
       for (int x = 0; x < geom.width; ++x) {
         const Eigen::Vector3d ray((x + 0.5 - cx) / fx, (y + 0.5 - cy) / fy, 1.0);
-        const Eigen::Vector2d uv = cam.Project(ray);  // original full-size pixels
+        const Eigen::Vector2d uv = cam.Project(ray);                    // original full-size pixels
         map_x.at<float>(y, x) = static_cast<float>(uv.x() * sx - 0.5);  // OpenCV: pixel centres at integers
         map_y.at<float>(y, x) = static_cast<float>(uv.y() * sy - 0.5);
       }
@@ -81,7 +81,10 @@ View LoadView(const core::Reconstruction& rec, const ViewGeometry& geom, const s
 
 ViewCache::ViewCache(const core::Reconstruction& rec, std::map<uint32_t, ViewGeometry> geoms,
                      std::filesystem::path frames_dir, size_t capacity)
-    : rec_(rec), geoms_(std::move(geoms)), frames_dir_(std::move(frames_dir)), capacity_(std::max<size_t>(1, capacity)) {}
+    : rec_(rec),
+      geoms_(std::move(geoms)),
+      frames_dir_(std::move(frames_dir)),
+      capacity_(std::max<size_t>(1, capacity)) {}
 
 std::shared_ptr<const View> ViewCache::Get(uint32_t image_id) {
   std::lock_guard<std::mutex> lock(mutex_);

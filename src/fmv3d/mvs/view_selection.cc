@@ -1,9 +1,10 @@
 #include "fmv3d/mvs/view_selection.h"
 
+#include <tbb/parallel_for.h>
+
 #include <Eigen/Dense>
 #include <algorithm>
 #include <cmath>
-#include <tbb/parallel_for.h>
 
 #include "fmv3d/core/error.h"
 

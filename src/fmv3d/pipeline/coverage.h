@@ -12,11 +12,10 @@
 
 #include <cstdint>
 #include <filesystem>
-#include <string>
-#include <vector>
-
 #include <nlohmann/json.hpp>
 #include <opencv2/core.hpp>
+#include <string>
+#include <vector>
 
 #include "fmv3d/core/camera.h"
 #include "fmv3d/core/pose.h"

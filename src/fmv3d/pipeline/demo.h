@@ -15,7 +15,6 @@
 #pragma once
 
 #include <filesystem>
-
 #include <nlohmann/json.hpp>
 #include <string>
 #include <vector>

@@ -23,8 +23,7 @@ struct View {
 // An oblique view of the scene: from beyond the registered cameras (on the side of their mean centre,
 // raised along the cameras' mean "up"), looking at the median of `points`, with a field of view that holds
 // the middle 98% of them. Works in any model frame (SfM frames have arbitrary orientation and scale).
-View SceneView(const core::Reconstruction& rec, const std::vector<Eigen::Vector3d>& points, int width,
-               int height);
+View SceneView(const core::Reconstruction& rec, const std::vector<Eigen::Vector3d>& points, int width, int height);
 
 // Splats (radius in pixels) with a z-buffer on a dark background; colours RGB as stored in the cloud.
 cv::Mat RenderPoints(const io::OrientedPointCloud& cloud, const View& view, int radius = 1);

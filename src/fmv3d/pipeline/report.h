@@ -5,7 +5,6 @@
 #pragma once
 
 #include <filesystem>
-
 #include <nlohmann/json.hpp>
 
 namespace fmv3d::pipeline {

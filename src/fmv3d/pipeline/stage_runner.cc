@@ -1,7 +1,6 @@
 #include "fmv3d/pipeline/stage_runner.h"
 
 #include <spdlog/spdlog.h>
-
 #include <sys/resource.h>
 
 #include <chrono>

@@ -46,7 +46,8 @@ MipTexture::MipTexture(const cv::Mat& bgr) {
       for (int x = 0; x < w; ++x) {
         const int x0 = std::min(2 * x, level.cols - 1), x1 = std::min(2 * x + 1, level.cols - 1);
         for (int c = 0; c < 3; ++c)
-          dst[3 * x + c] = static_cast<uint8_t>((r0[3 * x0 + c] + r0[3 * x1 + c] + r1[3 * x0 + c] + r1[3 * x1 + c] + 2) / 4);
+          dst[3 * x + c] =
+              static_cast<uint8_t>((r0[3 * x0 + c] + r0[3 * x1 + c] + r1[3 * x0 + c] + r1[3 * x1 + c] + 2) / 4);
       }
     }
     level = next;

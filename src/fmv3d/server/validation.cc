@@ -1,11 +1,10 @@
 #include "fmv3d/server/validation.h"
 
-#include <nlohmann/json.hpp>
-
 #include <algorithm>
 #include <charconv>
 #include <cmath>
 #include <cstdlib>
+#include <nlohmann/json.hpp>
 
 namespace fmv3d::server {
 

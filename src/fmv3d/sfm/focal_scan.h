@@ -11,9 +11,8 @@
 // lower bound of the order of the true focal (the remaining ambiguity is the affine one: focal and depth trade).
 #pragma once
 
-#include <vector>
-
 #include <Eigen/Core>
+#include <vector>
 
 #include "fmv3d/core/camera.h"
 
@@ -25,18 +24,18 @@ struct FocalScanPair {
 
 struct FocalScanOptions {
   double min_factor = 0.5, max_factor = 128;  // candidates: guess · factor, geometric steps
-  double step = 1.26;                          // ratio between consecutive candidates (2^(1/3))
-  double threshold_px = 2.0;                   // MSAC truncation and RANSAC inlier threshold
-  double tolerance = 0.05;                     // knee: first candidate with score ≤ (1 + tolerance) · best
+  double step = 1.26;                         // ratio between consecutive candidates (2^(1/3))
+  double threshold_px = 2.0;                  // MSAC truncation and RANSAC inlier threshold
+  double tolerance = 0.05;                    // knee: first candidate with score ≤ (1 + tolerance) · best
   int ransac_iterations = 1000;
   uint64_t seed = 1;
 };
 
 struct FocalScanResult {
-  double focal = 0;              // chosen focal (pixels)
-  bool plateau = false;          // the longest candidates score like the best: focal is only a lower bound
-  std::vector<double> focals;    // candidates
-  std::vector<double> scores;    // mean truncated squared Sampson error (px²), summed over pairs
+  double focal = 0;            // chosen focal (pixels)
+  bool plateau = false;        // the longest candidates score like the best: focal is only a lower bound
+  std::vector<double> focals;  // candidates
+  std::vector<double> scores;  // mean truncated squared Sampson error (px²), summed over pairs
 };
 
 // camera: the prior (principal point, distortion; its f is the guess the factors multiply).

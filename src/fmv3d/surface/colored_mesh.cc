@@ -68,8 +68,8 @@ void WriteMeshPly(const ColoredMesh& mesh, const fs::path& path) {
     std::ofstream out(tmp, std::ios::binary);
     if (!out) throw Error(tmp.string() + ": cannot write");
     const bool has_n = !mesh.normals.empty(), has_c = !mesh.colors.empty();
-    out << "ply\nformat binary_little_endian 1.0\ncomment fmv3d surface mesh\nelement vertex "
-        << mesh.vertices.size() << "\nproperty float x\nproperty float y\nproperty float z\n";
+    out << "ply\nformat binary_little_endian 1.0\ncomment fmv3d surface mesh\nelement vertex " << mesh.vertices.size()
+        << "\nproperty float x\nproperty float y\nproperty float z\n";
     if (has_n) out << "property float nx\nproperty float ny\nproperty float nz\n";
     if (has_c) out << "property uchar red\nproperty uchar green\nproperty uchar blue\n";
     out << "element face " << mesh.triangles.size() << "\nproperty list uchar int vertex_indices\nend_header\n";

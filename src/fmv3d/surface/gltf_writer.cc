@@ -37,8 +37,8 @@ int AddView(tinygltf::Model* model, const void* data, size_t bytes, int target) 
   return static_cast<int>(model->bufferViews.size()) - 1;
 }
 
-int AddAccessor(tinygltf::Model* model, int view, int component, int type, size_t count,
-                std::vector<double> min = {}, std::vector<double> max = {}) {
+int AddAccessor(tinygltf::Model* model, int view, int component, int type, size_t count, std::vector<double> min = {},
+                std::vector<double> max = {}) {
   tinygltf::Accessor a;
   a.bufferView = view;
   a.componentType = component;
@@ -95,7 +95,8 @@ void WriteGlb(const io::TexturedMesh& mesh, const fs::path& path) {
     }
     if (indices.empty()) continue;
     std::vector<double> lo(3, std::numeric_limits<double>::max()), hi(3, std::numeric_limits<double>::lowest());
-    for (size_t i = 0; i < pos.size(); ++i) lo[i % 3] = std::min(lo[i % 3], double(pos[i])), hi[i % 3] = std::max(hi[i % 3], double(pos[i]));
+    for (size_t i = 0; i < pos.size(); ++i)
+      lo[i % 3] = std::min(lo[i % 3], double(pos[i])), hi[i % 3] = std::max(hi[i % 3], double(pos[i]));
     const size_t nverts = pos.size() / 3;
     tinygltf::Primitive prim;
     prim.mode = TINYGLTF_MODE_TRIANGLES;
@@ -109,9 +110,9 @@ void WriteGlb(const io::TexturedMesh& mesh, const fs::path& path) {
     prim.attributes["TEXCOORD_0"] =
         AddAccessor(&model, AddView(&model, tex.data(), tex.size() * 4, TINYGLTF_TARGET_ARRAY_BUFFER),
                     TINYGLTF_COMPONENT_TYPE_FLOAT, TINYGLTF_TYPE_VEC2, nverts);
-    prim.indices = AddAccessor(
-        &model, AddView(&model, indices.data(), indices.size() * 4, TINYGLTF_TARGET_ELEMENT_ARRAY_BUFFER),
-        TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT, TINYGLTF_TYPE_SCALAR, indices.size());
+    prim.indices =
+        AddAccessor(&model, AddView(&model, indices.data(), indices.size() * 4, TINYGLTF_TARGET_ELEMENT_ARRAY_BUFFER),
+                    TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT, TINYGLTF_TYPE_SCALAR, indices.size());
 
     tinygltf::Material mat;
     mat.name = m < static_cast<int>(mesh.materials.size()) ? mesh.materials[m].name : "default";

@@ -24,8 +24,8 @@ void EstimateNormalsTowardsCameras(io::OrientedPointCloud* cloud, const fs::path
   if (!cloud->has_visibility())
     throw Error("the point cloud has no normals and no visibility lists to orient estimated ones");
   if (!fs::exists(sparse_dir / "images.txt"))
-    throw Error("the point cloud has no normals; orienting estimated ones needs the cameras in " +
-                sparse_dir.string() + " — run `fmv3d sparse` first");
+    throw Error("the point cloud has no normals; orienting estimated ones needs the cameras in " + sparse_dir.string() +
+                " — run `fmv3d sparse` first");
   const core::Reconstruction rec = io::ReadColmapText(sparse_dir);
   std::map<uint32_t, Eigen::Vector3d> centres;
   for (const auto& [id, im] : rec.images) centres[id] = im.pose.Centre();
@@ -57,7 +57,8 @@ nlohmann::json RunMeshStage(const fs::path& workspace, const MeshStageOptions& o
     throw Error(workspace.string() + ": no dense/fused.ply — run `fmv3d dense " + workspace.string() + "` first");
   io::OrientedPointCloud cloud = io::ReadPointCloudPly(fused);
   if (cloud.empty())
-    throw Error(fused.string() + ": the dense cloud has no points (check report/dense.json; the dense stage found "
+    throw Error(fused.string() +
+                ": the dense cloud has no points (check report/dense.json; the dense stage found "
                 "no consistent depths)");
   nlohmann::json report;
   report["input"] = fs::relative(fused, workspace).string();

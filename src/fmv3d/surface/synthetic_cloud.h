@@ -22,21 +22,21 @@
 namespace fmv3d::surface {
 
 struct SyntheticCloudOptions {
-  double spacing = 0.1;           // distance between samples, metres
-  int min_views = 2;              // a point must be seen by this many cameras
-  double position_noise = 0;      // Gaussian, metres (1 sigma per axis)
-  double normal_noise_deg = 0;    // Gaussian tilt of the normals, degrees
-  double outlier_share = 0;       // share of points moved by up to ±outlier_range along a random direction
-  double outlier_range = 1.0;     // metres
-  double max_distance = 0;        // ignore surface farther than this from every camera (0 = no limit)
-  Eigen::AlignedBox3d region;     // only faces overlapping this box are sampled (empty box: all)
+  double spacing = 0.1;         // distance between samples, metres
+  int min_views = 2;            // a point must be seen by this many cameras
+  double position_noise = 0;    // Gaussian, metres (1 sigma per axis)
+  double normal_noise_deg = 0;  // Gaussian tilt of the normals, degrees
+  double outlier_share = 0;     // share of points moved by up to ±outlier_range along a random direction
+  double outlier_range = 1.0;   // metres
+  double max_distance = 0;      // ignore surface farther than this from every camera (0 = no limit)
+  Eigen::AlignedBox3d region;   // only faces overlapping this box are sampled (empty box: all)
   uint64_t seed = 1;
   void Check() const;
 };
 
 struct SyntheticCloud {
-  io::OrientedPointCloud cloud;              // noisy, with outliers
-  std::vector<Eigen::Vector3d> seen_surface; // the noise-free samples that were kept (the "seen" truth)
+  io::OrientedPointCloud cloud;               // noisy, with outliers
+  std::vector<Eigen::Vector3d> seen_surface;  // the noise-free samples that were kept (the "seen" truth)
 };
 
 SyntheticCloud SampleOrientedCloud(const io::TexturedMesh& truth, const core::Reconstruction& cameras,
@@ -46,16 +46,15 @@ SyntheticCloud SampleOrientedCloud(const io::TexturedMesh& truth, const core::Re
 // run perfectly: frames/ copied, truth/ (less the `held_out` image names) as sparse/, and dense/fused.ply
 // sampled from scene.obj with SampleOrientedCloud (cameras: the kept images). Returns the cloud and the seen
 // true surface. Throws fmv3d::Error when synth_dir lacks frames/, truth/ or scene.obj.
-SyntheticCloud PrepareSyntheticWorkspace(const std::filesystem::path& synth_dir,
-                                         const std::filesystem::path& workspace,
+SyntheticCloud PrepareSyntheticWorkspace(const std::filesystem::path& synth_dir, const std::filesystem::path& workspace,
                                          const SyntheticCloudOptions& options,
                                          const std::vector<std::string>& held_out = {});
 
 struct MeshAccuracy {
-  size_t samples = 0;        // points sampled on the reconstructed mesh
-  double rms = 0;            // RMS distance of those samples to the true surface
+  size_t samples = 0;  // points sampled on the reconstructed mesh
+  double rms = 0;      // RMS distance of those samples to the true surface
   double mean = 0, median = 0, p90 = 0, max = 0;
-  double completeness = 0;   // share of the seen true surface within `tolerance` of the reconstruction
+  double completeness = 0;  // share of the seen true surface within `tolerance` of the reconstruction
   double tolerance = 0;
 };
 

@@ -23,16 +23,16 @@
 namespace fmv3d::surface {
 
 struct AtlasOptions {
-  int max_page_size = 4096;      // texels, side of a page (power of two, 256..16384)
-  int margin = 2;                // texels kept around each chart
-  double texel_scale = 1.0;      // atlas texels per source pixel (< 1 shrinks the atlas)
+  int max_page_size = 4096;  // texels, side of a page (power of two, 256..16384)
+  int margin = 2;            // texels kept around each chart
+  double texel_scale = 1.0;  // atlas texels per source pixel (< 1 shrinks the atlas)
   bool adjust_colors = true;
   double gain_regularisation = 0.05;  // pull of each view's log-gain towards 0, relative to the seam terms
   void Check() const;
 };
 
 struct TexturedModel {
-  io::TexturedMesh mesh;            // faces grouped by page; materials "atlas_<page>" with their textures
+  io::TexturedMesh mesh;                // faces grouped by page; materials "atlas_<page>" with their textures
   std::vector<io::Rgb8> vertex_colors;  // per mesh vertex, averaged from the texture (RGB)
   nlohmann::json stats;
 };

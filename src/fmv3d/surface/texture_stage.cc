@@ -32,7 +32,8 @@ std::vector<TextureView> LoadTextureViews(const core::Reconstruction& model, con
   }
   for (const auto& v : views)
     if (!fs::exists(frames_dir / v.name)) throw Error((frames_dir / v.name).string() + ": registered frame is missing");
-  tbb::parallel_for(size_t{0}, views.size(), [&](size_t i) { views[i].image = io::ReadImage(frames_dir / views[i].name); });
+  tbb::parallel_for(size_t{0}, views.size(),
+                    [&](size_t i) { views[i].image = io::ReadImage(frames_dir / views[i].name); });
   for (const auto& v : views)
     if (v.image.cols != v.camera.width || v.image.rows != v.camera.height)
       throw Error((frames_dir / v.name).string() + ": image is " + std::to_string(v.image.cols) + "x" +

@@ -7,12 +7,11 @@
 //   WS/report/texture.json                                          views, candidates, patches, pages, timings
 #pragma once
 
-#include "fmv3d/core/error.h"
-
 #include <filesystem>
 #include <nlohmann/json.hpp>
 #include <vector>
 
+#include "fmv3d/core/error.h"
 #include "fmv3d/core/reconstruction.h"
 #include "fmv3d/surface/texture_atlas.h"
 #include "fmv3d/surface/view_selection.h"

@@ -41,11 +41,11 @@ struct TextureView {
 };
 
 struct ViewSelectionOptions {
-  double max_angle_deg = 80;            // views more oblique than this to a face are not used for it
-  double consistency_threshold = 30;    // DN (0..255): colour distance from the consensus tolerated
-  double smoothness = 0.6;              // weight of each agreeing neighbour in label voting
+  double max_angle_deg = 80;          // views more oblique than this to a face are not used for it
+  double consistency_threshold = 30;  // DN (0..255): colour distance from the consensus tolerated
+  double smoothness = 0.6;            // weight of each agreeing neighbour in label voting
   int smoothing_iterations = 8;
-  double visibility_scale = 1.0;        // render the visibility maps at this fraction of the image size
+  double visibility_scale = 1.0;  // render the visibility maps at this fraction of the image size
   // Per face, only the best this many candidate views (by projected area × visible share) are kept: bounds the
   // memory on long videos (a 61-view, 7.7 M-face mesh held 27 per face). The consistency check then runs over
   // those views.

@@ -2,9 +2,9 @@
 
 #include <algorithm>
 #include <cctype>
+#include <charconv>
 #include <cmath>
 #include <map>
-#include <charconv>
 #include <sstream>
 
 #include "fmv3d/core/error.h"
