@@ -15,7 +15,7 @@ void Add(CLI::App& app) {
   struct Args {
     std::string ws, pairs = "auto", matcher = "auto";
     features::MatchStageOptions opt;
-    bool no_mutual = false, no_quadratic = false, no_tiepoints = false;
+    bool no_mutual = false, no_quadratic = false, no_tiepoints = false, force = false;
     std::string tiepoints;
     uint64_t seed = 0;
   };
@@ -56,6 +56,9 @@ void Add(CLI::App& app) {
   cmd->add_option("--tiepoints", a->tiepoints,
                   "The operator's tie points (docs/manual-inputs.md) instead of WS/manual/tiepoints.json");
   cmd->add_flag("--no-tiepoints", a->no_tiepoints, "Ignore WS/manual/tiepoints.json");
+  cmd->add_flag("--force", a->force,
+                "Match every pair again, even those whose features, cameras and options are unchanged since the "
+                "last run (WS/matches/automatic.*)");
   cmd->add_option("--tie-max-epipolar-px", a->opt.manual.max_epipolar_px,
                   "Report tie points farther than this from the automatic epipolar line (they are kept)")
       ->capture_default_str();
@@ -65,6 +68,7 @@ void Add(CLI::App& app) {
     const core::Workspace ws(a->ws);
     if (!a->tiepoints.empty()) a->opt.tiepoints_file = a->tiepoints;
     a->opt.use_tiepoints = !a->no_tiepoints;
+    a->opt.reuse = !a->force;
     ws.Require(ws.frames_json(), "frames");
     ws.Require(ws.features_dir(), "features");
     auto& o = a->opt;

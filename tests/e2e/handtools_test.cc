@@ -10,7 +10,8 @@
 //      noise seeds of this flight: bench/results/handtools3.md);
 //   3. tie points at the true projections of 12 scene points seen by frames 8 and 9 and at least two other frames
 //      (`truth-projections --format tiepoints`) → `match` + `sparse` register both frames through them, with
-//      camera centre error ≤ 0.1% of the extent after the similarity alignment to the truth.
+//      camera centre error ≤ 0.1% of the extent after the similarity alignment to the truth. That `match` re-run
+//      reads the automatic pairs back (match_cache.h: features and options unchanged) and adds the tie points.
 #include <gtest/gtest.h>
 
 #include <limits>
@@ -117,6 +118,7 @@ TEST(E2eHandTools, DegradedFramesTiePointsAndGcps) {
   const auto matches = core::ReadJson(dir / "ws/matches/matches.json");
   EXPECT_TRUE(matches.at("manual").at("used").get<bool>());
   EXPECT_EQ(matches.at("manual").at("tie_points").get<int>(), 12);
+  EXPECT_EQ(matches.at("pairs_reused"), matches.at("pairs_tried"));
   Cli("-q sparse " + ws);
   const auto sparse = core::ReadJson(dir / "ws/report/sparse.json");
   std::cout << sparse.at("manual").dump(2) << "\n";

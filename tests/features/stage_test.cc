@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 
 #include <Eigen/Dense>
+#include <chrono>
 #include <fstream>
 #include <iostream>
 #include <opencv2/imgcodecs.hpp>
@@ -97,8 +98,9 @@ TEST(Stage, FeaturesAndMatchThroughTheCli) {
   EXPECT_EQ(summary.at("pairs_verified").get<size_t>(), pairs.size());
   EXPECT_TRUE(summary.at("timing").contains("seconds_total"));
 
-  // Deterministic: a second run writes the same matches.
-  r = test::RunCli("-q match '" + ws.string() + "' --pairs sequential --overlap 2 --no-quadratic --loop-closure 0");
+  // Deterministic: a second run, every pair matched again (--force), writes the same matches.
+  r = test::RunCli("-q match '" + ws.string() +
+                   "' --pairs sequential --overlap 2 --no-quadratic --loop-closure 0 --force");
   ASSERT_EQ(r.exit_code, 0) << r.err;
   const auto again = ReadMatches(MatchesPath(ws / "matches"));
   ASSERT_EQ(again.size(), pairs.size());
@@ -140,7 +142,7 @@ TEST(Stage, MatchingWithinAMemoryBudgetGivesTheSameMatches) {
   const auto roomy_memory = core::ReadJson(MatchesSummaryPath(ws / "matches")).at("memory");
   EXPECT_EQ(roomy_memory.at("descriptor_loads").get<int>(), n);  // each image read once
 
-  r = test::RunCli(match + " --max-memory 0.01");
+  r = test::RunCli(match + " --max-memory 0.01 --force");
   ASSERT_EQ(r.exit_code, 0) << r.err;
   const auto tight = ReadMatches(MatchesPath(ws / "matches"));
   const auto memory = core::ReadJson(MatchesSummaryPath(ws / "matches")).at("memory");
@@ -160,6 +162,60 @@ TEST(Stage, MatchingWithinAMemoryBudgetGivesTheSameMatches) {
   r = test::RunCli(match + " --max-memory 0");
   EXPECT_EQ(r.exit_code, 1);
   EXPECT_NE(r.err.find("--max-memory must be > 0"), std::string::npos) << r.err;
+}
+
+// A re-run of `match` reads back the pairs whose features, cameras and options are unchanged (match_cache.h) and
+// gives the matches a full run gives; a changed frame, camera or option makes its pairs be matched again.
+TEST(Stage, MatchRerunReusesOnlyUnchangedPairs) {
+  test::TempDir tmp;
+  const fs::path ws = tmp / "ws";
+  MakeWorkspace(ws, 5);
+  auto r = test::RunCli("-q features '" + ws.string() + "' --max-features 1000");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const std::string match = "-q match '" + ws.string() + "' --pairs exhaustive";
+  auto run = [&](const std::string& extra) {
+    const auto res = test::RunCli(match + extra);
+    EXPECT_EQ(res.exit_code, 0) << res.err;
+    const auto summary = core::ReadJson(MatchesSummaryPath(ws / "matches"));
+    EXPECT_EQ(summary.at("pairs_tried").get<int>(), 10);
+    return std::make_pair(summary.at("pairs_reused").get<int>(), ReadMatches(MatchesPath(ws / "matches")));
+  };
+  auto same = [](const std::vector<VerifiedPair>& a, const std::vector<VerifiedPair>& b) {
+    if (a.size() != b.size()) return false;
+    for (size_t k = 0; k < a.size(); ++k)
+      if (a[k].image_id1 != b[k].image_id1 || a[k].image_id2 != b[k].image_id2 || a[k].F != b[k].F ||
+          a[k].inliers.size() != b[k].inliers.size() || a[k].num_putative != b[k].num_putative)
+        return false;
+    return true;
+  };
+  const auto [reused_first, first] = run("");
+  EXPECT_EQ(reused_first, 0);
+  ASSERT_GE(first.size(), 4u);
+  const auto [reused_again, again] = run("");
+  EXPECT_EQ(reused_again, 10);
+  EXPECT_TRUE(same(again, first));
+  const auto [reused_forced, forced] = run(" --force");
+  EXPECT_EQ(reused_forced, 0);
+  EXPECT_TRUE(same(forced, first));
+  // One frame changed (mirrored, features extracted again): its 4 pairs are matched again, the other 6 read back,
+  // and the result is that of a full run.
+  const fs::path image = ws / "frames" / "synthetic-000002.png";
+  cv::Mat flipped;
+  cv::flip(cv::imread(image.string()), flipped, 1);
+  cv::imwrite(image.string(), flipped);
+  fs::last_write_time(
+      image, fs::last_write_time(FeaturePath(ws / "features", image.filename().string())) + std::chrono::seconds(1));
+  r = test::RunCli("-q features '" + ws.string() + "' --max-features 1000");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const auto [reused_partly, partly] = run("");
+  EXPECT_EQ(reused_partly, 6);
+  EXPECT_TRUE(same(partly, run(" --force").second));
+  // Another verification option: nothing is reused; then another prior camera (focal) with that option again.
+  EXPECT_EQ(run(" --min-inliers 16").first, 0);
+  auto index = io::ReadFramesIndex(ws / "frames" / "frames.json");
+  index.cameras[0].camera.f = 600;
+  io::WriteFramesIndex(index, ws / "frames" / "frames.json");
+  EXPECT_EQ(run(" --min-inliers 16").first, 0);
 }
 
 // Strecha ground truth: K (3 rows), distortion row, R camera-to-world (3 rows), C, size.

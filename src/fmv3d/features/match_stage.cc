@@ -11,12 +11,14 @@
 #include <opencv2/imgcodecs.hpp>
 #include <set>
 
+#include "fmv3d/core/camera_json.h"
 #include "fmv3d/core/error.h"
 #include "fmv3d/core/files.h"
 #include "fmv3d/core/logging.h"
 #include "fmv3d/core/threading.h"
 #include "fmv3d/core/workspace.h"
 #include "fmv3d/features/feature_io.h"
+#include "fmv3d/features/match_cache.h"
 #include "fmv3d/features/spatial_pairs.h"
 #include "fmv3d/io/frames_index.h"
 #include "fmv3d/io/tiepoints.h"
@@ -172,6 +174,38 @@ LoadedFeatures LoadFeatures(const core::Workspace& ws, const io::FramesIndex& in
   return out;
 }
 
+// What a pair's automatic result depends on besides the two frames (match_cache.h).
+std::string OptionsKey(const MatchStageOptions& o) {
+  const auto& m = o.match;
+  const auto& v = o.verify;
+  return nlohmann::json{FMV3D_VERSION,
+                        m.ratio,
+                        m.mutual,
+                        static_cast<int>(m.type),
+                        m.flann_trees,
+                        m.flann_checks,
+                        m.brute_force_max_product,
+                        m.seed,
+                        v.max_error_px,
+                        v.confidence,
+                        v.max_iterations,
+                        v.min_inliers,
+                        v.min_E_F_inlier_ratio,
+                        v.max_H_inlier_ratio,
+                        v.refine,
+                        v.seed}
+      .dump();
+}
+
+std::vector<std::string> FrameKeys(const core::Workspace& ws, const io::FramesIndex& index, const LoadedFeatures& in) {
+  std::vector<std::string> keys(index.frames.size());
+  tbb::parallel_for(size_t{0}, keys.size(), [&](size_t i) {
+    const std::string camera = core::CameraToJson(*in.cameras[i]).dump() + (in.trusted[i] ? ":trusted" : ":guess");
+    keys[i] = index.frames[i].name + ":" + FrameKey(FeaturePath(ws.features_dir(), index.frames[i].name), camera);
+  });
+  return keys;
+}
+
 std::vector<ImagePair> ChoosePairs(const io::FramesIndex& index, const DescriptorLoader& load,
                                    const PairOptions& options, PairMode* mode, MatchStageStats* stats) {
   const size_t n = index.frames.size();
@@ -240,9 +274,29 @@ VerifiedPair MatchPair(const LoadedFeatures& in, DescriptorCache* cache, uint32_
 
 // Every pair matched and verified in parallel over pairs (OpenCV's own threads stay off meanwhile). Returns the
 // verified pairs in pair order; `per_pair` gets one summary row per pair tried.
+// Pairs whose automatic result `previous` holds for the same inputs (match_cache.h) are read back, the others
+// matched; `record` gets every pair's result for the next run.
 std::vector<VerifiedPair> MatchAndVerify(const LoadedFeatures& in, const DescriptorLoader& load,
                                          const std::vector<ImagePair>& pairs, const MatchStageOptions& options,
+                                         const AutomaticMatches& previous, AutomaticMatches* record,
                                          MatchStageStats* stats, nlohmann::json* per_pair, size_t* total_inliers) {
+  std::vector<VerifiedPair> results(pairs.size());
+  std::vector<char> verified(pairs.size(), 0);
+  std::vector<size_t> todo;
+  std::vector<ImagePair> todo_pairs;
+  for (size_t k = 0; k < pairs.size(); ++k) {
+    if (const auto* r = previous.Find(pairs[k], record->options_key, record->frame_keys)) {
+      results[k] = r->pair;
+      verified[k] = r->verified;
+    } else {
+      todo.push_back(k);
+      todo_pairs.push_back(pairs[k]);
+    }
+  }
+  stats->pairs_reused = pairs.size() - todo.size();
+  if (stats->pairs_reused > 0)
+    spdlog::info("match: {} of {} pairs unchanged since the last run: not matched again", stats->pairs_reused,
+                 pairs.size());
   const int cv_threads = cv::getNumThreads();
   cv::setNumThreads(1);
   size_t keypoints = 0;
@@ -251,13 +305,12 @@ std::vector<VerifiedPair> MatchAndVerify(const LoadedFeatures& in, const Descrip
       kBytesPerKeypoint * std::max(1.0, double(keypoints) / std::max<size_t>(1, in.features.size()));
   const size_t capacity =
       std::max<size_t>(2 * core::NumThreads() + 2, static_cast<size_t>(options.max_memory_mb * 1048576.0 / per_image));
-  DescriptorCache cache([&load](uint32_t i) { return load(i); }, in.features.size(), pairs, capacity);
-  std::vector<VerifiedPair> results(pairs.size());
-  std::vector<char> verified(pairs.size(), 0);
+  DescriptorCache cache([&load](uint32_t i) { return load(i); }, in.features.size(), todo_pairs, capacity);
   std::atomic<int64_t> ns_match{0}, ns_verify{0};
-  core::Progress progress("match", pairs.size());
-  tbb::parallel_for(tbb::blocked_range<size_t>(0, pairs.size(), 1), [&](const tbb::blocked_range<size_t>& range) {
-    for (size_t k = range.begin(); k != range.end(); ++k) {
+  core::Progress progress("match", todo.size());
+  tbb::parallel_for(tbb::blocked_range<size_t>(0, todo.size(), 1), [&](const tbb::blocked_range<size_t>& range) {
+    for (size_t t = range.begin(); t != range.end(); ++t) {
+      const size_t k = todo[t];
       bool ok = false;
       results[k] = MatchPair(in, &cache, pairs[k].first, pairs[k].second, options, &ok, &ns_match, &ns_verify);
       verified[k] = ok;
@@ -266,6 +319,7 @@ std::vector<VerifiedPair> MatchAndVerify(const LoadedFeatures& in, const Descrip
   });
   progress.Finish();
   cv::setNumThreads(cv_threads);
+  for (size_t k = 0; k < pairs.size(); ++k) record->pairs[pairs[k]] = {results[k], verified[k] != 0};
   stats->cpu_seconds_match = ns_match * 1e-9;
   stats->cpu_seconds_verify = ns_verify * 1e-9;
   stats->descriptor_cache_capacity = cache.capacity();
@@ -362,6 +416,7 @@ nlohmann::json SummaryJson(const MatchStageStats& stats, PairMode mode, const Ma
   return {{"images", stats.images},
           {"pair_mode", PairModeName(mode)},
           {"pairs_tried", stats.pairs_tried},
+          {"pairs_reused", stats.pairs_reused},
           {"loop_closure_pairs", stats.loop_closure_pairs},
           {"pairs_verified", stats.pairs_verified},
           {"calibrated", stats.calibrated},
@@ -420,8 +475,14 @@ MatchStageStats RunMatchStage(const core::Workspace& ws, const MatchStageOptions
 
   nlohmann::json per_pair;
   size_t total_inliers = 0;
-  std::vector<VerifiedPair> kept = MatchAndVerify(in, load, pairs, options, &stats, &per_pair, &total_inliers);
+  AutomaticMatches record;
+  record.options_key = OptionsKey(options);
+  record.frame_keys = FrameKeys(ws, index, in);
+  const AutomaticMatches previous = options.reuse ? ReadAutomaticMatches(ws.matches_dir()) : AutomaticMatches{};
+  std::vector<VerifiedPair> kept =
+      MatchAndVerify(in, load, pairs, options, previous, &record, &stats, &per_pair, &total_inliers);
   core::EnsureDirectory(ws.matches_dir());
+  WriteAutomaticMatches(ws.matches_dir(), record);
   nlohmann::json manual_summary = ApplyOperatorInput(ws, index, load, options, &in.features, &kept);
   stats.pairs_verified = kept.size();
   WriteMatches(kept, MatchesPath(ws.matches_dir()));

@@ -1,6 +1,7 @@
 // The `fmv3d match` stage: pair selection, descriptor matching and geometric verification of every pair.
 // Reads WS/frames/frames.json and WS/features/*.feat; writes WS/matches/matches.bin (all verified pairs,
-// see feature_io.h) and WS/matches/matches.json (pairs tried / verified, inlier counts per pair, timing).
+// see feature_io.h) and WS/matches/matches.json (pairs tried / verified, inlier counts per pair, timing), and
+// WS/matches/automatic.* (every pair's automatic result, read back by the next run where its inputs are unchanged).
 //
 // Calibrated vs uncalibrated: E is estimated with each camera's prior intrinsics from frames.json. When the
 // prior is trusted (prior_source is not "guess"), a pair whose E explains ≥ 95% of the F inliers is
@@ -32,6 +33,8 @@ struct MatchStageOptions {
   ManualMatchOptions manual;
   std::optional<std::filesystem::path> tiepoints_file;  // default: WS/manual/tiepoints.json when it exists
   bool use_tiepoints = true;
+  // Read back the pairs whose inputs are unchanged since the last run (match_cache.h); false: match every pair.
+  bool reuse = true;
   // Memory for the descriptors and search structures of the images being matched: as many images are held as
   // fit (at ~1.4 KB per keypoint), so a video of thousands of frames is matched in a bounded window.
   double max_memory_mb = 2048;
@@ -46,6 +49,7 @@ struct MatchStageOptions {
 
 struct MatchStageStats {
   size_t images = 0, pairs_tried = 0, pairs_verified = 0, loop_closure_pairs = 0;
+  size_t pairs_reused = 0;  // of pairs_tried: read back from the last run's matches/automatic.* (match_cache.h)
   size_t calibrated = 0, uncalibrated = 0, planar_or_rotation = 0;
   double seconds_total = 0, seconds_load = 0, seconds_pairs = 0;
   double cpu_seconds_match = 0, cpu_seconds_verify = 0;  // summed over threads

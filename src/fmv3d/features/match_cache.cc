@@ -1,0 +1,89 @@
+#include "fmv3d/features/match_cache.h"
+
+#include <spdlog/spdlog.h>
+
+#include <cstdio>
+#include <fstream>
+
+#include "fmv3d/core/error.h"
+#include "fmv3d/core/files.h"
+#include "fmv3d/features/feature_io.h"
+
+namespace fmv3d::features {
+namespace fs = std::filesystem;
+
+namespace {
+
+fs::path AutomaticJsonPath(const fs::path& dir) { return dir / "automatic.json"; }
+fs::path AutomaticBinPath(const fs::path& dir) { return dir / "automatic.bin"; }
+
+}  // namespace
+
+const AutomaticMatches::Result* AutomaticMatches::Find(const ImagePair& p, const std::string& options,
+                                                       const std::vector<std::string>& frames) const {
+  if (options != options_key || p.second >= frames.size() || p.second >= frame_keys.size()) return nullptr;
+  if (frame_keys[p.first] != frames[p.first] || frame_keys[p.second] != frames[p.second]) return nullptr;
+  const auto it = pairs.find(p);
+  return it == pairs.end() ? nullptr : &it->second;
+}
+
+std::string FrameKey(const fs::path& feature_file, const std::string& camera) {
+  std::ifstream in(feature_file, std::ios::binary);
+  if (!in) throw Error(feature_file.string() + ": cannot read");
+  uint64_t h = 14695981039346656037ull, size = 0;
+  std::vector<char> buf(1 << 20);
+  while (in) {
+    in.read(buf.data(), static_cast<std::streamsize>(buf.size()));
+    const std::streamsize got = in.gcount();
+    for (std::streamsize k = 0; k < got; ++k) h = (h ^ static_cast<unsigned char>(buf[k])) * 1099511628211ull;
+    size += static_cast<uint64_t>(got);
+  }
+  char hex[17];
+  std::snprintf(hex, sizeof hex, "%016llx", static_cast<unsigned long long>(h));
+  return std::to_string(size) + ":" + hex + ":" + camera;
+}
+
+AutomaticMatches ReadAutomaticMatches(const fs::path& dir) {
+  AutomaticMatches m;
+  if (!fs::exists(AutomaticJsonPath(dir)) || !fs::exists(AutomaticBinPath(dir))) return m;
+  try {
+    const auto j = core::ReadJson(AutomaticJsonPath(dir));
+    if (j.at("format").get<std::string>() != "fmv3d-automatic-matches" ||
+        j.at("version").get<int>() != kAutomaticMatchesVersion)
+      return m;
+    std::vector<VerifiedPair> results = ReadMatches(AutomaticBinPath(dir));
+    const auto& rows = j.at("pairs");
+    if (rows.size() != results.size()) throw Error("automatic.json and automatic.bin disagree on the pair count");
+    m.options_key = j.at("options").get<std::string>();
+    m.frame_keys = j.at("frames").get<std::vector<std::string>>();
+    for (size_t k = 0; k < rows.size(); ++k) {
+      const ImagePair p{rows[k].at(0).get<uint32_t>(), rows[k].at(1).get<uint32_t>()};
+      if (results[k].image_id1 != p.first + 1 || results[k].image_id2 != p.second + 1)
+        throw Error("automatic.json and automatic.bin disagree on pair " + std::to_string(k));
+      m.pairs[p] = {std::move(results[k]), rows[k].at(2).get<int>() != 0};
+    }
+  } catch (const std::exception& e) {
+    spdlog::warn("match: {} not used ({}): every pair is matched again", AutomaticJsonPath(dir).string(), e.what());
+    return AutomaticMatches{};
+  }
+  return m;
+}
+
+void WriteAutomaticMatches(const fs::path& dir, const AutomaticMatches& m) {
+  std::vector<VerifiedPair> results;
+  nlohmann::json rows = nlohmann::json::array();
+  for (const auto& [p, r] : m.pairs) {
+    results.push_back(r.pair);
+    rows.push_back({p.first, p.second, r.verified ? 1 : 0});
+  }
+  // The json names the bin's pairs: removed first, written last, so a run killed in between leaves no stale pair.
+  fs::remove(AutomaticJsonPath(dir));
+  WriteMatches(results, AutomaticBinPath(dir));
+  core::WriteJson(AutomaticJsonPath(dir), {{"format", "fmv3d-automatic-matches"},
+                                           {"version", kAutomaticMatchesVersion},
+                                           {"options", m.options_key},
+                                           {"frames", m.frame_keys},
+                                           {"pairs", std::move(rows)}});
+}
+
+}  // namespace fmv3d::features
