@@ -133,15 +133,24 @@ try {
   const degraded = ['flight-000012.png', 'flight-000013.png'];
   const flightDeg = path.join(root, 'flight-degraded');
   const wsDeg = path.join(wsRoot, 'degraded');
-  if (!fs.existsSync(path.join(wsDeg, 'sparse', 'images.txt'))) {
+  const keptDeg = fs.existsSync(path.join(wsDeg, 'sparse', 'images.txt'));
+  if (!keptDeg) {
     run(['-q', 'synth', '--scene', 'building', '--path', 'orbit', '--frames', '24', '--size', '480x270', '--seed', '3',
       '--degrade', '12:blur', '--degrade', '13:contrast', '-o', flightDeg]);
-    run(['-q', 'reconstruct', path.join(flightDeg, 'frames'), '-o', wsDeg, '--fast', '--until', 'sparse']);
+    // Started as a copy of the demo workspace (before any hand input), as an operator re-runs a copied project on
+    // changed frames: `match` then matches again only the pairs of the two changed frames (match_cache.h).
+    fs.cpSync(ws, wsDeg, { recursive: true });
+    fs.rmSync(path.join(wsDeg, 'manual'), { recursive: true, force: true });
+    run(['-q', 'reconstruct', path.join(flightDeg, 'frames'), '-o', wsDeg, '--fast', '--from', 'frames', '--until', 'sparse']);
+    const reused = JSON.parse(fs.readFileSync(path.join(wsDeg, 'matches', 'matches.json'), 'utf8')).pairs_reused;
+    log(`  degraded flight: ${reused} pairs reused from the demo workspace's matching`);
   }
   const obsDeg = readTruthObservations(flightDeg);
   fs.rmSync(path.join(wsDeg, 'manual', 'tiepoints.json'), { force: true });
   const leftOut = () => JSON.parse(fs.readFileSync(path.join(wsDeg, 'report', 'sparse.json'), 'utf8')).left_out.map((l) => l.image);
-  if (!degraded.every((f) => leftOut().includes(f))) {  // a kept work folder: back to the automatic model
+  // A kept work folder may hold a model with tie points: back to the automatic one. (A fresh one is that model;
+  // the contrast-cut frame may register automatically, which the checks below allow.)
+  if (keptDeg && !degraded.every((f) => leftOut().includes(f))) {
     run(['-q', 'reconstruct', path.join(flightDeg, 'frames'), '-o', wsDeg, '--fast', '--from', 'match', '--until', 'sparse']);
   }
   const pageErrors = [];
