@@ -69,20 +69,20 @@ AutomaticMatches ReadAutomaticMatches(const fs::path& dir) {
   return m;
 }
 
-void WriteAutomaticMatches(const fs::path& dir, const AutomaticMatches& m) {
-  std::vector<VerifiedPair> results;
+void WriteAutomaticMatches(const fs::path& dir, const std::string& options_key,
+                           const std::vector<std::string>& frame_keys, const std::vector<ImagePair>& pairs,
+                           const std::vector<VerifiedPair>& results, const std::vector<char>& verified) {
+  if (pairs.size() != results.size() || pairs.size() != verified.size())
+    throw Error("match: one result per pair expected");
   nlohmann::json rows = nlohmann::json::array();
-  for (const auto& [p, r] : m.pairs) {
-    results.push_back(r.pair);
-    rows.push_back({p.first, p.second, r.verified ? 1 : 0});
-  }
+  for (size_t k = 0; k < pairs.size(); ++k) rows.push_back({pairs[k].first, pairs[k].second, verified[k] ? 1 : 0});
   // The json names the bin's pairs: removed first, written last, so a run killed in between leaves no stale pair.
   fs::remove(AutomaticJsonPath(dir));
   WriteMatches(results, AutomaticBinPath(dir));
   core::WriteJson(AutomaticJsonPath(dir), {{"format", "fmv3d-automatic-matches"},
                                            {"version", kAutomaticMatchesVersion},
-                                           {"options", m.options_key},
-                                           {"frames", m.frame_keys},
+                                           {"options", options_key},
+                                           {"frames", frame_keys},
                                            {"pairs", std::move(rows)}});
 }
 

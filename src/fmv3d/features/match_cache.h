@@ -44,6 +44,9 @@ std::string FrameKey(const std::filesystem::path& feature_file, const std::strin
 
 // Empty (no pairs) when the files are missing, of another version or unreadable: nothing is reused then.
 AutomaticMatches ReadAutomaticMatches(const std::filesystem::path& matches_dir);
-void WriteAutomaticMatches(const std::filesystem::path& matches_dir, const AutomaticMatches& m);
+// Every tried pair's result (`results[k]` of `pairs[k]`, `verified[k]`), with the keys it was computed under.
+void WriteAutomaticMatches(const std::filesystem::path& matches_dir, const std::string& options_key,
+                           const std::vector<std::string>& frame_keys, const std::vector<ImagePair>& pairs,
+                           const std::vector<VerifiedPair>& results, const std::vector<char>& verified);
 
 }  // namespace fmv3d::features

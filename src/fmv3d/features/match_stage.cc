@@ -274,18 +274,25 @@ VerifiedPair MatchPair(const LoadedFeatures& in, DescriptorCache* cache, uint32_
 
 // Every pair matched and verified in parallel over pairs (OpenCV's own threads stay off meanwhile). Returns the
 // verified pairs in pair order; `per_pair` gets one summary row per pair tried.
-// Pairs whose automatic result `previous` holds for the same inputs (match_cache.h) are read back, the others
-// matched; `record` gets every pair's result for the next run.
+// The keys a pair's automatic result is computed under (match_cache.h).
+struct ResultKeys {
+  std::string options;
+  std::vector<std::string> frames;
+};
+
+// Pairs whose automatic result `previous` holds for the same keys (match_cache.h) are read back, the others
+// matched; every pair's result is written to `matches_dir` for the next run.
 std::vector<VerifiedPair> MatchAndVerify(const LoadedFeatures& in, const DescriptorLoader& load,
                                          const std::vector<ImagePair>& pairs, const MatchStageOptions& options,
-                                         const AutomaticMatches& previous, AutomaticMatches* record,
-                                         MatchStageStats* stats, nlohmann::json* per_pair, size_t* total_inliers) {
+                                         const AutomaticMatches& previous, const ResultKeys& keys,
+                                         const fs::path& matches_dir, MatchStageStats* stats, nlohmann::json* per_pair,
+                                         size_t* total_inliers) {
   std::vector<VerifiedPair> results(pairs.size());
   std::vector<char> verified(pairs.size(), 0);
   std::vector<size_t> todo;
   std::vector<ImagePair> todo_pairs;
   for (size_t k = 0; k < pairs.size(); ++k) {
-    if (const auto* r = previous.Find(pairs[k], record->options_key, record->frame_keys)) {
+    if (const auto* r = previous.Find(pairs[k], keys.options, keys.frames)) {
       results[k] = r->pair;
       verified[k] = r->verified;
     } else {
@@ -319,7 +326,8 @@ std::vector<VerifiedPair> MatchAndVerify(const LoadedFeatures& in, const Descrip
   });
   progress.Finish();
   cv::setNumThreads(cv_threads);
-  for (size_t k = 0; k < pairs.size(); ++k) record->pairs[pairs[k]] = {results[k], verified[k] != 0};
+  core::EnsureDirectory(matches_dir);
+  WriteAutomaticMatches(matches_dir, keys.options, keys.frames, pairs, results, verified);
   stats->cpu_seconds_match = ns_match * 1e-9;
   stats->cpu_seconds_verify = ns_verify * 1e-9;
   stats->descriptor_cache_capacity = cache.capacity();
@@ -475,14 +483,13 @@ MatchStageStats RunMatchStage(const core::Workspace& ws, const MatchStageOptions
 
   nlohmann::json per_pair;
   size_t total_inliers = 0;
-  AutomaticMatches record;
-  record.options_key = OptionsKey(options);
-  record.frame_keys = FrameKeys(ws, index, in);
-  const AutomaticMatches previous = options.reuse ? ReadAutomaticMatches(ws.matches_dir()) : AutomaticMatches{};
-  std::vector<VerifiedPair> kept =
-      MatchAndVerify(in, load, pairs, options, previous, &record, &stats, &per_pair, &total_inliers);
-  core::EnsureDirectory(ws.matches_dir());
-  WriteAutomaticMatches(ws.matches_dir(), record);
+  const ResultKeys keys{OptionsKey(options), FrameKeys(ws, index, in)};
+  std::vector<VerifiedPair> kept;
+  {
+    const AutomaticMatches previous = options.reuse ? ReadAutomaticMatches(ws.matches_dir()) : AutomaticMatches{};
+    kept =
+        MatchAndVerify(in, load, pairs, options, previous, keys, ws.matches_dir(), &stats, &per_pair, &total_inliers);
+  }
   nlohmann::json manual_summary = ApplyOperatorInput(ws, index, load, options, &in.features, &kept);
   stats.pairs_verified = kept.size();
   WriteMatches(kept, MatchesPath(ws.matches_dir()));
