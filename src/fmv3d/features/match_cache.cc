@@ -27,6 +27,26 @@ const AutomaticMatches::Result* AutomaticMatches::Find(const ImagePair& p, const
   return it == pairs.end() ? nullptr : &it->second;
 }
 
+std::string OptionsKey(const MatchOptions& m, const geometry::TwoViewOptions& v) {
+  return nlohmann::json{FMV3D_VERSION,
+                        m.ratio,
+                        m.mutual,
+                        static_cast<int>(m.type),
+                        m.flann_trees,
+                        m.flann_checks,
+                        m.brute_force_max_product,
+                        m.seed,
+                        v.max_error_px,
+                        v.confidence,
+                        v.max_iterations,
+                        v.min_inliers,
+                        v.min_E_F_inlier_ratio,
+                        v.max_H_inlier_ratio,
+                        v.refine,
+                        v.seed}
+      .dump();
+}
+
 std::string FrameKey(const fs::path& feature_file, const std::string& camera) {
   std::ifstream in(feature_file, std::ios::binary);
   if (!in) throw Error(feature_file.string() + ": cannot read");

@@ -19,8 +19,10 @@
 #include <string>
 #include <vector>
 
+#include "fmv3d/features/matcher.h"
 #include "fmv3d/features/pairs.h"
 #include "fmv3d/features/types.h"
+#include "fmv3d/geometry/two_view.h"
 
 namespace fmv3d::features {
 
@@ -38,6 +40,9 @@ struct AutomaticMatches {
   // The recorded result of pair (i, j) when the current keys match the recorded ones, else nullptr.
   const Result* Find(const ImagePair& p, const std::string& options, const std::vector<std::string>& frames) const;
 };
+
+// What a pair's automatic result depends on besides the two frames: the options and the program's version.
+std::string OptionsKey(const MatchOptions& match, const geometry::TwoViewOptions& verify);
 
 // A frame's key: its feature file's size and 64-bit FNV-1a hash, and `camera` (its prior, serialised).
 std::string FrameKey(const std::filesystem::path& feature_file, const std::string& camera);

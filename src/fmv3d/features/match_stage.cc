@@ -174,29 +174,6 @@ LoadedFeatures LoadFeatures(const core::Workspace& ws, const io::FramesIndex& in
   return out;
 }
 
-// What a pair's automatic result depends on besides the two frames (match_cache.h).
-std::string OptionsKey(const MatchStageOptions& o) {
-  const auto& m = o.match;
-  const auto& v = o.verify;
-  return nlohmann::json{FMV3D_VERSION,
-                        m.ratio,
-                        m.mutual,
-                        static_cast<int>(m.type),
-                        m.flann_trees,
-                        m.flann_checks,
-                        m.brute_force_max_product,
-                        m.seed,
-                        v.max_error_px,
-                        v.confidence,
-                        v.max_iterations,
-                        v.min_inliers,
-                        v.min_E_F_inlier_ratio,
-                        v.max_H_inlier_ratio,
-                        v.refine,
-                        v.seed}
-      .dump();
-}
-
 std::vector<std::string> FrameKeys(const core::Workspace& ws, const io::FramesIndex& index, const LoadedFeatures& in) {
   std::vector<std::string> keys(index.frames.size());
   tbb::parallel_for(size_t{0}, keys.size(), [&](size_t i) {
@@ -483,7 +460,7 @@ MatchStageStats RunMatchStage(const core::Workspace& ws, const MatchStageOptions
 
   nlohmann::json per_pair;
   size_t total_inliers = 0;
-  const ResultKeys keys{OptionsKey(options), FrameKeys(ws, index, in)};
+  const ResultKeys keys{OptionsKey(options.match, options.verify), FrameKeys(ws, index, in)};
   std::vector<VerifiedPair> kept;
   {
     const AutomaticMatches previous = options.reuse ? ReadAutomaticMatches(ws.matches_dir()) : AutomaticMatches{};
