@@ -35,6 +35,8 @@ void Add(CLI::App& app) {
   cmd->add_option("--self-cal-delta-chi2", m.self_calibration_min_delta_chi2,
                   "Self-calibration tests: fixed chi-square gain needed to free a parameter (0: BIC's k ln n)")
       ->capture_default_str();
+  cmd->add_flag("--self-cal-aspect", m.self_calibrate_aspect,
+                "Also test freeing the pixel aspect (fx/fy) by the nested-model test, after the principal point");
   cmd->add_flag("!--keep-two-view-tracks", m.tri_ignore_two_view_tracks,
                 "Also triangulate matches seen in two images only (no third image can observe them)");
   cmd->add_flag("--tangential", m.refine_tangential, "Also refine p1, p2");

@@ -50,6 +50,12 @@ TEST(IncrementalMapper, OrbitSelfCalibratesFocalAndDistortion) {
   EXPECT_NEAR(rec.cameras.begin()->second.k1, so.k1, 0.01);  // k2 (truth 0) is free and trades with k1
   EXPECT_LE(rec.MeanReprojectionError(), 0.9);               // ≈ the 0.5 px noise (mean of |2D noise| is 0.63 px)
   EXPECT_TRUE(out.result.left_out.empty());
+  // The tracks against the union–find tracks of the matches (10% of them wrong): the model's figure is COLMAP's
+  // (observations / points), and it holds nearly every keypoint of the tracks it touches.
+  const auto& tracks = out.result.stats.at("tracks");
+  EXPECT_DOUBLE_EQ(tracks.at("model_mean_track_length").get<double>(), rec.MeanTrackLength());
+  const double held = tracks.at("keypoints_of_touched_tracks_held").get<double>();
+  EXPECT_GE(held, 0.9 * tracks.at("keypoints_of_touched_tracks").get<double>());
   rec.Validate();
 }
 

@@ -24,6 +24,8 @@ nlohmann::json SparseEvaluation::ToJson() const {
           {"max_centre_error_percent_of_extent", 100 * max_centre_error_fraction},
           {"median_relative_rotation_error_deg", median_rotation_error_deg},
           {"focal_relative_error_percent", 100 * focal_relative_error},
+          {"focal_definition", "f = fy (vertical focal, pixels); fx = f * aspect"},
+          {"focal_x_relative_error_percent", 100 * focal_x_relative_error},
           {"principal_point_error_px", principal_point_error_px},
           {"systematic_rotation_error_deg",
            {systematic_rotation_deg.x(), systematic_rotation_deg.y(), systematic_rotation_deg.z()}},
@@ -96,6 +98,8 @@ SparseEvaluation EvaluateSparse(const core::Reconstruction& estimate, const core
     if (ft > 0) ev.focal_relative_error = std::max(ev.focal_relative_error, std::abs(fe - ft) / ft);
     const auto& ce = estimate.cameras.at(ours);
     const auto& ct = truth.cameras.at(theirs);
+    if (ct.fx() > 0)
+      ev.focal_x_relative_error = std::max(ev.focal_x_relative_error, std::abs(ce.fx() - ct.fx()) / ct.fx());
     ev.principal_point_error_px = std::max(ev.principal_point_error_px, std::hypot(ce.u0 - ct.u0, ce.v0 - ct.v0));
   }
   return ev;

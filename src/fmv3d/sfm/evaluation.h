@@ -25,7 +25,9 @@ struct SparseEvaluation {
   double centre_rmse_fraction = 0;  // centre_rmse / extent
   double median_rotation_error_deg = 0;
   double max_centre_error_fraction = 0;
-  double focal_relative_error = 0;      // worst over matched cameras
+  // Worst over matched cameras, of the focal f (the vertical one, fy; fx = f·aspect) and of fx: with the aspect
+  // held at 1 the estimate's single focal is compared with the truth's fy.
+  double focal_relative_error = 0, focal_x_relative_error = 0;
   double principal_point_error_px = 0;  // worst over matched cameras: distance between the principal points
   Eigen::Vector3d systematic_rotation_deg = Eigen::Vector3d::Zero();  // see ToJson
   core::Sim3 alignment;                                               // ours → truth

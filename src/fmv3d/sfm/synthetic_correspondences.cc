@@ -10,7 +10,7 @@
 namespace fmv3d::sfm {
 
 SyntheticScene MakeSyntheticScene(const SyntheticSceneOptions& o) {
-  if (o.num_cameras < 2 || o.num_points < 1 || o.width < 16 || o.height < 16 || !(o.focal > 0))
+  if (o.num_cameras < 2 || o.num_points < 1 || o.width < 16 || o.height < 16 || !(o.focal > 0) || !(o.aspect > 0))
     throw Error("synthetic scene: invalid options");
   std::mt19937_64 rng(o.seed);
   std::uniform_real_distribution<double> uni(0, 1);
@@ -19,6 +19,7 @@ SyntheticScene MakeSyntheticScene(const SyntheticSceneOptions& o) {
   core::Camera cam = core::Camera::Pinhole(o.width, o.height, o.focal);
   cam.u0 += o.u0_offset;
   cam.v0 += o.v0_offset;
+  cam.aspect = o.aspect;
   cam.k1 = o.k1;
   cam.k2 = o.k2;
   scene.truth.cameras[1] = cam;

@@ -19,6 +19,7 @@ struct SyntheticSceneOptions {
   double focal = 1000;  // true focal (pixels)
   double k1 = -0.08, k2 = 0;
   double u0_offset = 0, v0_offset = 0;  // true principal point minus the image centre
+  double aspect = 1;                    // true pixel aspect s_u (fx = focal · aspect)
   double noise_px = 0.5;
   double outlier_ratio = 0.1;       // fraction of each pair's matches replaced by wrong ones
   double clutter_ratio = 0.1;       // extra unmatched keypoints per image
