@@ -110,14 +110,14 @@ PntsTile DecodePnts(const std::string& bytes) {
   const char* pos = section("POSITION", 12);
   if (!pos) throw Error("pnts: no POSITION");
   t.positions.resize(n);
-  std::memcpy(t.positions.data(), pos, n * 12);
+  if (n > 0) std::memcpy(t.positions.data(), pos, n * 12);  // an empty vector's data() may be null
   if (const char* nor = section("NORMAL", 12)) {
     t.normals.resize(n);
-    std::memcpy(t.normals.data(), nor, n * 12);
+    if (n > 0) std::memcpy(t.normals.data(), nor, n * 12);
   }
   if (const char* rgb = section("RGB", 3)) {
     t.colors.resize(n);
-    std::memcpy(t.colors.data(), rgb, n * 3);
+    if (n > 0) std::memcpy(t.colors.data(), rgb, n * 3);
   }
   if (bt_json > 0) {
     const size_t bt_at = kHeader + ft_json + ft_bin;
@@ -142,7 +142,7 @@ PntsTile DecodePnts(const std::string& bytes) {
       const size_t off = v["byteOffset"].get<size_t>();
       if (off > bt_bin || n > (bt_bin - off) / 4) throw Error("pnts: batch table 'sigma' out of range");
       t.sigma.resize(n);
-      std::memcpy(t.sigma.data(), bytes.data() + bt_at + bt_json + off, n * 4);
+      if (n > 0) std::memcpy(t.sigma.data(), bytes.data() + bt_at + bt_json + off, n * 4);
     }
   }
   if (ft.contains("RTC_CENTER")) {
