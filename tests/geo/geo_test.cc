@@ -1,3 +1,5 @@
+// One file (~900 lines) on purpose: the georef cases share one synthetic-model builder (GeorefCase) and the DSM
+// cases the GDAL read-back helpers; split, the parts would each compile the Open3D and GDAL headers again in CI.
 // geo/: PROJ frames against the independent closed-form geodesy of synth/, the robust georeference on
 // synthetic models with known similarities (noise, an outlier, a straight track), DSM / orthophoto rasters on
 // a known mesh, GeoTIFF and LAS read back.
