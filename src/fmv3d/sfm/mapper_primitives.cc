@@ -2,6 +2,9 @@
 
 #include <algorithm>
 #include <cmath>
+#include <map>
+#include <utility>
+#include <vector>
 
 #include "fmv3d/geometry/triangulation.h"
 #include "fmv3d/sfm/bundle_adjustment.h"
@@ -31,6 +34,21 @@ void DeletePoint(core::Reconstruction* rec, uint64_t point_id) {
   if (it == rec->points.end()) return;
   for (const auto& el : it->second.track) rec->images.at(el.image_id).point3d_ids[el.point2d_idx] = core::kNoPoint3D;
   rec->points.erase(it);
+}
+
+std::vector<uint32_t> ImagesSharingMostPoints(const core::Reconstruction& rec, uint32_t image_id, int k) {
+  std::map<uint32_t, int> shared;
+  for (int64_t pid : rec.images.at(image_id).point3d_ids) {
+    if (pid == core::kNoPoint3D) continue;
+    for (const auto& el : rec.points.at(static_cast<uint64_t>(pid)).track)
+      if (el.image_id != image_id) ++shared[el.image_id];
+  }
+  std::vector<std::pair<int, uint32_t>> order;
+  for (const auto& [id, n] : shared) order.emplace_back(-n, id);
+  std::sort(order.begin(), order.end());
+  std::vector<uint32_t> out;
+  for (size_t i = 0; i < order.size() && static_cast<int>(i) < k; ++i) out.push_back(order[i].second);
+  return out;
 }
 
 void DetachImage(core::Reconstruction* rec, uint32_t image_id) {

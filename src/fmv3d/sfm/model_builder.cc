@@ -104,7 +104,7 @@ bool ModelBuilder::TryRegister(uint32_t image_id) {
 // A fresh absolute pose over all its correspondences finds them: when it is a different pose and explains
 // clearly more correspondences than the current one (same pixel threshold for both: 1.5x + 20), the image is
 // re-registered there (its observations dropped, the new inliers added, then triangulated).
-int ModelBuilder::RelocaliseImages() {
+int ModelBuilder::ReRegisterWrongPoses() {
   const auto start = Clock::now();
   Eigen::AlignedBox3d box;
   for (const auto& [id, im] : rec_.images) box.extend(im.pose.Centre());
@@ -158,20 +158,11 @@ int ModelBuilder::RelocaliseImages() {
 
 void ModelBuilder::LocalBundleAdjust(uint32_t image_id) {
   const auto start = Clock::now();
-  // Neighbours: the registered images sharing most points with the new one.
-  std::map<uint32_t, int> shared;
-  for (int64_t pid : rec_.images.at(image_id).point3d_ids) {
-    if (pid == core::kNoPoint3D) continue;
-    for (const auto& el : rec_.points.at(static_cast<uint64_t>(pid)).track)
-      if (el.image_id != image_id) ++shared[el.image_id];
-  }
-  std::vector<std::pair<int, uint32_t>> order;
-  for (const auto& [id, n] : shared) order.emplace_back(-n, id);
-  std::sort(order.begin(), order.end());
   BundleAdjustmentConfig cfg = NewBaConfig();
   cfg.variable_images.insert(image_id);
-  for (size_t i = 0; i < order.size() && static_cast<int>(i) < opt_.local_ba_num_images - 1; ++i)
-    cfg.variable_images.insert(order[i].second);
+  // Neighbours: the registered images sharing most points with the new one.
+  for (uint32_t id : ImagesSharingMostPoints(rec_, image_id, opt_.local_ba_num_images - 1))
+    cfg.variable_images.insert(id);
   cfg.constant_images.insert(gauge1_);  // the gauge image never moves, so the frame stays put
   cfg.gauge_image1 = gauge1_;
   cfg.gauge_image2 = gauge2_;
@@ -268,7 +259,7 @@ void ModelBuilder::Grow() {
   }
   // Final polish: retriangulate with the refined cameras, then a tight global BA.
   GlobalBundleAdjust(false);
-  if (opt_.relocalise && (num_relocalised_ = RelocaliseImages()) > 0) GlobalBundleAdjust(false);
+  if (opt_.relocalise && (num_relocalised_ = ReRegisterWrongPoses()) > 0) GlobalBundleAdjust(false);
   Retriangulate();
   GlobalBundleAdjust(true);
   if (static_cast<int>(rec_.images.size()) >= opt_.refine_principal_point_min_images) {

@@ -93,8 +93,8 @@ class ModelBuilder {
  private:
   // Initialisation (mapper_initial_pair.cc).
   void ChooseFocal(const std::vector<InitialPairCandidate>& cands);
-  void DollyZoomFocalScan();
   bool TryInitialPair(const InitialPairCandidate& c);
+  // Growth (model_builder.cc).
   void AddImage(uint32_t id, const core::Pose& pose);
   GrowthStep RegisterNextImage();
   // Timed wrappers of the primitives (mapper_primitives.h, triangulator.h) with this model's thresholds.
@@ -113,7 +113,8 @@ class ModelBuilder {
     cfg.observation_weight = input_.manual_weight;
     return cfg;
   }
-  int RelocaliseImages();
+  // Images sitting at a wrong pose moved to one that explains clearly more correspondences; returns how many.
+  int ReRegisterWrongPoses();
   void LocalBundleAdjust(uint32_t image_id);
   BundleAdjustmentSummary GlobalBundleAdjust(bool final_pass);
   // After an image was registered: whether the model has grown enough for an intermediate global adjustment
@@ -128,6 +129,8 @@ class ModelBuilder {
     const size_t remaining = pool_.size() - n;
     return remaining >= (opt_.global_ba_growth_ratio - 1) * n;
   }
+  // Calibration (mapper_calibration.cc). The telephoto dolly-zoom focal scan (dolly_zoom_scan.h).
+  void DollyZoomFocalScan();
   // The final nested-model test of one intrinsic group (self_calibration.h); true when it was freed.
   bool TrySelfCalibration(IntrinsicGroup group);
   // The final tests of the radial terms refined through growth, against the prior's values (k2, then k1 when k2

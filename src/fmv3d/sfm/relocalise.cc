@@ -13,6 +13,7 @@
 #include "fmv3d/features/matcher.h"
 #include "fmv3d/geometry/triangulation.h"
 #include "fmv3d/sfm/bundle_adjustment.h"
+#include "fmv3d/sfm/mapper_primitives.h"
 
 namespace fmv3d::sfm {
 
@@ -69,22 +70,6 @@ double ReprojectionError(const core::Reconstruction& rec, const core::Image& im,
   return (rec.cameras.at(im.camera_id).Project(xc) - uv).norm();
 }
 
-// Registered images sharing the most points with `image_id`, most first.
-std::vector<uint32_t> Neighbours(const core::Reconstruction& rec, uint32_t image_id, int k) {
-  std::map<uint32_t, int> shared;
-  for (int64_t pid : rec.images.at(image_id).point3d_ids) {
-    if (pid == core::kNoPoint3D) continue;
-    for (const auto& el : rec.points.at(static_cast<uint64_t>(pid)).track)
-      if (el.image_id != image_id) ++shared[el.image_id];
-  }
-  std::vector<std::pair<int, uint32_t>> v;
-  for (const auto& [id, n] : shared) v.emplace_back(-n, id);
-  std::sort(v.begin(), v.end());
-  std::vector<uint32_t> out;
-  for (size_t i = 0; i < v.size() && static_cast<int>(i) < k; ++i) out.push_back(v[i].second);
-  return out;
-}
-
 // Depth range of the points an image observes (5th–95th percentile, widened), for the guided search.
 bool DepthRange(const core::Reconstruction& rec, uint32_t image_id, double* lo, double* hi) {
   std::vector<double> z;
@@ -111,12 +96,6 @@ int RemoveObservation(core::Reconstruction* rec, uint64_t pid, uint32_t image_id
     }
   }
   return removed;
-}
-
-void DeletePoint(core::Reconstruction* rec, uint64_t pid) {
-  for (const auto& el : rec->points.at(pid).track)
-    rec->images.at(el.image_id).point3d_ids[el.point2d_idx] = core::kNoPoint3D;
-  rec->points.erase(pid);
 }
 
 // Drops observations above max_error_px and points left with fewer than two; returns observations dropped.
@@ -358,7 +337,7 @@ int TriangulateWithNeighbours(core::Reconstruction* rec, uint32_t id,
   double lo = 0, hi = 0;
   if (!DepthRange(*rec, id, &lo, &hi)) return 0;
   int added = 0;
-  for (uint32_t nb : Neighbours(*rec, id, o.guided_neighbours)) {
+  for (uint32_t nb : ImagesSharingMostPoints(*rec, id, o.guided_neighbours)) {
     const auto matches =
         GuidedMatches(*rec, id, nb, *feats.at(id), *feats.at(nb), lo, hi, o.guided_max_epipolar_px, o.guided_ratio);
     const auto& im1 = rec->images.at(id);
