@@ -160,7 +160,7 @@ bool RefineFundamental(const Points2& x1, const Points2& x2, Eigen::Matrix3d* F)
   Eigen::Matrix3d U = svd.matrixU(), V = svd.matrixV();
   if (U.determinant() < 0) U = -U;  // F's overall sign is irrelevant: flip both to stay in SO(3)
   if (V.determinant() < 0) V = -V;
-  const Eigen::Vector3d sv = svd.singularValues();
+  const Eigen::Vector3d& sv = svd.singularValues();
   if (!(sv(0) > 0)) return false;
   double s = sv(1) / sv(0);
 

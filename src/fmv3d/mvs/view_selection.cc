@@ -15,7 +15,7 @@ constexpr double kDeg = M_PI / 180.0;
 
 double Percentile(std::vector<double> v, double q) {
   if (v.empty()) return 0;
-  const size_t k = std::min(v.size() - 1, static_cast<size_t>(q * (v.size() - 1) + 0.5));
+  const size_t k = std::min(v.size() - 1, static_cast<size_t>(std::floor(q * (v.size() - 1) + 0.5)));
   std::nth_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(k), v.end());
   return v[k];
 }
@@ -253,6 +253,7 @@ std::map<uint32_t, ReferenceSelection> SelectViews(const core::Reconstruction& r
                                                    const ViewSelectionOptions& options) {
   options.Check();
   std::vector<uint32_t> ids;
+  ids.reserve(geoms.size());
   for (const auto& [id, g] : geoms) ids.push_back(id);
   // Sparse points observed by each image.
   std::map<uint32_t, std::vector<const core::Point3D*>> observed;

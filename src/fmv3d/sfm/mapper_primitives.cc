@@ -44,6 +44,7 @@ std::vector<uint32_t> ImagesSharingMostPoints(const core::Reconstruction& rec, u
       if (el.image_id != image_id) ++shared[el.image_id];
   }
   std::vector<std::pair<int, uint32_t>> order;
+  order.reserve(shared.size());
   for (const auto& [id, n] : shared) order.emplace_back(-n, id);
   std::sort(order.begin(), order.end());
   std::vector<uint32_t> out;
@@ -53,14 +54,14 @@ std::vector<uint32_t> ImagesSharingMostPoints(const core::Reconstruction& rec, u
 
 void DetachImage(core::Reconstruction* rec, uint32_t image_id) {
   auto& im = rec->images.at(image_id);
-  for (uint32_t kp = 0; kp < im.point3d_ids.size(); ++kp) {
-    const int64_t pid = im.point3d_ids[kp];
+  for (int64_t& point_of_kp : im.point3d_ids) {
+    const int64_t pid = point_of_kp;
     if (pid == core::kNoPoint3D) continue;
     auto& track = rec->points.at(static_cast<uint64_t>(pid)).track;
     track.erase(std::remove_if(track.begin(), track.end(),
                                [&](const core::TrackElement& el) { return el.image_id == image_id; }),
                 track.end());
-    im.point3d_ids[kp] = core::kNoPoint3D;
+    point_of_kp = core::kNoPoint3D;
     if (track.size() < 2) DeletePoint(rec, static_cast<uint64_t>(pid));
   }
 }

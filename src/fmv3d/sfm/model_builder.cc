@@ -196,7 +196,7 @@ BundleAdjustmentSummary ModelBuilder::GlobalBundleAdjust(bool final_pass) {
     o.function_tolerance = opt_.final_ba_function_tolerance;
     o.max_iterations = opt_.final_ba_max_iterations;
   }
-  const auto s = BundleAdjust(&rec_, cfg, o);
+  BundleAdjustmentSummary s = BundleAdjust(&rec_, cfg, o);
   ++num_global_ba_;
   t_->global_ba += Seconds(start);
   spdlog::debug("global BA ({} images, {} points): rms {:.3f} → {:.3f} px in {} iterations, {:.2f} s",

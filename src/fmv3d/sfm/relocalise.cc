@@ -228,6 +228,7 @@ std::vector<features::FeatureMatch> GuidedMatches(const core::Reconstruction& re
     if (it == by_b.end() || raw_dist[i] < raw_dist[it->second]) by_b[raw[i].idx2] = i;
   }
   std::vector<features::FeatureMatch> out;
+  out.reserve(by_b.size());
   for (const auto& [b, i] : by_b) out.push_back(raw[i]);
   std::sort(out.begin(), out.end(), [](const auto& x, const auto& y) { return x.idx1 < y.idx1; });
   return out;

@@ -169,7 +169,7 @@ SyntheticScene MakeSyntheticScene(const SyntheticSceneOptions& o) {
   }
   for (int i = 0; i < o.num_points; ++i) {
     core::Point3D p;
-    p.id = static_cast<uint64_t>(i + 1);
+    p.id = static_cast<uint64_t>(i) + 1;
     p.xyz = pts.X[i];
     scene.truth.points[p.id] = p;
   }
