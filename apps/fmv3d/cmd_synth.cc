@@ -10,7 +10,10 @@
 
 #include <cmath>
 #include <iostream>
+#include <memory>
 #include <sstream>
+#include <string>
+#include <vector>
 
 #include "command.h"
 #include "fmv3d/core/error.h"
@@ -71,6 +74,146 @@ const CLI::Validator kList3(
     },
     "X,Y,Z");
 
+// What the command line binds: SynthOptions' own fields directly, the rest as given (parsed by ToSynthOptions),
+// and the options whose presence matters.
+struct SynthFlags {
+  synth::SynthOptions o;
+  std::string size = "1280x720", distortion, look_at, grid_overlap, geo_origin = "38.16,-77.35,60", output;
+  double focal = 0, altitude = 0, radius = 0;
+  std::vector<double> principal;
+  std::vector<std::string> degrade;
+  CLI::Option *focal_opt = nullptr, *alt_opt = nullptr, *rad_opt = nullptr, *format_opt = nullptr;
+  CLI::Option *klv_opt = nullptr, *exif_opt = nullptr, *gpmf_opt = nullptr;
+};
+
+// Scene, flight path and camera.
+void AddFlightOptions(CLI::App* cmd, SynthFlags* f) {
+  cmd->add_option("--scene", f->o.scene, "Scene: building | town | terrain | board | sand")
+      ->check(CLI::IsMember(synth::SceneNames()))
+      ->capture_default_str();
+  cmd->add_option("--path", f->o.flight.path, "Flight path: orbit | grid | pass | oblique")
+      ->check(CLI::IsMember({"orbit", "grid", "pass", "oblique"}))
+      ->capture_default_str();
+  cmd->add_option("--frames", f->o.flight.frames, "Number of frames")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
+  cmd->add_option("--size", f->size, "Image size WIDTHxHEIGHT")->check(kSize)->capture_default_str();
+  f->focal_opt = cmd->add_option("--focal", f->focal, "Focal length, pixels (default: 60 deg horizontal FOV)")
+                     ->check(CLI::PositiveNumber);
+  f->alt_opt = cmd->add_option("--altitude", f->altitude, "Flight altitude, metres (world z; default per scene)");
+  f->rad_opt = cmd->add_option("--radius", f->radius,
+                               "Orbit radius / grid half-size / pass stand-off, metres (default per scene)")
+                   ->check(CLI::PositiveNumber);
+  cmd->add_option("--overlap", f->grid_overlap,
+                  "Grid: forward,side overlap in percent (e.g. 70,40; default: the "
+                  "--radius layout, ~65% side)");
+  cmd->add_option("--look-at", f->look_at, "Look-at point X,Y,Z in metres (default: the scene's target)")
+      ->check(kList3);
+  cmd->add_option("--distortion", f->distortion, "Lens distortion k1,k2,p1,p2 (default none)")->check(kList4);
+  cmd->add_option("--principal-offset", f->principal,
+                  "Principal point minus the image centre DU,DV, pixels (default 0,0)")
+      ->delimiter(',')
+      ->expected(2);
+}
+
+// Rendering, jitter, output format and the truth written beside the frames.
+void AddRenderOptions(CLI::App* cmd, SynthFlags* f) {
+  cmd->add_option("--sun-azimuth", f->o.render.sun_azimuth_deg, "Sun azimuth, degrees clockwise from north (+y)")
+      ->capture_default_str();
+  cmd->add_option("--sun-elevation", f->o.render.sun_elevation_deg, "Sun elevation, degrees")
+      ->check(CLI::Range(-89.0, 90.0))
+      ->capture_default_str();
+  cmd->add_option("--exposure", f->o.render.exposure, "Exposure gain")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
+  cmd->add_option("--noise", f->o.render.noise_sigma, "Sensor noise sigma, digital numbers")
+      ->check(CLI::NonNegativeNumber)
+      ->capture_default_str();
+  cmd->add_option("--supersample", f->o.render.supersample, "Anti-aliasing samples per pixel axis (1-4)")
+      ->check(CLI::Range(1, 4))
+      ->capture_default_str();
+  cmd->add_option("--altitude-swing", f->o.flight.altitude_swing,
+                  "Orbit: altitude varies by +- this (metres) twice around the circle")
+      ->check(CLI::NonNegativeNumber)
+      ->capture_default_str();
+  cmd->add_option("--jitter", f->o.flight.jitter_deg, "Gimbal attitude jitter, degrees (1 sigma)")
+      ->check(CLI::Range(0.0, 19.0))
+      ->capture_default_str();
+  cmd->add_option("--seed", f->o.flight.seed, "Seed for the flight jitter and sensor noise")->capture_default_str();
+  f->format_opt = cmd->add_option("--format", f->o.format, "Output: png | jpg | mp4 | ts")
+                      ->check(CLI::IsMember({"png", "jpg", "mp4", "ts"}))
+                      ->capture_default_str();
+  cmd->add_option("--fps", f->o.fps, "Frame rate (video and truth.json)")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
+  cmd->add_option("--detail", f->o.detail, "Scene texture resolution multiplier (0-4]")
+      ->check(CLI::Range(0.01, 4.0))
+      ->capture_default_str();
+  cmd->add_option("--truth-points", f->o.truth_points, "Surface points sampled for truth/points3D.txt")
+      ->check(CLI::NonNegativeNumber)
+      ->capture_default_str();
+  cmd->add_flag("--depth", f->o.write_depth, "Also write float depth maps to DIR/depth/");
+}
+
+// Telemetry embedded in the frames or video, and its noise.
+void AddTelemetryOptions(CLI::App* cmd, SynthFlags* f) {
+  f->klv_opt = cmd->add_flag("--klv", f->o.klv,
+                             "Write flight.ts with a MISB ST 0601 KLV telemetry stream (implies --format ts)");
+  f->exif_opt = cmd->add_flag("--exif-gps", f->o.exif_gps,
+                              "JPEG frames with EXIF GPS and DJI-style XMP attitude/altitudes (implies --format jpg)");
+  f->gpmf_opt = cmd->add_flag("--gpmf", f->o.gpmf,
+                              "Write flight.mp4 with a GoPro GPMF track: GPS5 + CORI (implies --format mp4)");
+  cmd->add_flag("--gps9", f->o.gpmf_gps9, "With --gpmf: GPS9 fixes instead of GPS5");
+  cmd->add_option("--geo-origin", f->geo_origin, "With --klv: WGS84 LAT,LON,ALT of the world origin (ellipsoidal m)")
+      ->check(kList3)
+      ->capture_default_str();
+  cmd->add_option("--gps-noise", f->o.klv_options.gps_noise,
+                  "With --klv: GPS position noise, metres (1 sigma per axis)")
+      ->check(CLI::Range(0.0, 1000.0))
+      ->capture_default_str();
+  cmd->add_option("--attitude-noise", f->o.klv_options.attitude_noise,
+                  "With --klv: platform heading/pitch/roll noise, degrees (1 sigma)")
+      ->check(CLI::Range(0.0, 30.0))
+      ->capture_default_str();
+}
+
+synth::SynthOptions ToSynthOptions(const SynthFlags& f) {
+  synth::SynthOptions opts = f.o;
+  std::sscanf(f.size.c_str(), "%d%*c%d", &opts.width, &opts.height);
+  if (f.focal_opt->count()) opts.focal = f.focal;
+  for (const auto& spec : f.degrade)
+    for (const auto& d : synth::ParseDegradation(spec)) opts.degrade.push_back(d);
+  if (f.alt_opt->count()) opts.flight.altitude = f.altitude;
+  if (f.rad_opt->count()) opts.flight.radius = f.radius;
+  if (!f.distortion.empty()) {
+    const auto d = ParseList(f.distortion);
+    std::copy(d.begin(), d.end(), opts.distortion.begin());
+  }
+  if (!f.grid_overlap.empty()) {
+    const auto v = ParseList(f.grid_overlap);
+    if (v.size() != 2) throw Error("--overlap: expected FORWARD,SIDE in percent, e.g. 70,40");
+    opts.flight.grid_overlap = std::make_pair(v[0] / 100, v[1] / 100);
+  }
+  if (!f.principal.empty()) opts.principal_offset = {f.principal[0], f.principal[1]};
+  if (!f.look_at.empty()) {
+    const auto p = ParseList(f.look_at);
+    opts.flight.look_at = Eigen::Vector3d(p[0], p[1], p[2]);
+  }
+  if (f.klv_opt->count() || f.exif_opt->count() || f.gpmf_opt->count()) {
+    const auto g = ParseList(f.geo_origin);
+    opts.klv_options.origin = {g[0], g[1], g[2]};
+    // Heights above mean sea level (tags 15, 25) differ from ellipsoidal ones (75, 78) by the geoid there.
+    if (std::abs(g[0]) <= 90 && std::abs(g[1]) <= 180) {
+      const auto n = geo::GeoidUndulation(g[0], g[1]);
+      if (!n) spdlog::warn("synth: PROJ's EGM96 grid (egm96_15.gtx) is missing; KLV heights MSL = ellipsoidal");
+      opts.klv_options.geoid_undulation = n.value_or(0.0);
+    }
+    if (!f.format_opt->count()) opts.format = f.klv_opt->count() ? "ts" : f.exif_opt->count() ? "jpg" : "mp4";
+  }
+  opts.output = f.output;
+  return opts;
+}
+
 void Add(CLI::App& app) {
   auto* cmd = app.add_subcommand("synth", "Render a synthetic flight with exact ground truth");
   cmd->footer(
@@ -89,131 +232,17 @@ void Add(CLI::App& app) {
       "absolute/relative altitude); --gpmf writes flight.mp4 with a GoPro GPMF track (GPS5, or GPS9 with --gps9,\n"
       "one fix per frame, ellipsoidal heights; CORI relative orientations). Same noise options as --klv.\n"
       "A --scene is a fixed world; --seed varies only the flight's jitter and the sensor noise.");
-  auto o = std::make_shared<synth::SynthOptions>();
-  auto size = std::make_shared<std::string>("1280x720");
-  auto distortion = std::make_shared<std::string>();
-  auto look_at = std::make_shared<std::string>();
-  auto focal = std::make_shared<double>(0);
-  auto altitude = std::make_shared<double>(0);
-  auto radius = std::make_shared<double>(0);
-  auto output = std::make_shared<std::string>();
-  cmd->add_option("--scene", o->scene, "Scene: building | town | terrain | board | sand")
-      ->check(CLI::IsMember(synth::SceneNames()))
-      ->capture_default_str();
-  cmd->add_option("--path", o->flight.path, "Flight path: orbit | grid | pass | oblique")
-      ->check(CLI::IsMember({"orbit", "grid", "pass", "oblique"}))
-      ->capture_default_str();
-  cmd->add_option("--frames", o->flight.frames, "Number of frames")->check(CLI::PositiveNumber)->capture_default_str();
-  cmd->add_option("--size", *size, "Image size WIDTHxHEIGHT")->check(kSize)->capture_default_str();
-  auto* focal_opt = cmd->add_option("--focal", *focal, "Focal length, pixels (default: 60 deg horizontal FOV)")
-                        ->check(CLI::PositiveNumber);
-  auto* alt_opt = cmd->add_option("--altitude", *altitude, "Flight altitude, metres (world z; default per scene)");
-  auto* rad_opt =
-      cmd->add_option("--radius", *radius, "Orbit radius / grid half-size / pass stand-off, metres (default per scene)")
-          ->check(CLI::PositiveNumber);
-  auto grid_overlap = std::make_shared<std::string>();
-  cmd->add_option("--overlap", *grid_overlap,
-                  "Grid: forward,side overlap in percent (e.g. 70,40; default: the "
-                  "--radius layout, ~65% side)");
-  cmd->add_option("--look-at", *look_at, "Look-at point X,Y,Z in metres (default: the scene's target)")->check(kList3);
-  cmd->add_option("--distortion", *distortion, "Lens distortion k1,k2,p1,p2 (default none)")->check(kList4);
-  auto principal = std::make_shared<std::vector<double>>();
-  cmd->add_option("--principal-offset", *principal,
-                  "Principal point minus the image centre DU,DV, pixels (default 0,0)")
-      ->delimiter(',')
-      ->expected(2);
-  cmd->add_option("--sun-azimuth", o->render.sun_azimuth_deg, "Sun azimuth, degrees clockwise from north (+y)")
-      ->capture_default_str();
-  cmd->add_option("--sun-elevation", o->render.sun_elevation_deg, "Sun elevation, degrees")
-      ->check(CLI::Range(-89.0, 90.0))
-      ->capture_default_str();
-  cmd->add_option("--exposure", o->render.exposure, "Exposure gain")->check(CLI::PositiveNumber)->capture_default_str();
-  cmd->add_option("--noise", o->render.noise_sigma, "Sensor noise sigma, digital numbers")
-      ->check(CLI::NonNegativeNumber)
-      ->capture_default_str();
-  cmd->add_option("--supersample", o->render.supersample, "Anti-aliasing samples per pixel axis (1-4)")
-      ->check(CLI::Range(1, 4))
-      ->capture_default_str();
-  cmd->add_option("--altitude-swing", o->flight.altitude_swing,
-                  "Orbit: altitude varies by +- this (metres) twice around the circle")
-      ->check(CLI::NonNegativeNumber)
-      ->capture_default_str();
-  cmd->add_option("--jitter", o->flight.jitter_deg, "Gimbal attitude jitter, degrees (1 sigma)")
-      ->check(CLI::Range(0.0, 19.0))
-      ->capture_default_str();
-  cmd->add_option("--seed", o->flight.seed, "Seed for the flight jitter and sensor noise")->capture_default_str();
-  auto* format_opt = cmd->add_option("--format", o->format, "Output: png | jpg | mp4 | ts")
-                         ->check(CLI::IsMember({"png", "jpg", "mp4", "ts"}))
-                         ->capture_default_str();
-  cmd->add_option("--fps", o->fps, "Frame rate (video and truth.json)")
-      ->check(CLI::PositiveNumber)
-      ->capture_default_str();
-  cmd->add_option("--detail", o->detail, "Scene texture resolution multiplier (0-4]")
-      ->check(CLI::Range(0.01, 4.0))
-      ->capture_default_str();
-  cmd->add_option("--truth-points", o->truth_points, "Surface points sampled for truth/points3D.txt")
-      ->check(CLI::NonNegativeNumber)
-      ->capture_default_str();
-  cmd->add_flag("--depth", o->write_depth, "Also write float depth maps to DIR/depth/");
-  auto* klv_opt =
-      cmd->add_flag("--klv", o->klv, "Write flight.ts with a MISB ST 0601 KLV telemetry stream (implies --format ts)");
-  auto* exif_opt =
-      cmd->add_flag("--exif-gps", o->exif_gps,
-                    "JPEG frames with EXIF GPS and DJI-style XMP attitude/altitudes (implies --format jpg)");
-  auto* gpmf_opt =
-      cmd->add_flag("--gpmf", o->gpmf, "Write flight.mp4 with a GoPro GPMF track: GPS5 + CORI (implies --format mp4)");
-  cmd->add_flag("--gps9", o->gpmf_gps9, "With --gpmf: GPS9 fixes instead of GPS5");
-  auto geo_origin = std::make_shared<std::string>("38.16,-77.35,60");
-  cmd->add_option("--geo-origin", *geo_origin, "With --klv: WGS84 LAT,LON,ALT of the world origin (ellipsoidal m)")
-      ->check(kList3)
-      ->capture_default_str();
-  cmd->add_option("--gps-noise", o->klv_options.gps_noise, "With --klv: GPS position noise, metres (1 sigma per axis)")
-      ->check(CLI::Range(0.0, 1000.0))
-      ->capture_default_str();
-  cmd->add_option("--attitude-noise", o->klv_options.attitude_noise,
-                  "With --klv: platform heading/pitch/roll noise, degrees (1 sigma)")
-      ->check(CLI::Range(0.0, 30.0))
-      ->capture_default_str();
-  cmd->add_flag("!--no-scene", o->write_scene, "Do not write scene.obj and its textures");
-  auto degrade = std::make_shared<std::vector<std::string>>();
-  cmd->add_option("--degrade", *degrade,
+  auto f = std::make_shared<SynthFlags>();
+  AddFlightOptions(cmd, f.get());
+  AddRenderOptions(cmd, f.get());
+  AddTelemetryOptions(cmd, f.get());
+  cmd->add_flag("!--no-scene", f->o.write_scene, "Do not write scene.obj and its textures");
+  cmd->add_option("--degrade", f->degrade,
                   "Degrade frames so they cannot register automatically: FRAMES:KIND, e.g. 5,6:blur "
                   "(KIND: blur = heavy motion blur, contrast = 1% contrast, blank = texture-less patch); repeatable");
-  cmd->add_option("-o,--output", *output, "Output folder")->required();
-  cmd->callback([=] {
-    synth::SynthOptions opts = *o;
-    std::sscanf(size->c_str(), "%d%*c%d", &opts.width, &opts.height);
-    if (focal_opt->count()) opts.focal = *focal;
-    for (const auto& spec : *degrade)
-      for (const auto& d : synth::ParseDegradation(spec)) opts.degrade.push_back(d);
-    if (alt_opt->count()) opts.flight.altitude = *altitude;
-    if (rad_opt->count()) opts.flight.radius = *radius;
-    if (!distortion->empty()) {
-      const auto d = ParseList(*distortion);
-      std::copy(d.begin(), d.end(), opts.distortion.begin());
-    }
-    if (!grid_overlap->empty()) {
-      const auto v = ParseList(*grid_overlap);
-      if (v.size() != 2) throw Error("--overlap: expected FORWARD,SIDE in percent, e.g. 70,40");
-      opts.flight.grid_overlap = std::make_pair(v[0] / 100, v[1] / 100);
-    }
-    if (!principal->empty()) opts.principal_offset = {(*principal)[0], (*principal)[1]};
-    if (!look_at->empty()) {
-      const auto p = ParseList(*look_at);
-      opts.flight.look_at = Eigen::Vector3d(p[0], p[1], p[2]);
-    }
-    if (klv_opt->count() || exif_opt->count() || gpmf_opt->count()) {
-      const auto g = ParseList(*geo_origin);
-      opts.klv_options.origin = {g[0], g[1], g[2]};
-      // Heights above mean sea level (tags 15, 25) differ from ellipsoidal ones (75, 78) by the geoid there.
-      if (std::abs(g[0]) <= 90 && std::abs(g[1]) <= 180) {
-        const auto n = geo::GeoidUndulation(g[0], g[1]);
-        if (!n) spdlog::warn("synth: PROJ's EGM96 grid (egm96_15.gtx) is missing; KLV heights MSL = ellipsoidal");
-        opts.klv_options.geoid_undulation = n.value_or(0.0);
-      }
-      if (!format_opt->count()) opts.format = klv_opt->count() ? "ts" : exif_opt->count() ? "jpg" : "mp4";
-    }
-    opts.output = *output;
+  cmd->add_option("-o,--output", f->output, "Output folder")->required();
+  cmd->callback([f] {
+    const synth::SynthOptions opts = ToSynthOptions(*f);
     const auto r = synth::RunSynth(opts);
     std::cout << "synth: " << r.frames << " frames of scene '" << opts.scene << "' in " << opts.output.string()
               << " (characteristic length " << r.characteristic_length << " m, " << r.truth.points.size()

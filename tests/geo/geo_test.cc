@@ -1,3 +1,5 @@
+// One file (~900 lines) on purpose: the georef cases share one synthetic-model builder (GeorefCase) and the DSM
+// cases the GDAL read-back helpers; split, the parts would each compile the Open3D and GDAL headers again in CI.
 // geo/: PROJ frames against the independent closed-form geodesy of synth/, the robust georeference on
 // synthetic models with known similarities (noise, an outlier, a straight track), DSM / orthophoto rasters on
 // a known mesh, GeoTIFF and LAS read back.
@@ -199,7 +201,8 @@ void MakeGeorefCase(GeorefCase* g, int n, double noise, bool straight, int outli
   for (int i = 0; i < 400; ++i) {
     core::Point3D pt;
     pt.id = i + 1;
-    const double y = -200 + 20.0 * (i / 20);
+    const int row = i / 20;
+    const double y = -200 + 20.0 * row;
     pt.xyz = g->true_to_model.Apply(
         Eigen::Vector3d(-200 + 20.0 * (i % 20), y, 0.5 * N(rng) + y * std::tan(ground_tilt_deg * M_PI / 180)));
     rec.points[pt.id] = pt;
@@ -723,7 +726,8 @@ TEST(Georef, ClearErrors) {
 // workspace georeferenced with a known similarity.
 void MakeDsmWorkspace(const test::TempDir& dir, const core::Sim3& enu_to_model) {
   open3d::geometry::TriangleMesh mesh;
-  auto quad = [&](Eigen::Vector3d a, Eigen::Vector3d b, Eigen::Vector3d c, Eigen::Vector3d d) {
+  auto quad = [&](const Eigen::Vector3d& a, const Eigen::Vector3d& b, const Eigen::Vector3d& c,
+                  const Eigen::Vector3d& d) {
     const int i = static_cast<int>(mesh.vertices_.size());
     for (const auto& v : {a, b, c, d}) mesh.vertices_.push_back(enu_to_model.Apply(v));
     mesh.triangles_.push_back({i, i + 1, i + 2});

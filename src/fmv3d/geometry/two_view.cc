@@ -160,7 +160,7 @@ bool RefineFundamental(const Points2& x1, const Points2& x2, Eigen::Matrix3d* F)
   Eigen::Matrix3d U = svd.matrixU(), V = svd.matrixV();
   if (U.determinant() < 0) U = -U;  // F's overall sign is irrelevant: flip both to stay in SO(3)
   if (V.determinant() < 0) V = -V;
-  const Eigen::Vector3d sv = svd.singularValues();
+  const Eigen::Vector3d& sv = svd.singularValues();
   if (!(sv(0) > 0)) return false;
   double s = sv(1) / sv(0);
 
@@ -295,6 +295,153 @@ double RotationAngle(const Eigen::Matrix3d& Ra, const Eigen::Matrix3d& Rb) {
   return 2 * std::asin(x);
 }
 
+namespace {
+
+// F: 8-point in USAC (OpenCV), then our normalised 8-point on all inliers + Sampson refinement. Sets F and its
+// inliers (over all correspondences) when USAC finds a model.
+void FitTwoViewF(const Points2& x1, const Points2& x2, const std::vector<cv::Point2d>& p1,
+                 const std::vector<cv::Point2d>& p2, double thr, const TwoViewOptions& options, TwoViewResult* res) {
+  const size_t n = x1.size();
+  const double thr_sq = thr * thr;
+  cv::Mat mask;
+  cv::Mat Fcv;
+  try {
+    Fcv = cv::findFundamentalMat(p1, p2, cv::USAC_FM_8PTS, thr, options.confidence, options.max_iterations, mask);
+  } catch (const cv::Exception&) {
+    Fcv.release();
+  }
+  if (Fcv.rows != 3 || Fcv.cols != 3) return;
+  Eigen::Matrix3d F;
+  cv::cv2eigen(Fcv, F);
+  std::vector<char> m(n, 0);
+  for (size_t i = 0; i < n; ++i) m[i] = mask.at<uchar>(static_cast<int>(i)) != 0;
+  Points2 y1, y2;
+  // Two rounds: fit on the inliers, re-select with the refined model.
+  for (int round = 0; round < 2; ++round) {
+    Select(x1, x2, m, &y1, &y2);
+    Eigen::Matrix3d F8;
+    if (!EightPointFundamental(y1, y2, &F8)) break;
+    if (options.refine) RefineFundamental(y1, y2, &F8);
+    std::vector<char> m2;
+    const int count = CountInliers(F8, x1, x2, thr_sq, 1.0, &m2);
+    if (count < std::count(m.begin(), m.end(), 1) * 0.9 && round == 0) break;  // refit made it worse
+    F = F8;
+    m = m2;
+  }
+  res->F = F / F.norm();
+  res->num_inliers_F = CountInliers(res->F, x1, x2, thr_sq, 1.0, &res->inliers_F);
+}
+
+// H (planar scene or pure rotation test), estimated on s1, s2; its inliers counted over all correspondences.
+void FitTwoViewH(const Points2& x1, const Points2& x2, const std::vector<cv::Point2d>& s1,
+                 const std::vector<cv::Point2d>& s2, double thr, const TwoViewOptions& options, TwoViewResult* res) {
+  const size_t n = x1.size();
+  cv::Mat mask;
+  cv::Mat Hcv = cv::findHomography(s1, s2, cv::RANSAC, thr, mask, options.max_iterations, options.confidence);
+  if (Hcv.rows != 3 || Hcv.cols != 3) return;
+  cv::cv2eigen(Hcv, res->H);
+  res->inliers_H.assign(n, 0);
+  for (size_t i = 0; i < n; ++i) {
+    const Eigen::Vector3d h = res->H * x1[i].homogeneous();
+    if (h.z() != 0 && (h.hnormalized() - x2[i]).squaredNorm() <= thr * thr) {
+      res->inliers_H[i] = 1;
+      ++res->num_inliers_H;
+    }
+  }
+}
+
+// Triangulation angles (radians) of the E-inliers whose rays meet in front of both cameras: rays d1 (cam-1
+// frame) and R^T n2 from C2 = -R^T t.
+std::vector<double> AnglesInFront(const Points2& n1, const Points2& n2, const std::vector<char>& inliers,
+                                  const Eigen::Matrix3d& R, const Eigen::Vector3d& t) {
+  std::vector<double> angles;
+  const Eigen::Vector3d C2 = -R.transpose() * t;
+  for (size_t i = 0; i < n1.size(); ++i) {
+    if (!inliers[i]) continue;
+    const Eigen::Vector3d d1 = n1[i].homogeneous().normalized();
+    const Eigen::Vector3d d2 = (R.transpose() * n2[i].homogeneous()).normalized();
+    // Closest points of the two rays: X = λ1 d1 = C2 + λ2 d2.
+    Eigen::Matrix<double, 3, 2> A;
+    A << d1, -d2;
+    const Eigen::Vector2d lam = (A.transpose() * A).ldlt().solve(A.transpose() * C2);
+    if (lam(0) > 0 && lam(1) > 0) angles.push_back(std::acos(std::clamp(d1.dot(d2), -1.0, 1.0)));
+  }
+  return angles;
+}
+
+// E with the (prior) intrinsics: 5-point in RANSAC on F's inliers in normalised coordinates, pose refinement;
+// the pose is kept when most E-inliers triangulate in front of both cameras.
+void FitTwoViewE(const Points2& x1, const Points2& x2, const core::Camera& camera1, const core::Camera& camera2,
+                 double thr, const TwoViewOptions& options, TwoViewResult* res) {
+  const size_t n = x1.size();
+  const double focal = 0.5 * (camera1.fx() + camera1.fy() + camera2.fx() + camera2.fy()) / 2;
+  Points2 n1(n), n2(n);
+  for (size_t i = 0; i < n; ++i) {
+    n1[i] = camera1.Unproject(x1[i]).hnormalized();
+    n2[i] = camera2.Unproject(x2[i]).hnormalized();
+  }
+  std::vector<cv::Point2d> c1, c2;
+  for (size_t i = 0; i < n; ++i)
+    if (res->inliers_F[i]) {
+      c1.emplace_back(n1[i].x(), n1[i].y());
+      c2.emplace_back(n2[i].x(), n2[i].y());
+    }
+  cv::Mat mask;
+  cv::Mat Ecv;
+  try {
+    Ecv = cv::findEssentialMat(c1, c2, cv::Mat::eye(3, 3, CV_64F), cv::RANSAC, options.confidence, thr / focal,
+                               options.max_iterations, mask);
+  } catch (const cv::Exception&) {
+    Ecv.release();
+  }
+  if (Ecv.rows != 3 || Ecv.cols != 3 || cv::countNonZero(mask) < 6) return;
+  cv::Mat Rcv, tcv, pose_mask = mask.clone();
+  const int in_front = cv::recoverPose(Ecv, c1, c2, cv::Mat::eye(3, 3, CV_64F), Rcv, tcv, pose_mask);
+  Eigen::Matrix3d R;
+  Eigen::Vector3d t;
+  cv::cv2eigen(Rcv, R);
+  cv::cv2eigen(tcv, t);
+  if (options.refine && in_front > 0) {
+    Points2 y1, y2;
+    for (int i = 0; i < mask.rows; ++i)
+      if (mask.at<uchar>(i)) {
+        y1.emplace_back(c1[i].x, c1[i].y);
+        y2.emplace_back(c2[i].x, c2[i].y);
+      }
+    RefineRelativePose(y1, y2, focal, &R, &t);
+  }
+  res->E = Skew(t) * R;
+  res->num_inliers_E = CountInliers(res->E, n1, n2, thr * thr, focal * focal, &res->inliers_E);
+  std::vector<double> angles = AnglesInFront(n1, n2, res->inliers_E, R, t);
+  if (angles.size() * 2 >= static_cast<size_t>(res->num_inliers_E) && res->num_inliers_E >= options.min_inliers) {
+    res->has_pose = true;
+    res->R = R;
+    res->t = t;
+    res->median_triangulation_angle_deg = core::Median(std::move(angles)) * 180.0 / M_PI;
+  }
+}
+
+// The pair's class from the three models' inlier counts, and the inliers of the chosen model: E's when the
+// intrinsics are trusted and E explains the data, else F's (which do not depend on the intrinsics); H's when F
+// failed (pure rotation may starve F).
+void ClassifyTwoView(bool trust_intrinsics, const TwoViewOptions& options, TwoViewResult* res) {
+  const int nF = res->num_inliers_F, nE = res->num_inliers_E, nH = res->num_inliers_H;
+  if (std::max(nF, nH) < options.min_inliers) return;  // rejected
+  const bool e_consistent = nE >= options.min_E_F_inlier_ratio * nF && nE >= options.min_inliers;
+  if (nF < options.min_inliers || nH > options.max_H_inlier_ratio * nF) {
+    res->geometry = TwoViewClass::kPlanarOrRotation;
+  } else {
+    res->geometry = e_consistent ? TwoViewClass::kCalibrated : TwoViewClass::kUncalibrated;
+  }
+  const std::vector<char>* chosen = &res->inliers_F;
+  if (trust_intrinsics && e_consistent) chosen = &res->inliers_E;
+  if (nF < options.min_inliers) chosen = &res->inliers_H;
+  for (size_t i = 0; i < chosen->size(); ++i)
+    if ((*chosen)[i]) res->inliers.push_back(static_cast<int>(i));
+}
+
+}  // namespace
+
 TwoViewResult VerifyTwoView(const Points2& x1, const Points2& x2, const core::Camera& camera1,
                             const core::Camera& camera2, bool trust_intrinsics, const TwoViewOptions& options) {
   TwoViewResult res;
@@ -305,42 +452,10 @@ TwoViewResult VerifyTwoView(const Points2& x1, const Points2& x2, const core::Ca
       options.max_error_px > 0
           ? options.max_error_px
           : std::max(1.5, std::max({camera1.width, camera1.height, camera2.width, camera2.height}) / 2000.0);
-  const double thr_sq = thr * thr;
   const auto p1 = ToCv(x1), p2 = ToCv(x2);
   // OpenCV's RANSAC and USAC draw from fixed-seed generators: deterministic. (options.seed is kept for our own
   // sampling; OpenCV 4.6 exposes no seed through these entry points.)
-
-  // --- F: 8-point in USAC (OpenCV), then our normalised 8-point on all inliers + Sampson refinement.
-  {
-    cv::Mat mask;
-    cv::Mat Fcv;
-    try {
-      Fcv = cv::findFundamentalMat(p1, p2, cv::USAC_FM_8PTS, thr, options.confidence, options.max_iterations, mask);
-    } catch (const cv::Exception&) {
-      Fcv.release();
-    }
-    if (Fcv.rows == 3 && Fcv.cols == 3) {
-      Eigen::Matrix3d F;
-      cv::cv2eigen(Fcv, F);
-      std::vector<char> m(n, 0);
-      for (size_t i = 0; i < n; ++i) m[i] = mask.at<uchar>(static_cast<int>(i)) != 0;
-      Points2 y1, y2;
-      // Two rounds: fit on the inliers, re-select with the refined model.
-      for (int round = 0; round < 2; ++round) {
-        Select(x1, x2, m, &y1, &y2);
-        Eigen::Matrix3d F8;
-        if (!EightPointFundamental(y1, y2, &F8)) break;
-        if (options.refine) RefineFundamental(y1, y2, &F8);
-        std::vector<char> m2;
-        const int count = CountInliers(F8, x1, x2, thr_sq, 1.0, &m2);
-        if (count < std::count(m.begin(), m.end(), 1) * 0.9 && round == 0) break;  // refit made it worse
-        F = F8;
-        m = m2;
-      }
-      res.F = F / F.norm();
-      res.num_inliers_F = CountInliers(res.F, x1, x2, thr_sq, 1.0, &res.inliers_F);
-    }
-  }
+  FitTwoViewF(x1, x2, p1, p2, thr, options, &res);
 
   // RANSAC for H and E on F's inliers when F found enough: their inliers lie (almost) within F's, and a sample
   // set with few outliers ends RANSAC after tens of iterations instead of thousands. Inliers are then counted
@@ -353,104 +468,10 @@ TwoViewResult VerifyTwoView(const Points2& x1, const Points2& x2, const core::Ca
         f1.push_back(p1[i]);
         f2.push_back(p2[i]);
       }
-
-  // --- H (planar scene or pure rotation test).
-  {
-    cv::Mat mask;
-    cv::Mat Hcv = cv::findHomography(f_ok ? f1 : p1, f_ok ? f2 : p2, cv::RANSAC, thr, mask, options.max_iterations,
-                                     options.confidence);
-    if (Hcv.rows == 3 && Hcv.cols == 3) {
-      cv::cv2eigen(Hcv, res.H);
-      res.inliers_H.assign(n, 0);
-      for (size_t i = 0; i < n; ++i) {
-        const Eigen::Vector3d h = res.H * x1[i].homogeneous();
-        if (h.z() != 0 && (h.hnormalized() - x2[i]).squaredNorm() <= thr_sq) {
-          res.inliers_H[i] = 1;
-          ++res.num_inliers_H;
-        }
-      }
-    }
-  }
-
-  // --- E with the (prior) intrinsics: 5-point in RANSAC on normalised coordinates, pose refinement.
-  const double focal = 0.5 * (camera1.fx() + camera1.fy() + camera2.fx() + camera2.fy()) / 2;
+  FitTwoViewH(x1, x2, f_ok ? f1 : p1, f_ok ? f2 : p2, thr, options, &res);
   // E only for pairs F supports: the 5-point RANSAC is the costly part on hopeless pairs.
-  if (res.num_inliers_F >= options.min_inliers) {
-    Points2 n1(n), n2(n);
-    for (size_t i = 0; i < n; ++i) {
-      n1[i] = camera1.Unproject(x1[i]).hnormalized();
-      n2[i] = camera2.Unproject(x2[i]).hnormalized();
-    }
-    std::vector<cv::Point2d> c1, c2;
-    for (size_t i = 0; i < n; ++i)
-      if (res.inliers_F[i]) {
-        c1.emplace_back(n1[i].x(), n1[i].y());
-        c2.emplace_back(n2[i].x(), n2[i].y());
-      }
-    cv::Mat mask;
-    cv::Mat Ecv;
-    try {
-      Ecv = cv::findEssentialMat(c1, c2, cv::Mat::eye(3, 3, CV_64F), cv::RANSAC, options.confidence, thr / focal,
-                                 options.max_iterations, mask);
-    } catch (const cv::Exception&) {
-      Ecv.release();
-    }
-    if (Ecv.rows == 3 && Ecv.cols == 3 && cv::countNonZero(mask) >= 6) {
-      cv::Mat Rcv, tcv, pose_mask = mask.clone();
-      const int in_front = cv::recoverPose(Ecv, c1, c2, cv::Mat::eye(3, 3, CV_64F), Rcv, tcv, pose_mask);
-      Eigen::Matrix3d R;
-      Eigen::Vector3d t;
-      cv::cv2eigen(Rcv, R);
-      cv::cv2eigen(tcv, t);
-      if (options.refine && in_front > 0) {
-        Points2 y1, y2;
-        for (int i = 0; i < mask.rows; ++i)
-          if (mask.at<uchar>(i)) {
-            y1.emplace_back(c1[i].x, c1[i].y);
-            y2.emplace_back(c2[i].x, c2[i].y);
-          }
-        RefineRelativePose(y1, y2, focal, &R, &t);
-      }
-      res.E = Skew(t) * R;
-      res.num_inliers_E = CountInliers(res.E, n1, n2, thr_sq, focal * focal, &res.inliers_E);
-      // Cheirality + triangulation angle: rays d1 (cam-1 frame) and R^T n2 from C2 = -R^T t.
-      std::vector<double> angles;
-      const Eigen::Vector3d C2 = -R.transpose() * t;
-      for (size_t i = 0; i < n; ++i) {
-        if (!res.inliers_E[i]) continue;
-        const Eigen::Vector3d d1 = n1[i].homogeneous().normalized();
-        const Eigen::Vector3d d2 = (R.transpose() * n2[i].homogeneous()).normalized();
-        // Closest points of the two rays: X = λ1 d1 = C2 + λ2 d2.
-        Eigen::Matrix<double, 3, 2> A;
-        A << d1, -d2;
-        const Eigen::Vector2d lam = (A.transpose() * A).ldlt().solve(A.transpose() * C2);
-        if (lam(0) > 0 && lam(1) > 0) angles.push_back(std::acos(std::clamp(d1.dot(d2), -1.0, 1.0)));
-      }
-      if (angles.size() * 2 >= static_cast<size_t>(res.num_inliers_E) && res.num_inliers_E >= options.min_inliers) {
-        res.has_pose = true;
-        res.R = R;
-        res.t = t;
-        res.median_triangulation_angle_deg = core::Median(std::move(angles)) * 180.0 / M_PI;
-      }
-    }
-  }
-
-  // --- Classification.
-  const int nF = res.num_inliers_F, nE = res.num_inliers_E, nH = res.num_inliers_H;
-  if (std::max(nF, nH) < options.min_inliers) return res;  // rejected
-  const bool e_consistent = nE >= options.min_E_F_inlier_ratio * nF && nE >= options.min_inliers;
-  if (nF < options.min_inliers || nH > options.max_H_inlier_ratio * nF) {
-    res.geometry = TwoViewClass::kPlanarOrRotation;
-  } else {
-    res.geometry = e_consistent ? TwoViewClass::kCalibrated : TwoViewClass::kUncalibrated;
-  }
-  // Inliers of the chosen model: E's when the intrinsics are trusted and E explains the data, else F's (which
-  // do not depend on the intrinsics); H's when F failed (pure rotation may starve F).
-  const std::vector<char>* chosen = &res.inliers_F;
-  if (trust_intrinsics && e_consistent) chosen = &res.inliers_E;
-  if (nF < options.min_inliers) chosen = &res.inliers_H;
-  for (size_t i = 0; i < n; ++i)
-    if ((*chosen)[i]) res.inliers.push_back(static_cast<int>(i));
+  if (f_ok) FitTwoViewE(x1, x2, camera1, camera2, thr, options, &res);
+  ClassifyTwoView(trust_intrinsics, options, &res);
   return res;
 }
 

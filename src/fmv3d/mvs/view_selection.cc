@@ -15,7 +15,7 @@ constexpr double kDeg = M_PI / 180.0;
 
 double Percentile(std::vector<double> v, double q) {
   if (v.empty()) return 0;
-  const size_t k = std::min(v.size() - 1, static_cast<size_t>(q * (v.size() - 1) + 0.5));
+  const size_t k = std::min(v.size() - 1, static_cast<size_t>(std::floor(q * (v.size() - 1) + 0.5)));
   std::nth_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(k), v.end());
   return v[k];
 }
@@ -117,11 +117,143 @@ std::vector<uint32_t> SelectReferenceViews(const core::Reconstruction& rec,
   return out;
 }
 
+namespace {
+
+// The points a reference view's neighbours are scored on: the sparse points it sees (with their tracks), or
+// stand-ins on a grid at the depth where the views' axes converge.
+struct ViewSelectionPoints {
+  std::vector<Eigen::Vector3d> xyz;
+  std::vector<const core::Point3D*> sparse;  // parallel to xyz when they are sparse points
+  std::vector<double> depths;                // camera-frame z of the sparse points
+};
+
+// Fills *pts and the depth range of *sel from the points `observed` by the reference (when there are enough of
+// them), else from the axes' convergence point (nullptr: none). False, with sel->problem set, when neither
+// gives a depth.
+bool GatherViewSelectionPoints(const ViewGeometry& ref, const std::vector<const core::Point3D*>* observed,
+                               const Eigen::Vector3d* convergence, const ViewSelectionOptions& options,
+                               ReferenceSelection* sel, ViewSelectionPoints* pts) {
+  if (observed && observed->size() >= static_cast<size_t>(options.min_shared_points)) {
+    for (const auto* p : *observed) {
+      Eigen::Vector2d uv;
+      if (ref.Project(p->xyz, &uv)) {
+        pts->xyz.push_back(p->xyz);
+        pts->sparse.push_back(p);
+      }
+    }
+    sel->from_sparse_points = true;
+  }
+  if (sel->from_sparse_points) {
+    for (const auto& X : pts->xyz) pts->depths.push_back((ref.R * X + ref.t).z());
+    const double lo = Percentile(pts->depths, 0.01), hi = Percentile(pts->depths, 0.99);
+    sel->depth_min = 0.6 * lo;
+    sel->depth_max = 1.6 * hi;
+    return true;
+  }
+  double z0 = 0;
+  if (convergence) z0 = (ref.R * *convergence + ref.t).z();
+  if (!(z0 > 0)) {
+    sel->problem = "no sparse points and no common viewing target to estimate a depth range";
+    return false;
+  }
+  sel->depth_min = z0 / 3;
+  sel->depth_max = z0 * 3;
+  for (int gy = 0; gy < 9; ++gy)
+    for (int gx = 0; gx < 16; ++gx)
+      pts->xyz.push_back(ref.Unproject({(gx + 0.5) * ref.width / 16.0, (gy + 0.5) * ref.height / 9.0}, z0));
+  return true;
+}
+
+// Whether source view `src` shares reference point k: with sparse points, when src observes it (its track) or
+// sees it — the point projects into src from the same side of the surface (within max_angle of the reference's
+// ray) at a comparable distance. Video tracks break into short pieces, so tracks alone would only pair
+// neighbouring keyframes; the wider baselines over the whole clip are what far surfaces need. With stand-ins,
+// when the point projects into src.
+bool SharesViewSelectionPoint(const ViewGeometry& ref, uint32_t src_id, const ViewGeometry& src,
+                              const ViewSelectionPoints& pts, size_t k, const ViewSelectionOptions& options) {
+  const Eigen::Vector3d& X = pts.xyz[k];
+  if (!pts.sparse.empty()) {
+    const auto& tr = pts.sparse[k]->track;
+    if (std::any_of(tr.begin(), tr.end(), [&](const core::TrackElement& te) { return te.image_id == src_id; }))
+      return true;
+    if (!options.sources_by_projection) return false;
+    const Eigen::Vector3d a = ref.Centre() - X, b = src.Centre() - X;
+    const double ratio = b.norm() / a.norm();
+    if (ratio < 0.5 || ratio > 2 || a.dot(b) < std::cos(options.max_angle_deg * kDeg) * a.norm() * b.norm())
+      return false;
+  }
+  Eigen::Vector2d uv;
+  return src.Project(X, &uv) && !(uv.x() < 0 || uv.y() < 0 || uv.x() > src.width || uv.y() > src.height);
+}
+
+// Source view src (nb->image_id) scored against the reference's points: each shared point within the angle
+// bounds adds its angle weight times its scale weight. False when src does not qualify as a neighbour.
+bool ScoreViewSelectionSource(const ViewGeometry& ref, const ViewGeometry& src, const ViewSelectionPoints& pts,
+                              const ViewSelectionOptions& options, Neighbour* nb) {
+  const Eigen::Vector3d cr = ref.Centre(), cj = src.Centre();
+  const double fr = ref.K(1, 1), fj = src.K(1, 1);
+  std::vector<double> angles;
+  for (size_t k = 0; k < pts.xyz.size(); ++k) {
+    if (!SharesViewSelectionPoint(ref, nb->image_id, src, pts, k, options)) continue;
+    const Eigen::Vector3d& X = pts.xyz[k];
+    const Eigen::Vector3d a = cr - X, b = cj - X;
+    const double alpha = std::atan2(a.cross(b).norm(), a.dot(b));
+    angles.push_back(alpha);
+    if (alpha < options.min_angle_deg * kDeg || alpha > options.max_angle_deg * kDeg) continue;
+    const double w_angle = std::min(1.0, std::pow(alpha / (options.good_angle_deg * kDeg), 2));
+    const double s = (a.norm() / fr) / (b.norm() / fj);
+    const double w_scale = s < 1 ? s : (s > 2 ? 2 / s : 1.0);
+    nb->score += w_angle * w_scale;
+  }
+  nb->shared_points = static_cast<int>(angles.size());
+  if (nb->shared_points < options.min_shared_points || nb->score <= 0) return false;
+  nb->median_angle_deg = Percentile(angles, 0.5) / kDeg;
+  return nb->median_angle_deg >= options.min_angle_deg && nb->median_angle_deg <= options.max_angle_deg;
+}
+
+// The neighbours and depth range of one reference view.
+ReferenceSelection SelectForReference(const ViewGeometry& ref, const std::map<uint32_t, ViewGeometry>& geoms,
+                                      const std::vector<const core::Point3D*>* observed,
+                                      const Eigen::Vector3d* convergence, const ViewSelectionOptions& options) {
+  ReferenceSelection sel;
+  ViewSelectionPoints pts;
+  if (!GatherViewSelectionPoints(ref, observed, convergence, options, &sel, &pts)) return sel;
+  std::vector<Neighbour> cands;
+  for (const auto& [jd, src] : geoms) {
+    if (jd == ref.image_id) continue;
+    Neighbour nb;
+    nb.image_id = jd;
+    if (ScoreViewSelectionSource(ref, src, pts, options, &nb)) cands.push_back(nb);
+  }
+  std::sort(cands.begin(), cands.end(), [](const Neighbour& a, const Neighbour& b) {
+    return a.score != b.score ? a.score > b.score : a.image_id < b.image_id;
+  });
+  if (cands.size() > static_cast<size_t>(options.max_neighbours)) cands.resize(options.max_neighbours);
+  // Far surfaces: the sparse points rarely reach them (their short tracks triangulate too flatly), so the
+  // range extends to where the widest chosen baseline still gives far_parallax_px of parallax — farther,
+  // nothing can be resolved; nearer, a cut-off range would hide surface the clip's baseline can resolve.
+  if (sel.from_sparse_points && options.far_parallax_px > 0 && !cands.empty()) {
+    double baseline = 0;
+    for (const auto& nb : cands) baseline = std::max(baseline, (geoms.at(nb.image_id).Centre() - ref.Centre()).norm());
+    const double z_far = ref.K(1, 1) * baseline / options.far_parallax_px;
+    const double hi = Percentile(pts.depths, 0.99);
+    sel.depth_max = std::max(sel.depth_max, std::min(z_far, options.max_far_factor * hi));
+  }
+  sel.neighbours = std::move(cands);
+  if (sel.neighbours.empty())
+    sel.problem = "no other view shares enough of its surface at a triangulation angle in [" +
+                  std::to_string(options.min_angle_deg) + ", " + std::to_string(options.max_angle_deg) + "] deg";
+  return sel;
+}
+
+}  // namespace
+
 std::map<uint32_t, ReferenceSelection> SelectViews(const core::Reconstruction& rec,
                                                    const std::map<uint32_t, ViewGeometry>& geoms,
                                                    const ViewSelectionOptions& options) {
   options.Check();
   std::vector<uint32_t> ids;
+  ids.reserve(geoms.size());
   for (const auto& [id, g] : geoms) ids.push_back(id);
   // Sparse points observed by each image.
   std::map<uint32_t, std::vector<const core::Point3D*>> observed;
@@ -135,105 +267,9 @@ std::map<uint32_t, ReferenceSelection> SelectViews(const core::Reconstruction& r
   std::vector<ReferenceSelection> out(ids.size());
   tbb::parallel_for(size_t{0}, ids.size(), [&](size_t ri) {
     const ViewGeometry& ref = geoms.at(ids[ri]);
-    ReferenceSelection& sel = out[ri];
-    const Eigen::Vector3d cr = ref.Centre();
-    const double fr = ref.K(1, 1);
-    // The reference's points: sparse points it sees, or stand-ins at the convergence depth.
-    std::vector<Eigen::Vector3d> pts;
-    std::vector<const core::Point3D*> sparse;
-    auto obs = observed.find(ref.image_id);
-    if (obs != observed.end() && obs->second.size() >= static_cast<size_t>(options.min_shared_points)) {
-      for (const auto* p : obs->second) {
-        Eigen::Vector2d uv;
-        if (ref.Project(p->xyz, &uv)) {
-          pts.push_back(p->xyz);
-          sparse.push_back(p);
-        }
-      }
-      sel.from_sparse_points = true;
-    }
-    std::vector<double> depths;
-    if (sel.from_sparse_points) {
-      for (const auto& X : pts) depths.push_back((ref.R * X + ref.t).z());
-      const double lo = Percentile(depths, 0.01), hi = Percentile(depths, 0.99);
-      sel.depth_min = 0.6 * lo;
-      sel.depth_max = 1.6 * hi;
-    } else {
-      double z0 = 0;
-      if (has_convergence) z0 = (ref.R * convergence + ref.t).z();
-      if (!(z0 > 0)) {
-        sel.problem = "no sparse points and no common viewing target to estimate a depth range";
-        return;
-      }
-      sel.depth_min = z0 / 3;
-      sel.depth_max = z0 * 3;
-      for (int gy = 0; gy < 9; ++gy)
-        for (int gx = 0; gx < 16; ++gx)
-          pts.push_back(ref.Unproject({(gx + 0.5) * ref.width / 16.0, (gy + 0.5) * ref.height / 9.0}, z0));
-    }
-    std::vector<Neighbour> cands;
-    for (uint32_t jd : ids) {
-      if (jd == ref.image_id) continue;
-      const ViewGeometry& src = geoms.at(jd);
-      const Eigen::Vector3d cj = src.Centre();
-      const double fj = src.K(1, 1);
-      Neighbour nb;
-      nb.image_id = jd;
-      std::vector<double> angles;
-      for (size_t k = 0; k < pts.size(); ++k) {
-        const Eigen::Vector3d& X = pts[k];
-        if (sel.from_sparse_points) {
-          // Shared when j observes the point (its track) or sees it: the point projects into j from the same
-          // side of the surface (within max_angle of the reference's ray) at a comparable distance. Video
-          // tracks break into short pieces, so tracks alone would only pair neighbouring keyframes; the wider
-          // baselines over the whole clip are what far surfaces need.
-          const auto& tr = sparse[k]->track;
-          if (std::none_of(tr.begin(), tr.end(), [&](const core::TrackElement& te) { return te.image_id == jd; })) {
-            if (!options.sources_by_projection) continue;
-            const Eigen::Vector3d a = cr - X, b = cj - X;
-            const double ratio = b.norm() / a.norm();
-            if (ratio < 0.5 || ratio > 2 || a.dot(b) < std::cos(options.max_angle_deg * kDeg) * a.norm() * b.norm())
-              continue;
-            Eigen::Vector2d uv;
-            if (!src.Project(X, &uv) || uv.x() < 0 || uv.y() < 0 || uv.x() > src.width || uv.y() > src.height) continue;
-          }
-        } else {
-          Eigen::Vector2d uv;
-          if (!src.Project(X, &uv) || uv.x() < 0 || uv.y() < 0 || uv.x() > src.width || uv.y() > src.height) continue;
-        }
-        const Eigen::Vector3d a = cr - X, b = cj - X;
-        const double alpha = std::atan2(a.cross(b).norm(), a.dot(b));
-        angles.push_back(alpha);
-        if (alpha < options.min_angle_deg * kDeg || alpha > options.max_angle_deg * kDeg) continue;
-        const double w_angle = std::min(1.0, std::pow(alpha / (options.good_angle_deg * kDeg), 2));
-        const double s = (a.norm() / fr) / (b.norm() / fj);
-        const double w_scale = s < 1 ? s : (s > 2 ? 2 / s : 1.0);
-        nb.score += w_angle * w_scale;
-      }
-      nb.shared_points = static_cast<int>(angles.size());
-      if (nb.shared_points < options.min_shared_points || nb.score <= 0) continue;
-      nb.median_angle_deg = Percentile(angles, 0.5) / kDeg;
-      if (nb.median_angle_deg < options.min_angle_deg || nb.median_angle_deg > options.max_angle_deg) continue;
-      cands.push_back(nb);
-    }
-    std::sort(cands.begin(), cands.end(), [](const Neighbour& a, const Neighbour& b) {
-      return a.score != b.score ? a.score > b.score : a.image_id < b.image_id;
-    });
-    if (cands.size() > static_cast<size_t>(options.max_neighbours)) cands.resize(options.max_neighbours);
-    // Far surfaces: the sparse points rarely reach them (their short tracks triangulate too flatly), so the
-    // range extends to where the widest chosen baseline still gives far_parallax_px of parallax — farther,
-    // nothing can be resolved; nearer, a cut-off range would hide surface the clip's baseline can resolve.
-    if (sel.from_sparse_points && options.far_parallax_px > 0 && !cands.empty()) {
-      double baseline = 0;
-      for (const auto& nb : cands) baseline = std::max(baseline, (geoms.at(nb.image_id).Centre() - cr).norm());
-      const double z_far = fr * baseline / options.far_parallax_px;
-      const double hi = Percentile(depths, 0.99);
-      sel.depth_max = std::max(sel.depth_max, std::min(z_far, options.max_far_factor * hi));
-    }
-    sel.neighbours = std::move(cands);
-    if (sel.neighbours.empty())
-      sel.problem = "no other view shares enough of its surface at a triangulation angle in [" +
-                    std::to_string(options.min_angle_deg) + ", " + std::to_string(options.max_angle_deg) + "] deg";
+    const auto obs = observed.find(ref.image_id);
+    out[ri] = SelectForReference(ref, geoms, obs == observed.end() ? nullptr : &obs->second,
+                                 has_convergence ? &convergence : nullptr, options);
   });
   std::map<uint32_t, ReferenceSelection> result;
   for (size_t i = 0; i < ids.size(); ++i) result[ids[i]] = std::move(out[i]);

@@ -2,6 +2,9 @@
 
 #include <algorithm>
 #include <cmath>
+#include <map>
+#include <utility>
+#include <vector>
 
 #include "fmv3d/geometry/triangulation.h"
 #include "fmv3d/sfm/bundle_adjustment.h"
@@ -33,16 +36,32 @@ void DeletePoint(core::Reconstruction* rec, uint64_t point_id) {
   rec->points.erase(it);
 }
 
+std::vector<uint32_t> ImagesSharingMostPoints(const core::Reconstruction& rec, uint32_t image_id, int k) {
+  std::map<uint32_t, int> shared;
+  for (int64_t pid : rec.images.at(image_id).point3d_ids) {
+    if (pid == core::kNoPoint3D) continue;
+    for (const auto& el : rec.points.at(static_cast<uint64_t>(pid)).track)
+      if (el.image_id != image_id) ++shared[el.image_id];
+  }
+  std::vector<std::pair<int, uint32_t>> order;
+  order.reserve(shared.size());
+  for (const auto& [id, n] : shared) order.emplace_back(-n, id);
+  std::sort(order.begin(), order.end());
+  std::vector<uint32_t> out;
+  for (size_t i = 0; i < order.size() && static_cast<int>(i) < k; ++i) out.push_back(order[i].second);
+  return out;
+}
+
 void DetachImage(core::Reconstruction* rec, uint32_t image_id) {
   auto& im = rec->images.at(image_id);
-  for (uint32_t kp = 0; kp < im.point3d_ids.size(); ++kp) {
-    const int64_t pid = im.point3d_ids[kp];
+  for (int64_t& point_of_kp : im.point3d_ids) {
+    const int64_t pid = point_of_kp;
     if (pid == core::kNoPoint3D) continue;
     auto& track = rec->points.at(static_cast<uint64_t>(pid)).track;
     track.erase(std::remove_if(track.begin(), track.end(),
                                [&](const core::TrackElement& el) { return el.image_id == image_id; }),
                 track.end());
-    im.point3d_ids[kp] = core::kNoPoint3D;
+    point_of_kp = core::kNoPoint3D;
     if (track.size() < 2) DeletePoint(rec, static_cast<uint64_t>(pid));
   }
 }

@@ -23,6 +23,8 @@ void AddObservation(core::Reconstruction* rec, uint64_t point_id, uint32_t image
 void DeletePoint(core::Reconstruction* rec, uint64_t point_id);
 // Removes image_id's observations from every point, deleting points left with fewer than two.
 void DetachImage(core::Reconstruction* rec, uint32_t image_id);
+// The (at most k) registered images sharing the most points with image_id, most first (ties: lower id first).
+std::vector<uint32_t> ImagesSharingMostPoints(const core::Reconstruction& rec, uint32_t image_id, int k);
 
 // 2D–3D correspondences of an image (registered or not) with the model: through the correspondence graph, each
 // keypoint matched to a keypoint that belongs to a 3D point (each point once per keypoint).

@@ -13,6 +13,7 @@
 #include "fmv3d/features/matcher.h"
 #include "fmv3d/geometry/triangulation.h"
 #include "fmv3d/sfm/bundle_adjustment.h"
+#include "fmv3d/sfm/mapper_primitives.h"
 
 namespace fmv3d::sfm {
 
@@ -69,22 +70,6 @@ double ReprojectionError(const core::Reconstruction& rec, const core::Image& im,
   return (rec.cameras.at(im.camera_id).Project(xc) - uv).norm();
 }
 
-// Registered images sharing the most points with `image_id`, most first.
-std::vector<uint32_t> Neighbours(const core::Reconstruction& rec, uint32_t image_id, int k) {
-  std::map<uint32_t, int> shared;
-  for (int64_t pid : rec.images.at(image_id).point3d_ids) {
-    if (pid == core::kNoPoint3D) continue;
-    for (const auto& el : rec.points.at(static_cast<uint64_t>(pid)).track)
-      if (el.image_id != image_id) ++shared[el.image_id];
-  }
-  std::vector<std::pair<int, uint32_t>> v;
-  for (const auto& [id, n] : shared) v.emplace_back(-n, id);
-  std::sort(v.begin(), v.end());
-  std::vector<uint32_t> out;
-  for (size_t i = 0; i < v.size() && static_cast<int>(i) < k; ++i) out.push_back(v[i].second);
-  return out;
-}
-
 // Depth range of the points an image observes (5th–95th percentile, widened), for the guided search.
 bool DepthRange(const core::Reconstruction& rec, uint32_t image_id, double* lo, double* hi) {
   std::vector<double> z;
@@ -111,12 +96,6 @@ int RemoveObservation(core::Reconstruction* rec, uint64_t pid, uint32_t image_id
     }
   }
   return removed;
-}
-
-void DeletePoint(core::Reconstruction* rec, uint64_t pid) {
-  for (const auto& el : rec->points.at(pid).track)
-    rec->images.at(el.image_id).point3d_ids[el.point2d_idx] = core::kNoPoint3D;
-  rec->points.erase(pid);
 }
 
 // Drops observations above max_error_px and points left with fewer than two; returns observations dropped.
@@ -249,10 +228,182 @@ std::vector<features::FeatureMatch> GuidedMatches(const core::Reconstruction& re
     if (it == by_b.end() || raw_dist[i] < raw_dist[it->second]) by_b[raw[i].idx2] = i;
   }
   std::vector<features::FeatureMatch> out;
+  out.reserve(by_b.size());
   for (const auto& [b, i] : by_b) out.push_back(raw[i]);
   std::sort(out.begin(), out.end(), [](const auto& x, const auto& y) { return x.idx1 < y.idx1; });
   return out;
 }
+
+namespace {
+
+// Rejects candidates without features or camera and model images whose features are not their 2D points.
+void CheckRelocaliseInputs(const core::Reconstruction& rec, const std::vector<RelocaliseCandidate>& candidates,
+                           const std::map<uint32_t, const features::FeatureSet*>& feats,
+                           const std::map<uint32_t, core::Camera>& cameras) {
+  for (const auto& c : candidates) {
+    if (!feats.count(c.image_id)) throw Error("relocalise: no features for image " + c.name);
+    if (!rec.cameras.count(c.camera_id) && !cameras.count(c.camera_id))
+      throw Error("relocalise: image " + c.name + " refers to unknown camera " + std::to_string(c.camera_id));
+  }
+  for (const auto& [id, im] : rec.images) {
+    const auto it = feats.find(id);
+    if (it == feats.end()) throw Error("relocalise: no features for model image " + im.name);
+    if (it->second->keypoints.size() != im.points2d.size())
+      throw Error("relocalise: features of " + im.name + " do not match the model's 2D points");
+  }
+}
+
+// The model's points as one descriptor bank (BuildPointBank), matched against by every candidate of a round.
+struct RelocalisePointBank {
+  features::Descriptors descriptors;
+  std::vector<uint64_t> point_ids;  // per row
+};
+
+// One candidate's absolute pose against the model.
+struct RelocaliseAttempt {
+  geometry::AbsolutePoseResult pose;
+  std::vector<std::pair<uint32_t, uint64_t>> matches;  // (keypoint, point id)
+  std::string why;                                     // why it failed (empty on success)
+};
+
+RelocaliseAttempt AttemptRelocalisation(const core::Reconstruction& rec, const RelocaliseCandidate& c,
+                                        const features::FeatureSet& f, const RelocalisePointBank& bank,
+                                        features::ImageDescriptors& bank_desc, const core::Camera& cam,
+                                        const RelocaliseOptions& o) {
+  RelocaliseAttempt at;
+  if (f.keypoints.empty()) {
+    at.why = "no features";
+    return at;
+  }
+  features::MatchOptions mo;
+  mo.ratio = o.ratio;
+  mo.mutual = false;
+  features::ImageDescriptors d(f.descriptors, c.image_id);
+  const auto m = features::MatchDescriptors(d, bank_desc, mo);
+  std::vector<Eigen::Vector2d> p2;
+  std::vector<Eigen::Vector3d> p3;
+  for (const auto& fm : m) {
+    const uint64_t pid = bank.point_ids[fm.idx2];
+    at.matches.emplace_back(fm.idx1, pid);
+    p2.emplace_back(f.keypoints[fm.idx1].x, f.keypoints[fm.idx1].y);
+    p3.push_back(rec.points.at(pid).xyz);
+  }
+  if (static_cast<int>(p2.size()) < o.pose.min_inliers) {
+    at.why =
+        std::to_string(p2.size()) + " 2D-3D matches with the model (" + std::to_string(o.pose.min_inliers) + " needed)";
+    return at;
+  }
+  at.pose = geometry::EstimateAbsolutePose(p2, p3, cam, o.pose);
+  if (!at.pose.success)
+    at.why = "absolute pose failed on " + std::to_string(p2.size()) + " 2D-3D matches (" +
+             std::to_string(at.pose.num_inliers) + " inliers)";
+  return at;
+}
+
+// Adds a registered candidate to the model at its pose, observing each inlier point once (with the keypoint
+// that reprojects best); returns the observations added.
+int AddRelocalisedImage(core::Reconstruction* rec, const RelocaliseCandidate& c, const features::FeatureSet& f,
+                        const RelocaliseAttempt& at, const core::Camera& cam, const RelocaliseOptions& o) {
+  if (!rec->cameras.count(c.camera_id)) rec->cameras[c.camera_id] = cam;
+  core::Image im;
+  im.id = c.image_id;
+  im.camera_id = c.camera_id;
+  im.name = c.name;
+  im.pose = at.pose.pose;
+  for (const auto& kp : f.keypoints) im.points2d.emplace_back(kp.x, kp.y);
+  im.point3d_ids.assign(im.points2d.size(), core::kNoPoint3D);
+  rec->images[c.image_id] = im;
+  std::map<uint64_t, std::pair<double, uint32_t>> best;
+  const auto& stored = rec->images.at(c.image_id);
+  for (size_t m = 0; m < at.matches.size(); ++m) {
+    if (!at.pose.inlier_mask[m]) continue;
+    const auto [kp, pid] = at.matches[m];
+    const double e = ReprojectionError(*rec, stored, stored.points2d[kp], rec->points.at(pid).xyz);
+    if (e > o.tri_max_error_px) continue;
+    auto it = best.find(pid);
+    if (it == best.end() || e < it->second.first) best[pid] = {e, kp};
+  }
+  for (const auto& [pid, ekp] : best) {
+    rec->images.at(c.image_id).point3d_ids[ekp.second] = static_cast<int64_t>(pid);
+    rec->points.at(pid).track.push_back({c.image_id, ekp.second});
+  }
+  return static_cast<int>(best.size());
+}
+
+// Guided matching of a new image with its registered neighbours, then two-view triangulation of the matches
+// whose keypoints are both free (angle and reprojection checks). Returns the points added.
+int TriangulateWithNeighbours(core::Reconstruction* rec, uint32_t id,
+                              const std::map<uint32_t, const features::FeatureSet*>& feats, const RelocaliseOptions& o,
+                              uint64_t* next_pid) {
+  double lo = 0, hi = 0;
+  if (!DepthRange(*rec, id, &lo, &hi)) return 0;
+  int added = 0;
+  for (uint32_t nb : ImagesSharingMostPoints(*rec, id, o.guided_neighbours)) {
+    const auto matches =
+        GuidedMatches(*rec, id, nb, *feats.at(id), *feats.at(nb), lo, hi, o.guided_max_epipolar_px, o.guided_ratio);
+    const auto& im1 = rec->images.at(id);
+    const auto& im2 = rec->images.at(nb);
+    const auto& cam1 = rec->cameras.at(im1.camera_id);
+    const auto& cam2 = rec->cameras.at(im2.camera_id);
+    for (const auto& m : matches) {
+      if (im1.point3d_ids[m.idx1] != core::kNoPoint3D || im2.point3d_ids[m.idx2] != core::kNoPoint3D) continue;
+      const std::vector<core::Pose> poses = {im1.pose, im2.pose};
+      const std::vector<Eigen::Vector2d> xs = {cam1.Unproject(im1.points2d[m.idx1]).head<2>(),
+                                               cam2.Unproject(im2.points2d[m.idx2]).head<2>()};
+      Eigen::Vector3d X;
+      if (!geometry::TriangulateDLT(poses, xs, &X)) continue;
+      geometry::RefinePoint(poses, xs, &X);
+      if (geometry::TriangulationAngle(im1.pose.Centre(), im2.pose.Centre(), X) < o.tri_min_angle_deg * kDeg) continue;
+      if (ReprojectionError(*rec, im1, im1.points2d[m.idx1], X) > o.tri_max_error_px ||
+          ReprojectionError(*rec, im2, im2.points2d[m.idx2], X) > o.tri_max_error_px)
+        continue;
+      core::Point3D p;
+      p.id = (*next_pid)++;
+      p.xyz = X;
+      const auto& colors = feats.at(id)->colors;
+      if (colors.size() > m.idx1) p.rgb = colors[m.idx1];
+      p.track = {{id, m.idx1}, {nb, m.idx2}};
+      rec->images.at(id).point3d_ids[m.idx1] = static_cast<int64_t>(p.id);
+      rec->images.at(nb).point3d_ids[m.idx2] = static_cast<int64_t>(p.id);
+      rec->points[p.id] = std::move(p);
+      ++added;
+    }
+  }
+  return added;
+}
+
+// The whole model adjusted with the intrinsics held (the mapper has calibrated them on the larger part of the
+// survey), observations above the bound dropped; a new image left with too few observations is taken out again,
+// and points left with a one-image track are deleted.
+void AdjustAfterRelocalisation(core::Reconstruction* rec, const std::vector<uint32_t>& added,
+                               const RelocaliseOptions& o, RelocaliseStats* stats) {
+  BundleAdjustmentConfig config;
+  for (const auto& [cid, cam] : rec->cameras) config.constant_cameras.insert(cid);
+  BundleAdjustmentOptions ba;
+  ba.max_iterations = o.ba_max_iterations;
+  ba.refine_focal = ba.refine_k1 = ba.refine_k2 = false;
+  BundleAdjust(rec, config, ba);
+  FilterObservations(rec, o.filter_max_error_px);
+  UpdatePointErrors(rec);
+  for (uint32_t id : added) {
+    const auto& ids = rec->images.at(id).point3d_ids;
+    const int obs =
+        static_cast<int>(std::count_if(ids.begin(), ids.end(), [](int64_t p) { return p != core::kNoPoint3D; }));
+    if (obs >= o.pose.min_inliers / 2) continue;
+    for (int64_t pid : ids)
+      if (pid != core::kNoPoint3D) RemoveObservation(rec, static_cast<uint64_t>(pid), id);
+    rec->images.erase(id);
+    stats->registered.erase(std::find(stats->registered.begin(), stats->registered.end(), id));
+    stats->still_failed[id] = "relocalised, but its observations did not survive the adjustment";
+    spdlog::warn("relocalise: image {} dropped again after the adjustment ({} observations left)", id, obs);
+  }
+  std::vector<uint64_t> short_tracks;
+  for (const auto& [pid, p] : rec->points)
+    if (p.track.size() < 2) short_tracks.push_back(pid);
+  for (uint64_t pid : short_tracks) DeletePoint(rec, pid);
+}
+
+}  // namespace
 
 RelocaliseStats RelocaliseImages(core::Reconstruction* rec, const std::vector<RelocaliseCandidate>& candidates,
                                  const std::map<uint32_t, const features::FeatureSet*>& feats,
@@ -260,107 +411,40 @@ RelocaliseStats RelocaliseImages(core::Reconstruction* rec, const std::vector<Re
   o.Check();
   const auto start = std::chrono::steady_clock::now();
   RelocaliseStats stats;
-  for (const auto& c : candidates) {
-    if (!feats.count(c.image_id)) throw Error("relocalise: no features for image " + c.name);
-    if (!rec->cameras.count(c.camera_id) && !cameras.count(c.camera_id))
-      throw Error("relocalise: image " + c.name + " refers to unknown camera " + std::to_string(c.camera_id));
-  }
-  for (const auto& [id, im] : rec->images) {
-    const auto it = feats.find(id);
-    if (it == feats.end()) throw Error("relocalise: no features for model image " + im.name);
-    if (it->second->keypoints.size() != im.points2d.size())
-      throw Error("relocalise: features of " + im.name + " do not match the model's 2D points");
-  }
+  CheckRelocaliseInputs(*rec, candidates, feats, cameras);
   std::vector<RelocaliseCandidate> pending;
   for (const auto& c : candidates)
     if (!rec->images.count(c.image_id)) pending.push_back(c);
   if (pending.empty() || rec->points.empty()) return stats;
   uint64_t next_pid = rec->points.empty() ? 1 : rec->points.rbegin()->first + 1;
+  auto camera_of = [&](const RelocaliseCandidate& c) -> const core::Camera& {
+    return rec->cameras.count(c.camera_id) ? rec->cameras.at(c.camera_id) : cameras.at(c.camera_id);
+  };
 
-  features::MatchOptions mo;
-  mo.ratio = o.ratio;
-  mo.mutual = false;
   for (int round = 0; round < o.max_rounds && !pending.empty(); ++round) {
     stats.rounds = round + 1;
-    features::Descriptors bank;
-    std::vector<uint64_t> bank_pid;
-    BuildPointBank(*rec, feats, &bank, &bank_pid);
-    if (bank.rows() < o.pose.min_inliers) break;
-    features::ImageDescriptors bank_desc(bank, 0);
+    RelocalisePointBank bank;
+    BuildPointBank(*rec, feats, &bank.descriptors, &bank.point_ids);
+    if (bank.descriptors.rows() < o.pose.min_inliers) break;
+    features::ImageDescriptors bank_desc(bank.descriptors, 0);
     // Poses of every pending image against the current model (parallel; the model is read only).
-    struct Attempt {
-      geometry::AbsolutePoseResult pose;
-      std::vector<std::pair<uint32_t, uint64_t>> matches;  // (keypoint, point id)
-      std::string why;
-    };
-    std::vector<Attempt> attempts(pending.size());
+    std::vector<RelocaliseAttempt> attempts(pending.size());
     tbb::parallel_for(size_t{0}, pending.size(), [&](size_t k) {
       const auto& c = pending[k];
-      const features::FeatureSet& f = *feats.at(c.image_id);
-      Attempt& at = attempts[k];
-      if (f.keypoints.empty()) {
-        at.why = "no features";
-        return;
-      }
-      features::ImageDescriptors d(f.descriptors, c.image_id);
-      const auto m = features::MatchDescriptors(d, bank_desc, mo);
-      std::vector<Eigen::Vector2d> p2;
-      std::vector<Eigen::Vector3d> p3;
-      for (const auto& fm : m) {
-        const uint64_t pid = bank_pid[fm.idx2];
-        at.matches.emplace_back(fm.idx1, pid);
-        p2.emplace_back(f.keypoints[fm.idx1].x, f.keypoints[fm.idx1].y);
-        p3.push_back(rec->points.at(pid).xyz);
-      }
-      if (static_cast<int>(p2.size()) < o.pose.min_inliers) {
-        at.why = std::to_string(p2.size()) + " 2D-3D matches with the model (" + std::to_string(o.pose.min_inliers) +
-                 " needed)";
-        return;
-      }
-      const core::Camera& cam =
-          rec->cameras.count(c.camera_id) ? rec->cameras.at(c.camera_id) : cameras.at(c.camera_id);
-      at.pose = geometry::EstimateAbsolutePose(p2, p3, cam, o.pose);
-      if (!at.pose.success)
-        at.why = "absolute pose failed on " + std::to_string(p2.size()) + " 2D-3D matches (" +
-                 std::to_string(at.pose.num_inliers) + " inliers)";
+      attempts[k] = AttemptRelocalisation(*rec, c, *feats.at(c.image_id), bank, bank_desc, camera_of(c), o);
     });
     // Add the successful ones (in candidate order: deterministic).
     std::vector<uint32_t> added;
     std::vector<RelocaliseCandidate> still;
     for (size_t k = 0; k < pending.size(); ++k) {
       const auto& c = pending[k];
-      Attempt& at = attempts[k];
+      const RelocaliseAttempt& at = attempts[k];
       if (!at.pose.success) {
         stats.still_failed[c.image_id] = at.why;
         still.push_back(c);
         continue;
       }
-      const features::FeatureSet& f = *feats.at(c.image_id);
-      if (!rec->cameras.count(c.camera_id)) rec->cameras[c.camera_id] = cameras.at(c.camera_id);
-      core::Image im;
-      im.id = c.image_id;
-      im.camera_id = c.camera_id;
-      im.name = c.name;
-      im.pose = at.pose.pose;
-      for (const auto& kp : f.keypoints) im.points2d.emplace_back(kp.x, kp.y);
-      im.point3d_ids.assign(im.points2d.size(), core::kNoPoint3D);
-      rec->images[c.image_id] = im;
-      // One keypoint per point: the one that reprojects best.
-      std::map<uint64_t, std::pair<double, uint32_t>> best;
-      const auto& stored = rec->images.at(c.image_id);
-      for (size_t m = 0; m < at.matches.size(); ++m) {
-        if (!at.pose.inlier_mask[m]) continue;
-        const auto [kp, pid] = at.matches[m];
-        const double e = ReprojectionError(*rec, stored, stored.points2d[kp], rec->points.at(pid).xyz);
-        if (e > o.tri_max_error_px) continue;
-        auto it = best.find(pid);
-        if (it == best.end() || e < it->second.first) best[pid] = {e, kp};
-      }
-      for (const auto& [pid, ekp] : best) {
-        rec->images.at(c.image_id).point3d_ids[ekp.second] = static_cast<int64_t>(pid);
-        rec->points.at(pid).track.push_back({c.image_id, ekp.second});
-        ++stats.observations_added;
-      }
+      stats.observations_added += AddRelocalisedImage(rec, c, *feats.at(c.image_id), at, camera_of(c), o);
       stats.still_failed.erase(c.image_id);
       stats.registered.push_back(c.image_id);
       added.push_back(c.image_id);
@@ -369,70 +453,8 @@ RelocaliseStats RelocaliseImages(core::Reconstruction* rec, const std::vector<Re
     }
     pending.swap(still);
     if (added.empty()) break;
-
-    // Guided matching of each new image with its registered neighbours, then triangulation.
-    for (uint32_t id : added) {
-      double lo = 0, hi = 0;
-      if (!DepthRange(*rec, id, &lo, &hi)) continue;
-      for (uint32_t nb : Neighbours(*rec, id, o.guided_neighbours)) {
-        const auto matches =
-            GuidedMatches(*rec, id, nb, *feats.at(id), *feats.at(nb), lo, hi, o.guided_max_epipolar_px, o.guided_ratio);
-        const auto& im1 = rec->images.at(id);
-        const auto& im2 = rec->images.at(nb);
-        const auto& cam1 = rec->cameras.at(im1.camera_id);
-        const auto& cam2 = rec->cameras.at(im2.camera_id);
-        for (const auto& m : matches) {
-          if (im1.point3d_ids[m.idx1] != core::kNoPoint3D || im2.point3d_ids[m.idx2] != core::kNoPoint3D) continue;
-          const std::vector<core::Pose> poses = {im1.pose, im2.pose};
-          const std::vector<Eigen::Vector2d> xs = {cam1.Unproject(im1.points2d[m.idx1]).head<2>(),
-                                                   cam2.Unproject(im2.points2d[m.idx2]).head<2>()};
-          Eigen::Vector3d X;
-          if (!geometry::TriangulateDLT(poses, xs, &X)) continue;
-          geometry::RefinePoint(poses, xs, &X);
-          if (geometry::TriangulationAngle(im1.pose.Centre(), im2.pose.Centre(), X) < o.tri_min_angle_deg * kDeg)
-            continue;
-          if (ReprojectionError(*rec, im1, im1.points2d[m.idx1], X) > o.tri_max_error_px ||
-              ReprojectionError(*rec, im2, im2.points2d[m.idx2], X) > o.tri_max_error_px)
-            continue;
-          core::Point3D p;
-          p.id = next_pid++;
-          p.xyz = X;
-          const auto& colors = feats.at(id)->colors;
-          if (colors.size() > m.idx1) p.rgb = colors[m.idx1];
-          p.track = {{id, m.idx1}, {nb, m.idx2}};
-          rec->images.at(id).point3d_ids[m.idx1] = static_cast<int64_t>(p.id);
-          rec->images.at(nb).point3d_ids[m.idx2] = static_cast<int64_t>(p.id);
-          rec->points[p.id] = std::move(p);
-          ++stats.points_added;
-        }
-      }
-    }
-    // The whole model, intrinsics held (the mapper has calibrated them on the larger part of the survey).
-    BundleAdjustmentConfig config;
-    for (const auto& [cid, cam] : rec->cameras) config.constant_cameras.insert(cid);
-    BundleAdjustmentOptions ba;
-    ba.max_iterations = o.ba_max_iterations;
-    ba.refine_focal = ba.refine_k1 = ba.refine_k2 = false;
-    BundleAdjust(rec, config, ba);
-    FilterObservations(rec, o.filter_max_error_px);
-    UpdatePointErrors(rec);
-    // An image whose observations were all filtered out is not registered after all.
-    for (uint32_t id : added) {
-      const auto& ids = rec->images.at(id).point3d_ids;
-      const int obs =
-          static_cast<int>(std::count_if(ids.begin(), ids.end(), [](int64_t p) { return p != core::kNoPoint3D; }));
-      if (obs >= o.pose.min_inliers / 2) continue;
-      for (int64_t pid : ids)
-        if (pid != core::kNoPoint3D) RemoveObservation(rec, static_cast<uint64_t>(pid), id);
-      rec->images.erase(id);
-      stats.registered.erase(std::find(stats.registered.begin(), stats.registered.end(), id));
-      stats.still_failed[id] = "relocalised, but its observations did not survive the adjustment";
-      spdlog::warn("relocalise: image {} dropped again after the adjustment ({} observations left)", id, obs);
-    }
-    std::vector<uint64_t> short_tracks;
-    for (const auto& [pid, p] : rec->points)
-      if (p.track.size() < 2) short_tracks.push_back(pid);
-    for (uint64_t pid : short_tracks) DeletePoint(rec, pid);
+    for (uint32_t id : added) stats.points_added += TriangulateWithNeighbours(rec, id, feats, o, &next_pid);
+    AdjustAfterRelocalisation(rec, added, o, &stats);
   }
   stats.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   return stats;

@@ -150,20 +150,20 @@ void SparseStageOptions::Check() const {
   if (focal_px > 0 && hfov_deg > 0) throw Error("sparse: give --focal or --hfov, not both");
 }
 
-nlohmann::json RunSparseStage(const core::Workspace& ws, const SparseStageOptions& options) {
-  options.Check();
-  using Clock = std::chrono::steady_clock;
-  const auto start = Clock::now();
-  auto require = [&](const fs::path& p, const char* cmd) {
-    if (!fs::exists(p))
-      throw Error(ws.name() + ": no " + fs::relative(p, ws.root()).string() + " — run `fmv3d " + cmd + "` first");
-  };
-  require(ws.frames_json(), "frames");
-  require(ws.features_dir(), "features");
-  require(features::MatchesPath(ws.matches_dir()), "match");
-  const io::FramesIndex index = io::ReadFramesIndex(ws.frames_json());
+namespace {
 
-  MapperInput input;
+// What the sparse stage reads from the workspace: the mapper's input, the feature sets (kept for
+// relocalisation) and the operator's tie-point tracks.
+struct SparseStageInput {
+  MapperInput mapper;
+  std::vector<features::FeatureSet> feature_sets;  // per frame, in frames.json order
+  std::vector<TieTrack> tie_tracks;
+  bool manual = false;  // the operator's tie points are in use
+};
+
+// The cameras of frames.json, with the options' focal prior (which counts as known) when one is given.
+std::map<uint32_t, MapperCamera> SparseCameras(const io::FramesIndex& index, const SparseStageOptions& options) {
+  std::map<uint32_t, MapperCamera> cameras;
   for (const auto& c : index.cameras) {
     MapperCamera mc;
     mc.camera = c.camera;
@@ -176,10 +176,46 @@ nlohmann::json RunSparseStage(const core::Workspace& ws, const SparseStageOption
       spdlog::info("camera {}: focal prior {:.1f} px from {}", c.camera.id, f,
                    options.focal_px > 0 ? "--focal" : "--hfov");
     }
-    input.cameras[c.camera.id] = mc;
+    cameras[c.camera.id] = mc;
   }
+  return cameras;
+}
+
+// The operator's tie points: the keypoints `match` appended (features/manual_matches.h), appended again to the
+// images here, and their tracks.
+void AddTiePoints(const features::ManualMatches& mm, double weight, const std::string& source, SparseStageInput* in,
+                  std::vector<size_t>* num_kp) {
+  for (const auto& [i, ap] : mm.appended) {
+    MapperImage& im = in->mapper.images[i];
+    features::FeatureSet& fs_ = in->feature_sets[i];
+    features::AppendToFeatureSet(ap, &fs_, source + ": frame " + im.name);
+    if (im.colors.size() == im.keypoints.size()) im.colors.insert(im.colors.end(), ap.colors.begin(), ap.colors.end());
+    for (const auto& k : ap.keypoints) im.keypoints.emplace_back(k.x, k.y);
+    (*num_kp)[i] = im.keypoints.size();
+    in->mapper.manual_from[im.id] = ap.first_index;
+  }
+  in->mapper.manual_weight = weight;
+  for (const auto& t : mm.tracks) {
+    if (t.kind != features::ManualTrackKind::kTiePoint) continue;
+    TieTrack tt{t.id, {}};
+    for (const auto& o : t.observations) tt.observations.push_back({o.image + 1, o.keypoint});
+    in->tie_tracks.push_back(std::move(tt));
+  }
+}
+
+SparseStageInput ReadSparseStageInput(const core::Workspace& ws, const SparseStageOptions& options) {
+  auto require = [&](const fs::path& p, const char* cmd) {
+    if (!fs::exists(p))
+      throw Error(ws.name() + ": no " + fs::relative(p, ws.root()).string() + " — run `fmv3d " + cmd + "` first");
+  };
+  require(ws.frames_json(), "frames");
+  require(ws.features_dir(), "features");
+  require(features::MatchesPath(ws.matches_dir()), "match");
+  const io::FramesIndex index = io::ReadFramesIndex(ws.frames_json());
+  SparseStageInput in;
+  in.mapper.cameras = SparseCameras(index, options);
   std::vector<size_t> num_kp;
-  std::vector<features::FeatureSet> feature_sets(index.frames.size());  // kept for relocalisation
+  in.feature_sets.resize(index.frames.size());
   for (size_t i = 0; i < index.frames.size(); ++i) {
     const auto& fr = index.frames[i];
     MapperImage im;
@@ -188,104 +224,98 @@ nlohmann::json RunSparseStage(const core::Workspace& ws, const SparseStageOption
     im.name = fr.name;
     const fs::path fp = features::FeaturePath(ws.features_dir(), fr.name);
     if (fs::exists(fp)) {
-      feature_sets[i] = features::ReadFeatures(fp);
-      const features::FeatureSet& fs_ = feature_sets[i];
+      in.feature_sets[i] = features::ReadFeatures(fp);
+      const features::FeatureSet& fs_ = in.feature_sets[i];
       im.keypoints.reserve(fs_.keypoints.size());
       for (const auto& k : fs_.keypoints) im.keypoints.emplace_back(k.x, k.y);
       if (fs_.colors.size() == fs_.keypoints.size()) im.colors = fs_.colors;
     }
     num_kp.push_back(im.keypoints.size());
-    input.images.push_back(std::move(im));
+    in.mapper.images.push_back(std::move(im));
   }
-  // The operator's tie points: the keypoints `match` appended (features/manual_matches.h), appended again here.
-  std::vector<TieTrack> tie_tracks;
   const fs::path manual_path = features::ManualMatchesPath(ws.matches_dir());
-  const bool manual = options.manual.enabled && fs::exists(manual_path);
-  if (manual) {
-    const auto mm = features::ManualMatches::FromJson(core::ReadJson(manual_path), index);
-    for (const auto& [i, ap] : mm.appended) {
-      MapperImage& im = input.images[i];
-      features::FeatureSet& fs_ = feature_sets[i];
-      features::AppendToFeatureSet(ap, &fs_, manual_path.string() + ": frame " + im.name);
-      if (im.colors.size() == im.keypoints.size())
-        im.colors.insert(im.colors.end(), ap.colors.begin(), ap.colors.end());
-      for (const auto& k : ap.keypoints) im.keypoints.emplace_back(k.x, k.y);
-      num_kp[i] = im.keypoints.size();
-      input.manual_from[im.id] = ap.first_index;
-    }
-    input.manual_weight = options.manual.options.weight;
-    for (const auto& t : mm.tracks) {
-      if (t.kind != features::ManualTrackKind::kTiePoint) continue;
-      TieTrack tt{t.id, {}};
-      for (const auto& o : t.observations) tt.observations.push_back({o.image + 1, o.keypoint});
-      tie_tracks.push_back(std::move(tt));
-    }
-  }
+  in.manual = options.manual.enabled && fs::exists(manual_path);
+  if (in.manual)
+    AddTiePoints(features::ManualMatches::FromJson(core::ReadJson(manual_path), index), options.manual.options.weight,
+                 manual_path.string(), &in, &num_kp);
   const fs::path matches_path = features::MatchesPath(ws.matches_dir());
-  input.pairs = features::ReadMatches(matches_path);
-  features::ValidateMatches(input.pairs, num_kp, matches_path.string());
-  const double load_seconds = std::chrono::duration<double>(Clock::now() - start).count();
+  in.mapper.pairs = features::ReadMatches(matches_path);
+  features::ValidateMatches(in.mapper.pairs, num_kp, matches_path.string());
+  return in;
+}
 
-  MapperResult result = RunIncrementalMapper(input, options.mapper);
-  const nlohmann::json relocalisation = RelocaliseLeftOut(input, feature_sets, options, &result);
-  nlohmann::json manual_report = {{"used", manual}};
-  if (manual && !result.models.empty()) {
-    std::map<uint32_t, std::vector<Eigen::Vector2d>> keypoints;
-    std::map<uint32_t, std::string> names;
-    std::map<uint32_t, uint32_t> image_cameras;
-    std::map<uint32_t, core::Camera> cameras;
-    for (const auto& im : input.images) {
-      keypoints[im.id] = im.keypoints;
-      names[im.id] = im.name;
-      image_cameras[im.id] = im.camera_id;
-    }
-    for (const auto& [id, c] : input.cameras) cameras[id] = c.camera;
-    const ManualRegistrationResult mr =
-        RegisterWithTiePoints(&result.models[0], tie_tracks, keypoints, names, image_cameras, cameras,
-                              input.manual_from, options.manual.options);
-    for (uint32_t id : mr.registered) result.left_out.erase(id);
-    for (const auto& [id, why] : mr.still_failed)
-      if (result.left_out.count(id)) result.left_out[id] += "; tie points: " + why;
-    LeaveOtherModels(mr.registered, options.mapper.min_model_size, &result);
-    manual_report = mr.ToJson(names);
-    manual_report["used"] = true;
-    manual_report["weight"] = options.manual.options.weight;
-    manual_report["min_tie_points"] = options.manual.options.min_tie_points;
+// Left-out frames registered into the largest model with the operator's tie points (manual_registration.h);
+// returns the report's "manual" section.
+nlohmann::json RegisterTiePointFrames(const SparseStageInput& in, const SparseStageOptions& options,
+                                      MapperResult* result) {
+  const MapperInput& input = in.mapper;
+  std::map<uint32_t, std::vector<Eigen::Vector2d>> keypoints;
+  std::map<uint32_t, std::string> names;
+  std::map<uint32_t, uint32_t> image_cameras;
+  std::map<uint32_t, core::Camera> cameras;
+  for (const auto& im : input.images) {
+    keypoints[im.id] = im.keypoints;
+    names[im.id] = im.name;
+    image_cameras[im.id] = im.camera_id;
   }
+  for (const auto& [id, c] : input.cameras) cameras[id] = c.camera;
+  const ManualRegistrationResult mr =
+      RegisterWithTiePoints(&result->models[0], in.tie_tracks, keypoints, names, image_cameras, cameras,
+                            input.manual_from, options.manual.options);
+  for (uint32_t id : mr.registered) result->left_out.erase(id);
+  for (const auto& [id, why] : mr.still_failed)
+    if (result->left_out.count(id)) result->left_out[id] += "; tie points: " + why;
+  LeaveOtherModels(mr.registered, options.mapper.min_model_size, result);
+  nlohmann::json report = mr.ToJson(names);
+  report["used"] = true;
+  report["weight"] = options.manual.options.weight;
+  report["min_tie_points"] = options.manual.options.min_tie_points;
+  return report;
+}
 
-  const auto write_start = Clock::now();
+// Every model as a COLMAP text model with its sparse.ply: the largest in WS/sparse, the others in numbered
+// sub-folders. Stale sub-models of an earlier run must not survive next to the new ones.
+void WriteSparseModels(const core::Workspace& ws, const std::vector<core::Reconstruction>& models) {
   core::EnsureDirectory(ws.sparse_dir());
   core::EnsureDirectory(ws.report_dir());
-  // Stale sub-models of an earlier run must not survive next to the new ones.
   for (int k = 1; fs::exists(ws.sparse_dir() / std::to_string(k)); ++k)
     fs::remove_all(ws.sparse_dir() / std::to_string(k));
-  for (size_t m = 0; m < result.models.size(); ++m) {
+  for (size_t m = 0; m < models.size(); ++m) {
     const fs::path dir = m == 0 ? ws.sparse_dir() : ws.sparse_dir() / std::to_string(m);
     core::EnsureDirectory(dir);
-    io::WriteColmapText(result.models[m], dir);
-    WritePointsPly(result.models[m], dir / "sparse.ply");
+    io::WriteColmapText(models[m], dir);
+    WritePointsPly(models[m], dir / "sparse.ply");
   }
+}
+
+// The report's per-model section: size, accuracy, cameras and self-calibration tests.
+nlohmann::json ModelReport(const core::Reconstruction& rec, const std::vector<NestedModelTestResult>* calibration) {
+  nlohmann::json tests = nlohmann::json::array();
+  if (calibration)
+    for (const auto& t : *calibration) tests.push_back(ToJson(t));
+  nlohmann::json cams = nlohmann::json::array();
+  for (const auto& [id, c] : rec.cameras) {
+    nlohmann::json cam = core::IntrinsicsToJson(c);
+    cam["id"] = id;
+    cams.push_back(cam);
+  }
+  return {{"registered_images", rec.images.size()},
+          {"points", rec.points.size()},
+          {"mean_track_length", rec.MeanTrackLength()},
+          {"mean_reprojection_error_px", rec.MeanReprojectionError()},
+          {"cameras", cams},
+          {"self_calibration", tests}};
+}
+
+// report/sparse.json without its timings: every model, the largest one's figures at the top, the left-out
+// frames with their reasons, and the mapper's, relocalisation's and tie points' sections.
+nlohmann::json SparseReport(const MapperInput& input, const MapperResult& result) {
   nlohmann::json report;
   report["total_images"] = input.images.size();
   report["models"] = nlohmann::json::array();
-  for (size_t m = 0; m < result.models.size(); ++m) {
-    const core::Reconstruction& rec = result.models[m];
-    nlohmann::json calibration = nlohmann::json::array();
-    if (m < result.self_calibration.size())
-      for (const auto& t : result.self_calibration[m]) calibration.push_back(ToJson(t));
-    nlohmann::json cams = nlohmann::json::array();
-    for (const auto& [id, c] : rec.cameras) {
-      nlohmann::json cam = core::IntrinsicsToJson(c);
-      cam["id"] = id;
-      cams.push_back(cam);
-    }
-    report["models"].push_back({{"registered_images", rec.images.size()},
-                                {"points", rec.points.size()},
-                                {"mean_track_length", rec.MeanTrackLength()},
-                                {"mean_reprojection_error_px", rec.MeanReprojectionError()},
-                                {"cameras", cams},
-                                {"self_calibration", calibration}});
-  }
+  for (size_t m = 0; m < result.models.size(); ++m)
+    report["models"].push_back(
+        ModelReport(result.models[m], m < result.self_calibration.size() ? &result.self_calibration[m] : nullptr));
   const core::Reconstruction* best = result.models.empty() ? nullptr : &result.models[0];
   report["registered_images"] = best ? best->images.size() : 0;
   report["points"] = best ? best->points.size() : 0;
@@ -296,6 +326,27 @@ nlohmann::json RunSparseStage(const core::Workspace& ws, const SparseStageOption
   for (const auto& [id, why] : result.left_out) left.push_back({{"image", input.images[id - 1].name}, {"reason", why}});
   report["left_out"] = left;
   report["mapper"] = result.stats;
+  return report;
+}
+
+}  // namespace
+
+nlohmann::json RunSparseStage(const core::Workspace& ws, const SparseStageOptions& options) {
+  options.Check();
+  using Clock = std::chrono::steady_clock;
+  const auto start = Clock::now();
+  const SparseStageInput in = ReadSparseStageInput(ws, options);
+  const MapperInput& input = in.mapper;
+  const double load_seconds = std::chrono::duration<double>(Clock::now() - start).count();
+
+  MapperResult result = RunIncrementalMapper(input, options.mapper);
+  const nlohmann::json relocalisation = RelocaliseLeftOut(input, in.feature_sets, options, &result);
+  nlohmann::json manual_report = {{"used", in.manual}};
+  if (in.manual && !result.models.empty()) manual_report = RegisterTiePointFrames(in, options, &result);
+
+  const auto write_start = Clock::now();
+  WriteSparseModels(ws, result.models);
+  nlohmann::json report = SparseReport(input, result);
   report["relocalisation"] = relocalisation;
   report["manual"] = manual_report;
   report["seconds"] = {{"load", load_seconds},
@@ -303,6 +354,7 @@ nlohmann::json RunSparseStage(const core::Workspace& ws, const SparseStageOption
                        {"write", std::chrono::duration<double>(Clock::now() - write_start).count()},
                        {"total", std::chrono::duration<double>(Clock::now() - start).count()}};
   core::WriteJson(ws.report_dir() / "sparse.json", report);
+  const core::Reconstruction* best = result.models.empty() ? nullptr : &result.models[0];
   if (!best) throw Error(ws.name() + ": no model could be reconstructed (see report/sparse.json for the reasons)");
   spdlog::info("sparse: {} / {} images registered, {} points, mean track {:.2f}, reprojection {:.3f} px",
                best->images.size(), input.images.size(), best->points.size(), best->MeanTrackLength(),

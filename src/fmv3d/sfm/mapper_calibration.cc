@@ -1,0 +1,113 @@
+// The model builder's final self-calibration tests and the telephoto dolly-zoom focal scan (model_builder.h).
+#include <fmt/format.h>
+#include <spdlog/spdlog.h>
+
+#include <algorithm>
+#include <cmath>
+#include <string>
+#include <utility>
+
+#include "fmv3d/sfm/dolly_zoom_scan.h"
+#include "fmv3d/sfm/model_builder.h"
+
+namespace fmv3d::sfm::mapper {
+
+// Held through growth, freed at the end only when the data ask for it and determine it (self_calibration.h):
+// a telephoto scan's focal is the knee of a plateau (longer focals explain the two-view matches as well); the
+// principal point is weakly constrained in many configurations (an orbit of cameras all looking at one centre:
+// a shift trades against a common tilt), and freeing it there only adds noise to every rotation; aspect and
+// tangential distortion are small for most cameras. Each test starts from the previous one's result.
+bool ModelBuilder::RunSelfCalibrationTest(IntrinsicGroup group, core::Reconstruction* rec) {
+  BundleAdjustmentOptions o = BaOptions();
+  // Δχ² = dof · (ss0 − ss1) / ss0: a relative cost tolerance of 1e-6 moves it by about dof · 1e-6 (≈ 1 for a
+  // large model), far below the price of a parameter for such a model, so the test needs no tighter convergence.
+  o.function_tolerance = std::max(opt_.final_ba_function_tolerance, 1e-6);
+  o.max_iterations = opt_.final_ba_max_iterations;
+  BundleAdjustmentConfig cfg = NewBaConfig();
+  cfg.gauge_image1 = gauge1_;
+  cfg.gauge_image2 = gauge2_;
+  NestedModelTestOptions to;
+  // k1, k2 were free through growth: a fixed threshold would drop a real lens's distortion (1000 held the true
+  // k1 = −0.08 of a 40-image synthetic orbit at Δχ² = 972), so their tests always use BIC's.
+  const bool radial = group == IntrinsicGroup::kK1 || group == IntrinsicGroup::kK2;
+  to.min_delta_chi2 = radial ? 0 : opt_.self_calibration_min_delta_chi2;
+  const auto start = Clock::now();
+  NestedModelTestResult r = TestNestedModel(rec, cfg, o, group, to);
+  t_->global_ba += Seconds(start);
+  std::string values;
+  for (size_t i = 0; i < r.parameters.size(); ++i)
+    values += fmt::format(" {:.6g}→{:.6g}{}", r.held_values[i], r.freed_values[i],
+                          i < r.sigmas.size() ? fmt::format(" (σ {:.3g})", r.sigmas[i]) : std::string());
+  spdlog::info("self-calibration, {}: Δχ² = {:.1f} vs {:.1f}, 1σ at the corner {:.3f} px vs rms {:.3f} px → {};{}",
+               ToString(group), r.delta_chi2, r.threshold, r.max_sigma_px, r.rms_freed_px, ToString(r.decision),
+               values);
+  const bool freed = r.freed_decision();
+  // k1, k2 were free already: their tests only decide whether they are held (k1_held_, k2_held_).
+  if (freed && group != IntrinsicGroup::kK1 && group != IntrinsicGroup::kK2) freed_groups_.insert(group);
+  self_calibration_.push_back(std::move(r));
+  return freed;
+}
+
+bool ModelBuilder::TrySelfCalibration(IntrinsicGroup group) { return RunSelfCalibrationTest(group, &rec_); }
+
+// k1 and k2 follow the data through growth (a guessed prior says nothing about the lens). On photos that were
+// undistorted (or a lens without measurable distortion) they only trade against the focal and the principal
+// point. Nested models: k2 is tested first (null: k2 at the prior, k1 free), then, when k2 is not needed, k1
+// (null: both at the prior); a term stays free only when both questions of self_calibration.h say so. Held, the
+// final adjustment re-fits the model with it at the prior.
+bool ModelBuilder::TestRadialTerm(IntrinsicGroup group, bool* held) {
+  core::Reconstruction start = rec_;
+  for (auto& [cid, cam] : start.cameras) {
+    const core::Camera& prior = input_.cameras.at(cid).camera;
+    (group == IntrinsicGroup::kK1 ? cam.k1 : cam.k2) = group == IntrinsicGroup::kK1 ? prior.k1 : prior.k2;
+  }
+  const bool freed = RunSelfCalibrationTest(group, &start);
+  if (self_calibration_.back().decision == NestedModelDecision::kFailed) return false;  // keep the model as it was
+  rec_ = std::move(start);
+  *held = !freed;
+  return true;
+}
+
+bool ModelBuilder::TryRadialSelfCalibration() {
+  // One camera: the test prices each term as one parameter.
+  if (rec_.cameras.size() != 1) return false;
+  bool changed = false;
+  if (BaOptions().refine_k2) changed = TestRadialTerm(IntrinsicGroup::kK2, &k2_held_);
+  if (BaOptions().refine_k1 && !BaOptions().refine_k2)
+    changed = TestRadialTerm(IntrinsicGroup::kK1, &k1_held_) || changed;
+  return changed;
+}
+
+void ModelBuilder::DollyZoomFocalScan() {
+  dolly_done_ = true;
+  const auto start = Clock::now();
+  BundleAdjustmentConfig cfg = NewBaConfig();
+  cfg.gauge_image1 = gauge1_;
+  cfg.gauge_image2 = gauge2_;
+  DollyZoomScanOptions so;
+  so.max_factor = opt_.focal_dolly_max_factor;
+  DollyZoomScanResult r = ScanFocalDollyZoom(rec_, cfg, BaOptions(), so);
+  t_->global_ba += Seconds(start);
+  spdlog::info("focal dolly-zoom scan on {} images: x{:.2f} → {:.1f} px ({:.1f} s); rms px by focal:{}",
+               rec_.images.size(), r.best_factor, r.best.cameras.empty() ? 0.0 : r.best.cameras.begin()->second.f,
+               Seconds(start), r.curve);
+  // The two-view scan's "lower bound" can be wrong for an ordinary lens (a 40-frame 960x540 orbit: bound 1452 px,
+  // true 831). Then the error rises steeply from the bound on — no plateau — and holding the focal there builds
+  // the whole model on it (0.08% centre error, distortion absorbing the rest). The data do determine the focal:
+  // release it to bundle adjustment from here, as for any guess.
+  if (r.best_factor == 1 && r.rms_at_start_px > 0 && r.rms_next_px > 1.2 * r.rms_at_start_px) {
+    focal_fixed_ = focal_from_plateau_ = false;
+    spdlog::info(
+        "focal: the error rises from the scan's lower bound on ({:.3f} → {:.3f} px): no plateau, the focal "
+        "is refined from here",
+        r.rms_at_start_px, r.rms_next_px);
+  }
+  if (r.best_factor != 1 && !r.best.images.empty()) {
+    rec_ = std::move(r.best);
+    const auto& cam = rec_.cameras.begin()->second;
+    narrow_field_ = narrow_field_ || 0.5 * std::hypot(cam.width, cam.height) / cam.f < opt_.narrow_field_max_radius;
+    FilterPoints(nullptr);
+  }
+}
+
+}  // namespace fmv3d::sfm::mapper
