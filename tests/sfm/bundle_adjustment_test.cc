@@ -175,8 +175,8 @@ TEST(BundleAdjustment, FocalPriorDecidesWhatNadirViewsLeaveFree) {
     EXPECT_LT(rec.MeanReprojectionError(), 0.5);
     return std::abs(rec.cameras.at(1).f / f_true - 1);
   };
-  EXPECT_GT(adjust(false), 0.01);   // the images alone keep most of the 3% error
-  EXPECT_LT(adjust(true), 0.002);   // the prior brings it back
+  EXPECT_GT(adjust(false), 0.01);  // the images alone keep most of the 3% error
+  EXPECT_LT(adjust(true), 0.002);  // the prior brings it back
 }
 
 TEST(Evaluation, LensResidualAtTheCorners) {

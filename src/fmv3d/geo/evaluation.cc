@@ -261,8 +261,7 @@ TelemetryErrors TrackTelemetryErrors(const fs::path& track_json, double fps, con
     for (const auto& s : track.samples) {
       const double k = std::round(s.time * fps);
       if (std::abs(s.time * fps - k) > 0.01 || !s.sensor_latitude || !s.sensor_longitude) continue;
-      const std::optional<double> alt =
-          !msl && s.sensor_altitude_hae ? s.sensor_altitude_hae : s.sensor_altitude_msl;
+      const std::optional<double> alt = !msl && s.sensor_altitude_hae ? s.sensor_altitude_hae : s.sensor_altitude_msl;
       const core::Image* t = tru.FindImageByName(fmt::format("flight-{:06d}.png", static_cast<long long>(k)));
       if (!t || !alt) continue;
       e.Add(fg.ToEnu({*s.sensor_latitude, *s.sensor_longitude, *alt}) - to_ws(t->pose.Centre()));
@@ -416,7 +415,8 @@ nlohmann::json EvaluateGeoAgainstSynth(const core::Workspace& ws, const fs::path
   }
   // The same floor for a georeference fitted on every packet (frames/telemetry.json).
   if (fs::exists(ws.telemetry_json()) && truth.contains("fps")) {
-    const TelemetryErrors e = TrackTelemetryErrors(ws.telemetry_json(), truth["fps"].get<double>(), tru, fg, to_ws, msl);
+    const TelemetryErrors e =
+        TrackTelemetryErrors(ws.telemetry_json(), truth["fps"].get<double>(), tru, fg, to_ws, msl);
     if (e.x.n) {
       j["telemetry_track"] = e.ToJson("packets");
       j["cameras"]["bias_minus_track_mean_m"] = (bias - e.Mean()).norm();
