@@ -180,6 +180,9 @@ std::map<uint32_t, MapperCamera> SparseCameras(const io::FramesIndex& index, con
       spdlog::info("camera {}: focal prior {:.1f} px from {}", c.camera.id, f,
                    options.focal_px > 0 ? "--focal" : "--hfov");
     }
+    if (mc.focal_prior_sigma > 0)
+      spdlog::info("camera {}: focal {:.1f} px from {}, a prior of σ {:.0f}% in bundle adjustment", c.camera.id,
+                   mc.camera.f, c.prior_source, 100 * mc.focal_prior_sigma);
     cameras[c.camera.id] = mc;
   }
   return cameras;
