@@ -40,6 +40,8 @@ void Add(CLI::App& app) {
                 100 * ev.centre_rmse_fraction, ev.extent, 100 * ev.max_centre_error_fraction);
     std::printf("median relative rotation error %.4f deg\n", ev.median_rotation_error_deg);
     std::printf("focal relative error %.4f%%\n", 100 * ev.focal_relative_error);
+    std::printf("principal point error %.2f px, lens residual at the corners %.3f px\n", ev.principal_point_error_px,
+                ev.lens_residual_corner_px);
     std::printf("systematic rotation error (camera x/y/z) %.4f %.4f %.4f deg\n", ev.systematic_rotation_deg.x(),
                 ev.systematic_rotation_deg.y(), ev.systematic_rotation_deg.z());
     std::printf("mean reprojection error %.3f px, %zu points\n", est.MeanReprojectionError(), est.points.size());

@@ -92,6 +92,33 @@ TEST(Exif, MalformedGpsNeverReadsOutOfBounds) {
   EXPECT_FALSE(ParseImageMetadata(jpeg.data(), jpeg.size()).gps.present());
 }
 
+TEST(Exif, FocalPlaneResolutionRoundTrip) {
+  ExifInfo in = Sample();
+  in.focal_plane_x_res = 5472 / 13.2;  // pixels per mm
+  in.pixel_width = 5472;
+  const auto tiff = EncodeTiffExif(in);
+  const ExifInfo out = ParseTiffExif(tiff.data(), tiff.size());
+  EXPECT_FALSE(out.damaged);
+  EXPECT_NEAR(out.focal_plane_x_res, in.focal_plane_x_res, 1e-3 / 25.4);  // written per inch to 1e-3
+  EXPECT_EQ(out.pixel_width, 5472);
+}
+
+// A block that is there but unreadable is told apart from no block (frames counts and warns about it).
+TEST(Exif, DamagedBlockIsFlagged) {
+  const std::vector<unsigned char> bad_ifd = {'I', 'I', 42, 0, 0xFF, 0xFF, 0xFF, 0x7F};
+  EXPECT_TRUE(ParseTiffExif(bad_ifd.data(), bad_ifd.size()).damaged);
+  const std::vector<unsigned char> bad_magic = {'I', 'I', 43, 0, 8, 0, 0, 0, 0, 0};
+  EXPECT_TRUE(ParseTiffExif(bad_magic.data(), bad_magic.size()).damaged);
+  const auto good = EncodeTiffExif(Sample());
+  EXPECT_FALSE(ParseTiffExif(good.data(), good.size()).damaged);
+  std::vector<uint8_t> jpeg;
+  ASSERT_TRUE(cv::imencode(".jpg", cv::Mat(16, 16, CV_8UC3, cv::Scalar(1, 2, 3)), jpeg));
+  const auto no_exif = ParseImageMetadata(jpeg.data(), jpeg.size());
+  EXPECT_FALSE(no_exif.damaged);
+  const auto damaged = InsertJpegMetadata(jpeg, std::vector<uint8_t>(bad_ifd.begin(), bad_ifd.end()), "");
+  EXPECT_TRUE(ParseImageMetadata(damaged.data(), damaged.size()).damaged);
+}
+
 TEST(Exif, OutOfRangeIntegersAreDroppedNotCast) {
   // Found by exif_fuzz: a PixelXDimension rational of 2684354560/1 was cast to int (undefined behaviour).
   std::vector<unsigned char> b = {'I', 'I', 42, 0, 8, 0, 0, 0};

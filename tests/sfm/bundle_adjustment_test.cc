@@ -147,6 +147,58 @@ TEST(BundleAdjustment, LocalAdjustmentMovesOnlyVariableImages) {
   EXPECT_EQ(rec.cameras.at(1).f, truth.cameras.at(1).f);
 }
 
+// Nadir views from one height see a focal change as a change of depth: f(1 + e) with every depth (1 + e) times
+// larger reprojects the same. The images leave the focal where it starts; a stated focal's prior decides it.
+TEST(BundleAdjustment, FocalPriorDecidesWhatNadirViewsLeaveFree) {
+  SyntheticSceneOptions so;
+  so.layout = SyntheticSceneOptions::Layout::kNadirGrid;
+  so.num_cameras = 12;
+  so.num_points = 400;
+  so.k1 = 0;
+  so.noise_px = 0.3;
+  so.outlier_ratio = 0;
+  so.clutter_ratio = 0;
+  const core::Reconstruction truth = TrueModelWithObservations(so);
+  const double f_true = truth.cameras.at(1).f;
+  const auto adjust = [&](bool with_prior) {
+    core::Reconstruction rec = truth;
+    rec.cameras.at(1).f = 1.03 * f_true;
+    BundleAdjustmentConfig cfg;
+    cfg.gauge_image1 = 1;
+    cfg.gauge_image2 = 2;
+    if (with_prior) cfg.focal_priors[1] = {f_true, 0.01 * f_true};
+    BundleAdjustmentOptions o;
+    o.refine_k1 = o.refine_k2 = false;
+    o.function_tolerance = 1e-12;
+    o.max_iterations = 200;
+    EXPECT_TRUE(BundleAdjust(&rec, cfg, o).success);
+    EXPECT_LT(rec.MeanReprojectionError(), 0.5);
+    return std::abs(rec.cameras.at(1).f / f_true - 1);
+  };
+  EXPECT_GT(adjust(false), 0.01);  // the images alone keep most of the 3% error
+  EXPECT_LT(adjust(true), 0.002);  // the prior brings it back
+}
+
+TEST(Evaluation, LensResidualAtTheCorners) {
+  core::Camera truth = core::Camera::Pinhole(854, 480, 450);
+  truth.k1 = -0.27;
+  truth.k2 = 0.08;
+  EXPECT_LT(LensResidualPx(truth, truth), 1e-9);
+  // Against a pinhole estimate the residual is the true distortion at the corner: the corner's distorted radius
+  // r_d against the undistorted r_u with r_u (1 + k1 r_u² + k2 r_u⁴) = r_d, found here by bisection.
+  const double r_d = std::hypot(427.0, 240.0) / 450;
+  double lo = r_d, hi = 3 * r_d;
+  for (int i = 0; i < 100; ++i) {
+    const double r = 0.5 * (lo + hi), r2 = r * r;
+    (r * (1 + truth.k1 * r2 + truth.k2 * r2 * r2) < r_d ? lo : hi) = r;
+  }
+  const core::Camera pinhole = core::Camera::Pinhole(854, 480, 450);
+  EXPECT_NEAR(LensResidualPx(pinhole, truth), 450 * (lo - r_d), 1e-6);
+  // A focal error alone is not distortion.
+  EXPECT_LT(LensResidualPx(core::Camera::Pinhole(854, 480, 460), pinhole), 1e-9);
+  EXPECT_THROW(LensResidualPx(core::Camera::Pinhole(640, 480, 450), pinhole), Error);
+}
+
 TEST(Evaluation, AlignmentIsSimilarityInvariant) {
   SyntheticSceneOptions so;
   so.num_cameras = 10;

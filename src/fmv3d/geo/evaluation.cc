@@ -237,13 +237,13 @@ struct TelemetryErrors {
 
 // The telemetry of each keyframe (frames.json) against its true camera.
 TelemetryErrors FrameTelemetryErrors(const io::FramesIndex& index, const core::Reconstruction& tru,
-                                     const LocalFrame& fg, const TruthToWorkspace& to_ws) {
+                                     const LocalFrame& fg, const TruthToWorkspace& to_ws, bool msl) {
   TelemetryErrors e;
   for (const auto& f : index.frames) {
     const core::Image* t = tru.FindImageByName(f.name);
     const auto& tel = f.telemetry;
     if (!t || !tel.is_object() || !tel.contains("sensor_latitude") || !tel.contains("sensor_longitude")) continue;
-    const char* alt = tel.contains("sensor_altitude_hae") ? "sensor_altitude_hae" : "sensor_altitude_msl";
+    const char* alt = !msl && tel.contains("sensor_altitude_hae") ? "sensor_altitude_hae" : "sensor_altitude_msl";
     if (!tel.contains(alt)) continue;
     const GeoPoint p{tel["sensor_latitude"].get<double>(), tel["sensor_longitude"].get<double>(),
                      tel[alt].get<double>()};
@@ -255,13 +255,13 @@ TelemetryErrors FrameTelemetryErrors(const io::FramesIndex& index, const core::R
 // Every packet of frames/telemetry.json against the true camera of its frame (synth writes one packet per frame,
 // at its time).
 TelemetryErrors TrackTelemetryErrors(const fs::path& track_json, double fps, const core::Reconstruction& tru,
-                                     const LocalFrame& fg, const TruthToWorkspace& to_ws) {
+                                     const LocalFrame& fg, const TruthToWorkspace& to_ws, bool msl) {
   TelemetryErrors e;
   for (const auto& track : telemetry::ReadTelemetryTracks(track_json))
     for (const auto& s : track.samples) {
       const double k = std::round(s.time * fps);
       if (std::abs(s.time * fps - k) > 0.01 || !s.sensor_latitude || !s.sensor_longitude) continue;
-      const std::optional<double> alt = s.sensor_altitude_hae ? s.sensor_altitude_hae : s.sensor_altitude_msl;
+      const std::optional<double> alt = !msl && s.sensor_altitude_hae ? s.sensor_altitude_hae : s.sensor_altitude_msl;
       const core::Image* t = tru.FindImageByName(fmt::format("flight-{:06d}.png", static_cast<long long>(k)));
       if (!t || !alt) continue;
       e.Add(fg.ToEnu({*s.sensor_latitude, *s.sensor_longitude, *alt}) - to_ws(t->pose.Centre()));
@@ -381,15 +381,25 @@ nlohmann::json EvaluateGeoAgainstSynth(const core::Workspace& ws, const fs::path
   const nlohmann::json truth = core::ReadJson(synth / "truth.json");
   if (!truth.contains("geo_origin"))
     throw Error((synth / "truth.json").string() + ": no geo_origin (render the flight with `fmv3d synth --klv`)");
-  const GeoPoint to{truth["geo_origin"]["lat"].get<double>(), truth["geo_origin"]["lon"].get<double>(),
-                    truth["geo_origin"]["alt"].get<double>()};
+  GeoPoint to{truth["geo_origin"]["lat"].get<double>(), truth["geo_origin"]["lon"].get<double>(),
+              truth["geo_origin"]["alt"].get<double>()};
   const double building = truth.at("characteristic_length").get<double>();
   const Georef g = ReadGeoref(ws);
+  // A workspace whose heights are MSL (telemetry without ellipsoidal heights, e.g. EXIF): the truth's origin is
+  // ellipsoidal, so it is lowered by the geoid undulation there (constant over a survey: EGM96 changes by
+  // centimetres per kilometre), and the telemetry is read at MSL.
+  const bool msl = g.vertical_datum == "MSL";
+  if (msl) {
+    const std::optional<double> n = GeoidUndulation(to.lat, to.lon);
+    if (!n) throw Error(ws.name() + ": heights are MSL but the EGM96 geoid grid is not available to compare them");
+    to.alt -= *n;
+  }
   const LocalFrame fg(g.origin, g.utm), ft(to, g.utm);
   const TruthToWorkspace to_ws{fg, ft};
 
   nlohmann::json j;
   j["building_height_m"] = building;
+  j["vertical_datum"] = msl ? "MSL (truth lowered by the EGM96 undulation at its origin)" : "WGS84 ellipsoid";
   const core::Reconstruction est = io::ReadColmapText(ws.sparse_enu_dir());
   const core::Reconstruction tru = io::ReadColmapText(synth / "truth");
   Eigen::Vector3d bias;
@@ -397,7 +407,7 @@ nlohmann::json EvaluateGeoAgainstSynth(const core::Workspace& ws, const fs::path
   // The floor set by the telemetry itself: the mean of (telemetry − true) camera positions, which a
   // position-only georeference cannot see past (its translation error tends to exactly this).
   if (fs::exists(ws.frames_json())) {
-    const TelemetryErrors e = FrameTelemetryErrors(io::ReadFramesIndex(ws.frames_json()), tru, fg, to_ws);
+    const TelemetryErrors e = FrameTelemetryErrors(io::ReadFramesIndex(ws.frames_json()), tru, fg, to_ws, msl);
     if (e.x.n) {
       j["telemetry"] = e.ToJson("frames");
       j["cameras"]["bias_minus_telemetry_mean_m"] = (bias - e.Mean()).norm();
@@ -405,7 +415,8 @@ nlohmann::json EvaluateGeoAgainstSynth(const core::Workspace& ws, const fs::path
   }
   // The same floor for a georeference fitted on every packet (frames/telemetry.json).
   if (fs::exists(ws.telemetry_json()) && truth.contains("fps")) {
-    const TelemetryErrors e = TrackTelemetryErrors(ws.telemetry_json(), truth["fps"].get<double>(), tru, fg, to_ws);
+    const TelemetryErrors e =
+        TrackTelemetryErrors(ws.telemetry_json(), truth["fps"].get<double>(), tru, fg, to_ws, msl);
     if (e.x.n) {
       j["telemetry_track"] = e.ToJson("packets");
       j["cameras"]["bias_minus_track_mean_m"] = (bias - e.Mean()).norm();

@@ -1,6 +1,7 @@
-// Accuracy of a georeferenced workspace against a `fmv3d synth --klv` ground truth (truth.json's geo_origin,
-// truth/ cameras, scene.obj), all compared in the workspace's georef ENU frame (through WGS84, so the two
-// origins may differ):
+// Accuracy of a georeferenced workspace against a `fmv3d synth --klv | --exif-gps | --gpmf` ground truth (truth.json's
+// geo_origin, truth/ cameras, scene.obj), all compared in the workspace's georef ENU frame (through WGS84, so the two
+// origins may differ; a workspace whose heights are MSL, as EXIF states them, is compared with the truth lowered by
+// the geoid undulation at its origin):
 //   cameras   absolute camera-centre error (RMS 3D, horizontal, vertical, bias) of geo/sparse_enu/
 //   telemetry the telemetry's own error at the cameras (RMS per axis, and its mean: the floor of a
 //             position-only georeference's translation error)

@@ -245,6 +245,7 @@ class FramesBuilder {
     r.sharpness = m.sharpness;
     const telemetry::PhotoTelemetry t = telemetry::TelemetryFromPhoto(exif, options_.telemetry);
     photo_fixes_.Add(t.rejection);
+    if (exif.damaged) ++damaged_exif_;
     if (t.sample) r.telemetry = telemetry::ToJson(*t.sample);
     if (t.dji.malformed > 0)
       spdlog::warn("{}: {} DJI XMP fields are not numbers (ignored)", file.string(), t.dji.malformed);
@@ -325,6 +326,9 @@ class FramesBuilder {
 
   // After every input: --max-frames, unused cameras dropped, priors; frames.json and telemetry.json written.
   io::FramesIndex Finish() {
+    if (damaged_exif_ > 0)
+      spdlog::warn("{} photos have an EXIF block that cannot be read; they carry no position or focal from it",
+                   damaged_exif_);
     if (photo_fixes_.Rejected() > 0)
       spdlog::warn("{}; those photos carry no telemetry", photo_fixes_.Summary("photo GPS fixes"));
     if (photo_fixes_.kept > 0) spdlog::info("{} photos with a GPS position", photo_fixes_.kept);
@@ -415,6 +419,7 @@ class FramesBuilder {
   std::map<ImageCameraKey, uint32_t> image_cameras_;
   NameRegistry names_;
   std::vector<telemetry::TelemetryTrack> tracks_;  // every video's whole telemetry → frames/telemetry.json
+  size_t damaged_exif_ = 0;                        // photos whose EXIF block cannot be read
   telemetry::FixCounts photo_fixes_;               // photos with a position: kept / dropped
 };
 

@@ -216,7 +216,10 @@ constexpr size_t kMaxXmp = 1 << 20;
 ExifInfo ParseTiffExif(const unsigned char* data, size_t size) {
   ExifInfo info;
   TiffReader r(data, size);
-  if (!r.Init()) return info;
+  if (!r.Init() || r.FirstIfd() < 8 || !r.Ok(r.FirstIfd(), 2)) {
+    info.damaged = true;
+    return info;
+  }
   uint32_t exif_ifd = 0, gps_ifd = 0;
   r.ForEach(r.FirstIfd(), [&](const TiffReader::Entry& e) {
     if (e.tag == 0x010F) info.make = r.Ascii(e);

@@ -37,7 +37,8 @@ struct ExifInfo {
   int pixel_width = 0;            // PixelXDimension (the width the focal-plane resolution refers to)
   std::string datetime_original;  // DateTimeOriginal "YYYY:MM:DD HH:MM:SS" (local time of the camera)
   ExifGps gps;
-  std::string xmp;  // the XMP packet (JPEG APP1 "http://ns.adobe.com/xap/1.0/", TIFF tag 700)
+  std::string xmp;       // the XMP packet (JPEG APP1 "http://ns.adobe.com/xap/1.0/", TIFF tag 700)
+  bool damaged = false;  // an EXIF block is there but its TIFF header or first IFD cannot be read
   // True when none of the camera fields (make, model, focal) is present.
   bool empty() const { return make.empty() && model.empty() && focal_mm == 0 && focal_35mm == 0; }
 };

@@ -125,6 +125,14 @@ std::vector<uint8_t> EncodeTiffExif(const ExifInfo& e) {
   if (!e.datetime_original.empty()) exif.push_back(Ascii(0x9003, e.datetime_original));
   if (e.focal_mm > 0) exif.push_back(Rationals(0x920A, {Rational(e.focal_mm, 1000)}));
   if (e.focal_35mm > 0) exif.push_back(Short(0xA405, static_cast<uint16_t>(std::lround(e.focal_35mm))));
+  if (e.focal_plane_x_res > 0) {
+    // In pixels per inch (unit 2), the unit most cameras write; the reader converts it back to pixels per mm.
+    const auto per_inch = Rational(e.focal_plane_x_res * 25.4, 1000);
+    exif.push_back(Rationals(0xA20E, {per_inch}));
+    exif.push_back(Rationals(0xA20F, {per_inch}));
+    exif.push_back(Short(0xA210, 2));
+  }
+  if (e.pixel_width > 0) exif.push_back(Long(0xA002, static_cast<uint32_t>(e.pixel_width)));
   const ExifGps& g = e.gps;
   if (g.present() || g.dop || g.utc_seconds) {
     gps.push_back(Byte(0x0000, {2, 3, 0, 0}));

@@ -1,5 +1,6 @@
 // EXIF writer (the inverse of exif.h, for test data: `fmv3d synth --exif-gps`): a little-endian TIFF structure
-// with IFD0 (Make, Model), the EXIF IFD (DateTimeOriginal, FocalLength, FocalLengthIn35mmFilm) and the GPS IFD
+// with IFD0 (Make, Model), the EXIF IFD (DateTimeOriginal, FocalLength, FocalLengthIn35mmFilm, FocalPlaneX/YResolution
+// with its unit, PixelXDimension) and the GPS IFD
 // (version 2.3, latitude/longitude as degrees/minutes/seconds rationals with their refs, altitude with its ref,
 // time and date stamps, status, measure mode, DOP, map datum, horizontal positioning error), each written only
 // when set; and its insertion, with an XMP packet, into a JPEG as APP1 segments right after SOI.

@@ -10,6 +10,8 @@
 #include <algorithm>
 #include <cmath>
 
+#include "fmv3d/core/camera.h"
+
 namespace fmv3d::sfm::ba {
 
 // w · (t[k] − t0): holds one translation coordinate (the gauge of scale), weighted relative to its size.
@@ -78,6 +80,23 @@ struct SightPrior {
  private:
   Eigen::Vector3d f_;
   double range_, inv_sigma_;
+};
+
+// (f − prior) / σ: a camera's focal (intrinsics block in core::IntrinsicIndex order) against a stated one.
+class FocalPrior : public ceres::SizedCostFunction<1, core::kNumIntrinsics> {
+ public:
+  FocalPrior(double prior, double sigma) : prior_(prior), inv_sigma_(1 / sigma) {}
+  bool Evaluate(double const* const* params, double* residual, double** jacobians) const override {
+    residual[0] = (params[0][core::kF] - prior_) * inv_sigma_;
+    if (jacobians && jacobians[0]) {
+      std::fill(jacobians[0], jacobians[0] + core::kNumIntrinsics, 0.0);
+      jacobians[0][core::kF] = inv_sigma_;
+    }
+    return true;
+  }
+
+ private:
+  double prior_, inv_sigma_;
 };
 
 // (X − prior) / σ: a 3D point against its known position.

@@ -49,6 +49,7 @@ namespace {
 
 using ba::AxisPrior;
 using ba::CentrePrior;
+using ba::FocalPrior;
 using ba::PointPrior;
 using ba::ScaleGaugePrior;
 using ba::SightPrior;
@@ -113,6 +114,7 @@ class BundleProblem {
     const size_t pose_anchors = AddPosePriors();
     const size_t anchors = std::max(pose_anchors, AddPointPriors());
     if (!any_constant && anchors < 3) FixGauge();
+    AddFocalPriors();
     FreeIntrinsics();
   }
 
@@ -340,6 +342,17 @@ class BundleProblem {
       if (sight_count >= 3) anchors = std::max(anchors, sight_count);
     }
     return anchors;
+  }
+
+  // Focal priors (see the header) on the cameras in the problem.
+  void AddFocalPriors() {
+    for (const auto& [cid, prior] : config_.focal_priors) {
+      const auto it = intr_.find(cid);
+      if (it == intr_.end()) continue;
+      if (!(prior.second > 0)) throw Error("bundle adjustment: a focal prior's σ must be positive");
+      prior_costs_.emplace_back(new FocalPrior(prior.first, prior.second));
+      problem_.AddResidualBlock(prior_costs_.back().get(), nullptr, it->second);
+    }
   }
 
   // Point priors (see the header) on the adjusted points. Returns how many: three or more fix the gauge.

@@ -90,6 +90,10 @@ struct BundleAdjustmentConfig {
   // towards its own few noisy clicks.
   std::map<uint64_t, Eigen::Vector3d> point_priors;
   double point_prior_sigma = 0.02;
+  // Soft priors on the focal of cameras whose f is free: camera id → (prior f, σ), pixels; residual (f − prior) / σ.
+  // A stated focal (EXIF, the sensor database) decides what the images leave free: nadir photos from one height see a
+  // focal change and a change of depth, ground height and relief alike, so f drifts where the images barely hold it.
+  std::map<uint32_t, std::pair<double, double>> focal_priors;
   double point_prior_loss_px = 3;
   double point_prior_observation_weight = 1;
 };

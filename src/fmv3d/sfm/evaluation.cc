@@ -27,6 +27,10 @@ nlohmann::json SparseEvaluation::ToJson() const {
           {"focal_definition", "f = fy (vertical focal, pixels); fx = f * aspect"},
           {"focal_x_relative_error_percent", 100 * focal_x_relative_error},
           {"principal_point_error_px", principal_point_error_px},
+          {"lens_residual_corner_px", lens_residual_corner_px},
+          {"lens_residual_definition",
+           "max over the image corners of the difference between the estimated and true distortion displacements "
+           "(pixel minus its undistorted position under the same camera's pinhole)"},
           {"systematic_rotation_error_deg",
            {systematic_rotation_deg.x(), systematic_rotation_deg.y(), systematic_rotation_deg.z()}},
           {"systematic_rotation_error_definition",
@@ -47,6 +51,24 @@ double MedianRelativeRotationErrorDeg(const std::vector<core::Pose>& estimate, c
       errs.push_back(core::RotationAngle(re, rt) * 180.0 / M_PI);
     }
   return core::Median(std::move(errs));
+}
+
+double LensResidualPx(const core::Camera& estimate, const core::Camera& truth) {
+  if (estimate.width != truth.width || estimate.height != truth.height)
+    throw Error("evaluate: the estimated and true cameras differ in size; cannot compare their lenses");
+  // Displacement of pixel uv by the camera's distortion: uv minus its undistorted pixel under the same K.
+  const auto displacement = [](const core::Camera& c, const Eigen::Vector2d& uv) {
+    const Eigen::Vector3d ray = c.Unproject(uv);
+    const Eigen::Vector2d pin(c.fx() * ray.x() + c.u0, c.fy() * ray.y() + c.v0);
+    return Eigen::Vector2d(uv - pin);
+  };
+  double worst = 0;
+  for (const double u : {0.0, double(truth.width)})
+    for (const double v : {0.0, double(truth.height)}) {
+      const Eigen::Vector2d uv(u, v);
+      worst = std::max(worst, (displacement(estimate, uv) - displacement(truth, uv)).norm());
+    }
+  return worst;
 }
 
 SparseEvaluation EvaluateSparse(const core::Reconstruction& estimate, const core::Reconstruction& truth) {
@@ -101,6 +123,8 @@ SparseEvaluation EvaluateSparse(const core::Reconstruction& estimate, const core
     if (ct.fx() > 0)
       ev.focal_x_relative_error = std::max(ev.focal_x_relative_error, std::abs(ce.fx() - ct.fx()) / ct.fx());
     ev.principal_point_error_px = std::max(ev.principal_point_error_px, std::hypot(ce.u0 - ct.u0, ce.v0 - ct.v0));
+    if (ce.width == ct.width && ce.height == ct.height)
+      ev.lens_residual_corner_px = std::max(ev.lens_residual_corner_px, LensResidualPx(ce, ct));
   }
   return ev;
 }

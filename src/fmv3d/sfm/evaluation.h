@@ -4,7 +4,8 @@
 //    PAIRWISE DISTANCE between true camera centres (the set's diameter);
 //  - median over all image pairs of the angle of R_rel_est · R_rel_trueᵀ, with R_rel = R_j R_iᵀ (gauge-free);
 //  - relative focal error |f_est − f_true| / f_true per camera (matched through the first image using it), and
-//    the distance between the principal points in pixels.
+//    the distance between the principal points in pixels;
+//  - the lens model's residual distortion at the image corners (LensResidualPx).
 #pragma once
 
 #include <map>
@@ -29,10 +30,17 @@ struct SparseEvaluation {
   // held at 1 the estimate's single focal is compared with the truth's fy.
   double focal_relative_error = 0, focal_x_relative_error = 0;
   double principal_point_error_px = 0;  // worst over matched cameras: distance between the principal points
+  double lens_residual_corner_px = 0;   // worst over matched cameras: LensResidualPx
   Eigen::Vector3d systematic_rotation_deg = Eigen::Vector3d::Zero();  // see ToJson
   core::Sim3 alignment;                                               // ours → truth
   nlohmann::json ToJson() const;
 };
+
+// Residual distortion of an estimated lens against the true one, in pixels: the largest difference, over the four
+// image corners, between the distortion displacements of the two models, where a model's displacement at pixel p is
+// p minus where its own pinhole (same f, s_u, u0, v0, no distortion) puts the ray p sees. Focal and principal point
+// errors are not part of it (evaluated on their own above); the cameras must have the same size.
+double LensResidualPx(const core::Camera& estimate, const core::Camera& truth);
 
 // Throws fmv3d::Error when fewer than 3 images can be matched by name (no alignment possible).
 SparseEvaluation EvaluateSparse(const core::Reconstruction& estimate, const core::Reconstruction& truth);

@@ -39,6 +39,8 @@ struct MapperImage {
 struct MapperCamera {
   core::Camera camera;       // prior intrinsics
   bool focal_known = false;  // false: the prior is a guess, self-calibrate
+  // > 0: camera.f's relative 1σ, a soft prior in every bundle adjustment (BundleAdjustmentConfig::focal_priors).
+  double focal_prior_sigma = 0;
 };
 
 struct MapperInput {

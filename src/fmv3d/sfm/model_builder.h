@@ -111,6 +111,9 @@ class ModelBuilder {
     BundleAdjustmentConfig cfg;
     cfg.weighted_from = input_.manual_from;
     cfg.observation_weight = input_.manual_weight;
+    for (const auto& [id, mc] : input_.cameras)
+      if (mc.focal_known && mc.focal_prior_sigma > 0)
+        cfg.focal_priors[id] = {mc.camera.f, mc.focal_prior_sigma * mc.camera.f};
     return cfg;
   }
   // Images sitting at a wrong pose moved to one that explains clearly more correspondences; returns how many.

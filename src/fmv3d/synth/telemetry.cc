@@ -118,7 +118,13 @@ PhotoMetadata MakePhotoMetadata(const telemetry::klv::St0601Record& r, const cor
   io::ExifInfo& e = m.exif;
   e.make = "fmv3d";
   e.model = "synth";
+  // What a survey camera writes: the lens focal in mm, its 35 mm equivalent (whole mm) and the focal-plane resolution
+  // of its sensor, here a 1-inch type 13.2 mm wide (a DJI Phantom 4 Pro's), so the focal in pixels is exact.
+  constexpr double kSensorWidthMm = 13.2;
+  e.focal_mm = camera.fx() * kSensorWidthMm / camera.width;
   e.focal_35mm = std::round(camera.fx() * std::hypot(36.0, 24.0) / std::hypot(camera.width, camera.height));
+  e.focal_plane_x_res = camera.width / kSensorWidthMm;
+  e.pixel_width = camera.width;
   const double t = r.unix_time_us * 1e-6;
   const std::time_t secs = static_cast<std::time_t>(t);
   std::tm tm{};

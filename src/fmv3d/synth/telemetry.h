@@ -56,7 +56,8 @@ std::vector<telemetry::klv::St0601Record> MakeKlvTelemetry(const std::vector<cor
 // Photo metadata of one frame as a DJI drone writes it (`fmv3d synth --exif-gps`), from its ST 0601 record
 // (so the same noise model holds): EXIF GPS at the record's noisy position, altitude = its true altitude (MSL,
 // the datum EXIF and DJI use), DOP 1, GPSHPositioningError = gps_noise, GPS time; make "fmv3d", model "synth",
-// the 35 mm equivalent focal (rounded to whole mm, as cameras write it); and a DJI XMP packet with the stated
+// the focal in mm of a 13.2 mm wide sensor with that sensor's focal-plane resolution and the image width, the 35 mm
+// equivalent focal (rounded to whole mm, as cameras write it); and a DJI XMP packet with the stated
 // attitude (gimbal angles of the record's camera rotation, flight angles = its platform angles),
 // AbsoluteAltitude (MSL) and RelativeAltitude (ellipsoidal height above the geo origin).
 struct PhotoMetadata {
