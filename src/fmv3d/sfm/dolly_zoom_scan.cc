@@ -36,12 +36,13 @@ DollyZoomScanResult ScanFocalDollyZoom(const core::Reconstruction& rec, const Bu
     const auto sm = BundleAdjust(&m, config, o);
     if (!sm.success) continue;
     r.curve += fmt::format(" {:.0f}:{:.4f}", m.cameras.begin()->second.f, sm.final_rms_px);
+    r.rms_longest_px = sm.final_rms_px;
     if (k == 1)
       r.rms_at_start_px = sm.final_rms_px;
     else if (r.rms_next_px == 0)
       r.rms_next_px = sm.final_rms_px;
     if (sm.final_rms_px < best_rms) {
-      best_rms = sm.final_rms_px;
+      best_rms = r.rms_best_px = sm.final_rms_px;
       r.best_factor = k;
       r.best = m;
     }

@@ -24,6 +24,8 @@ struct DollyZoomScanResult {
   core::Reconstruction best;   // the model at the best candidate (empty when no BA succeeded)
   double rms_at_start_px = 0;  // rms at the starting focal ...
   double rms_next_px = 0;      // ... and at the next candidate (0 when it failed)
+  double rms_best_px = 0;      // at the best candidate ...
+  double rms_longest_px = 0;   // ... and at the longest that succeeded
   std::string curve;           // "focal:rms" per candidate, for the log
 };
 

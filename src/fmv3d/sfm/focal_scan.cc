@@ -5,6 +5,7 @@
 #include <limits>
 #include <opencv2/calib3d.hpp>
 #include <opencv2/core/eigen.hpp>
+#include <vector>
 
 namespace fmv3d::sfm {
 
@@ -24,6 +25,18 @@ double MsacScore(const Eigen::Matrix3d& E, const std::vector<cv::Point2d>& p1, c
     sum += std::min(e2, t2);
   }
   return sum / std::max<size_t>(1, p1.size());
+}
+
+// Median of each value and its two neighbours (at the ends, of the first or last three).
+std::vector<double> MedianOfNeighbours(const std::vector<double>& v) {
+  if (v.size() < 3) return v;
+  std::vector<double> m(v.size());
+  for (size_t i = 0; i < v.size(); ++i) {
+    const size_t c = std::clamp<size_t>(i, 1, v.size() - 2);
+    const double a = v[c - 1], b = v[c], d = v[c + 1];
+    m[i] = std::max(std::min(a, b), std::min(std::max(a, b), d));
+  }
+  return m;
 }
 
 }  // namespace
@@ -83,6 +96,18 @@ FocalScanResult ScanFocal(const core::Camera& camera, const std::vector<FocalSca
       }
       r.scores[c] += best;
     }
+  }
+  // Flat: every candidate explains the matches about equally well (optical axes that meet, as in an orbit around its
+  // target, or near-affine views), and the best is one candidate's luck (a lucky or failed minimal sample; at very
+  // long focals the five-point solver degenerates). Two views bound nothing: the shortest candidate is the lower
+  // bound, and the multi-view dolly-zoom scan decides from there. The flatness test reads the median of each
+  // candidate and its neighbours, so one such jump does not decide it.
+  const std::vector<double> smooth = MedianOfNeighbours(r.scores);
+  const auto [lo, hi] = std::minmax_element(smooth.begin(), smooth.end());
+  if (*hi <= (1 + o.flat_tolerance) * *lo) {
+    r.undetermined = r.plateau = true;
+    r.focal = r.focals.front();
+    return r;
   }
   const double best = *std::min_element(r.scores.begin(), r.scores.end());
   const double limit = (1 + o.tolerance) * best + 1e-12;

@@ -9,6 +9,11 @@
 // keep the shortest focal whose score is within a tolerance of the best — the knee of the curve. For ordinary
 // lenses the curve has a clear minimum near the true focal; for telephoto it is a plateau, and the knee is a
 // lower bound of the order of the true focal (the remaining ambiguity is the affine one: focal and depth trade).
+// A curve flat over the whole range determines nothing (the optical axes of an orbit around its target meet, which
+// makes the two-view focal undefined; near-affine views explain as well at any focal): its shortest candidate is
+// the lower bound, and the multi-view dolly-zoom scan (dolly_zoom_scan.h) decides from there. Measured: with each
+// candidate's pose refined to its optimum rather than taken from a minimal sample, telephoto curves are flat too;
+// a knee comes from how the five-point solver fails at focals far too short, so it is only a lower bound.
 #pragma once
 
 #include <Eigen/Core>
@@ -27,6 +32,7 @@ struct FocalScanOptions {
   double step = 1.26;                         // ratio between consecutive candidates (2^(1/3))
   double threshold_px = 2.0;                  // MSAC truncation and RANSAC inlier threshold
   double tolerance = 0.05;                    // knee: first candidate with score ≤ (1 + tolerance) · best
+  double flat_tolerance = 0.15;               // undetermined: every candidate within (1 + this) · best
   int ransac_iterations = 1000;
   uint64_t seed = 1;
 };
@@ -34,6 +40,7 @@ struct FocalScanOptions {
 struct FocalScanResult {
   double focal = 0;            // chosen focal (pixels)
   bool plateau = false;        // the longest candidates score like the best: focal is only a lower bound
+  bool undetermined = false;   // the curve is flat: focal is the shortest candidate, plateau is set
   std::vector<double> focals;  // candidates
   std::vector<double> scores;  // mean truncated squared Sampson error (px²), summed over pairs
 };

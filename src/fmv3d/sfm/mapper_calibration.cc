@@ -102,6 +102,13 @@ void ModelBuilder::DollyZoomFocalScan() {
         "is refined from here",
         r.rms_at_start_px, r.rms_next_px);
   }
+  // A best focal beyond the start with the error rising again towards the longest is a minimum the views
+  // determine, not the knee of a plateau (an orbit whose two-view curve was flat): refined from here.
+  if (r.best_factor > 1 && r.rms_longest_px > 1.2 * r.rms_best_px) {
+    focal_fixed_ = focal_from_plateau_ = false;
+    spdlog::info("focal: the error rises again beyond {:.1f} px ({:.3f} → {:.3f} px): a minimum, refined from here",
+                 r.best.cameras.begin()->second.f, r.rms_best_px, r.rms_longest_px);
+  }
   if (r.best_factor != 1 && !r.best.images.empty()) {
     rec_ = std::move(r.best);
     const auto& cam = rec_.cameras.begin()->second;

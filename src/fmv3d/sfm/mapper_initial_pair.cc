@@ -50,7 +50,9 @@ void ModelBuilder::ChooseFocal(const std::vector<InitialPairCandidate>& cands) {
   std::string curve;
   for (size_t i = 0; i < r.focals.size(); ++i) curve += fmt::format(" {:.0f}:{:.3f}", r.focals[i], r.scores[i]);
   spdlog::info("focal scan on {} pairs: {:.1f} px ({:.2f} x the guess){}{}", pairs.size(), r.focal, init_focal_scale_,
-               r.plateau ? ", plateau: a lower bound, held until the final test" : "",
+               r.undetermined ? ", a flat curve: the shortest candidate as a lower bound, held until the final test"
+               : r.plateau    ? ", plateau: a lower bound, held until the final test"
+                              : "",
                narrow_field_ ? ", narrow field: distortion fixed" : "");
   spdlog::debug("focal scan (f: px²):{}", curve);
 }

@@ -1,0 +1,97 @@
+// The two-view focal scan on exact synthetic pairs: when two views cannot tell the focal, it says so instead of
+// picking one candidate's luck.
+#include "fmv3d/sfm/focal_scan.h"
+
+#include <gtest/gtest.h>
+
+#include <Eigen/Geometry>
+#include <cmath>
+#include <random>
+
+#include "fmv3d/core/pose.h"
+
+namespace fmv3d::sfm {
+namespace {
+
+constexpr double kW = 640, kH = 360, kTrueFocal = 554;
+
+core::Camera TrueCamera() {
+  core::Camera c;
+  c.width = static_cast<int>(kW);
+  c.height = static_cast<int>(kH);
+  c.f = kTrueFocal;
+  c.u0 = kW / 2;
+  c.v0 = kH / 2;
+  return c;
+}
+
+// A camera at `centre` looking at `target` (world z up).
+core::Pose LookAt(const Eigen::Vector3d& centre, const Eigen::Vector3d& target) {
+  const Eigen::Vector3d z = (target - centre).normalized();
+  const Eigen::Vector3d x = z.cross(Eigen::Vector3d::UnitZ()).normalized();
+  const Eigen::Vector3d y = z.cross(x);
+  core::Pose p;
+  Eigen::Matrix3d R;
+  R.row(0) = x;
+  R.row(1) = y;
+  R.row(2) = z;
+  p.q = Eigen::Quaterniond(R);
+  p.t = -R * centre;
+  return p;
+}
+
+// Pairs of neighbouring views on a circle of radius 60 m, 30 m up, around a block of points 40 m wide and 15 m
+// tall; every view looks at `target`. Keypoints carry 0.5 px noise.
+std::vector<FocalScanPair> OrbitPairs(const Eigen::Vector3d& target, double step_deg) {
+  std::mt19937 rng(7);
+  std::uniform_real_distribution<double> ux(-20, 20), uz(0, 15);
+  std::normal_distribution<double> noise(0, 0.5);
+  std::vector<Eigen::Vector3d> points;
+  for (int i = 0; i < 600; ++i) points.emplace_back(ux(rng), ux(rng), uz(rng));
+  const core::Camera cam = TrueCamera();
+  std::vector<FocalScanPair> pairs;
+  for (int k = 0; k < 5; ++k) {
+    const double a1 = (72.0 * k) * M_PI / 180, a2 = a1 + step_deg * M_PI / 180;
+    const core::Pose p1 = LookAt({60 * std::cos(a1), 60 * std::sin(a1), 30}, target);
+    const core::Pose p2 = LookAt({60 * std::cos(a2), 60 * std::sin(a2), 30}, target);
+    FocalScanPair pair;
+    for (const auto& X : points) {
+      const Eigen::Vector3d c1 = p1.Transform(X), c2 = p2.Transform(X);
+      if (c1.z() <= 0 || c2.z() <= 0) continue;
+      const Eigen::Vector2d u1 = cam.Project(c1), u2 = cam.Project(c2);
+      if (u1.x() < 0 || u1.x() > kW || u1.y() < 0 || u1.y() > kH || u2.x() < 0 || u2.x() > kW || u2.y() < 0 ||
+          u2.y() > kH)
+        continue;
+      pair.uv1.push_back(u1 + Eigen::Vector2d(noise(rng), noise(rng)));
+      pair.uv2.push_back(u2 + Eigen::Vector2d(noise(rng), noise(rng)));
+    }
+    pairs.push_back(std::move(pair));
+  }
+  return pairs;
+}
+
+TEST(FocalScan, OrbitWhoseAxesMeetLeavesTheFocalUndeterminedFromTheShortestCandidate) {
+  core::Camera guess = TrueCamera();
+  guess.f = 1.2 * kW;  // the guess a frame without metadata gets
+  const auto pairs = OrbitPairs({0, 0, 5}, 20);
+  ASSERT_GE(pairs[0].uv1.size(), 200u);
+  const FocalScanResult r = ScanFocal(guess, pairs);
+  ASSERT_FALSE(r.scores.empty());
+  EXPECT_TRUE(r.undetermined);
+  EXPECT_TRUE(r.plateau);  // a lower bound for the multi-view scan, not one candidate's luck
+  EXPECT_DOUBLE_EQ(r.focal, r.focals.front());
+}
+
+TEST(FocalScan, NoUsablePairKeepsTheGuess) {
+  core::Camera guess = TrueCamera();
+  guess.f = 700;
+  FocalScanPair tiny;
+  tiny.uv1 = {{1, 2}, {3, 4}};
+  tiny.uv2 = {{1, 2}, {3, 4}};
+  const FocalScanResult r = ScanFocal(guess, {tiny});
+  EXPECT_TRUE(r.scores.empty());
+  EXPECT_DOUBLE_EQ(r.focal, 700);
+}
+
+}  // namespace
+}  // namespace fmv3d::sfm
