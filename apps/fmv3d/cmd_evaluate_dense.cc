@@ -20,7 +20,7 @@ namespace {
 void Add(CLI::App& app) {
   auto* cmd = app.add_subcommand("evaluate-dense", "Compare WS/dense/fused.ply with a synthetic scene's true mesh");
   struct Args {
-    std::string ws, truth, cloud, mesh;
+    std::string ws, truth, cloud, mesh, missed;
     bool everywhere = false;
     mvs::DenseEvaluationOptions opt;
   };
@@ -34,6 +34,9 @@ void Add(CLI::App& app) {
   cmd->add_option("--completeness", a->opt.completeness_fraction,
                   "Completeness distance, fraction of the characteristic length")
       ->capture_default_str();
+  cmd->add_option("--missed", a->missed,
+                  "Write the seen surface samples with no point near (truth frame, PLY) to see where completeness "
+                  "is lost");
   cmd->add_flag("--everywhere", a->everywhere,
                 "Completeness over all seen surface, including synth's backdrop beyond truth.json bounds");
   cmd->callback([a] {
@@ -73,7 +76,13 @@ void Add(CLI::App& app) {
       const geometry::MeshDistance md(mesh.vertices, mesh.triangles);
       cloud.positions = md.SampleSurface(0.001 * length / s, nullptr, 3);
     }
+    a->opt.keep_missed = !a->missed.empty();
     const auto ev = mvs::EvaluateDense(cloud, est, truth, scene, length, a->opt);
+    if (!a->missed.empty()) {
+      io::OrientedPointCloud missed;
+      missed.positions = ev.missed_samples;
+      io::WritePointCloudPly(missed, a->missed);
+    }
     core::EnsureDirectory(ws.report_dir());
     core::WriteJson(ws.report_dir() / (a->mesh.empty() ? "dense_eval.json" : "mesh_eval.json"), ev.ToJson());
     std::printf("%-34s %14s\n", a->mesh.empty() ? "dense cloud vs true mesh" : "mesh surface vs true mesh", "");

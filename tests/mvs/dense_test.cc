@@ -268,8 +268,17 @@ TEST(DenseStage, FusedPointsLieOnTheTrueSurface) {
   eo.region = Eigen::AlignedBox3d(
       Eigen::Vector3d(truth_json["bounds"]["min"][0], truth_json["bounds"]["min"][1], truth_json["bounds"]["min"][2]),
       Eigen::Vector3d(truth_json["bounds"]["max"][0], truth_json["bounds"]["max"][1], truth_json["bounds"]["max"][2]));
+  eo.keep_missed = true;
   const auto ev =
       EvaluateDense(cloud, flight.result.truth, flight.result.truth, scene, flight.result.characteristic_length, eo);
+  // The missed samples are the seen ones without a point near: inside the region, and no point within the radius.
+  ASSERT_EQ(ev.missed_samples.size(), ev.seen_samples - ev.complete_samples);
+  const double radius = eo.completeness_fraction * flight.result.characteristic_length;
+  for (size_t k = 0; k < ev.missed_samples.size(); k += std::max<size_t>(1, ev.missed_samples.size() / 20)) {
+    EXPECT_TRUE(eo.region.contains(ev.missed_samples[k]));
+    for (size_t i = 0; i < cloud.size(); i += 7) ASSERT_GT((cloud.positions[i] - ev.missed_samples[k]).norm(), radius);
+  }
+  EXPECT_GT(report.at("fusion").at("texture_floor").get<double>(), 0);
   std::printf("fused: %zu points, median %.5f, p90 %.5f of the height, completeness %.4f\n", cloud.size(),
               ev.median_fraction(), ev.p90_fraction(), ev.completeness);
   // At 320x240 a pixel covers ~0.2 m of the 30 m building: points within a fraction of a pixel.

@@ -255,8 +255,11 @@ TEST(Fusion, UncertaintyFilterKeepsTheFarFloorAndStatesItsLargerSigma) {
 // the two halves apart; the filter must drop the faint half.
 constexpr double kWeakX = 3.0, kWeakFactor = 20.0;
 
+// texture_beyond / noise_beyond: the texture map's p and the depth noise (in units of the sharp half's) for
+// x > kWeakX; both kWeakFactor by default (noise as the texture predicts).
 FusionView TexturedGroundView(const ViewGeometry& g, const std::vector<uint32_t>& neighbours, uint32_t seed,
-                              bool with_texture_map) {
+                              bool with_texture_map, double texture_beyond = kWeakFactor,
+                              double noise_beyond = kWeakFactor) {
   std::mt19937 rng(seed);
   std::normal_distribution<double> gauss(0, 1);
   DepthMap map;
@@ -270,11 +273,12 @@ FusionView TexturedGroundView(const ViewGeometry& g, const std::vector<uint32_t>
     for (int x = 0; x < g.width; ++x) {
       const Eigen::Vector3d ray = g.R.transpose() * g.K.inverse() * Eigen::Vector3d(x + 0.5, y + 0.5, 1);
       const Eigen::Vector3d X = c + ray * (-c.z() / ray.z());
-      const double p = X.x() > kWeakX ? kWeakFactor : 1.0;
+      const bool beyond = X.x() > kWeakX;
       const double z = (g.R * X + g.t).z();
-      map.depth.at<float>(y, x) = static_cast<float>(z + p * kDisparityNoise * z * z * gauss(rng));
+      map.depth.at<float>(y, x) =
+          static_cast<float>(z + (beyond ? noise_beyond : 1.0) * kDisparityNoise * z * z * gauss(rng));
       map.normal.at<cv::Vec3f>(y, x) = cv::Vec3f(n.x(), n.y(), n.z());
-      texture.at<float>(y, x) = static_cast<float>(p);
+      texture.at<float>(y, x) = static_cast<float>(beyond ? texture_beyond : 1.0);
     }
   FusionView v = MakeFusionView(g, map, cv::Mat::zeros(g.height, g.width, CV_8UC3), neighbours);
   if (with_texture_map) texture.convertTo(v.texture, CV_16F);
@@ -420,6 +424,54 @@ TEST(Fusion, StatedSigmaBoundsTheTrueErrorAndFollowsTheTexture) {
   EXPECT_GT(sig[1][sig[1].size() / 2], 5 * sig[0][sig[0].size() / 2]);
 }
 
+// Window matching does not get better without bound as the texture sharpens: past the clip's typical texture
+// other errors (interpolation, the planar patch) dominate. Here the part beyond kWeakX has a texture map that
+// promises 10x the precision of the rest, but its depths are as noisy: its stated σ must not promise 10x.
+TEST(Fusion, StatedSigmaHasAMatchingFloorOnSharpTexture) {
+  const double offsets[5][2] = {{0, 0}, {1.5, 1.5}, {-1.5, 1.5}, {1.5, -1.5}, {-1.5, -1.5}};
+  auto fuse = [&](double floor_quantile, double over_fraction[2], double median_sigma[2]) {
+    std::map<uint32_t, FusionView> views;
+    for (uint32_t id = 1; id <= 5; ++id) {
+      std::vector<uint32_t> nbs;
+      for (uint32_t j = 1; j <= 5; ++j)
+        if (j != id) nbs.push_back(j);
+      views.emplace(id, TexturedGroundView(NadirView(id, offsets[id - 1][0], offsets[id - 1][1]), nbs, id, true,
+                                           /*texture_beyond=*/0.1, /*noise_beyond=*/1.0));
+    }
+    FusionOptions opt;
+    opt.texture_floor_quantile = floor_quantile;
+    FusionStats st;
+    const io::OrientedPointCloud cloud = FuseDepthMaps(views, opt, &st);
+    ASSERT_TRUE(cloud.has_sigma());
+    EXPECT_EQ(st.texture_floor > 0, floor_quantile > 0);
+    size_t n[2] = {0, 0}, over[2] = {0, 0};
+    std::vector<double> sig[2];
+    for (size_t i = 0; i < cloud.size(); ++i) {
+      const auto& p = cloud.positions[i];
+      if (std::abs(p.x() - kWeakX) < 0.5) continue;
+      const int part = p.x() > kWeakX ? 1 : 0;
+      ++n[part];
+      over[part] += std::abs(p.z()) > cloud.sigma[i];
+      sig[part].push_back(cloud.sigma[i]);
+    }
+    for (int part = 0; part < 2; ++part) {
+      ASSERT_GT(n[part], 1000u);
+      std::nth_element(sig[part].begin(), sig[part].begin() + sig[part].size() / 2, sig[part].end());
+      over_fraction[part] = static_cast<double>(over[part]) / n[part];
+      median_sigma[part] = sig[part][sig[part].size() / 2];
+    }
+    std::printf("floor quantile %.2f: %.2f%% / %.2f%% over sigma (rest / sharp), median sigma %.4f / %.4f m\n",
+                floor_quantile, 100 * over_fraction[0], 100 * over_fraction[1], median_sigma[0], median_sigma[1]);
+  };
+  double over[2], sigma[2];
+  fuse(0, over, sigma);  // no floor: the sharp part's σ is ~10x too small
+  EXPECT_GT(over[1], 0.3);
+  fuse(FusionOptions{}.texture_floor_quantile, over, sigma);
+  EXPECT_LE(over[0], 0.05);
+  EXPECT_LE(over[1], 0.05);
+  EXPECT_GT(sigma[1], 0.5 * sigma[0]);
+}
+
 TEST(Fusion, UncertaintyOptionIsChecked) {
   FusionOptions o;
   o.max_relative_uncertainty = 0.5;  // would drop half the cloud by definition
@@ -428,6 +480,10 @@ TEST(Fusion, UncertaintyOptionIsChecked) {
   EXPECT_THROW(o.Check(), Error);
   o.max_relative_uncertainty = 0;
   EXPECT_NO_THROW(o.Check());
+  o.texture_floor_quantile = 1;
+  EXPECT_THROW(o.Check(), Error);
+  o.texture_floor_quantile = -0.1;
+  EXPECT_THROW(o.Check(), Error);
 }
 
 }  // namespace

@@ -256,6 +256,7 @@ nlohmann::json DenseReport(const core::Reconstruction& rec, const ViewPlan& plan
         {"median_normal_sigma_per_footprint", fstats.median_uncertainty},
         {"max_normal_sigma_per_footprint", fstats.max_uncertainty},
         {"sigma_scale", fstats.sigma_scale},
+        {"texture_floor", fstats.texture_floor},
         {"sigma_coverage",
          options.fusion.write_sigma ? nlohmann::json(options.fusion.sigma_coverage) : nlohmann::json()},
         {"mean_consistent_views", mean_views},

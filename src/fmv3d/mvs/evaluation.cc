@@ -59,6 +59,7 @@ double Quantile(std::vector<double> v, double q) {
 struct CompletenessResult {
   size_t surface_samples = 0, seen_samples = 0, complete_samples = 0;
   double completeness = 0, sample_spacing = 0;
+  std::vector<Eigen::Vector3d> missed;  // when opt.keep_missed
 };
 
 // Completeness of `pts` (truth frame) over the surface of `mesh` inside `region` (empty: everywhere) that
@@ -130,6 +131,9 @@ CompletenessResult Completeness(const std::vector<Eigen::Vector3d>& pts, const g
     }
   }
   CompletenessResult r;
+  if (opt.keep_missed)
+    for (size_t i = 0; i < samples.size(); ++i)
+      if (seen[i] >= opt.min_cameras && !complete[i]) r.missed.push_back(samples[i]);
   r.surface_samples = samples.size();
   r.seen_samples = n_seen;
   r.complete_samples = n_complete;
@@ -263,6 +267,7 @@ DenseEvaluation EvaluateDense(const io::OrientedPointCloud& cloud, const core::R
   ev.complete_samples = in_region.complete_samples;
   ev.completeness = in_region.completeness;
   ev.sample_spacing = in_region.sample_spacing;
+  ev.missed_samples = in_region.missed;
   if (opt.region.isEmpty()) {
     ev.completeness_everywhere = ev.completeness;
     ev.seen_samples_everywhere = ev.seen_samples;

@@ -31,6 +31,7 @@ struct DenseEvaluationOptions {
   // Completeness counts only surface inside this box (e.g. truth.json "bounds": the modelled area, not the
   // coarse backdrop ring synth adds for the horizon); empty box = everywhere.
   Eigen::AlignedBox3d region;
+  bool keep_missed = false;  // fill DenseEvaluation::missed_samples (to see where completeness is lost)
   void Check() const;
 };
 
@@ -59,6 +60,7 @@ struct DenseEvaluation {
   double sigma_exceeded = -1, sigma_exceeded_outside = -1, median_sigma = 0;
   core::Sim3 alignment;  // model → truth
   std::vector<DenseBreakdown> breakdown;
+  std::vector<Eigen::Vector3d> missed_samples;  // region samples seen by min_cameras with no point near (keep_missed)
   double median_fraction() const { return median_error / characteristic_length; }
   double p90_fraction() const { return p90_error / characteristic_length; }
   nlohmann::json ToJson() const;

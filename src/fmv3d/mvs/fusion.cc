@@ -29,6 +29,8 @@ void FusionOptions::Check() const {
   if (!(max_relative_uncertainty == 0 || max_relative_uncertainty >= 1))
     throw Error("fusion: max_relative_uncertainty must be 0 (off) or at least 1");
   if (!(sigma_coverage > 0)) throw Error("fusion: sigma_coverage must be positive");
+  if (!(texture_floor_quantile >= 0 && texture_floor_quantile < 1))
+    throw Error("fusion: texture_floor_quantile must be in [0, 1)");
 }
 
 double NormalUncertainty(const Eigen::Vector3d& X, const Eigen::Vector3d& n,
@@ -158,10 +160,28 @@ struct FusedPoint {
   io::Rgb8 color;
   std::vector<uint32_t> visibility;
   int support = 0;
-  float sigma = 0;      // σ_n (0 when neither the uncertainty filter nor the stated σ is on)
-  float footprint = 0;  // the reference pixel's footprint at the point (depth / focal), world units
-  float scatter = -1;   // RMS spread of the consistent views' points along the normal (-1: fewer than 2)
+  float sigma = 0;          // σ_n (0 when neither the uncertainty filter nor the stated σ is on)
+  float sigma_floored = 0;  // σ_n with p floored at the matching floor: what the stated σ is made of
+  float footprint = 0;      // the reference pixel's footprint at the point (depth / focal), world units
+  float scatter = -1;       // RMS spread of the consistent views' points along the normal (-1: fewer than 2)
 };
+
+// The matching floor of the pixel precision p (see fusion.h): the given quantile of p over the pixels with a
+// depth, every 4th row and column of every view with a texture map; 0 when there is none.
+double TexturePrecisionFloor(const std::map<uint32_t, FusionView>& maps, double quantile) {
+  if (!(quantile > 0)) return 0;
+  std::vector<float> p;
+  for (const auto& [id, v] : maps) {
+    if (v.texture.empty()) continue;
+    for (int y = 0; y < v.depth.rows; y += 4)
+      for (int x = 0; x < v.depth.cols; x += 4)
+        if (v.depth.at<float>(y, x) > 0) p.push_back(static_cast<float>(v.texture.at<cv::float16_t>(y, x)));
+  }
+  if (p.empty()) return 0;
+  const size_t k = std::min(p.size() - 1, static_cast<size_t>(quantile * static_cast<double>(p.size())));
+  std::nth_element(p.begin(), p.begin() + static_cast<std::ptrdiff_t>(k), p.end());
+  return p[k];
+}
 
 // The fusion proper over (eroded) maps; every accepted point goes to emit(FusedPoint&&).
 void FuseMaps(const std::map<uint32_t, FusionView>& maps, const FusionOptions& opt, FusionStats* st,
@@ -177,6 +197,8 @@ void FuseMaps(const std::map<uint32_t, FusionView>& maps, const FusionOptions& o
   };
   std::vector<Hit> hits;
   const bool uncertainty = opt.max_relative_uncertainty > 0 || opt.write_sigma;
+  const double p_floor = uncertainty ? TexturePrecisionFloor(maps, opt.texture_floor_quantile) : 0;
+  st->texture_floor = p_floor;
   std::vector<const ViewGeometry*> hit_views;
   std::vector<double> hit_px;
   for (const auto& [rid, ref] : maps) {
@@ -267,6 +289,11 @@ void FuseMaps(const std::map<uint32_t, FusionView>& maps, const FusionOptions& o
                 h.view->texture.empty() ? 1.0 : static_cast<double>(h.view->texture.at<cv::float16_t>(h.y, h.x)));
           }
           p.sigma = static_cast<float>(NormalUncertainty(pos, p.normal.cast<double>(), hit_views, hit_px));
+          p.sigma_floored = p.sigma;
+          if (p_floor > 0) {
+            for (double& px : hit_px) px = std::hypot(px, p_floor);
+            p.sigma_floored = static_cast<float>(NormalUncertainty(pos, p.normal.cast<double>(), hit_views, hit_px));
+          }
           p.footprint = static_cast<float>(d / (0.5 * (ref.geom.K(0, 0) + ref.geom.K(1, 1))));
         }
         emit(std::move(p));
@@ -333,7 +360,7 @@ io::OrientedPointCloud FuseDepthMaps(const std::map<uint32_t, FusionView>& views
   }
   io::OrientedPointCloud cloud;
   std::vector<int> support_of;
-  std::vector<float> sigma_of, scatter_of, footprint_of;
+  std::vector<float> sigma_of, stated_of, scatter_of, footprint_of;
   FuseMaps(*maps, opt, &st, [&](FusedPoint&& p) {
     cloud.positions.push_back(p.position);
     cloud.normals.push_back(p.normal);
@@ -341,12 +368,13 @@ io::OrientedPointCloud FuseDepthMaps(const std::map<uint32_t, FusionView>& views
     cloud.visibility.push_back(std::move(p.visibility));
     support_of.push_back(p.support);
     sigma_of.push_back(p.sigma);
+    stated_of.push_back(p.sigma_floored);
     scatter_of.push_back(p.scatter);
     footprint_of.push_back(p.footprint);
   });
   const std::vector<float> relative = RelativeSigmas(sigma_of, footprint_of);
   SetUncertaintyThreshold(relative, opt, &st);
-  st.sigma_scale = opt.write_sigma ? SigmaScale(sigma_of, scatter_of) : 0;
+  st.sigma_scale = opt.write_sigma ? SigmaScale(stated_of, scatter_of) : 0;
   if (opt.write_sigma) cloud.sigma.resize(cloud.size());
   // In place (no second copy of the cloud).
   size_t j = 0;
@@ -355,7 +383,7 @@ io::OrientedPointCloud FuseDepthMaps(const std::map<uint32_t, FusionView>& views
       ++st.rejected_uncertainty;
       continue;
     }
-    if (opt.write_sigma) cloud.sigma[j] = StatedSigma(sigma_of[i], st.sigma_scale, opt);
+    if (opt.write_sigma) cloud.sigma[j] = StatedSigma(stated_of[i], st.sigma_scale, opt);
     if (j != i) {
       cloud.positions[j] = cloud.positions[i];
       cloud.normals[j] = cloud.normals[i];
@@ -393,7 +421,7 @@ size_t FuseDepthMapsToPly(std::map<uint32_t, FusionView> views, const FusionOpti
       std::filesystem::remove(path, ec);
     }
   } scratch_guard{scratch};
-  std::vector<float> sigma_of, scatter_of, footprint_of;
+  std::vector<float> sigma_of, stated_of, scatter_of, footprint_of;
   std::vector<uint8_t> support_of;
   {
     std::ofstream out(scratch, std::ios::binary);
@@ -415,6 +443,7 @@ size_t FuseDepthMapsToPly(std::map<uint32_t, FusionView> views, const FusionOpti
       }
       out.write(rec.data(), static_cast<std::streamsize>(rec.size()));
       sigma_of.push_back(p.sigma);
+      stated_of.push_back(p.sigma_floored);
       scatter_of.push_back(p.scatter);
       footprint_of.push_back(p.footprint);
       support_of.push_back(static_cast<uint8_t>(std::min(p.support, 255)));
@@ -426,7 +455,7 @@ size_t FuseDepthMapsToPly(std::map<uint32_t, FusionView> views, const FusionOpti
   const std::vector<float> relative = RelativeSigmas(sigma_of, footprint_of);
   footprint_of = {};
   SetUncertaintyThreshold(relative, opt, &st);
-  st.sigma_scale = opt.write_sigma ? SigmaScale(sigma_of, scatter_of) : 0;
+  st.sigma_scale = opt.write_sigma ? SigmaScale(stated_of, scatter_of) : 0;
   scatter_of = {};
   size_t kept = 0;
   for (size_t i = 0; i < sigma_of.size(); ++i)
@@ -452,7 +481,7 @@ size_t FuseDepthMapsToPly(std::map<uint32_t, FusionView> views, const FusionOpti
       if (!Keep(relative[i], opt, st)) continue;
       if (opt.write_sigma) {  // between the colour and the visibility list, as io::WritePointCloudPly puts it
         out.write(rec, static_cast<std::streamsize>(kFixed - 1));
-        const float sigma = StatedSigma(sigma_of[i], st.sigma_scale, opt);
+        const float sigma = StatedSigma(stated_of[i], st.sigma_scale, opt);
         out.write(reinterpret_cast<const char*>(&sigma), sizeof sigma);
         out.write(rec + kFixed - 1, static_cast<std::streamsize>(1 + 4 * n));
       } else {

@@ -45,7 +45,12 @@
 // common pixel-precision factor; the cloud measures that factor itself: for every point fused from two or more
 // fresh pixels, the RMS spread of their points along the normal, and the scale is the median over the cloud of
 // spread / σ_n. The stated σ is sigma_coverage × scale × σ_n: a bound that the true error along the normal
-// exceeds in few cases (sigma_coverage 3: ≤ 5% on the synthetic scenes, bench/results/coverage.md). Far,
+// exceeds in few cases (sigma_coverage 3: ≤ 5% on the synthetic scenes, bench/results/coverage.md, cover6.md).
+// For the stated σ (not the filter) each p_i is floored: p_i' = hypot(p_i, p_0), p_0 the median p over the
+// maps' pixels with a depth (texture_floor_quantile). Window matching reaches its noise limit only where the
+// texture is weak; past the clip's typical texture, interpolation and the planar-patch model set the error,
+// and an unfloored p made the sharpest, best-seen points the most overconfident (true error above the
+// stated σ for 22% of the smallest-σ fifth of a town orbit's points, 0.4% of the largest). Far,
 // grazing or low-parallax surface keeps its points with a large σ rather than being cut off by the depth range.
 #pragma once
 
@@ -73,6 +78,7 @@ struct FusionOptions {
   double max_relative_uncertainty = 10;  // 0 = off; drop points with σ_n / footprint > this · its median (above)
   bool write_sigma = true;               // compute and write each point's stated σ (above)
   double sigma_coverage = 3;             // stated σ = this × the measured per-point standard deviation
+  double texture_floor_quantile = 0.5;   // p's matching floor: this quantile of p over the maps (0 = none)
   void Check() const;
 };
 
@@ -99,6 +105,7 @@ struct FusionStats {
   double median_uncertainty = 0;    // median σ_n / footprint of the fused points before that filter (pixels, up to p)
   double max_uncertainty = 0;       // the threshold applied to σ_n / footprint (0 when the filter is off)
   double sigma_scale = 0;           // world units per unit of σ_n (stated σ, above); 0 when not measured
+  double texture_floor = 0;         // p's matching floor (above); 0 when none
   std::map<int, size_t> views_histogram;  // number of consistent views → points
 };
 
