@@ -110,14 +110,14 @@ PntsTile DecodePnts(const std::string& bytes) {
   const char* pos = section("POSITION", 12);
   if (!pos) throw Error("pnts: no POSITION");
   t.positions.resize(n);
-  if (n > 0) std::memcpy(t.positions.data(), pos, n * 12);  // an empty vector's data() may be null
+  if (n > 0) std::memcpy(static_cast<void*>(t.positions.data()), pos, n * 12);  // an empty vector's data() may be null
   if (const char* nor = section("NORMAL", 12)) {
     t.normals.resize(n);
-    if (n > 0) std::memcpy(t.normals.data(), nor, n * 12);
+    if (n > 0) std::memcpy(static_cast<void*>(t.normals.data()), nor, n * 12);
   }
   if (const char* rgb = section("RGB", 3)) {
     t.colors.resize(n);
-    if (n > 0) std::memcpy(t.colors.data(), rgb, n * 3);
+    if (n > 0) std::memcpy(static_cast<void*>(t.colors.data()), rgb, n * 3);
   }
   if (bt_json > 0) {
     const size_t bt_at = kHeader + ft_json + ft_bin;
