@@ -386,6 +386,34 @@ TEST(Fusion, StreamingToPlyMatchesTheInMemoryCloud) {
   for (size_t i = 0; i < mem.size(); ++i) ASSERT_EQ(ply.sigma[i], mem.sigma[i]) << i;
 }
 
+// Per part of the weak-texture ground (0: x < kWeakX, 1: beyond; a 0.5 m band at the edge left out): points,
+// the share whose true error (|z|) exceeds their stated σ, and the median σ.
+struct SigmaTally {
+  size_t n[2] = {0, 0};
+  double over_fraction[2] = {0, 0}, median_sigma[2] = {0, 0};
+};
+
+SigmaTally TallySigma(const io::OrientedPointCloud& cloud) {
+  SigmaTally t;
+  size_t over[2] = {0, 0};
+  std::vector<double> sig[2];
+  for (size_t i = 0; i < cloud.size(); ++i) {
+    const auto& p = cloud.positions[i];
+    if (std::abs(p.x() - kWeakX) < 0.5) continue;
+    const int part = p.x() > kWeakX ? 1 : 0;
+    ++t.n[part];
+    over[part] += std::abs(p.z()) > cloud.sigma[i];
+    sig[part].push_back(cloud.sigma[i]);
+  }
+  for (int part = 0; part < 2; ++part) {
+    if (sig[part].empty()) continue;
+    std::nth_element(sig[part].begin(), sig[part].begin() + sig[part].size() / 2, sig[part].end());
+    t.over_fraction[part] = static_cast<double>(over[part]) / t.n[part];
+    t.median_sigma[part] = sig[part][sig[part].size() / 2];
+  }
+  return t;
+}
+
 // The stated σ of every fused point (world units, calibrated by the cloud's own spread) bounds its true error
 // in all but a few cases, on sharp and on faint texture alike, and is larger where the texture is faint.
 TEST(Fusion, StatedSigmaBoundsTheTrueErrorAndFollowsTheTexture) {
@@ -403,25 +431,15 @@ TEST(Fusion, StatedSigmaBoundsTheTrueErrorAndFollowsTheTexture) {
   const io::OrientedPointCloud cloud = FuseDepthMaps(views, opt, &st);
   ASSERT_TRUE(cloud.has_sigma());
   EXPECT_GT(st.sigma_scale, 0);
-  size_t n[2] = {0, 0}, over[2] = {0, 0};
-  std::vector<double> sig[2];
-  for (size_t i = 0; i < cloud.size(); ++i) {
-    const auto& p = cloud.positions[i];
-    if (std::abs(p.x() - kWeakX) < 0.5) continue;
-    const int part = p.x() > kWeakX ? 1 : 0;
-    ++n[part];
-    over[part] += std::abs(p.z()) > cloud.sigma[i];
-    sig[part].push_back(cloud.sigma[i]);
-  }
-  ASSERT_GT(n[0], 1000u);
-  ASSERT_GT(n[1], 1000u);
+  const SigmaTally t = TallySigma(cloud);
+  ASSERT_GT(t.n[0], 1000u);
+  ASSERT_GT(t.n[1], 1000u);
   for (int part = 0; part < 2; ++part) {
-    std::nth_element(sig[part].begin(), sig[part].begin() + sig[part].size() / 2, sig[part].end());
-    std::printf("%s: %zu points, %.2f%% over sigma, median sigma %.4f m\n", part ? "faint" : "sharp", n[part],
-                100.0 * over[part] / n[part], sig[part][sig[part].size() / 2]);
-    EXPECT_LE(static_cast<double>(over[part]) / n[part], 0.05) << part;
+    std::printf("%s: %zu points, %.2f%% over sigma, median sigma %.4f m\n", part ? "faint" : "sharp", t.n[part],
+                100.0 * t.over_fraction[part], t.median_sigma[part]);
+    EXPECT_LE(t.over_fraction[part], 0.05) << part;
   }
-  EXPECT_GT(sig[1][sig[1].size() / 2], 5 * sig[0][sig[0].size() / 2]);
+  EXPECT_GT(t.median_sigma[1], 5 * t.median_sigma[0]);
 }
 
 // Window matching does not get better without bound as the texture sharpens: past the clip's typical texture
@@ -444,21 +462,11 @@ TEST(Fusion, StatedSigmaHasAMatchingFloorOnSharpTexture) {
     const io::OrientedPointCloud cloud = FuseDepthMaps(views, opt, &st);
     ASSERT_TRUE(cloud.has_sigma());
     EXPECT_EQ(st.texture_floor > 0, floor_quantile > 0);
-    size_t n[2] = {0, 0}, over[2] = {0, 0};
-    std::vector<double> sig[2];
-    for (size_t i = 0; i < cloud.size(); ++i) {
-      const auto& p = cloud.positions[i];
-      if (std::abs(p.x() - kWeakX) < 0.5) continue;
-      const int part = p.x() > kWeakX ? 1 : 0;
-      ++n[part];
-      over[part] += std::abs(p.z()) > cloud.sigma[i];
-      sig[part].push_back(cloud.sigma[i]);
-    }
+    const SigmaTally t = TallySigma(cloud);
     for (int part = 0; part < 2; ++part) {
-      ASSERT_GT(n[part], 1000u);
-      std::nth_element(sig[part].begin(), sig[part].begin() + sig[part].size() / 2, sig[part].end());
-      over_fraction[part] = static_cast<double>(over[part]) / n[part];
-      median_sigma[part] = sig[part][sig[part].size() / 2];
+      ASSERT_GT(t.n[part], 1000u);
+      over_fraction[part] = t.over_fraction[part];
+      median_sigma[part] = t.median_sigma[part];
     }
     std::printf("floor quantile %.2f: %.2f%% / %.2f%% over sigma (rest / sharp), median sigma %.4f / %.4f m\n",
                 floor_quantile, 100 * over_fraction[0], 100 * over_fraction[1], median_sigma[0], median_sigma[1]);
