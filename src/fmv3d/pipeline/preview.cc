@@ -132,6 +132,9 @@ cv::Mat RenderMesh(const io::TexturedMesh& mesh, const View& view) {
   const Eigen::Vector3d to_eye = -(view.pose.R().transpose() * Eigen::Vector3d::UnitZ());
   o.sun_elevation_deg = std::asin(std::clamp(to_eye.z(), -0.99, 0.99)) * 180 / M_PI;
   o.sun_azimuth_deg = std::atan2(to_eye.x(), to_eye.y()) * 180 / M_PI;
+  // The renderer scales light so that a level surface shows its albedo; lit from a low viewer, that gain would
+  // saturate every face turned to the viewer to white. Here a face turned to the light shows its albedo instead.
+  if (o.shading) o.exposure = o.ambient + (1 - o.ambient) * std::max(std::sin(o.sun_elevation_deg * M_PI / 180), 0.05);
   cv::Mat image = renderer.Render(view.camera, view.pose, o).image;
   return image;
 }
