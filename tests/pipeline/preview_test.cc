@@ -5,6 +5,7 @@
 
 #include <Eigen/Geometry>
 #include <cmath>
+#include <opencv2/imgproc.hpp>
 
 namespace fmv3d::pipeline {
 namespace {
