@@ -14,9 +14,22 @@
 // the lower bound, and the multi-view dolly-zoom scan (dolly_zoom_scan.h) decides from there. Measured: with each
 // candidate's pose refined to its optimum rather than taken from a minimal sample, telephoto curves are flat too;
 // a knee comes from how the five-point solver fails at focals far too short, so it is only a lower bound.
+//
+// Wide lenses (action cameras, k1 ≈ −0.3): tens of pixels of barrel distortion at the corners, which no pinhole
+// essential matrix explains at any focal (the pinhole curve falls monotonically, near its truncation everywhere,
+// and reads as a telephoto plateau). So the scan also tries a one-parameter division model (Fitzgibbon's:
+// undistorted = distorted / (1 + κ ρ²), ρ the radius over the half-diagonal, so κ means the same at every focal)
+// at the wide end of its range. When that explains the matches clearly better than any pinhole focal
+// (distortion_gain), the lens is wide and distorting: two views do not decide its focal (with distortion free,
+// focal and κ trade over a wide range), so the result is a start — the wide end, with the κ found as k1, k2 —
+// and neither a plateau nor a bound: bundle adjustment refines focal and distortion from the first views on, and
+// the views together determine them. On a lens without measurable distortion the extra parameter buys nothing
+// and the pinhole decision is kept as it was.
 #pragma once
 
 #include <Eigen/Core>
+#include <array>
+#include <utility>
 #include <vector>
 
 #include "fmv3d/core/camera.h"
@@ -35,6 +48,11 @@ struct FocalScanOptions {
   double flat_tolerance = 0.15;               // undetermined: every candidate within (1 + this) · best
   int ransac_iterations = 1000;
   uint64_t seed = 1;
+  // The division scan for barrel distortion; skipped when the prior states a distortion.
+  bool scan_distortion = true;
+  double min_division = -0.5;    // most negative κ (the corner's undistorted radius 1/(1 + κ) = 2)
+  double division_step = 0.05;   // κ candidates: −step, −2·step, ... down to min_division
+  double distortion_gain = 0.8;  // accepted when its best score ≤ this · the pinhole's best
 };
 
 struct FocalScanResult {
@@ -43,7 +61,16 @@ struct FocalScanResult {
   bool undetermined = false;   // the curve is flat: focal is the shortest candidate, plateau is set
   std::vector<double> focals;  // candidates
   std::vector<double> scores;  // mean truncated squared Sampson error (px²), summed over pairs
+  // The division scan: κ of the lens (0: pinhole, the scan above decided) and the same lens as Brown k1, k2 at the
+  // chosen focal (a start for bundle adjustment); the best scores of both models; the candidates tried.
+  double division = 0, k1 = 0, k2 = 0;
+  double pinhole_best = 0, division_best = 0;
+  std::vector<std::array<double, 3>> division_cells;  // (focal, κ, score)
 };
+
+// Brown k1, k2 (core::Camera) of a division model κ (on ρ = pixel radius / half_diagonal) at focal f: the least
+// squares fit over the image's radii.
+std::pair<double, double> DivisionToBrown(double kappa, double f, double half_diagonal);
 
 // camera: the prior (principal point, distortion; its f is the guess the factors multiply).
 // Deterministic for a fixed seed. Returns the guess (and empty scores) when no pair has ≥ 8 matches.

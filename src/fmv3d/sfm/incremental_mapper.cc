@@ -115,6 +115,7 @@ MapperResult RunIncrementalMapper(const MapperInput& input, const MapperOptions&
     spdlog::info("model {}: {} images, {} points", result.models.size(), rec.images.size(), rec.points.size());
     result.models.push_back(std::move(rec));
     result.self_calibration.push_back(std::move(calibration));
+    result.focal_decision.push_back(builder.focal_decision());
   }
   {  // largest first, each model with its self-calibration tests
     std::vector<size_t> order(result.models.size());
@@ -126,9 +127,11 @@ MapperResult RunIncrementalMapper(const MapperInput& input, const MapperOptions&
     for (size_t i : order) {
       sorted.models.push_back(std::move(result.models[i]));
       sorted.self_calibration.push_back(std::move(result.self_calibration[i]));
+      sorted.focal_decision.push_back(std::move(result.focal_decision[i]));
     }
     result.models = std::move(sorted.models);
     result.self_calibration = std::move(sorted.self_calibration);
+    result.focal_decision = std::move(sorted.focal_decision);
   }
   for (size_t m = 0; m < result.models.size(); ++m)
     for (const auto& [id, im] : result.models[m].images) {

@@ -125,6 +125,7 @@ struct MapperOptions {
 struct MapperResult {
   std::vector<core::Reconstruction> models;                          // largest first
   std::vector<std::vector<NestedModelTestResult>> self_calibration;  // per model: the final tests, in order
+  std::vector<nlohmann::json> focal_decision;                        // per model: how its focal was decided
   std::map<uint32_t, std::string> left_out;  // image id → reason it is not in the largest model
   nlohmann::json stats;                      // counts and timings per stage
 };

@@ -109,6 +109,11 @@ void ModelBuilder::DollyZoomFocalScan() {
     spdlog::info("focal: the error rises again beyond {:.1f} px ({:.3f} → {:.3f} px): a minimum, refined from here",
                  r.best.cameras.begin()->second.f, r.rms_best_px, r.rms_longest_px);
   }
+  focal_decision_["dolly_zoom"] = {{"images", rec_.images.size()},
+                                   {"factor", r.best_factor},
+                                   {"focal_px", r.best.cameras.empty() ? 0.0 : r.best.cameras.begin()->second.f},
+                                   {"released", !focal_fixed_},
+                                   {"seconds", Seconds(start)}};
   if (r.best_factor != 1 && !r.best.images.empty()) {
     rec_ = std::move(r.best);
     const auto& cam = rec_.cameras.begin()->second;

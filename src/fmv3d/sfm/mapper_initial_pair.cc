@@ -6,6 +6,7 @@
 #include <cmath>
 #include <set>
 #include <string>
+#include <tuple>
 #include <utility>
 #include <vector>
 
@@ -24,6 +25,7 @@ void ModelBuilder::ChooseFocal(const std::vector<InitialPairCandidate>& cands) {
     return 0.5 * std::hypot(mc.camera.width, mc.camera.height) / f < opt_.narrow_field_max_radius;
   };
   if (mc.focal_known) {
+    focal_decision_ = {{"decision", "known"}, {"focal_px", mc.camera.f}};
     focal_fixed_ = opt_.fix_known_focal;
     narrow_field_ = narrow(mc.camera.f);
     return;
@@ -43,18 +45,48 @@ void ModelBuilder::ChooseFocal(const std::vector<InitialPairCandidate>& cands) {
   }
   FocalScanOptions fo;
   fo.seed = opt_.seed;
+  const auto start = Clock::now();
   const FocalScanResult r = ScanFocal(mc.camera, pairs, fo);
+  const double seconds = Seconds(start);
   init_focal_scale_ = r.focal / mc.camera.f;
   focal_fixed_ = focal_from_plateau_ = r.plateau;
   narrow_field_ = narrow(r.focal);
-  std::string curve;
+  // The lens the scan found starts the model; k1, k2 stay free in bundle adjustment (tested at the end).
+  if (r.division != 0) init_distortion_ = {r.k1, r.k2};
+  std::string curve, cells;
   for (size_t i = 0; i < r.focals.size(); ++i) curve += fmt::format(" {:.0f}:{:.3f}", r.focals[i], r.scores[i]);
-  spdlog::info("focal scan on {} pairs: {:.1f} px ({:.2f} x the guess){}{}", pairs.size(), r.focal, init_focal_scale_,
-               r.undetermined ? ", a flat curve: the shortest candidate as a lower bound, held until the final test"
-               : r.plateau    ? ", plateau: a lower bound, held until the final test"
-                              : "",
-               narrow_field_ ? ", narrow field: distortion fixed" : "");
+  for (const auto& c : r.division_cells) cells += fmt::format(" {:.0f}/{:.3f}:{:.3f}", c[0], c[1], c[2]);
+  spdlog::info(
+      "focal scan on {} pairs: {:.1f} px ({:.2f} x the guess){}{} ({:.1f} s)", pairs.size(), r.focal, init_focal_scale_,
+      r.division != 0  ? fmt::format(", barrel distortion: division κ {:.3f} (k1 {:.3f}, k2 {:.3f}) explains the "
+                                      "matches at {:.3f} px² vs the pinhole's {:.3f}",
+                                     r.division, r.k1, r.k2, r.division_best, r.pinhole_best)
+      : r.undetermined ? ", a flat curve: the shortest candidate as a lower bound, held until the final test"
+      : r.plateau      ? ", plateau: a lower bound, held until the final test"
+                       : "",
+      narrow_field_ ? ", narrow field: distortion fixed" : "", seconds);
   spdlog::debug("focal scan (f: px²):{}", curve);
+  spdlog::debug("focal scan with a division model (f/κ: px²):{}", cells);
+  focal_decision_ = {{"guess_px", mc.camera.f},
+                     {"pairs", pairs.size()},
+                     {"two_view_focal_px", r.focal},
+                     {"decision", r.division != 0  ? "distorted"
+                                  : r.undetermined ? "undetermined"
+                                  : r.plateau      ? "plateau"
+                                                   : "minimum"},
+                     {"pinhole_best_px2", r.pinhole_best},
+                     {"division_best_px2", r.division_best},
+                     {"division_kappa", r.division},
+                     {"initial_k1", r.k1},
+                     {"initial_k2", r.k2},
+                     {"candidates", r.focals.size() + r.division_cells.size()},
+                     {"seconds", seconds}};
+}
+
+core::Camera ModelBuilder::InitialCamera(uint32_t camera_id) const {
+  core::Camera cam = input_.cameras.at(camera_id).camera;
+  if (init_distortion_) std::tie(cam.k1, cam.k2) = *init_distortion_;
+  return cam;
 }
 
 bool ModelBuilder::TryInitialPair(const InitialPairCandidate& c) {
@@ -62,7 +94,10 @@ bool ModelBuilder::TryInitialPair(const InitialPairCandidate& c) {
   const auto& pair = *c.pair;
   AddImage(pair.image_id1, core::Pose());
   AddImage(pair.image_id2, c.pose2);
-  for (auto& [cid, cam] : rec_.cameras) cam.f *= c.focal_scale;
+  for (auto& [cid, cam] : rec_.cameras) {
+    cam.f *= c.focal_scale;
+    if (init_distortion_) std::tie(cam.k1, cam.k2) = *init_distortion_;
+  }
   gauge1_ = pair.image_id1;
   gauge2_ = pair.image_id2;
   // The pair keeps its two-view matches (the triangulator skips them later): dropping them here lengthens the
@@ -104,8 +139,8 @@ bool ModelBuilder::Initialize() {
   for (auto& c : cands) {
     const MapperImage& im1 = *images_.at(c.pair->image_id1);
     const MapperImage& im2 = *images_.at(c.pair->image_id2);
-    EvaluateInitialPair(im1, im2, input_.cameras.at(im1.camera_id).camera, input_.cameras.at(im2.camera_id).camera,
-                        init_focal_scale_, opt_, &c);
+    EvaluateInitialPair(im1, im2, InitialCamera(im1.camera_id), InitialCamera(im2.camera_id), init_focal_scale_, opt_,
+                        &c);
   }
   // Strict first (enough angle, not planar), then relax the angle and finally accept planar pairs.
   const std::vector<std::pair<double, bool>> passes = {

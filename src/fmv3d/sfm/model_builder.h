@@ -8,6 +8,8 @@
 
 #include <chrono>
 #include <map>
+#include <nlohmann/json.hpp>
+#include <optional>
 #include <set>
 #include <string>
 #include <utility>
@@ -89,11 +91,15 @@ class ModelBuilder {
   int num_global_ba() const { return num_global_ba_; }
   int num_relocalised() const { return num_relocalised_; }
   const std::vector<NestedModelTestResult>& self_calibration() const { return self_calibration_; }
+  // How the focal was decided (stated, or the two-view and dolly-zoom scans), for report/sparse.json.
+  const nlohmann::json& focal_decision() const { return focal_decision_; }
 
  private:
   // Initialisation (mapper_initial_pair.cc).
   void ChooseFocal(const std::vector<InitialPairCandidate>& cands);
   bool TryInitialPair(const InitialPairCandidate& c);
+  // The prior camera with the scan's lens distortion (the focal scale is applied by the initial pair's code).
+  core::Camera InitialCamera(uint32_t camera_id) const;
   // Growth (model_builder.cc).
   void AddImage(uint32_t id, const core::Pose& pose);
   GrowthStep RegisterNextImage();
@@ -149,6 +155,8 @@ class ModelBuilder {
   const std::map<uint32_t, const MapperImage*>& images_;
   const CorrespondenceGraph& graph_;
   double init_focal_scale_ = 1;
+  std::optional<std::pair<double, double>> init_distortion_;  // k1, k2 of a wide lens found by the focal scan
+  nlohmann::json focal_decision_;
   // Focal held through growth: a trusted prior the user wants kept, or a telephoto scan's lower bound (then
   // tested once at the end). Narrow field: distortion is unobservable and stays fixed.
   bool focal_fixed_ = false, focal_from_plateau_ = false, narrow_field_ = false, dolly_done_ = false;

@@ -295,8 +295,9 @@ void WriteSparseModels(const core::Workspace& ws, const std::vector<core::Recons
   }
 }
 
-// The report's per-model section: size, accuracy, cameras and self-calibration tests.
-nlohmann::json ModelReport(const core::Reconstruction& rec, const std::vector<NestedModelTestResult>* calibration) {
+// The report's per-model section: size, accuracy, cameras, self-calibration tests and how the focal was decided.
+nlohmann::json ModelReport(const core::Reconstruction& rec, const std::vector<NestedModelTestResult>* calibration,
+                           const nlohmann::json& focal_decision) {
   nlohmann::json tests = nlohmann::json::array();
   if (calibration)
     for (const auto& t : *calibration) tests.push_back(ToJson(t));
@@ -311,7 +312,8 @@ nlohmann::json ModelReport(const core::Reconstruction& rec, const std::vector<Ne
           {"mean_track_length", rec.MeanTrackLength()},
           {"mean_reprojection_error_px", rec.MeanReprojectionError()},
           {"cameras", cams},
-          {"self_calibration", tests}};
+          {"self_calibration", tests},
+          {"focal_decision", focal_decision}};
 }
 
 // report/sparse.json without its timings: every model, the largest one's figures at the top, the left-out
@@ -322,13 +324,15 @@ nlohmann::json SparseReport(const MapperInput& input, const MapperResult& result
   report["models"] = nlohmann::json::array();
   for (size_t m = 0; m < result.models.size(); ++m)
     report["models"].push_back(
-        ModelReport(result.models[m], m < result.self_calibration.size() ? &result.self_calibration[m] : nullptr));
+        ModelReport(result.models[m], m < result.self_calibration.size() ? &result.self_calibration[m] : nullptr,
+                    m < result.focal_decision.size() ? result.focal_decision[m] : nlohmann::json::object()));
   const core::Reconstruction* best = result.models.empty() ? nullptr : &result.models[0];
   report["registered_images"] = best ? best->images.size() : 0;
   report["points"] = best ? best->points.size() : 0;
   report["mean_track_length"] = best ? best->MeanTrackLength() : 0.0;
   report["mean_reprojection_error_px"] = best ? best->MeanReprojectionError() : 0.0;
   report["self_calibration"] = best ? report["models"][0]["self_calibration"] : nlohmann::json::array();
+  report["focal_decision"] = best ? report["models"][0]["focal_decision"] : nlohmann::json::object();
   nlohmann::json left = nlohmann::json::array();
   for (const auto& [id, why] : result.left_out) left.push_back({{"image", input.images[id - 1].name}, {"reason", why}});
   report["left_out"] = left;
