@@ -40,27 +40,27 @@ core::Pose LookAt(const Eigen::Vector3d& centre, const Eigen::Vector3d& target) 
   return p;
 }
 
-// Pairs of neighbouring views on a circle of radius 60 m, 30 m up, around a block of points 40 m wide and 15 m
-// tall; every view looks at `target`. Keypoints carry 0.5 px noise.
-std::vector<FocalScanPair> OrbitPairs(const Eigen::Vector3d& target, double step_deg) {
+// Pairs of neighbouring views on a circle (by default of radius 60 m, 30 m up) around a block of points 40 m wide and
+// 15 m tall; every view looks at `target`, through `cam`. Keypoints carry 0.5 px noise.
+std::vector<FocalScanPair> OrbitPairs(const Eigen::Vector3d& target, double step_deg,
+                                      const core::Camera& cam = TrueCamera(), double radius = 60, double height = 30) {
   std::mt19937 rng(7);
   std::uniform_real_distribution<double> ux(-20, 20), uz(0, 15);
   std::normal_distribution<double> noise(0, 0.5);
   std::vector<Eigen::Vector3d> points;
   for (int i = 0; i < 600; ++i) points.emplace_back(ux(rng), ux(rng), uz(rng));
-  const core::Camera cam = TrueCamera();
+  const double w = cam.width, h = cam.height;
   std::vector<FocalScanPair> pairs;
   for (int k = 0; k < 5; ++k) {
     const double a1 = (72.0 * k) * M_PI / 180, a2 = a1 + step_deg * M_PI / 180;
-    const core::Pose p1 = LookAt({60 * std::cos(a1), 60 * std::sin(a1), 30}, target);
-    const core::Pose p2 = LookAt({60 * std::cos(a2), 60 * std::sin(a2), 30}, target);
+    const core::Pose p1 = LookAt({radius * std::cos(a1), radius * std::sin(a1), height}, target);
+    const core::Pose p2 = LookAt({radius * std::cos(a2), radius * std::sin(a2), height}, target);
     FocalScanPair pair;
     for (const auto& X : points) {
       const Eigen::Vector3d c1 = p1.Transform(X), c2 = p2.Transform(X);
       if (c1.z() <= 0 || c2.z() <= 0) continue;
       const Eigen::Vector2d u1 = cam.Project(c1), u2 = cam.Project(c2);
-      if (u1.x() < 0 || u1.x() > kW || u1.y() < 0 || u1.y() > kH || u2.x() < 0 || u2.x() > kW || u2.y() < 0 ||
-          u2.y() > kH)
+      if (u1.x() < 0 || u1.x() > w || u1.y() < 0 || u1.y() > h || u2.x() < 0 || u2.x() > w || u2.y() < 0 || u2.y() > h)
         continue;
       pair.uv1.push_back(u1 + Eigen::Vector2d(noise(rng), noise(rng)));
       pair.uv2.push_back(u2 + Eigen::Vector2d(noise(rng), noise(rng)));
@@ -80,6 +80,38 @@ TEST(FocalScan, OrbitWhoseAxesMeetLeavesTheFocalUndeterminedFromTheShortestCandi
   EXPECT_TRUE(r.undetermined);
   EXPECT_TRUE(r.plateau);  // a lower bound for the multi-view scan, not one candidate's luck
   EXPECT_DOUBLE_EQ(r.focal, r.focals.front());
+}
+
+// A wide distorted lens (k1 −0.27, k2 0.08 at f 450 px on 854x480): the pinhole curve cannot explain the pairs;
+// the division model does, and the result is a wide-lens start with barrel distortion, not a telephoto bound.
+// A lens without distortion keeps the pinhole decision.
+TEST(FocalScan, BarrelDistortionIsDetectedAndStartsAWideLens) {
+  for (const double k1 : {-0.27, 0.0}) {
+    core::Camera lens = TrueCamera();
+    lens.width = 854;
+    lens.height = 480;
+    lens.u0 = 427;
+    lens.v0 = 240;
+    lens.f = 450;
+    lens.k1 = k1;
+    lens.k2 = k1 != 0 ? 0.08 : 0;
+    core::Camera guess = lens;
+    guess.f = 1.2 * 854;
+    guess.k1 = guess.k2 = 0;
+    // 22 m out and 12 m up: the block fills the wide view to its corners.
+    const FocalScanResult r = ScanFocal(guess, OrbitPairs({0, 0, 5}, 20, lens, 22, 12));
+    ASSERT_FALSE(r.scores.empty());
+    if (k1 != 0) {
+      EXPECT_LT(r.division, 0);
+      EXPECT_LT(r.k1, -0.1);
+      EXPECT_FALSE(r.plateau);
+      EXPECT_LE(r.division_best, 0.8 * r.pinhole_best);
+      EXPECT_LT(r.focal, guess.f);  // the wide end, where bundle adjustment starts
+    } else {
+      EXPECT_EQ(r.division, 0);
+      EXPECT_EQ(r.k1, 0);
+    }
+  }
 }
 
 TEST(FocalScan, NoUsablePairKeepsTheGuess) {
