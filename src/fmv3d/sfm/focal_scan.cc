@@ -2,6 +2,7 @@
 
 #include <Eigen/Cholesky>
 #include <algorithm>
+#include <chrono>
 #include <cmath>
 #include <limits>
 #include <opencv2/calib3d.hpp>
@@ -168,7 +169,12 @@ FocalScanResult ScanFocal(const core::Camera& camera, const std::vector<FocalSca
   r.scores.resize(r.focals.size());
   for (size_t c = 0; c < r.focals.size(); ++c) r.scores[c] = ScoreLens(camera, r.focals[c], 0, pairs, o);
   r.pinhole_best = *std::min_element(r.scores.begin(), r.scores.end());
-  if (o.scan_distortion && !camera.HasDistortion() && ScanDivision(camera, pairs, o, &r)) return r;
+  if (o.scan_distortion && !camera.HasDistortion()) {
+    const auto start = std::chrono::steady_clock::now();
+    const bool distorted = ScanDivision(camera, pairs, o, &r);
+    r.division_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    if (distorted) return r;
+  }
   // Flat: every candidate explains the matches about equally well (optical axes that meet, as in an orbit around its
   // target, or near-affine views), and the best is one candidate's luck (a lucky or failed minimal sample; at very
   // long focals the five-point solver degenerates). Two views bound nothing: the shortest candidate is the lower

@@ -65,6 +65,7 @@ struct FocalScanResult {
   // chosen focal (a start for bundle adjustment); the best scores of both models; the candidates tried.
   double division = 0, k1 = 0, k2 = 0;
   double pinhole_best = 0, division_best = 0;
+  double division_seconds = 0;                        // the division scan's share of the run time
   std::vector<std::array<double, 3>> division_cells;  // (focal, κ, score)
 };
 

@@ -80,7 +80,8 @@ void ModelBuilder::ChooseFocal(const std::vector<InitialPairCandidate>& cands) {
                      {"initial_k1", r.k1},
                      {"initial_k2", r.k2},
                      {"candidates", r.focals.size() + r.division_cells.size()},
-                     {"seconds", seconds}};
+                     {"seconds", seconds},
+                     {"division_seconds", r.division_seconds}};
 }
 
 core::Camera ModelBuilder::InitialCamera(uint32_t camera_id) const {
