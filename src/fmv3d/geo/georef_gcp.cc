@@ -223,6 +223,7 @@ bool FitDatumToClicks(const core::Reconstruction& model, const std::vector<Groun
   };
   core::Sim3 s = *sim;
   const double start_cost = evaluate(s, nullptr, nullptr);
+  if (!std::isfinite(start_cost)) return false;  // a control point behind a camera: keep the Umeyama fit
   double cost = start_cost;
   for (int it = 0; it < 20; ++it) {
     Eigen::Matrix<double, 7, 7> H;
