@@ -153,5 +153,50 @@ TEST(GcpGeoref, AdjustmentWithGcpConstraintsOverNoiseSeeds) {
   EXPECT_LE(sum_adj / seeds, 0.001);
 }
 
+// With the model's shape exact (the truth in another frame), the datum fitted to the clicks is the truth's: exactly
+// with exact clicks, and with noisy clicks the clicks' own error is all that is left (the reprojection RMS of the
+// control clicks at their coordinates equals that of the true projections).
+TEST(GcpGeoref, DatumFittedToClicksOnAnExactModel) {
+  const Flight f = MakeFlight();
+  core::Reconstruction exact = f.truth;
+  core::Sim3 away;
+  away.s = 0.02;
+  away.q = Eigen::Quaterniond(Eigen::AngleAxisd(-1.1, Eigen::Vector3d(3, -1, 2).normalized()));
+  away.t = Eigen::Vector3d(-7, 1, 3);
+  exact.Transform(away);
+  const GcpCrs crs("EPSG:4326");
+  GcpGeorefOptions o;
+  o.adjust = false;
+  o.origin = kGcpOrigin;
+  GcpGeoref g = EstimateGcpGeoref(exact, Click(f, 0, 1), crs, o);
+  EXPECT_TRUE(g.datum_fitted_to_clicks);
+  EXPECT_LT(WorstCameraError(f, g), 1e-6 * f.extent);
+  // Gaussian clicks: the fit lowers the clicks' error below the precision-weighted Umeyama start, never below what
+  // a fit can remove (7 of ~80 degrees of freedom), and the cameras stay within what 1 px allows on this flight.
+  const auto gcps = Click(f, 1.0, 3);
+  g = EstimateGcpGeoref(exact, gcps, crs, o);
+  o.fit_to_clicks = false;
+  const GcpGeoref umeyama = EstimateGcpGeoref(exact, gcps, crs, o);
+  EXPECT_TRUE(g.datum_fitted_to_clicks);
+  EXPECT_FALSE(umeyama.datum_fitted_to_clicks);
+  double fitted = 0, start = 0;
+  int n = 0;
+  for (size_t i = 0; i + 1 < gcps.size(); ++i)
+    for (const auto& ob : gcps[i].observations) {
+      const core::Image* a = g.enu.FindImageByName(ob.frame);
+      const core::Image* b = umeyama.enu.FindImageByName(ob.frame);
+      const Eigen::Vector2d uv(ob.x, ob.y);
+      fitted += (g.enu.cameras.at(a->camera_id).Project(a->pose.Transform(g.points[i].enu)) - uv).squaredNorm();
+      start += (umeyama.enu.cameras.at(b->camera_id).Project(b->pose.Transform(g.points[i].enu)) - uv).squaredNorm();
+      ++n;
+    }
+  fitted = std::sqrt(fitted / n), start = std::sqrt(start / n);
+  std::printf("control clicks: %.3f px (Umeyama) → %.3f px (fitted); worst camera %.4f%% → %.4f%%\n", start, fitted,
+              100 * WorstCameraError(f, umeyama) / f.extent, 100 * WorstCameraError(f, g) / f.extent);
+  EXPECT_LT(fitted, start);
+  EXPECT_GT(fitted, 0.9 * std::sqrt(2.0));  // 2D RMS of σ = 1 px per axis is √2
+  EXPECT_LT(WorstCameraError(f, g), 0.001 * f.extent);
+}
+
 }  // namespace
 }  // namespace fmv3d::geo

@@ -116,6 +116,19 @@ TEST(GcpList, EveryBrokenLineNamed) {
   EXPECT_THAT(e[4], HasSubstr("gcp_list.txt:8: GCP \"g\" has other coordinates than on line 2"));
   EXPECT_THAT(e[5], HasSubstr("gcp_list.txt:6: frame \"missing.png\" is not in frames/frames.json"));
   EXPECT_THAT(e[6], HasSubstr("gcp_list.txt:7: (700.00, 20.00) is outside b.png (640x360)"));
+  // Coordinates that are no place in their CRS (longitude 200, latitude 95), and one point clicked twice in a frame.
+  e = Problems(
+      "EPSG:4326\n"
+      "200 46.94 560 10 20 a.png g\n"
+      "7.44 95 560 10 20 b.png g\n"
+      "7.44 46.94 560 10 20 a.png h\n"
+      "7.44 46.94 560 30 40 a.png h\n"
+      "7.44 46.94 560 10 20 b.png h\n");
+  ASSERT_EQ(e.size(), 3u) << io::JoinErrors(e, 100);
+  EXPECT_THAT(e[0], HasSubstr("gcp_list.txt:2: (200, 46.94, 560) is not a place in WGS 84"));
+  EXPECT_THAT(e[1], HasSubstr("gcp_list.txt:3: (7.44, 95, 560) is not a place"));
+  EXPECT_THAT(e[2],
+              HasSubstr("gcp_list.txt:5: GCP \"h\" is clicked a second time in frame \"a.png\" (first on line 4)"));
   // A point clicked in one frame only cannot be triangulated.
   e = Problems("EPSG:4326\n7.44 46.94 560 10 20 a.png lone\n");
   ASSERT_EQ(e.size(), 1u);

@@ -162,6 +162,12 @@ TEST_F(ManualApi, TiePointsSavedWholeOrNotAtAll) {
       {R"({"format": "fmv3d-tiepoints", "version": 1, "deleted_matches": [{"frame1": "f1.png", "frame2": "f2.png", "feature1": 999, "feature2": 0}]})",
        "999"},
       {"not json", "JSON"},
+      {R"({"format": "fmv3d-tiepoints", "version": 1, "tie_points": [{"id": "t3", "observations": [{"frame": "f1.png", "x": 1, "y": 2}, {"frame": "f1.png", "x": 3, "y": 4}]}]})",
+       "one per frame"},
+      {R"({"format": "fmv3d-tiepoints", "version": 1, "tie_points": [{"id": "t4", "observations": [{"frame": "f1.png", "x": -1, "y": 2}, {"frame": "f2.png", "x": 3, "y": 4}]}]})",
+       "outside"},
+      {R"({"format": "fmv3d-tiepoints", "version": 1, "keypoints": [{"id": "k9", "frame": "f9.png", "x": 1, "y": 2}]})",
+       "k9"},
   };
   for (const auto& b : bad) {
     r = Put("/api/workspaces/ws1/tiepoints", b.body);
@@ -213,6 +219,11 @@ TEST_F(ManualApi, GcpsJsonImportExportAndBadInput) {
       {R"({"crs": "EPSG:4326", "points": [{"name": "g1", "x": 8, "y": 47, "z": 500, "observations": [{"frame": "f1.png", "x": 1, "y": 1}]}]})",
        "application/json", "at least 2"},
       {R"({"crs": "EPSG:0", "points": []})", "application/json", "EPSG:0"},
+      {"EPSG:4326\n200 47 400 10 10 f1.png a\n200 47 400 10 10 f2.png a\n", "text/plain", "is not a place"},
+      {"EPSG:32632\n500000 5200000 400 10 10 f1.png a\n500000 5200000 400 12 10 f1.png a\n", "text/plain",
+       "clicked a second time in frame \"f1.png\""},
+      {"", "text/plain", "empty file"},
+      {"500000 5200000 400 10 10 f1.png a\n", "text/plain", ":1: CRS"},
   };
   for (const auto& b : bad) {
     r = Put("/api/workspaces/ws1/gcps", b.body, b.type.c_str());

@@ -133,12 +133,26 @@ Eigen::Vector3d GcpCrs::FromWgs84(const GeoPoint& p) const {
   return {x, y, z};
 }
 
+namespace {
+// A coordinate the CRS maps to a real place: PROJ transforms it to finite WGS84 with |lat| ≤ 90°, |lon| ≤ 180°
+// (a longitude of 200 or a swapped easting/northing is a typing error, not a position).
+bool InWgs84Range(const GcpCrs& crs, const Eigen::Vector3d& geo) {
+  try {
+    const GeoPoint p = crs.ToWgs84(geo);
+    return std::abs(p.lat) <= 90 && std::abs(p.lon) <= 180;
+  } catch (const Error&) {
+    return false;
+  }
+}
+}  // namespace
+
 GcpList ParseGcpList(const std::string& text, std::vector<std::string>* errors, const std::string& what) {
   GcpList list;
   std::istringstream in(text);
   std::string raw;
   int line_no = 0;
   bool have_crs = false;
+  std::unique_ptr<GcpCrs> crs;
   auto fail = [&](const std::string& msg) { errors->push_back(fmt::format("{}:{}: {}", what, line_no, msg)); };
   while (std::getline(in, raw)) {
     ++line_no;
@@ -148,7 +162,7 @@ GcpList ParseGcpList(const std::string& text, std::vector<std::string>* errors, 
       have_crs = true;
       list.crs = line;
       try {
-        GcpCrs crs(line);
+        crs = std::make_unique<GcpCrs>(line);
       } catch (const Error& e) {
         fail(e.what());
       }
@@ -174,6 +188,13 @@ GcpList ParseGcpList(const std::string& text, std::vector<std::string>* errors, 
       }
     if (!ok) continue;
     g.geo = {v[0], v[1], v[2]};
+    if (crs && !InWgs84Range(*crs, g.geo)) {
+      fail(
+          fmt::format("({}, {}, {}) is not a place in {} (geo_x is the easting or longitude, geo_y the northing or "
+                      "latitude)",
+                      f[0].substr(0, 40), f[1].substr(0, 40), f[2].substr(0, 40), crs->name()));
+      continue;
+    }
     g.im_x = v[3];
     g.im_y = v[4];
     g.image = f[5];
@@ -189,19 +210,25 @@ GcpList ParseGcpList(const std::string& text, std::vector<std::string>* errors, 
     line_no = std::max(line_no, 1);
     fail("empty file: the first line must name the CRS (e.g. EPSG:4326)");
   }
-  // One name, one place.
+  // One name, one place, one click per frame.
   std::map<std::string, const GcpLine*> first;
+  std::map<std::pair<std::string, std::string>, const GcpLine*> clicked;
   for (const auto& g : list.lines) {
     if (g.name.empty()) continue;
     auto [it, inserted] = first.emplace(g.name, &g);
+    line_no = g.line;
     if (!inserted && (it->second->geo - g.geo).cwiseAbs().maxCoeff() > 1e-9 * std::max(1.0, g.geo.norm())) {
-      line_no = g.line;
       fail(fmt::format("GCP \"{}\" has other coordinates than on line {}", g.name, it->second->line));
-    } else if (!inserted && it->second->IsCheck() != g.IsCheck()) {
-      line_no = g.line;
+      continue;
+    }
+    if (!inserted && it->second->IsCheck() != g.IsCheck())
       fail(fmt::format("GCP \"{}\" is marked as a check point on one line and not on another (line {})", g.name,
                        it->second->line));
-    }
+    const auto [c, new_frame] = clicked.emplace(std::make_pair(g.name, g.image), &g);
+    if (!new_frame && (c->second->im_x != g.im_x || c->second->im_y != g.im_y))
+      fail(fmt::format(
+          "GCP \"{}\" is clicked a second time in frame \"{}\" (first on line {}); keep one click per frame", g.name,
+          g.image, c->second->line));
   }
   return list;
 }

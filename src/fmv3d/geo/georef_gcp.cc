@@ -172,6 +172,87 @@ void AdjustWithGcps(const std::vector<GroundControlPoint>& gcps, const std::vect
   *enu = std::move(rec);
 }
 
+// Step 3's datum fitted to the clicks themselves: Gauss–Newton on the seven parameters of `sim` (started from the
+// precision-weighted Umeyama fit) minimising the reprojection error of every control click, the control point at
+// its coordinates carried into the model by sim⁻¹ and projected by the model's camera (Huber 3 px, as in step 4).
+// With the model's shape taken as exact this is the maximum-likelihood datum: each click weighs by its own geometry
+// (depth, angle), where the triangulate-then-fit weighs a whole point by one scalar and discards the anisotropy of
+// its triangulation (an orbit's points are far less certain along the line of sight). Returns false (sim kept)
+// when it does not lower the cost.
+bool FitDatumToClicks(const core::Reconstruction& model, const std::vector<GroundControlPoint>& gcps,
+                      const std::vector<GcpResult>& points, core::Sim3* sim) {
+  struct Click {
+    const core::Image* image;
+    const core::Camera* camera;
+    Eigen::Vector3d enu;
+    Eigen::Vector2d uv;
+  };
+  std::vector<Click> clicks;
+  for (size_t i = 0; i < gcps.size(); ++i) {
+    if (points[i].status != GcpStatus::kControl) continue;
+    for (const auto& o : gcps[i].observations)
+      if (const core::Image* im = model.FindImageByName(o.frame))
+        clicks.push_back({im, &model.cameras.at(im->camera_id), points[i].enu, {o.x, o.y}});
+  }
+  constexpr double kHuberPx = 3;
+  // Robust cost of `s`; with J, H and g, the Gauss–Newton system in δ = (ω, δt, δlog s), δS applied after s.
+  auto evaluate = [&](const core::Sim3& s, Eigen::Matrix<double, 7, 7>* H, Eigen::Matrix<double, 7, 1>* g) {
+    const core::Sim3 inv = s.Inverse();
+    const Eigen::Matrix3d Rt_over_s = s.q.conjugate().toRotationMatrix() / s.s;  // d(model point)/d(ENU point)
+    double cost = 0;
+    if (H) H->setZero(), g->setZero();
+    for (const auto& c : clicks) {
+      const Eigen::Vector3d xc = c.image->pose.Transform(inv.Apply(c.enu));
+      if (xc.z() <= 0) return std::numeric_limits<double>::infinity();
+      const Eigen::Vector2d r = c.camera->Project(xc) - c.uv;
+      const double e = r.norm(), w = e <= kHuberPx ? 1.0 : kHuberPx / e;
+      cost += e <= kHuberPx ? e * e : 2 * kHuberPx * e - kHuberPx * kHuberPx;
+      if (!H) continue;
+      // δS⁻¹(Y) ≈ Y − δt − δlog s·Y + Y×ω: the ENU point as the perturbed datum sees it.
+      const Eigen::Vector3d& Y = c.enu;
+      Eigen::Matrix<double, 3, 7> dY;
+      dY << 0, -Y.z(), Y.y(), -1, 0, 0, -Y.x(),  //
+          Y.z(), 0, -Y.x(), 0, -1, 0, -Y.y(),    //
+          -Y.y(), Y.x(), 0, 0, 0, -1, -Y.z();
+      const Eigen::Matrix<double, 2, 7> J =
+          c.camera->ProjectJacobian(xc) * c.image->pose.q.toRotationMatrix() * Rt_over_s * dY;
+      *H += w * J.transpose() * J;
+      *g += w * J.transpose() * r;
+    }
+    return cost;
+  };
+  core::Sim3 s = *sim;
+  const double start_cost = evaluate(s, nullptr, nullptr);
+  if (!std::isfinite(start_cost)) return false;  // a control point behind a camera: keep the Umeyama fit
+  double cost = start_cost;
+  for (int it = 0; it < 20; ++it) {
+    Eigen::Matrix<double, 7, 7> H;
+    Eigen::Matrix<double, 7, 1> g;
+    evaluate(s, &H, &g);
+    const Eigen::Matrix<double, 7, 1> d = H.ldlt().solve(-g);
+    if (!d.allFinite()) break;
+    core::Sim3 step;
+    step.s = std::exp(d(6));
+    const double angle = d.head<3>().norm();
+    step.q =
+        angle > 0 ? Eigen::Quaterniond(Eigen::AngleAxisd(angle, d.head<3>() / angle)) : Eigen::Quaterniond::Identity();
+    step.t = d.segment<3>(3);
+    core::Sim3 next;  // step ∘ s
+    next.s = step.s * s.s;
+    next.q = (step.q * s.q).normalized();
+    next.t = step.Apply(s.t);
+    const double next_cost = evaluate(next, nullptr, nullptr);
+    if (!(next_cost < cost)) break;
+    const bool converged = cost - next_cost < 1e-10 * cost;
+    s = next;
+    cost = next_cost;
+    if (converged) break;
+  }
+  if (!(cost < start_cost)) return false;
+  *sim = s;
+  return true;
+}
+
 // The similarity of the sparse model's camera centres onto the adjusted model's (same image ids).
 bool FitToAdjusted(const core::Reconstruction& model, const core::Reconstruction& enu, core::Sim3* sim) {
   std::vector<Eigen::Vector3d> src, dst;
@@ -238,6 +319,7 @@ GcpGeoref EstimateGcpGeoref(const core::Reconstruction& model, const std::vector
   if (!geometry::EstimateSimilarity(src, dst, weights, true, &out.sim) || geometry::Collinearity(dst) < 1e-3)
     throw Error("georef: the control points (" + fmt::format("{}", fmt::join(control_names, ", ")) +
                 ") are collinear; add a GCP off their line");
+  out.datum_fitted_to_clicks = options.fit_to_clicks && FitDatumToClicks(model, gcps, out.points, &out.sim);
   out.enu = model;
   out.enu.Transform(out.sim);
   if (!options.adjust) out.adjustment.why_not = "turned off";
@@ -311,9 +393,11 @@ nlohmann::json GcpGeoref::ToJson() const {
       {"check_rms_m", check_used ? nlohmann::json(check_rms_m) : nlohmann::json()},
       {"fit",
        "least-squares similarity (Umeyama) of the triangulated control points to their coordinates, each "
-       "weighted by 1/σ² of its triangulation (sigma_m_per_px: its σ in metres for a 1 px click), then a bundle "
+       "weighted by 1/σ² of its triangulation (sigma_m_per_px: its σ in metres for a 1 px click), refined on the "
+       "clicks' reprojection errors (datum_fitted_to_clicks), then a bundle "
        "adjustment with the control points held at their coordinates and their clicks as reprojection residuals "
        "(adjustment); residuals from the points triangulated again with the final cameras"},
+      {"datum_fitted_to_clicks", datum_fitted_to_clicks},
       {"adjustment", AdjustmentJson(adjustment)},
       {"independent_accuracy", check_used ? "check_rms_m: check points left out of the fit"
                                           : "none: mark GCPs as check points (extra field \"check\") to measure it"}};

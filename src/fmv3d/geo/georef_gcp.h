@@ -7,7 +7,9 @@
 //      origin (the GCPs' centroid unless given).
 //   3. The similarity sparse → ENU is the least-squares (Umeyama) fit of the triangulated control points (not the
 //      check points) to their coordinates, each weighted by the inverse variance of its triangulation (from the
-//      Jacobians of its projections): ≥ 3 control points, not collinear.
+//      Jacobians of its projections): ≥ 3 control points, not collinear. That fit then starts a Gauss–Newton of the
+//      seven parameters on the clicks themselves (each control point at its coordinates, carried into the model and
+//      reprojected): the maximum-likelihood datum for the model's shape, every click weighed by its own geometry.
 //   4. Bundle adjustment with GCP constraints (unless options.adjust is off): the model, carried to ENU by that
 //      similarity, is adjusted with the control points as extra 3D points held (softly, σ = gcp_sigma_m) at their
 //      coordinates and their clicks as reprojection residuals beside every automatic observation, weighted by
@@ -35,6 +37,7 @@ namespace fmv3d::geo {
 struct GcpGeorefOptions {
   std::optional<GeoPoint> origin;  // default: the centroid of the GCPs (WGS84)
   int min_control_points = 3;
+  bool fit_to_clicks = true;  // step 3's Gauss–Newton on the clicks (off: the precision-weighted Umeyama fit alone)
   bool adjust = true;         // step 4
   bool refine_focal = true;   // step 4 adjusts the focal too (an orbit trades it against the cameras' distance)
   double gcp_sigma_m = 0.02;  // survey accuracy of a control point's coordinates, per axis (step 4's priors)
@@ -76,8 +79,9 @@ struct GcpAdjustment {
 struct GcpGeoref {
   GeoPoint origin;
   bool origin_given = false;
-  core::Sim3 sim;            // sparse → ENU (step 3, or fitted to step 4's result)
-  core::Reconstruction enu;  // the model in ENU: adjusted (step 4), else sim applied to the sparse model
+  core::Sim3 sim;                       // sparse → ENU (step 3, or fitted to step 4's result)
+  bool datum_fitted_to_clicks = false;  // step 3's Gauss–Newton on the clicks lowered their error
+  core::Reconstruction enu;             // the model in ENU: adjusted (step 4), else sim applied to the sparse model
   GcpAdjustment adjustment;
   std::string crs, crs_name, vertical_datum;
   std::vector<GcpResult> points;

@@ -71,11 +71,7 @@ json GcpsToJson(const geo::GcpList& list) {
 // Checks a parsed list (frames, pixels; every point in ≥ 2 frames) and writes it atomically.
 json CheckAndWriteGcps(const geo::GcpList& list, const io::FrameTable& frames, const fs::path& path) {
   std::vector<std::string> errors;
-  geo::CheckGcpList(list, frames, &errors);
-  for (const auto& p : geo::GroupGcps(list))
-    if (p.observations.size() < 2)
-      errors.push_back("GCP '" + p.name + "' is marked in " + std::to_string(p.observations.size()) +
-                       " frame; mark it in at least 2");
+  geo::CheckGcpList(list, frames, &errors);  // names a point clicked in fewer than 2 frames too
   ThrowIfAny(errors, "points");
   try {
     geo::WriteGcpList(list, path, &frames);
