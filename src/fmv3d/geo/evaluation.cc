@@ -388,7 +388,7 @@ nlohmann::json EvaluateGeoAgainstSynth(const core::Workspace& ws, const fs::path
   // A workspace whose heights are MSL (telemetry without ellipsoidal heights, e.g. EXIF): the truth's origin is
   // ellipsoidal, so it is lowered by the geoid undulation there (constant over a survey: EGM96 changes by
   // centimetres per kilometre), and the telemetry is read at MSL.
-  const bool msl = g.vertical_datum == "MSL";
+  const bool msl = g.datum == VerticalDatum::kMsl;
   if (msl) {
     const std::optional<double> n = GeoidUndulation(to.lat, to.lon);
     if (!n) throw Error(ws.name() + ": heights are MSL but the EGM96 geoid grid is not available to compare them");

@@ -79,8 +79,7 @@ void Guard(httplib::Response& res, const std::function<void()>& handler) {
 fs::path WorkspaceDir(const Context& ctx, const std::string& name) {
   if (!IsValidWorkspaceName(name))
     throw RequestError(400, "bad workspace name (one path component of [A-Za-z0-9._ -], not starting with '.')", "ws");
-  std::string why;
-  const auto dir = ResolveInside(ctx.ws_root, name, &why);
+  const auto dir = ResolveInside(ctx.ws_root, name);
   std::error_code ec;
   if (!dir || !fs::is_directory(*dir, ec) || dir->parent_path() != ctx.ws_root)
     throw RequestError(404, "no workspace '" + name + "'");

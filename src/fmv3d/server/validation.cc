@@ -42,23 +42,42 @@ bool IsWithin(const fs::path& root, const fs::path& path) {
   return true;
 }
 
-std::optional<fs::path> ResolveInside(const fs::path& root, std::string_view relative, std::string* why) {
-  auto fail = [why](const char* reason) -> std::optional<fs::path> {
-    if (why) *why = reason;
-    return std::nullopt;
-  };
-  if (relative.empty()) return fail("empty path");
-  if (relative.find('\0') != std::string_view::npos) return fail("NUL byte in path");
-  if (relative.find('\\') != std::string_view::npos) return fail("backslash in path");
+const char* PathRefusalText(PathRefusal refusal) {
+  switch (refusal) {
+    case PathRefusal::kNone:
+      return "";
+    case PathRefusal::kEmpty:
+      return "empty path";
+    case PathRefusal::kNulByte:
+      return "NUL byte in path";
+    case PathRefusal::kBackslash:
+      return "backslash in path";
+    case PathRefusal::kAbsolute:
+      return "absolute path";
+    case PathRefusal::kDotDot:
+      return "'..' in path";
+    case PathRefusal::kUnresolvable:
+      return "path cannot be resolved";
+    case PathRefusal::kLeavesRoot:
+      return "path leaves its root";
+  }
+  return "";
+}
+
+ResolvedPath ResolveInside(const fs::path& root, std::string_view relative) {
+  const auto fail = [](PathRefusal refusal) { return ResolvedPath{std::nullopt, refusal}; };
+  if (relative.empty()) return fail(PathRefusal::kEmpty);
+  if (relative.find('\0') != std::string_view::npos) return fail(PathRefusal::kNulByte);
+  if (relative.find('\\') != std::string_view::npos) return fail(PathRefusal::kBackslash);
   const fs::path rel{std::string(relative)};
-  if (rel.is_absolute() || relative.front() == '/') return fail("absolute path");
+  if (rel.is_absolute() || relative.front() == '/') return fail(PathRefusal::kAbsolute);
   for (const auto& part : rel)
-    if (part == "..") return fail("'..' in path");
+    if (part == "..") return fail(PathRefusal::kDotDot);
   std::error_code ec;
-  const fs::path resolved = fs::weakly_canonical(root / rel, ec);
-  if (ec) return fail("path cannot be resolved");
-  if (!IsWithin(root, resolved)) return fail("path leaves its root");
-  return resolved;
+  fs::path resolved = fs::weakly_canonical(root / rel, ec);
+  if (ec) return fail(PathRefusal::kUnresolvable);
+  if (!IsWithin(root, resolved)) return fail(PathRefusal::kLeavesRoot);
+  return {std::move(resolved), PathRefusal::kNone};
 }
 
 bool ConstantTimeEquals(std::string_view a, std::string_view b) {
