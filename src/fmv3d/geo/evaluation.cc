@@ -43,7 +43,7 @@ Eigen::AlignedBox3d ModelledRegion(const nlohmann::json& truth) {
   const auto lo = truth["bounds"].at("min").get<std::vector<double>>(),
              hi = truth["bounds"].at("max").get<std::vector<double>>();
   if (lo.size() != 3 || hi.size() != 3) return {};
-  return Eigen::AlignedBox3d(Eigen::Vector3d(lo[0], lo[1], lo[2]), Eigen::Vector3d(hi[0], hi[1], hi[2]));
+  return {Eigen::Vector3d(lo[0], lo[1], lo[2]), Eigen::Vector3d(hi[0], hi[1], hi[2])};
 }
 
 // DSM height errors over a set of compared cells: e = DSM − truth, its part that is the reconstruction's own

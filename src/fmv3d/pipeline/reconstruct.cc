@@ -49,7 +49,7 @@ void ReconstructOptions::ApplyFastPreset() {
 
 std::vector<Stage> ReconstructStages(const ReconstructOptions& o) {
   const core::Workspace ws(o.workspace);
-  const fs::path root = ws.root();
+  const fs::path& root = ws.root();
   std::vector<Stage> stages;
   stages.push_back({"frames",
                     [o] {
@@ -86,7 +86,7 @@ std::vector<Stage> ReconstructStages(const ReconstructOptions& o) {
   // nothing (their markers stay absent, so adding telemetry later and re-running makes them).
   // The products after georef also need its georef.json.
   enum class Needs { kTelemetry, kGeoreference };
-  auto with_telemetry = [ws](const char* stage, Needs needs, std::function<nlohmann::json()> run) {
+  auto with_telemetry = [ws](const char* stage, Needs needs, const std::function<nlohmann::json()>& run) {
     return [ws, stage, needs, run] {
       const io::FramesIndex index = io::ReadFramesIndex(ws.frames_json());
       const bool any = std::any_of(index.frames.begin(), index.frames.end(),
@@ -176,7 +176,7 @@ nlohmann::json RunReconstruct(const ReconstructOptions& o, std::vector<StageResu
   for (const auto& r : results) timings[r.name] = r.skipped ? nlohmann::json("skipped") : nlohmann::json(r.seconds);
   RecordTimings(ws.root(), timings);
   if (stage_results) *stage_results = results;
-  if (!o.report) return nlohmann::json();
+  if (!o.report) return {};
   core::AppendProgressEvent({{"event", "stage"}, {"stage", "report"}, {"state", "start"}});
   nlohmann::json report = WriteReport(ws.root());
   core::AppendProgressEvent({{"event", "stage"}, {"stage", "report"}, {"state", "done"}});

@@ -31,7 +31,7 @@ void RequireJsonBody(const httplib::Request& req) {
 fs::path ResolveInput(const Context& ctx, const fs::path& ws_dir, const std::string& in) {
   std::error_code ec;
   if (!in.empty() && in.front() == '/') {
-    const fs::path p = fs::weakly_canonical(fs::path(in), ec);
+    fs::path p = fs::weakly_canonical(fs::path(in), ec);
     if (!ec && IsWithin(ctx.ws_root, p) && fs::exists(p, ec)) return p;
     throw RequestError(400, "'inputs': " + in + " is not an existing path under WS_ROOT", "inputs");
   }
