@@ -3,6 +3,7 @@
 #include <unistd.h>
 
 #include <fstream>
+#include <utility>
 
 #include "fmv3d/core/error.h"
 #include "fmv3d/server/routes.h"
@@ -191,7 +192,7 @@ Server::Server(ServerOptions options) : impl_(std::make_unique<Impl>()) {
   });
   http.set_exception_handler([](const httplib::Request&, httplib::Response& res, std::exception_ptr ep) {
     try {
-      std::rethrow_exception(ep);
+      std::rethrow_exception(std::move(ep));
     } catch (const std::exception& e) {
       SendError(res, 500, e.what());
     } catch (...) {

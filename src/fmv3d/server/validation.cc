@@ -104,7 +104,7 @@ std::string StageField(const nlohmann::json& j, const char* field) {
   if (!j.contains(field) || j[field].is_null()) return {};
   if (!j[field].is_string())
     throw RequestError(400, std::string("'") + field + "' must be a stage name (string)", field);
-  const std::string s = j[field].get<std::string>();
+  std::string s = j[field].get<std::string>();
   if (s.empty()) return {};
   if (!IsStageName(s)) {
     std::string known;
@@ -150,7 +150,7 @@ std::string ParseCreateWorkspace(std::string_view body) {
   const nlohmann::json j = ParseObject(body);
   if (!j.contains("name")) throw RequestError(400, "'name' is required", "name");
   if (!j["name"].is_string()) throw RequestError(400, "'name' must be a string", "name");
-  const std::string name = j["name"].get<std::string>();
+  std::string name = j["name"].get<std::string>();
   if (!IsValidWorkspaceName(name))
     throw RequestError(400, "'name' must be 1-128 of [A-Za-z0-9._ -], not starting with '.'", "name");
   return name;
@@ -195,7 +195,7 @@ std::string SanitiseUploadName(std::string_view client_name) {
   for (char c : client_name) name += NameChar(c) ? c : '_';
   while (!name.empty() && (name.front() == '.' || name.front() == ' ')) name.erase(name.begin());
   if (name.size() > 128) name.erase(0, name.size() - 128);
-  if (name.empty() || name.find_first_not_of("_") == std::string::npos)
+  if (name.empty() || name.find_first_not_of('_') == std::string::npos)
     throw RequestError(400, "the uploaded file has no usable name", "file");
   return name;
 }
