@@ -79,7 +79,7 @@ over=$(awk -F'\t' '
 ' "$baseline" <(echo -n "$found"))
 if [[ -n "$over" ]]; then
   echo "$over" >&2
-  echo "tidy: new findings (fix them, or if one must stay, add it to $baseline with the reason in a comment)" >&2
+  echo "tidy: new findings: fix them, or where one must stay, count it in $baseline and say why in the commit" >&2
   exit 1
 fi
 echo "tidy: ${#sources[@]} source(s) checked, no finding beyond the baseline ($(echo -n "$found" | grep -c . || true) allowed)"
