@@ -1,7 +1,10 @@
 #!/usr/bin/env bash
 # Re-runs the commands behind bench/RESULTS.md, one section per table, into OUT (default bench-out/).
 #
-#   bench/run.sh SECTION... [--out DIR]      SECTION: sparse-colmap sparse dense demo clip align geo other all
+#   bench/run.sh SECTION... [--out DIR]
+#   SECTION: sparse-colmap sparse dense demo clip coverage align geo other          (phase 1 and the mesh tables)
+#            console handtools field-telemetry survey selfcal reliability ci       (phase 2 tables)
+#            all                                                                    (every section)
 #
 # Each section writes its workspaces and the evaluation JSON files (report/*_eval.json, compare.json, ...) under
 # OUT/SECTION/ and prints where the figures are. Needs a built fmv3d (make build); sparse-colmap and geo's COLMAP
@@ -16,12 +19,16 @@ sections=()
 while [[ $# -gt 0 ]]; do
   case "$1" in
     --out) out=$2; shift 2 ;;
-    -h|--help) sed -n '2,9p' "$0"; exit 0 ;;
-    all) sections+=(sparse-colmap sparse dense demo clip align geo other); shift ;;
+    -h|--help) sed -n '2,11p' "$0"; exit 0 ;;
+    all)
+      sections+=(sparse-colmap sparse dense demo clip coverage align geo other)
+      sections+=(console handtools field-telemetry survey selfcal reliability ci)
+      shift
+      ;;
     *) sections+=("$1"); shift ;;
   esac
 done
-[[ ${#sections[@]} -gt 0 ]] || { sed -n '2,9p' "$0" >&2; exit 2; }
+[[ ${#sections[@]} -gt 0 ]] || { sed -n '2,11p' "$0" >&2; exit 2; }
 [[ -x "$FMV3D" ]] || { echo "$FMV3D not built: make build" >&2; exit 1; }
 log() { echo "[bench] $*" >&2; }
 timed() { /usr/bin/time -f '%e s wall, %U+%S CPU-s, %M kB peak' "$@"; }
@@ -100,6 +107,119 @@ run_other() {
   "$here/build/bench/decode_bench" || true
   "$here/build/bench/match_bench" || true
   "$here/build/bench/render_bench" || true
+}
+
+# Mesh and texture, the whole-scene coverage rows (evaluate-dense: seen surface, completeness, per-view coverage).
+run_coverage() {
+  local d=$1 name args
+  while IFS='|' read -r name args; do
+    # shellcheck disable=SC2086
+    "$FMV3D" -q synth $args -o "$d/S_$name"
+    timed "$FMV3D" reconstruct "$d/S_$name/frames" -o "$d/W_$name" --until mesh
+    "$FMV3D" evaluate-dense "$d/W_$name" --truth "$d/S_$name"
+    "$FMV3D" evaluate-dense "$d/W_$name" --truth "$d/S_$name" --mesh "$d/W_$name/mesh/poisson.ply"
+  done <<'FLIGHTS'
+town_orbit|--scene town --path orbit --frames 36 --size 960x540
+terrain_orbit_s1|--scene terrain --path orbit --frames 30 --size 960x540 --seed 1
+FLIGHTS
+}
+
+# Console, 3D Tiles, COG: tiles and first-picture times in Chromium (node + playwright, as the browser tests),
+# then the console's browser test.
+run_console() {
+  local d=$1
+  node "$here/bench/console_web.mjs" --fmv3d "$FMV3D" --web "$here/build/web" --points 1000000,10000000 --runs 3
+  node "$here/bench/console_web.mjs" --fmv3d "$FMV3D" --web "$here/build/web" --points 20000000 --runs 1
+  ctest --test-dir "$here/build" -R 'Browser.Console' --output-on-failure | tee "$d/ctest.txt"
+}
+
+# Hand tools: tie points, GCPs and the calibration window, from the CLI and through the page.
+run_handtools() {
+  ctest --test-dir "$here/build" -R 'E2eHandTools|Browser.Handtools' -V | tee "$1/ctest.txt"
+}
+
+# Field inputs: the telemetry readers on the shared real files (seconds).
+run_field_telemetry() {
+  local d=$1 f
+  for f in "$DATA"/photos/exif-gps/*.jpg; do "$FMV3D" -q telemetry "$f" -o "$d/$(basename "$f").json"; done
+  "$FMV3D" -q telemetry "$DATA/fmv/gopro/max-heromode.mp4" -o "$d/max-heromode.json"
+  "$FMV3D" -q telemetry "$DATA/fmv/kwiver/videos/aphill_klv_10s.ts" -o "$d/aphill_klv_10s.json"
+  log "positions: $d/*.json (compare the photos with $DATA/photos/exif-gps/README*)"
+}
+
+# Field inputs and registration: the low-texture nadir survey (image chain with the focal guessed and stated;
+# EXIF JPEGs through reconstruct with no option), the oblique action-camera clip, the real KLV clip's
+# line-of-sight check.
+run_survey() {
+  local d=$1
+  "$FMV3D" -q synth --scene sand --path grid --overlap 70,40 --frames 60 --size 1600x900 --altitude 110 --format jpg \
+    --seed 3 -o "$d/sand"
+  sfm_chain "$d/sand/frames" "$d/sand_guess" "$d/sand/truth"
+  mkdir -p "$d/sand_focal" && cp -r "$d/sand_guess"/{frames,features,matches} "$d/sand_focal"/
+  timed "$FMV3D" -q sparse "$d/sand_focal" --focal 1385.6406  # the focal an EXIF would give
+  "$FMV3D" evaluate-sparse "$d/sand_focal" --truth "$d/sand/truth"
+  "$FMV3D" -q synth --scene sand --path grid --overlap 70,40 --frames 60 --size 1600x900 --altitude 110 \
+    --exif-gps --gps-noise 3 --seed 3 -o "$d/sand_exif"
+  timed "$FMV3D" reconstruct "$d/sand_exif/frames" -o "$d/sand_exif_ws" --until georef
+  "$FMV3D" evaluate-sparse "$d/sand_exif_ws" --truth "$d/sand_exif/truth"
+  "$FMV3D" dsm "$d/sand_exif_ws" && "$FMV3D" evaluate-geo "$d/sand_exif_ws" --truth "$d/sand_exif"
+  "$FMV3D" -q synth --scene terrain --path oblique --frames 120 --fps 10 --size 854x480 --focal 450 \
+    --distortion -0.27,0.08,0,0 --gpmf --gps-noise 3 --seed 4 -o "$d/obl"
+  timed "$FMV3D" reconstruct "$d/obl/flight.mp4" -o "$d/obl_ws" --until georef --no-report
+  "$FMV3D" evaluate-sparse "$d/obl_ws" --truth "$d/obl/truth"
+  timed "$FMV3D" reconstruct "$DATA/fmv/kwiver/videos/aphill_klv_10s.ts" -o "$d/aphill"
+  log "line of sight: $d/aphill/geo/georef.json (\"trusted\", \"line_of_sight\")"
+}
+
+# Self-calibration: the Strecha sets beside COLMAP (as sparse-colmap), the principal-point orbit, the focal scan on
+# a flat curve, and the merged-model figures of E2eAlign.
+run_selfcal() {
+  local d=$1 set
+  for set in fountain-P11 Herz-Jesus-P8; do
+    "$FMV3D" -q import-truth strecha "$DATA/mvs/$set/gt_dense_cameras" -o "$d/$set-truth"
+    "$here/bench/compare_colmap.sh" "$DATA/mvs/$set/images" --truth "$d/$set-truth" --out "$d/$set"
+  done
+  "$FMV3D" -q synth --scene town --path orbit --frames 24 --size 640x360 --seed 7 --principal-offset 12,-16 \
+    --no-scene -o "$d/pp"
+  sfm_chain "$d/pp/frames" "$d/pp_ws" "$d/pp/truth"
+  "$FMV3D" -q synth --scene town --path orbit --frames 16 --size 640x360 --seed 3 -o "$d/scan"
+  sfm_chain "$d/scan/frames" "$d/scan_ws" "$d/scan/truth"
+  "$here/build/tests/test_e2e" --gtest_filter='E2eAlign*'
+}
+
+# Reliability: two uninterrupted runs of one flight compared byte for byte, then the crash-safety tests.
+run_reliability() {
+  local d=$1
+  "$FMV3D" -q synth --scene building --path orbit --frames 90 --fps 10 --size 320x180 --klv --seed 5 -o "$d/S"
+  timed "$FMV3D" -q reconstruct "$d/S/flight.ts" -o "$d/A" --fast --no-report
+  timed "$FMV3D" -q reconstruct "$d/S/flight.ts" -o "$d/B" --fast --no-report
+  # Products must match byte for byte; JSON summaries once every key naming seconds or a time is dropped.
+  local f bad=0
+  while read -r f; do
+    [[ "$f" == *.json ]] && python3 - "$d/A/$f" "$d/B/$f" <<'PY' && continue
+import json, sys
+def strip(v):
+    if isinstance(v, dict):
+        return {k: strip(x) for k, x in v.items() if "second" not in k and "time" not in k and k != "cpu_s"}
+    return [strip(x) for x in v] if isinstance(v, list) else v
+a, b = (strip(json.load(open(p))) for p in sys.argv[1:])
+sys.exit(a != b)
+PY
+    echo "differs: $f" >&2
+    bad=1
+  done < <(cd "$d/A" && find . -type f ! -name '*.log' ! -name '*.jsonl' ! -name '*.lock' | sed 's#^\./##' |
+    while read -r g; do cmp -s "$g" "$d/B/$g" || echo "$g"; done)
+  [[ $bad -eq 0 ]] && log "reliability: every product identical"
+  ctest --test-dir "$here/build" -R CrashSafety --output-on-failure | tee "$d/ctest.txt"
+}
+
+# Tests and CI: a from-scratch Release build as CI makes it (unity + precompiled header, ccache off), then the
+# whole suite, both timed. Takes ~35 min on 2 cores.
+run_ci() {
+  local d=$1
+  cmake -S "$here" -B "$d/B" -G Ninja -DCMAKE_BUILD_TYPE=Release >/dev/null
+  CCACHE_DISABLE=1 timed cmake --build "$d/B" -j2 >"$d/build.txt"
+  timed ctest --test-dir "$d/B" -j2 | tee "$d/ctest.txt"
 }
 
 for s in "${sections[@]}"; do

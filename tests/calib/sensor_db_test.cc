@@ -158,18 +158,18 @@ TEST(Priors, OrderOfTrust) {
   g.exif.make = "DJI";
   g.exif.model = "FC6310";
   g.exif.focal_mm = 8.8;
-  std::string source;
+  fmv3d::io::PriorSource source;
   // 1. calibration file
   EXPECT_NEAR(PriorChooser({tmp / "camera.json", ""}, db).Choose(g, &source).f, 950, 1e-9);
-  EXPECT_EQ(source, "calibration:" + (tmp / "camera.json").string());
+  EXPECT_EQ(fmv3d::io::PriorSourceName(source), "calibration:" + (tmp / "camera.json").string());
   // ... not for frames of another aspect ratio: falls through to the sensor database.
   ingest::CameraGroup square = g;
   square.width = square.height = 912;
   PriorChooser({tmp / "camera.json", ""}, db).Choose(square, &source);
-  EXPECT_EQ(source, "sensor-db:DJI Phantom 4 Pro");
+  EXPECT_EQ(fmv3d::io::PriorSourceName(source), "sensor-db:DJI Phantom 4 Pro");
   // 2. sensor database by EXIF model
   EXPECT_NEAR(PriorChooser({}, db).Choose(g, &source).f, 912, 1e-9);
-  EXPECT_EQ(source, "sensor-db:DJI Phantom 4 Pro");
+  EXPECT_EQ(fmv3d::io::PriorSourceName(source), "sensor-db:DJI Phantom 4 Pro");
   // ... or forced with --sensor, for a video without EXIF
   ingest::CameraGroup video;
   video.width = 1368;
@@ -182,10 +182,10 @@ TEST(Priors, OrderOfTrust) {
   unknown.exif.model = "Unknown-1";
   unknown.exif.focal_35mm = 28;
   EXPECT_NEAR(PriorChooser({}, db).Choose(unknown, &source).f, 28 * std::hypot(1368, 912) / std::hypot(36, 24), 1e-9);
-  EXPECT_EQ(source, "exif");
+  EXPECT_EQ(fmv3d::io::PriorSourceName(source), "exif");
   // 4. guess
   EXPECT_NEAR(PriorChooser({}, db).Choose(video, &source).f, 1.2 * 1368, 1e-9);
-  EXPECT_EQ(source, "guess");
+  EXPECT_EQ(fmv3d::io::PriorSourceName(source), "guess");
 }
 
 // The three commands end to end, as a user runs them.
@@ -215,7 +215,8 @@ TEST(CalibCli, CalibrateSaveAsCamerasAndFramesWithPriors) {
   ASSERT_EQ(r.exit_code, 0) << r.err;
   auto index = io::ReadFramesIndex(tmp / "ws1" / "frames" / "frames.json");
   ASSERT_EQ(index.cameras.size(), 1u);
-  EXPECT_EQ(index.cameras[0].prior_source.rfind("calibration:", 0), 0u) << index.cameras[0].prior_source;
+  EXPECT_EQ(index.cameras[0].prior_source.kind, fmv3d::io::PriorKind::kCalibration)
+      << fmv3d::io::PriorSourceName(index.cameras[0].prior_source);
   EXPECT_NEAR(index.cameras[0].camera.f, j["f"].get<double>(), 1e-9);
   EXPECT_NEAR(index.cameras[0].camera.k1, j["k1"].get<double>(), 1e-12);
 
@@ -223,7 +224,7 @@ TEST(CalibCli, CalibrateSaveAsCamerasAndFramesWithPriors) {
                    "' --sensor 'lab cam'");
   ASSERT_EQ(r.exit_code, 0) << r.err;
   index = io::ReadFramesIndex(tmp / "ws2" / "frames" / "frames.json");
-  EXPECT_EQ(index.cameras[0].prior_source, "sensor-db:lab cam");
+  EXPECT_EQ(fmv3d::io::PriorSourceName(index.cameras[0].prior_source), "sensor-db:lab cam");
   EXPECT_NEAR(index.cameras[0].camera.f, j["f"].get<double>(), 1e-9);
 
   // Usage and input errors: non-zero exit and a message naming the problem.
@@ -259,9 +260,9 @@ TEST(Priors, ExifJpegMatchesSensorDatabaseThroughIngestion) {
   opt.prior = PriorChooser({}, SensorDatabase::LoadDefault()).AsFunction();
   const io::FramesIndex index = ingest::IngestFrames({tmp / "dji.jpg", tmp / "plain.jpg"}, opt);
   ASSERT_EQ(index.cameras.size(), 2u);
-  EXPECT_EQ(index.cameras[0].prior_source, "sensor-db:DJI Phantom 4 Pro");
+  EXPECT_EQ(fmv3d::io::PriorSourceName(index.cameras[0].prior_source), "sensor-db:DJI Phantom 4 Pro");
   EXPECT_NEAR(index.cameras[0].camera.f, 912, 1e-9);
-  EXPECT_EQ(index.cameras[1].prior_source, "guess");
+  EXPECT_EQ(fmv3d::io::PriorSourceName(index.cameras[1].prior_source), "guess");
   EXPECT_NEAR(index.cameras[1].camera.f, 1.2 * 1368, 1e-9);
   // The JPEG is copied byte for byte (EXIF kept).
   EXPECT_EQ(io::ReadExif(tmp / "ws" / "frames" / "dji.jpg").model, "FC6310");

@@ -27,7 +27,7 @@ io::FramesIndex GridFlight(const fs::path& dir, bool with_telemetry_on_all) {
   io::FramesIndex index;
   io::CameraPrior cam;
   cam.camera = core::Camera::Pinhole(800, 600, 400 / std::tan(30 * kDeg));
-  cam.prior_source = "guess";
+  cam.prior_source = fmv3d::io::ParsePriorSource("guess");
   index.cameras.push_back(cam);
   for (int line = 0; line < 3; ++line)
     for (int k = 0; k < 8; ++k) {

@@ -37,7 +37,7 @@ void MakeWorkspace(const fs::path& ws, int num_frames) {
   io::FramesIndex index;
   io::CameraPrior cam;
   cam.camera = core::Camera::Pinhole(480, 320, 576);
-  cam.prior_source = "guess";
+  cam.prior_source = fmv3d::io::ParsePriorSource("guess");
   index.cameras.push_back(cam);
   for (int k = 0; k < num_frames; ++k) {
     cv::Mat frame;

@@ -148,7 +148,7 @@ void MakeGeorefCase(GeorefCase* g, int n, double noise, bool straight, int outli
   g->true_to_model.q = Eigen::Quaterniond(Eigen::AngleAxisd(0.7, Eigen::Vector3d(0.3, -0.5, 0.8).normalized()));
   g->true_to_model.t = Eigen::Vector3d(1, -2, 3);
   io::FramesIndex index;
-  index.cameras.push_back({rec.cameras[1], "guess", "flight.ts"});
+  index.cameras.push_back({rec.cameras[1], fmv3d::io::ParsePriorSource("guess"), "flight.ts"});
   const LocalFrame frame(kOrigin);
   for (int k = 0; k < n; ++k) {
     Eigen::Vector3d c;
@@ -634,7 +634,7 @@ TEST(Georef, StraightTrackWithFrameCentresIsBuiltAgain) {
       for (auto& [id, img] : rec.images)
         img.pose = g.true_to_model.Apply(core::Pose::LookAt(g.true_centres[id - 1], CaseLookAt(id - 1, 17)));
       io::FramesIndex index = io::ReadFramesIndex(g.dir / "frames/frames.json");
-      index.cameras[0].prior_source = "telemetry-hfov";
+      index.cameras[0].prior_source = fmv3d::io::ParsePriorSource("telemetry-hfov");
       index.cameras[0].camera.f *= 1.05;
       io::WriteFramesIndex(index, g.dir / "frames/frames.json");
     }

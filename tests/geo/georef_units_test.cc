@@ -150,7 +150,7 @@ SightCase MakeSightCase(const LocalFrame& frame, LookAt look_at, Stated stated) 
   c.model.cameras[1] = core::Camera::Pinhole(640, 360, 500);
   c.model.cameras[1].id = 1;
   c.model.cameras[1].u0 = 320, c.model.cameras[1].v0 = 180;
-  c.index.cameras.push_back({c.model.cameras[1], "guess", "flight.ts"});
+  c.index.cameras.push_back({c.model.cameras[1], fmv3d::io::ParsePriorSource("guess"), "flight.ts"});
   uint64_t next_point = 1;
   for (int gx = -40; gx <= 40; ++gx)
     for (int gy = -10; gy <= 40; ++gy) {

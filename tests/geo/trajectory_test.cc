@@ -105,7 +105,7 @@ TEST(Georef, EveryTelemetryPacketAgainstTheTrajectory) {
   rec.cameras[1] = core::Camera::Pinhole(640, 360, 500);
   rec.cameras[1].id = 1;
   io::FramesIndex index;
-  index.cameras.push_back({rec.cameras[1], "guess", "flight.ts"});
+  index.cameras.push_back({rec.cameras[1], fmv3d::io::ParsePriorSource("guess"), "flight.ts"});
   telemetry::TelemetryTrack track{"flight.ts", {}};
   std::mt19937_64 rng(11);
   std::normal_distribution<double> N(0, 1);

@@ -98,7 +98,7 @@ TEST(FieldTelemetry, SynthExifJpegsThroughFrames) {
   // The focal prior comes from the EXIF focal length and focal-plane resolution (exact to the rationals' 1e-3),
   // not the guess nor the 35 mm equivalent (rounded to whole mm: 1-2% off).
   ASSERT_EQ(index.cameras.size(), 1u);
-  EXPECT_EQ(index.cameras[0].prior_source, "exif");
+  EXPECT_EQ(fmv3d::io::PriorSourceName(index.cameras[0].prior_source), "exif");
   EXPECT_NEAR(index.cameras[0].camera.f, result.truth.cameras.at(1).f, 2e-4 * result.truth.cameras.at(1).f);
 
   // `fmv3d telemetry` dumps the same sample for one photo.

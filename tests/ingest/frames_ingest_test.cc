@@ -49,7 +49,7 @@ TEST(FramesIngest, MixedImagesAndVideo) {
   EXPECT_EQ(index.cameras[2].camera.width, 343);
   EXPECT_EQ(index.cameras[2].camera.height, 259);
   for (const auto& c : index.cameras) {
-    EXPECT_EQ(c.prior_source, "guess");
+    EXPECT_EQ(fmv3d::io::PriorSourceName(c.prior_source), "guess");
     EXPECT_DOUBLE_EQ(c.camera.f, 1.2 * std::max(c.camera.width, c.camera.height));
     EXPECT_DOUBLE_EQ(c.camera.u0, c.camera.width / 2.0);
   }

@@ -26,7 +26,7 @@ TEST(FramesTelemetry, KlvPositionsReachFramesJson) {
   EXPECT_EQ(back.frames.front().telemetry, index.frames.front().telemetry);
   // The stream's sensor HFOV (0.8°) is the focal prior: (360 / 2) / tan(0.4°) = 25,783 px, not the guess.
   ASSERT_EQ(index.cameras.size(), 1u);
-  EXPECT_EQ(index.cameras[0].prior_source, "telemetry-hfov");
+  EXPECT_EQ(fmv3d::io::PriorSourceName(index.cameras[0].prior_source), "telemetry-hfov");
   EXPECT_NEAR(index.cameras[0].camera.f, 180 / std::tan(0.4 * M_PI / 180), 30);
 }
 
@@ -38,7 +38,7 @@ TEST(FramesTelemetry, VideoWithoutKlvHasNone) {
   const auto index = IngestFrames({test::SharedData() / "fmv/kwiver/videos/h264_no_klv.ts"}, options);
   ASSERT_FALSE(index.frames.empty());
   for (const auto& f : index.frames) EXPECT_TRUE(f.telemetry.is_null()) << f.name;
-  EXPECT_EQ(index.cameras.at(0).prior_source, "guess");
+  EXPECT_EQ(fmv3d::io::PriorSourceName(index.cameras.at(0).prior_source), "guess");
 }
 
 }  // namespace

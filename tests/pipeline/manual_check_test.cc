@@ -15,7 +15,7 @@ void MakeWorkspace(const std::filesystem::path& ws) {
   io::FramesIndex index;
   io::CameraPrior c;
   c.camera = core::Camera::Pinhole(640, 360, 500);
-  c.prior_source = "guess";
+  c.prior_source = fmv3d::io::ParsePriorSource("guess");
   index.cameras.push_back(c);
   for (const char* name : {"a.png", "b.png"}) {
     io::FrameRecord f;

@@ -80,7 +80,7 @@ void MakeWorkspaceRoot(const fs::path& tmp) {
   io::FramesIndex index;
   io::CameraPrior prior;
   prior.camera = rec.cameras[1];
-  prior.prior_source = "test";
+  prior.prior_source = fmv3d::io::ParsePriorSource("test");
   index.cameras.push_back(prior);
   for (int i = 1; i <= 2; ++i) {
     io::FrameRecord f;

@@ -28,24 +28,30 @@ TEST(Validation, ResolveInsideRefusesEveryEscape) {
   fs::create_directory_symlink(tmp.path(), tmp / "root" / "out");
   fs::create_directory_symlink(tmp / "root" / "sub", tmp / "root" / "in");
   const fs::path root = fs::canonical(tmp / "root");
-  std::string why;
   ASSERT_TRUE(ResolveInside(root, "sub/f.txt"));
+  EXPECT_EQ(ResolveInside(root, "sub/f.txt").refusal, PathRefusal::kNone);
   EXPECT_EQ(*ResolveInside(root, "sub/f.txt"), root / "sub" / "f.txt");
   EXPECT_EQ(*ResolveInside(root, "in/f.txt"), root / "sub" / "f.txt");  // a symlink within the root is fine
   EXPECT_TRUE(ResolveInside(root, "sub/not-yet.txt"));
-  EXPECT_FALSE(ResolveInside(root, "../secret.txt", &why));
-  EXPECT_EQ(why, "'..' in path");
-  EXPECT_FALSE(ResolveInside(root, "sub/../../secret.txt"));
-  EXPECT_FALSE(ResolveInside(root, "sub/..", &why));
-  EXPECT_FALSE(ResolveInside(root, "/etc/passwd", &why));
-  EXPECT_EQ(why, "absolute path");
-  EXPECT_FALSE(ResolveInside(root, std::string("sub/f.txt\0.png", 14), &why));
-  EXPECT_EQ(why, "NUL byte in path");
-  EXPECT_FALSE(ResolveInside(root, "sub\\..\\..\\secret.txt"));
-  EXPECT_FALSE(ResolveInside(root, "", &why));
-  EXPECT_FALSE(ResolveInside(root, "out/secret.txt", &why));
-  EXPECT_EQ(why, "path leaves its root");
-  EXPECT_FALSE(ResolveInside(root, "out", &why));
+  const std::pair<std::string, PathRefusal> refused[] = {
+      {"../secret.txt", PathRefusal::kDotDot},
+      {"sub/../../secret.txt", PathRefusal::kDotDot},
+      {"sub/..", PathRefusal::kDotDot},
+      {"/etc/passwd", PathRefusal::kAbsolute},
+      {std::string("sub/f.txt\0.png", 14), PathRefusal::kNulByte},
+      {"sub\\..\\..\\secret.txt", PathRefusal::kBackslash},
+      {"", PathRefusal::kEmpty},
+      {"out/secret.txt", PathRefusal::kLeavesRoot},
+      {"out", PathRefusal::kLeavesRoot},
+  };
+  for (const auto& [rel, why] : refused) {
+    const ResolvedPath p = ResolveInside(root, rel);
+    EXPECT_FALSE(p) << rel;
+    EXPECT_EQ(p.refusal, why) << rel;
+  }
+  // The texts are what API errors say.
+  EXPECT_STREQ(PathRefusalText(PathRefusal::kDotDot), "'..' in path");
+  EXPECT_STREQ(PathRefusalText(PathRefusal::kLeavesRoot), "path leaves its root");
 }
 
 TEST(Validation, IsWithinComparesComponents) {

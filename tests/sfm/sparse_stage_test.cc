@@ -22,7 +22,8 @@ void WriteWorkspace(const SyntheticScene& scene, const std::filesystem::path& ws
   io::FramesIndex index;
   io::CameraPrior prior;
   prior.camera = scene.input.cameras.at(1).camera;
-  prior.prior_source = scene.input.cameras.at(1).focal_known ? "calibration:test" : "guess";
+  prior.prior_source =
+      fmv3d::io::ParsePriorSource(scene.input.cameras.at(1).focal_known ? "calibration:test" : "guess");
   index.cameras.push_back(prior);
   core::EnsureDirectory(ws / "frames");
   core::EnsureDirectory(ws / "features");

@@ -33,11 +33,11 @@ PriorChooser::PriorChooser(const PriorOptions& options, SensorDatabase db) : opt
   }
 }
 
-core::Camera PriorChooser::Choose(const ingest::CameraGroup& g, std::string* source) const {
+core::Camera PriorChooser::Choose(const ingest::CameraGroup& g, io::PriorSource* source) const {
   core::Camera cam;
   if (calibration_) {
     if (ScaleCamera(*calibration_, g.width, g.height, &cam)) {
-      *source = "calibration:" + options_.camera_file.string();
+      *source = {io::PriorKind::kCalibration, options_.camera_file.string()};
       return cam;
     }
     spdlog::warn("{}: {}x{} does not have the aspect ratio of the calibration {} ({}x{}); not using it", g.source,
@@ -45,14 +45,14 @@ core::Camera PriorChooser::Choose(const ingest::CameraGroup& g, std::string* sou
   }
   const SensorEntry* entry = forced_ ? forced_ : db_.FindByExif(g.exif.make, g.exif.model);
   if (entry && PriorFromSensor(*entry, g.width, g.height, g.exif.focal_mm, &cam)) {
-    *source = "sensor-db:" + entry->name;
+    *source = {io::PriorKind::kSensorDb, entry->name};
     return cam;
   }
   if (PriorFromExif(g.exif, g.width, g.height, &cam)) {
-    *source = "exif";
+    *source = {io::PriorKind::kExif, ""};
     return cam;
   }
-  *source = "guess";
+  *source = {io::PriorKind::kGuess, ""};
   return ingest::GuessPrior(g.width, g.height);
 }
 
@@ -60,7 +60,7 @@ ingest::IntrinsicsPriorFn PriorChooser::AsFunction() const {
   auto self = std::make_shared<PriorChooser>(*this);
   // forced_ points into db_: re-resolve it in the copy.
   if (!options_.sensor_name.empty()) self->forced_ = self->db_.FindByName(options_.sensor_name);
-  return [self](const ingest::CameraGroup& g, std::string* source) { return self->Choose(g, source); };
+  return [self](const ingest::CameraGroup& g, io::PriorSource* source) { return self->Choose(g, source); };
 }
 
 }  // namespace fmv3d::calib

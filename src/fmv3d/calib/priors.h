@@ -1,9 +1,9 @@
 // Intrinsics priors for `fmv3d frames`, in the order of trust:
 //   1. a calibration file (--camera: camera.json or OpenCV YAML), scaled to the frame size when the aspect
-//      ratio matches                                                       → "calibration:FILE"
-//   2. the sensor database: --sensor NAME, or a match on EXIF make/model    → "sensor-db:NAME"
-//   3. EXIF focal length with the focal-plane resolution, or the 35 mm-equivalent focal → "exif"
-//   4. f = 1.2 · max(w, h)                                                  → "guess" (BA must refine it)
+//      ratio matches                                                       → PriorKind::kCalibration (FILE)
+//   2. the sensor database: --sensor NAME, or a match on EXIF make/model    → PriorKind::kSensorDb (NAME)
+//   3. EXIF focal length with the focal-plane resolution, or the 35 mm-equivalent focal → PriorKind::kExif
+//   4. f = 1.2 · max(w, h)                                                  → PriorKind::kGuess (BA must refine it)
 #pragma once
 
 #include <filesystem>
@@ -24,7 +24,7 @@ class PriorChooser {
  public:
   // Reads the calibration file and checks the sensor name now, so bad options fail before any decoding.
   PriorChooser(const PriorOptions& options, SensorDatabase db);
-  core::Camera Choose(const ingest::CameraGroup& group, std::string* prior_source) const;
+  core::Camera Choose(const ingest::CameraGroup& group, io::PriorSource* prior_source) const;
   ingest::IntrinsicsPriorFn AsFunction() const;
 
  private:

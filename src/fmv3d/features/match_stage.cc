@@ -169,7 +169,8 @@ LoadedFeatures LoadFeatures(const core::Workspace& ws, const io::FramesIndex& in
                   std::to_string(f.height) + " but camera " + std::to_string(prior->camera.id) + " is " +
                   std::to_string(prior->camera.width) + "x" + std::to_string(prior->camera.height) +
                   " (stale features? re-run `fmv3d features --force`)");
-    out.trusted[i] = !prior->prior_source.empty() && prior->prior_source != "guess";
+    const io::PriorKind kind = prior->prior_source.kind;
+    out.trusted[i] = kind != io::PriorKind::kNone && kind != io::PriorKind::kGuess;
   }
   return out;
 }

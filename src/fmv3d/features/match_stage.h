@@ -4,7 +4,7 @@
 // WS/matches/automatic.* (every pair's automatic result, read back by the next run where its inputs are unchanged).
 //
 // Calibrated vs uncalibrated: E is estimated with each camera's prior intrinsics from frames.json. When the
-// prior is trusted (prior_source is not "guess"), a pair whose E explains ≥ 95% of the F inliers is
+// prior is trusted (recorded and not a guess), a pair whose E explains ≥ 95% of the F inliers is
 // kCalibrated and keeps E's inliers. With a guessed prior the pair keeps F's inliers (F does not depend on the
 // guess) and is only labelled kCalibrated when the guessed E still explains ≥ 95% of them (the guess is then
 // good enough for this pair); its relative pose (R, t) is filled in either case when E gives one.

@@ -43,7 +43,7 @@ Eigen::AlignedBox3d ModelledRegion(const nlohmann::json& truth) {
   const auto lo = truth["bounds"].at("min").get<std::vector<double>>(),
              hi = truth["bounds"].at("max").get<std::vector<double>>();
   if (lo.size() != 3 || hi.size() != 3) return {};
-  return Eigen::AlignedBox3d(Eigen::Vector3d(lo[0], lo[1], lo[2]), Eigen::Vector3d(hi[0], hi[1], hi[2]));
+  return {Eigen::Vector3d(lo[0], lo[1], lo[2]), Eigen::Vector3d(hi[0], hi[1], hi[2])};
 }
 
 // DSM height errors over a set of compared cells: e = DSM − truth, its part that is the reconstruction's own
@@ -388,7 +388,7 @@ nlohmann::json EvaluateGeoAgainstSynth(const core::Workspace& ws, const fs::path
   // A workspace whose heights are MSL (telemetry without ellipsoidal heights, e.g. EXIF): the truth's origin is
   // ellipsoidal, so it is lowered by the geoid undulation there (constant over a survey: EGM96 changes by
   // centimetres per kilometre), and the telemetry is read at MSL.
-  const bool msl = g.vertical_datum == "MSL";
+  const bool msl = g.datum == VerticalDatum::kMsl;
   if (msl) {
     const std::optional<double> n = GeoidUndulation(to.lat, to.lon);
     if (!n) throw Error(ws.name() + ": heights are MSL but the EGM96 geoid grid is not available to compare them");

@@ -30,6 +30,7 @@ Georef ReadGeoref(const core::Workspace& ws) {
     g.origin = {j.at("origin").at("lat").get<double>(), j.at("origin").at("lon").get<double>(),
                 j.at("origin").at("alt").get<double>()};
     g.vertical_datum = j.value("vertical_datum", "");
+    g.datum = ParseVerticalDatum(g.vertical_datum);
     const auto& s = j.at("similarity");
     g.sparse_to_enu.s = s.at("scale").get<double>();
     const auto q = s.at("rotation_wxyz").get<std::vector<double>>();

@@ -38,7 +38,8 @@ namespace fmv3d::geo {
 // The georeference that later stages read.
 struct Georef {
   GeoPoint origin;
-  std::string vertical_datum;  // "WGS84 ellipsoid" or "MSL"
+  std::string vertical_datum;          // as georef.json names it: "WGS84 ellipsoid", "MSL" or a GCP CRS's own
+  std::optional<VerticalDatum> datum;  // the same, parsed; nullopt for a GCP CRS's own datum
   core::Sim3 sparse_to_enu;
   UtmZone utm;
   bool consistent_with_telemetry = true;  // false: the model's trajectory disagrees with the telemetry

@@ -42,6 +42,12 @@ GeorefPair MakePair(const std::string& name, const Eigen::Vector3d& centre, cons
 
 const char* VerticalDatumName(VerticalDatum d) { return d == VerticalDatum::kEllipsoid ? "WGS84 ellipsoid" : "MSL"; }
 
+std::optional<VerticalDatum> ParseVerticalDatum(const std::string& name) {
+  for (const VerticalDatum d : {VerticalDatum::kEllipsoid, VerticalDatum::kMsl})
+    if (name == VerticalDatumName(d)) return d;
+  return std::nullopt;
+}
+
 std::optional<Eigen::Matrix3d> TelemetryAttitude(const telemetry::TelemetrySample& t) {
   if (!t.platform_heading || !t.platform_pitch || !t.platform_roll || !t.sensor_relative_azimuth ||
       !t.sensor_relative_elevation || !t.sensor_relative_roll)

@@ -19,6 +19,8 @@ namespace fmv3d::geo {
 
 enum class VerticalDatum { kEllipsoid, kMsl };
 const char* VerticalDatumName(VerticalDatum d);  // "WGS84 ellipsoid", "MSL"
+// nullopt for another name (a GCP list's CRS names its own vertical datum).
+std::optional<VerticalDatum> ParseVerticalDatum(const std::string& name);
 
 // One (model camera, telemetry) correspondence.
 struct GeorefPair {

@@ -123,7 +123,7 @@ nlohmann::json UseTelemetryCameras(const io::FramesIndex& index, core::Reconstru
   nlohmann::json focal = nlohmann::json::array();
   for (const auto& cp : index.cameras) {
     const auto it = rec->cameras.find(cp.camera.id);
-    if (it == rec->cameras.end() || cp.prior_source != "telemetry-hfov") continue;
+    if (it == rec->cameras.end() || cp.prior_source.kind != io::PriorKind::kTelemetryHfov) continue;
     focal.push_back({{"camera", cp.camera.id},
                      {"f_image_model", it->second.f},
                      {"f", cp.camera.f},

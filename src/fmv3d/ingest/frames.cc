@@ -117,7 +117,8 @@ namespace {
 // frames gives the focal: f = (w / 2) / tan(HFOV / 2) — the median over frames. The mapper then skips its focal
 // scan and refines this value. Zoom during the video changes the HFOV; one camera per video keeps one focal,
 // so that is only warned about.
-void FocalFromTelemetryHfov(const io::FramesIndex& index, uint32_t camera_id, core::Camera* cam, std::string* source) {
+void FocalFromTelemetryHfov(const io::FramesIndex& index, uint32_t camera_id, core::Camera* cam,
+                            io::PriorSource* source) {
   std::vector<double> hfov;
   for (const auto& f : index.frames)
     if (f.camera_id == camera_id && f.telemetry.is_object() && f.telemetry.contains("horizontal_fov") &&
@@ -134,7 +135,7 @@ void FocalFromTelemetryHfov(const io::FramesIndex& index, uint32_t camera_id, co
         "median, {:.3f}°",
         camera_id, hfov.front(), hfov.back(), median);
   cam->f = 0.5 * cam->width / std::tan(0.5 * median * M_PI / 180) / cam->aspect;  // the horizontal focal is f · aspect
-  *source = "telemetry-hfov";
+  *source = {io::PriorKind::kTelemetryHfov, ""};
 }
 
 // A video's own telemetry: KLV data streams (MISB ST 0601 / EG0104), a GoPro GPMF track, or a DJI .SRT beside
@@ -345,7 +346,7 @@ class FramesBuilder {
     io::CameraPrior c;
     c.camera = GuessPrior(g.width, g.height);
     c.camera.id = static_cast<uint32_t>(index_.cameras.size() + 1);
-    c.prior_source = "guess";
+    c.prior_source = {io::PriorKind::kGuess, ""};
     c.source = g.source;
     index_.cameras.push_back(c);
     groups_.push_back(std::move(g));
@@ -393,7 +394,7 @@ class FramesBuilder {
 
   void SetIntrinsicsPriors() {
     for (size_t i = 0; i < index_.cameras.size(); ++i) {
-      std::string source = "guess";
+      io::PriorSource source{io::PriorKind::kGuess, ""};
       core::Camera cam =
           options_.prior ? options_.prior(groups_[i], &source) : GuessPrior(groups_[i].width, groups_[i].height);
       cam.id = index_.cameras[i].camera.id;
@@ -401,15 +402,17 @@ class FramesBuilder {
         throw Error(groups_[i].source + ": intrinsics prior has the wrong image size");
       // Non-square pixels (e.g. DV/SD video, SAR 10:11): a pixel is pixel_aspect times wider than tall, so the
       // horizontal focal in pixels is f / pixel_aspect. A calibration already measured it.
-      if (groups_[i].pixel_aspect != 1.0 && source.rfind("calibration:", 0) != 0) cam.aspect /= groups_[i].pixel_aspect;
-      if (source == "guess") FocalFromTelemetryHfov(index_, static_cast<uint32_t>(i + 1), &cam, &source);
+      if (groups_[i].pixel_aspect != 1.0 && source.kind != io::PriorKind::kCalibration)
+        cam.aspect /= groups_[i].pixel_aspect;
+      if (source.kind == io::PriorKind::kGuess)
+        FocalFromTelemetryHfov(index_, static_cast<uint32_t>(i + 1), &cam, &source);
       cam.Validate();
       index_.cameras[i].camera = cam;
       index_.cameras[i].prior_source = source;
     }
     for (const auto& c : index_.cameras)
       spdlog::info("camera {}: {}x{} f={:.1f} ({}) from {}", c.camera.id, c.camera.width, c.camera.height, c.camera.f,
-                   c.prior_source, c.source);
+                   io::PriorSourceName(c.prior_source), c.source);
   }
 
   const IngestOptions& options_;

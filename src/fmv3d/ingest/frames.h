@@ -39,9 +39,9 @@ struct CameraGroup {
   io::ExifInfo exif;        // of the first image (empty for videos)
 };
 
-// Returns the prior intrinsics (size must be the group's) and where they came from ("guess",
-// "calibration:FILE", "sensor-db:NAME", "exif"). Must not return an invalid camera.
-using IntrinsicsPriorFn = std::function<core::Camera(const CameraGroup&, std::string* prior_source)>;
+// Returns the prior intrinsics (size must be the group's) and where they came from (guess, calibration file,
+// sensor database, EXIF). Must not return an invalid camera.
+using IntrinsicsPriorFn = std::function<core::Camera(const CameraGroup&, io::PriorSource* prior_source)>;
 
 // f = 1.2 · max(w, h), principal point at the centre, no distortion.
 core::Camera GuessPrior(int width, int height);

@@ -19,15 +19,12 @@ extern "C" {
 
 #include "fmv3d/core/error.h"
 #include "fmv3d/io/image_io.h"
+#include "fmv3d/telemetry/av_error.h"
 
 namespace fmv3d::ingest {
 namespace {
 
-std::string AvError(int code) {
-  char buf[AV_ERROR_MAX_STRING_SIZE] = {0};
-  av_strerror(code, buf, sizeof(buf));
-  return buf;
-}
+using telemetry::AvError;
 
 // FFmpeg logs straight to stderr by default; route its messages to spdlog's debug level so that a damaged
 // stream does not flood the terminal (we report damage once, with the file name, as a warning).

@@ -13,17 +13,12 @@ extern "C" {
 #include <algorithm>
 
 #include "fmv3d/core/error.h"
+#include "fmv3d/telemetry/av_error.h"
 
 namespace fmv3d::ingest {
 namespace fs = std::filesystem;
 
-namespace {
-std::string AvError(int code) {
-  char buf[AV_ERROR_MAX_STRING_SIZE] = {0};
-  av_strerror(code, buf, sizeof(buf));
-  return buf;
-}
-}  // namespace
+using telemetry::AvError;
 
 void VideoWriterOptions::Check() const {
   if (!(fps > 0 && fps <= 1000)) throw Error("video: fps must be in (0, 1000]");

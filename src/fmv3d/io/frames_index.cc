@@ -6,6 +6,42 @@
 
 namespace fmv3d::io {
 
+namespace {
+constexpr char kSensorDbPrefix[] = "sensor-db:";
+constexpr char kCalibrationPrefix[] = "calibration:";
+}  // namespace
+
+std::string PriorSourceName(const PriorSource& s) {
+  switch (s.kind) {
+    case PriorKind::kNone:
+      return "";
+    case PriorKind::kGuess:
+      return "guess";
+    case PriorKind::kExif:
+      return "exif";
+    case PriorKind::kSensorDb:
+      return kSensorDbPrefix + s.detail;
+    case PriorKind::kCalibration:
+      return kCalibrationPrefix + s.detail;
+    case PriorKind::kTelemetryHfov:
+      return "telemetry-hfov";
+    case PriorKind::kOther:
+      return s.detail;
+  }
+  return s.detail;
+}
+
+PriorSource ParsePriorSource(const std::string& name) {
+  const auto with_prefix = [&name](const char* prefix) { return name.rfind(prefix, 0) == 0; };
+  if (name.empty()) return {PriorKind::kNone, ""};
+  if (name == "guess") return {PriorKind::kGuess, ""};
+  if (name == "exif") return {PriorKind::kExif, ""};
+  if (name == "telemetry-hfov") return {PriorKind::kTelemetryHfov, ""};
+  if (with_prefix(kSensorDbPrefix)) return {PriorKind::kSensorDb, name.substr(sizeof(kSensorDbPrefix) - 1)};
+  if (with_prefix(kCalibrationPrefix)) return {PriorKind::kCalibration, name.substr(sizeof(kCalibrationPrefix) - 1)};
+  return {PriorKind::kOther, name};
+}
+
 const CameraPrior* FramesIndex::FindCamera(uint32_t id) const {
   for (const auto& c : cameras)
     if (c.camera.id == id) return &c;
@@ -22,7 +58,7 @@ void WriteFramesIndex(const FramesIndex& index, const std::filesystem::path& pat
                             {"width", k.width},
                             {"height", k.height},
                             {"prior", core::IntrinsicsToJson(k)},
-                            {"prior_source", c.prior_source},
+                            {"prior_source", PriorSourceName(c.prior_source)},
                             {"source", c.source}});
   }
   j["frames"] = nlohmann::json::array();
@@ -47,7 +83,7 @@ FramesIndex ReadFramesIndex(const std::filesystem::path& path) {
       c.camera.height = cj.at("height").get<int>();
       const auto& p = cj.at("prior");
       core::IntrinsicsFromJson(p, &c.camera);
-      c.prior_source = cj.value("prior_source", "");
+      c.prior_source = ParsePriorSource(cj.value("prior_source", ""));
       c.source = cj.value("source", "");
       c.camera.Validate();
       index.cameras.push_back(c);

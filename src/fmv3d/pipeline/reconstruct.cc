@@ -49,7 +49,7 @@ void ReconstructOptions::ApplyFastPreset() {
 
 std::vector<Stage> ReconstructStages(const ReconstructOptions& o) {
   const core::Workspace ws(o.workspace);
-  const fs::path root = ws.root();
+  const fs::path& root = ws.root();
   std::vector<Stage> stages;
   stages.push_back({"frames",
                     [o] {
@@ -84,8 +84,10 @@ std::vector<Stage> ReconstructStages(const ReconstructOptions& o) {
                     ws.sparse_dir() / "images.txt", [o, root] { return sfm::RunSparseStage(root, o.sparse); }});
   // Terrain products need telemetry (KLV, DJI SRT, EXIF GPS): without it these stages say so and write
   // nothing (their markers stay absent, so adding telemetry later and re-running makes them).
-  auto with_telemetry = [ws](const char* stage, std::function<nlohmann::json()> run) {
-    return [ws, stage, run] {
+  // The products after georef also need its georef.json.
+  enum class Needs { kTelemetry, kGeoreference };
+  auto with_telemetry = [ws](const char* stage, Needs needs, const std::function<nlohmann::json()>& run) {
+    return [ws, stage, needs, run] {
       const io::FramesIndex index = io::ReadFramesIndex(ws.frames_json());
       const bool any = std::any_of(index.frames.begin(), index.frames.end(),
                                    [](const io::FrameRecord& f) { return !f.telemetry.is_null(); });
@@ -93,7 +95,7 @@ std::vector<Stage> ReconstructStages(const ReconstructOptions& o) {
         spdlog::info("{}: no telemetry in frames.json (KLV, SRT or GPS) nor GCPs, no georeferenced products", stage);
         return nlohmann::json{{"skipped", "no telemetry"}};
       }
-      if (std::string(stage) != "georef" && !fs::exists(ws.georef_json())) {
+      if (needs == Needs::kGeoreference && !fs::exists(ws.georef_json())) {
         spdlog::info("{}: no georeference (see the georef stage's warning), skipped", stage);
         return nlohmann::json{{"skipped", "no georeference"}};
       }
@@ -108,7 +110,7 @@ std::vector<Stage> ReconstructStages(const ReconstructOptions& o) {
                       if (fs::exists(ws.manual_dir() / "gcp_list.txt")) in.push_back(ws.manual_dir() / "gcp_list.txt");
                       return in;
                     },
-                    ws.georef_json(), with_telemetry("georef", [o, root] {
+                    ws.georef_json(), with_telemetry("georef", Needs::kTelemetry, [o, root] {
                       // Unusable telemetry must not cost the user the model: the georeferenced products are
                       // skipped instead (dsm and ortho then say so).
                       try {
@@ -136,12 +138,13 @@ std::vector<Stage> ReconstructStages(const ReconstructOptions& o) {
                       return std::vector<fs::path>{ws.georef_json(), ws.mesh_dir() / "poisson.ply"};
                     },
                     ws.geo_dir() / "dsm.json",
-                    with_telemetry("dsm", [o, root] { return geo::RunDsmStage(root, o.dsm); })});
+                    with_telemetry("dsm", Needs::kGeoreference, [o, root] { return geo::RunDsmStage(root, o.dsm); })});
   stages.push_back({"ortho",
                     [ws] {
                       return std::vector<fs::path>{ws.geo_dir() / "dsm.json", ws.report_dir() / "texture.json"};
                     },
-                    ws.geo_dir() / "ortho.tif", with_telemetry("ortho", [root] { return geo::RunOrthoStage(root); })});
+                    ws.geo_dir() / "ortho.tif",
+                    with_telemetry("ortho", Needs::kGeoreference, [root] { return geo::RunOrthoStage(root); })});
   return stages;
 }
 
@@ -173,7 +176,7 @@ nlohmann::json RunReconstruct(const ReconstructOptions& o, std::vector<StageResu
   for (const auto& r : results) timings[r.name] = r.skipped ? nlohmann::json("skipped") : nlohmann::json(r.seconds);
   RecordTimings(ws.root(), timings);
   if (stage_results) *stage_results = results;
-  if (!o.report) return nlohmann::json();
+  if (!o.report) return {};
   core::AppendProgressEvent({{"event", "stage"}, {"stage", "report"}, {"state", "start"}});
   nlohmann::json report = WriteReport(ws.root());
   core::AppendProgressEvent({{"event", "stage"}, {"stage", "report"}, {"state", "done"}});

@@ -214,7 +214,7 @@ nlohmann::json WriteReport(const fs::path& root) {
                       {"width", c.camera.width},
                       {"height", c.camera.height},
                       {"focal_prior_px", c.camera.f},
-                      {"prior", c.prior_source}});
+                      {"prior", io::PriorSourceName(c.prior_source)}});
     report["frames"] = {{"count", index.frames.size()}, {"cameras", cams}};
   }
   report["features"] = ReadIfPresent(ws.features_dir() / "features.json");

@@ -10,6 +10,7 @@
 #include "fmv3d/core/files.h"
 #include "fmv3d/core/logging.h"
 #include "fmv3d/geo/geodesy.h"
+#include "fmv3d/geo/georef_pairs.h"
 #include "fmv3d/io/ply_stream.h"
 #include "fmv3d/io/point_cloud.h"
 #include "fmv3d/io/tiles3d.h"
@@ -92,7 +93,7 @@ nlohmann::json RootTransform(const fs::path& ws) {
       for (int c = 0; c < 4; ++c) sim(r, c) = g.at("similarity").at("matrix").at(r).at(c).get<double>();
     const double lat = g.at("origin").at("lat").get<double>(), lon = g.at("origin").at("lon").get<double>();
     double h = g.at("origin").at("alt").get<double>();
-    if (g.value("vertical_datum", std::string()) == "MSL")
+    if (geo::ParseVerticalDatum(g.value("vertical_datum", std::string())) == geo::VerticalDatum::kMsl)
       if (const auto n = geo::GeoidUndulation(lat, lon)) h += *n;
     const Eigen::Matrix4d M = EnuToEcef(lat, lon, h) * sim;
     nlohmann::json t = nlohmann::json::array();

@@ -17,13 +17,8 @@ namespace fs = std::filesystem;
 namespace {
 
 nlohmann::json WorkspaceJson(const Context& ctx, const fs::path& dir) {
-  nlohmann::json w = DescribeWorkspace(dir);
   const std::string name = dir.filename().string();
-  const auto overrides = ctx.jobs->StageOverrides(name);
-  for (auto& s : w["stages"]) {
-    const auto it = overrides.find(s["name"].get<std::string>());
-    if (it != overrides.end() && (it->second == "running" || s["state"] != "done")) s["state"] = it->second;
-  }
+  nlohmann::json w = DescribeWorkspace(dir, ctx.jobs->StageOverrides(name));
   w["job"] = ctx.jobs->LatestFor(name);
   return w;
 }
@@ -36,15 +31,14 @@ void RequireJsonBody(const httplib::Request& req) {
 fs::path ResolveInput(const Context& ctx, const fs::path& ws_dir, const std::string& in) {
   std::error_code ec;
   if (!in.empty() && in.front() == '/') {
-    const fs::path p = fs::weakly_canonical(fs::path(in), ec);
+    fs::path p = fs::weakly_canonical(fs::path(in), ec);
     if (!ec && IsWithin(ctx.ws_root, p) && fs::exists(p, ec)) return p;
     throw RequestError(400, "'inputs': " + in + " is not an existing path under WS_ROOT", "inputs");
   }
-  std::string why;
   for (const fs::path& root : {ws_dir, ctx.ws_root}) {
-    const auto p = ResolveInside(root, in, &why);
-    if (!p && why != "path leaves its root" && why != "path cannot be resolved")
-      throw RequestError(400, "'inputs': " + in + ": " + why, "inputs");
+    const auto p = ResolveInside(root, in);
+    if (!p && p.refusal != PathRefusal::kLeavesRoot && p.refusal != PathRefusal::kUnresolvable)
+      throw RequestError(400, "'inputs': " + in + ": " + p.why(), "inputs");
     if (p && fs::exists(*p, ec)) return *p;
   }
   throw RequestError(400, "'inputs': " + in + " is not in the workspace nor under WS_ROOT", "inputs");

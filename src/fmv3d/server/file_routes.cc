@@ -45,15 +45,18 @@ void ClampRanges(const httplib::Request& req, const fs::path& path) {
   for (auto& r : const_cast<httplib::Request&>(req).ranges)
     if (r.second >= size) r.second = size - 1;
 }
+// A path outside its root is forbidden (403); a malformed one is a bad request.
+RequestError PathRefused(const ResolvedPath& path) {
+  return {path.refusal == PathRefusal::kLeavesRoot ? 403 : 400, std::string("refused: ") + path.why(), "path"};
+}
 }  // namespace
 
 void RegisterFileRoutes(httplib::Server& http, Context& ctx) {
   http.Get(R"(/files/([^/]*)/(.*))", [&ctx](const httplib::Request& req, httplib::Response& res) {
     Guard(res, [&] {
       const fs::path dir = WorkspaceDir(ctx, req.matches[1]);
-      std::string why;
-      const auto path = ResolveInside(dir, std::string(req.matches[2]), &why);
-      if (!path) throw RequestError(why == "path leaves its root" ? 403 : 400, "refused: " + why, "path");
+      const auto path = ResolveInside(dir, std::string(req.matches[2]));
+      if (!path) throw PathRefused(path);
       ClampRanges(req, *path);
       SendFile(res, *path);
     });
@@ -69,9 +72,8 @@ void RegisterFileRoutes(httplib::Server& http, Context& ctx) {
         res.set_content(NoAssetsPage(ctx), "text/html; charset=utf-8");
         return;
       }
-      std::string why;
-      const auto path = ResolveInside(ctx.asset_root, index ? std::string("index.html") : req.path.substr(1), &why);
-      if (!path) throw RequestError(why == "path leaves its root" ? 403 : 400, "refused: " + why, "path");
+      const auto path = ResolveInside(ctx.asset_root, index ? std::string("index.html") : req.path.substr(1));
+      if (!path) throw PathRefused(path);
       ClampRanges(req, *path);
       SendFile(res, *path);
     });

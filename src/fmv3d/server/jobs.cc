@@ -64,6 +64,13 @@ const char* JobStateName(JobState s) {
   return "queued";
 }
 
+std::optional<JobState> ParseJobState(std::string_view name) {
+  for (const JobState s :
+       {JobState::kQueued, JobState::kRunning, JobState::kDone, JobState::kFailed, JobState::kStopped})
+    if (name == JobStateName(s)) return s;
+  return std::nullopt;
+}
+
 std::vector<std::string> ReconstructArgv(const fs::path& executable, const std::vector<fs::path>& inputs,
                                          const fs::path& ws, const JobRequest& r, const fs::path& progress_json) {
   std::vector<std::string> argv = {executable.string(), "reconstruct"};
@@ -179,13 +186,13 @@ nlohmann::json JobManager::LatestFor(const std::string& workspace) const {
   return nullptr;
 }
 
-std::map<std::string, std::string> JobManager::StageOverrides(const std::string& workspace) const {
+std::map<std::string, StageState> JobManager::StageOverrides(const std::string& workspace) const {
   std::lock_guard<std::mutex> lock(mutex_);
-  std::map<std::string, std::string> out;
+  std::map<std::string, StageState> out;
   for (auto it = jobs_.rbegin(); it != jobs_.rend(); ++it)
     if ((*it)->workspace == workspace) {
       for (const auto& s : (*it)->stages)
-        if (s.state == "running" || s.state == "failed") out[s.name] = s.state;
+        if (s.state == StageState::kRunning || s.state == StageState::kFailed) out[s.name] = s.state;
       break;
     }
   return out;
@@ -194,7 +201,11 @@ std::map<std::string, std::string> JobManager::StageOverrides(const std::string&
 nlohmann::json JobManager::ToJson(const Job& job, bool with_log) const {
   nlohmann::json stages = nlohmann::json::array();
   for (const auto& s : job.stages)
-    stages.push_back({{"name", s.name}, {"state", s.state}, {"done", s.done}, {"total", s.total}, {"eta_s", s.eta_s}});
+    stages.push_back({{"name", s.name},
+                      {"state", StageStateName(s.state)},
+                      {"done", s.done},
+                      {"total", s.total},
+                      {"eta_s", s.eta_s}});
   nlohmann::json j = {{"id", job.id},
                       {"workspace", job.workspace},
                       {"state", JobStateName(job.state)},
@@ -233,11 +244,14 @@ void JobManager::HandleProgressLine(Job& job, const std::string& line) {
     Publish("job", ToJson(job, false));
   } else if (type == "stage" && e.contains("stage") && e["stage"].is_string() && e.contains("state") &&
              e["state"].is_string()) {
-    const std::string name = e["stage"].get<std::string>(), state = e["state"].get<std::string>();
+    const std::string name = e["stage"].get<std::string>(), event = e["state"].get<std::string>();
+    // The stage runner's events: start, done, skipped, failed.
+    const std::optional<StageState> state = event == "start" ? StageState::kRunning : ParseStageState(event);
+    if (!state) return;
     StageProgress* s = FindStage(job, name);
-    s->state = state == "start" ? "running" : state;
-    if (state == "start") job.stage = name;
-    if (state == "done" || state == "skipped") {
+    s->state = *state;
+    if (*state == StageState::kRunning) job.stage = name;
+    if (*state == StageState::kDone || *state == StageState::kSkipped) {
       s->eta_s = 0;
       if (s->total > 0) s->done = s->total;
     }
@@ -277,7 +291,8 @@ void JobManager::Poll(Job& job) {
   job.finished = Now();
   job.state = job.stop_requested > 0 ? JobState::kStopped : *code == 0 ? JobState::kDone : JobState::kFailed;
   for (auto& s : job.stages)
-    if (s.state == "running") s.state = job.state == JobState::kStopped ? "stopped" : "failed";
+    if (s.state == StageState::kRunning)
+      s.state = job.state == JobState::kStopped ? StageState::kStopped : StageState::kFailed;
   const nlohmann::json record = ToJson(job, false);
   try {
     core::WriteJson(fs::path(job.log_path).replace_extension(".json"), record);
@@ -321,8 +336,9 @@ std::unique_ptr<JobManager::Job> JobManager::RestoreJob(const std::string& works
   const double log_time =
       ec ? job->started : std::chrono::duration<double>(mtime - fs::file_time_type::clock::now()).count() + Now();
   if (record.is_object()) {
-    const std::string state = record.value("state", std::string());
-    job->state = state == "done" ? JobState::kDone : state == "failed" ? JobState::kFailed : JobState::kStopped;
+    // A job that had not ended when its record was written counts as stopped.
+    const std::optional<JobState> state = ParseJobState(record.value("state", std::string()));
+    job->state = state == JobState::kDone || state == JobState::kFailed ? *state : JobState::kStopped;
     if (record.contains("exit_code") && record["exit_code"].is_number_integer())
       job->exit_code = record["exit_code"].get<int>();
     job->finished =
@@ -333,7 +349,8 @@ std::unique_ptr<JobManager::Job> JobManager::RestoreJob(const std::string& works
       job->stages.clear();
       for (const auto& st : record["stages"])
         if (st.is_object() && st.contains("name") && st["name"].is_string())
-          job->stages.push_back({st["name"].get<std::string>(), st.value("state", std::string("pending")),
+          job->stages.push_back({st["name"].get<std::string>(),
+                                 ParseStageState(st.value("state", std::string())).value_or(StageState::kPending),
                                  st.value("done", 0.0), st.value("total", 0.0), st.value("eta_s", 0.0)});
     }
   } else {
@@ -342,7 +359,8 @@ std::unique_ptr<JobManager::Job> JobManager::RestoreJob(const std::string& works
     HandleLogLine(*job, "(the server stopped while this job ran; its end was not recorded)");
   }
   for (auto& s : job->stages)
-    if (s.state == "running") s.state = job->state == JobState::kFailed ? "failed" : "stopped";
+    if (s.state == StageState::kRunning)
+      s.state = job->state == JobState::kFailed ? StageState::kFailed : StageState::kStopped;
   return job;
 }
 

@@ -17,16 +17,19 @@
 #include <nlohmann/json.hpp>
 #include <optional>
 #include <string>
+#include <string_view>
 #include <thread>
 #include <vector>
 
 #include "fmv3d/server/events.h"
 #include "fmv3d/server/validation.h"
+#include "fmv3d/server/workspace_state.h"
 
 namespace fmv3d::server {
 
 enum class JobState { kQueued, kRunning, kDone, kFailed, kStopped };
 const char* JobStateName(JobState s);
+std::optional<JobState> ParseJobState(std::string_view name);  // nullopt for an unknown name
 
 // The argv of a reconstruct run (argv[0] = executable): inputs, -o WS, --from/--until (omitted for "report",
 // which reconstruct always writes last), --fast, --progress-json.
@@ -63,11 +66,12 @@ class JobManager {
   void RestoreHistory(const std::vector<std::pair<std::string, std::filesystem::path>>& workspaces);
   // The workspace's latest job (null when none) and the stage states it overrides (running / failed).
   nlohmann::json LatestFor(const std::string& workspace) const;
-  std::map<std::string, std::string> StageOverrides(const std::string& workspace) const;
+  std::map<std::string, StageState> StageOverrides(const std::string& workspace) const;
 
  private:
   struct StageProgress {
-    std::string name, state = "pending";
+    std::string name;
+    StageState state = StageState::kPending;
     double done = 0, total = 0, eta_s = 0;
   };
   struct Job {

@@ -172,6 +172,21 @@ nlohmann::json PairJson(const fs::path& dir, const std::string& a, const std::st
           {"F_source", f_source.empty() ? nlohmann::json() : nlohmann::json(f_source)}};
 }
 
+enum class CalibrationState { kNone, kRunning, kDone, kFailed };
+const char* CalibrationStateName(CalibrationState s) {
+  switch (s) {
+    case CalibrationState::kNone:
+      return "none";
+    case CalibrationState::kRunning:
+      return "running";
+    case CalibrationState::kDone:
+      return "done";
+    case CalibrationState::kFailed:
+      return "failed";
+  }
+  return "none";
+}
+
 // Chessboard calibration runs (`fmv3d calibrate`), at most one per workspace, tracked by pid.
 class CalibrationRuns {
  public:
@@ -199,15 +214,14 @@ class CalibrationRuns {
         {{"board", {{"cols", r.cols}, {"rows", r.rows}}}, {"square", r.square}, {"images", names}, {"drop", r.drop}});
     running_[ws_dir] = SpawnProcess(argv, out / "calibrate.log");
   }
-  // "running", "done", "failed" or "none".
-  std::string State(const fs::path& ws_dir) {
+  CalibrationState State(const fs::path& ws_dir) {
     std::lock_guard<std::mutex> lock(mutex_);
     Poll(ws_dir);
-    if (running_.count(ws_dir)) return "running";
+    if (running_.count(ws_dir)) return CalibrationState::kRunning;
     const fs::path out = ws_dir / "calib";
-    if (fs::exists(out / "camera.json")) return "done";
-    if (fs::exists(out / "calibrate.log")) return "failed";
-    return "none";
+    if (fs::exists(out / "camera.json")) return CalibrationState::kDone;
+    if (fs::exists(out / "calibrate.log")) return CalibrationState::kFailed;
+    return CalibrationState::kNone;
   }
 
  private:
@@ -229,10 +243,10 @@ std::vector<std::string> LastLines(const fs::path& path, size_t n) {
 
 nlohmann::json CalibrationJson(CalibrationRuns& runs, const fs::path& dir) {
   const fs::path out = dir / "calib";
-  const std::string state = runs.State(dir);
-  nlohmann::json j = {{"state", state}, {"log", LastLines(out / "calibrate.log", 200)}};
+  const CalibrationState state = runs.State(dir);
+  nlohmann::json j = {{"state", CalibrationStateName(state)}, {"log", LastLines(out / "calibrate.log", 200)}};
   j["request"] = fs::exists(out / "request.json") ? core::ReadJson(out / "request.json") : nlohmann::json();
-  j["result"] = state == "done" ? core::ReadJson(out / "camera.json") : nlohmann::json();
+  j["result"] = state == CalibrationState::kDone ? core::ReadJson(out / "camera.json") : nlohmann::json();
   // Images uploaded to the workspace, candidates for the board images.
   std::vector<std::string> uploads;
   std::error_code ec;
@@ -243,7 +257,7 @@ nlohmann::json CalibrationJson(CalibrationRuns& runs, const fs::path& dir) {
     }
   std::sort(uploads.begin(), uploads.end());
   j["uploads"] = uploads;
-  if (state == "done") {
+  if (state == CalibrationState::kDone) {
     j["distortion_png"] = "calib/camera-distortion.png";
     j["corners_dir"] = "calib/camera-corners";
     if (j["result"].contains("frames_dir")) j["frames_dir"] = "calib/camera-frames";  // frames of videos
@@ -252,9 +266,8 @@ nlohmann::json CalibrationJson(CalibrationRuns& runs, const fs::path& dir) {
 }
 
 fs::path WorkspaceFile(const fs::path& dir, const std::string& rel, const std::string& field) {
-  std::string why;
-  const auto p = ResolveInside(dir, rel, &why);
-  if (!p) throw RequestError(400, "'" + field + "': " + rel + ": " + why, field);
+  const auto p = ResolveInside(dir, rel);
+  if (!p) throw RequestError(400, "'" + field + "': " + rel + ": " + p.why(), field);
   std::error_code ec;
   if (!fs::is_regular_file(*p, ec)) throw RequestError(400, "'" + field + "': " + rel + " is not a file", field);
   return *p;
@@ -345,7 +358,8 @@ void RegisterManualRoutes(httplib::Server& http, Context& ctx) {
       const fs::path dir = WorkspaceDir(ctx, req.matches[1]);
       if (req.body.size() > kMaxJsonBody) throw RequestError(413, "the JSON body is larger than 1 MB", "body");
       const std::string name = ParseSensorName(req.body);
-      if (runs->State(dir) != "done") throw RequestError(409, "no finished calibration to save (run it first)");
+      if (runs->State(dir) != CalibrationState::kDone)
+        throw RequestError(409, "no finished calibration to save (run it first)");
       const nlohmann::json result = core::ReadJson(dir / "calib" / "camera.json");
       const core::Camera camera = calib::ReadCameraFile(dir / "calib" / "camera.json");
       const fs::path db = calib::UserDatabasePath();

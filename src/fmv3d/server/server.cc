@@ -3,6 +3,7 @@
 #include <unistd.h>
 
 #include <fstream>
+#include <utility>
 
 #include "fmv3d/core/error.h"
 #include "fmv3d/server/routes.h"
@@ -79,8 +80,7 @@ void Guard(httplib::Response& res, const std::function<void()>& handler) {
 fs::path WorkspaceDir(const Context& ctx, const std::string& name) {
   if (!IsValidWorkspaceName(name))
     throw RequestError(400, "bad workspace name (one path component of [A-Za-z0-9._ -], not starting with '.')", "ws");
-  std::string why;
-  const auto dir = ResolveInside(ctx.ws_root, name, &why);
+  const auto dir = ResolveInside(ctx.ws_root, name);
   std::error_code ec;
   if (!dir || !fs::is_directory(*dir, ec) || dir->parent_path() != ctx.ws_root)
     throw RequestError(404, "no workspace '" + name + "'");
@@ -192,7 +192,7 @@ Server::Server(ServerOptions options) : impl_(std::make_unique<Impl>()) {
   });
   http.set_exception_handler([](const httplib::Request&, httplib::Response& res, std::exception_ptr ep) {
     try {
-      std::rethrow_exception(ep);
+      std::rethrow_exception(std::move(ep));
     } catch (const std::exception& e) {
       SendError(res, 500, e.what());
     } catch (...) {

@@ -42,23 +42,42 @@ bool IsWithin(const fs::path& root, const fs::path& path) {
   return true;
 }
 
-std::optional<fs::path> ResolveInside(const fs::path& root, std::string_view relative, std::string* why) {
-  auto fail = [why](const char* reason) -> std::optional<fs::path> {
-    if (why) *why = reason;
-    return std::nullopt;
-  };
-  if (relative.empty()) return fail("empty path");
-  if (relative.find('\0') != std::string_view::npos) return fail("NUL byte in path");
-  if (relative.find('\\') != std::string_view::npos) return fail("backslash in path");
+const char* PathRefusalText(PathRefusal refusal) {
+  switch (refusal) {
+    case PathRefusal::kNone:
+      return "";
+    case PathRefusal::kEmpty:
+      return "empty path";
+    case PathRefusal::kNulByte:
+      return "NUL byte in path";
+    case PathRefusal::kBackslash:
+      return "backslash in path";
+    case PathRefusal::kAbsolute:
+      return "absolute path";
+    case PathRefusal::kDotDot:
+      return "'..' in path";
+    case PathRefusal::kUnresolvable:
+      return "path cannot be resolved";
+    case PathRefusal::kLeavesRoot:
+      return "path leaves its root";
+  }
+  return "";
+}
+
+ResolvedPath ResolveInside(const fs::path& root, std::string_view relative) {
+  const auto fail = [](PathRefusal refusal) { return ResolvedPath{std::nullopt, refusal}; };
+  if (relative.empty()) return fail(PathRefusal::kEmpty);
+  if (relative.find('\0') != std::string_view::npos) return fail(PathRefusal::kNulByte);
+  if (relative.find('\\') != std::string_view::npos) return fail(PathRefusal::kBackslash);
   const fs::path rel{std::string(relative)};
-  if (rel.is_absolute() || relative.front() == '/') return fail("absolute path");
+  if (rel.is_absolute() || relative.front() == '/') return fail(PathRefusal::kAbsolute);
   for (const auto& part : rel)
-    if (part == "..") return fail("'..' in path");
+    if (part == "..") return fail(PathRefusal::kDotDot);
   std::error_code ec;
-  const fs::path resolved = fs::weakly_canonical(root / rel, ec);
-  if (ec) return fail("path cannot be resolved");
-  if (!IsWithin(root, resolved)) return fail("path leaves its root");
-  return resolved;
+  fs::path resolved = fs::weakly_canonical(root / rel, ec);
+  if (ec) return fail(PathRefusal::kUnresolvable);
+  if (!IsWithin(root, resolved)) return fail(PathRefusal::kLeavesRoot);
+  return {std::move(resolved), PathRefusal::kNone};
 }
 
 bool ConstantTimeEquals(std::string_view a, std::string_view b) {
@@ -85,7 +104,7 @@ std::string StageField(const nlohmann::json& j, const char* field) {
   if (!j.contains(field) || j[field].is_null()) return {};
   if (!j[field].is_string())
     throw RequestError(400, std::string("'") + field + "' must be a stage name (string)", field);
-  const std::string s = j[field].get<std::string>();
+  std::string s = j[field].get<std::string>();
   if (s.empty()) return {};
   if (!IsStageName(s)) {
     std::string known;
@@ -131,7 +150,7 @@ std::string ParseCreateWorkspace(std::string_view body) {
   const nlohmann::json j = ParseObject(body);
   if (!j.contains("name")) throw RequestError(400, "'name' is required", "name");
   if (!j["name"].is_string()) throw RequestError(400, "'name' must be a string", "name");
-  const std::string name = j["name"].get<std::string>();
+  std::string name = j["name"].get<std::string>();
   if (!IsValidWorkspaceName(name))
     throw RequestError(400, "'name' must be 1-128 of [A-Za-z0-9._ -], not starting with '.'", "name");
   return name;
@@ -176,7 +195,7 @@ std::string SanitiseUploadName(std::string_view client_name) {
   for (char c : client_name) name += NameChar(c) ? c : '_';
   while (!name.empty() && (name.front() == '.' || name.front() == ' ')) name.erase(name.begin());
   if (name.size() > 128) name.erase(0, name.size() - 128);
-  if (name.empty() || name.find_first_not_of("_") == std::string::npos)
+  if (name.empty() || name.find_first_not_of('_') == std::string::npos)
     throw RequestError(400, "the uploaded file has no usable name", "file");
   return name;
 }

@@ -32,11 +32,23 @@ bool IsStageName(std::string_view name);
 // One path component: [A-Za-z0-9._ -]+, at most 128 characters, not starting with '.'.
 bool IsValidWorkspaceName(std::string_view name);
 
-// The file `relative` names inside `root` (which must be canonical), or nullopt with *why set when it is
-// empty, contains a NUL byte or a backslash, is absolute, has a ".." component, or — after resolving every
+// Why ResolveInside refused a path; callers decide on it (403 for kLeavesRoot), the text is only for messages.
+enum class PathRefusal { kNone, kEmpty, kNulByte, kBackslash, kAbsolute, kDotDot, kUnresolvable, kLeavesRoot };
+const char* PathRefusalText(PathRefusal refusal);  // "empty path", …, "path leaves its root"
+
+struct ResolvedPath {
+  std::optional<std::filesystem::path> path;  // set when the path was accepted
+  PathRefusal refusal = PathRefusal::kNone;   // why not, when path is unset
+  explicit operator bool() const { return path.has_value(); }
+  const std::filesystem::path& operator*() const { return *path; }
+  const std::filesystem::path* operator->() const { return &*path; }
+  const char* why() const { return PathRefusalText(refusal); }
+};
+
+// The file `relative` names inside `root` (which must be canonical), or a refusal when it is empty, contains a
+// NUL byte or a backslash, is absolute, has a ".." component, cannot be resolved, or — after resolving every
 // symlink of the part that exists — leaves `root`. The file itself need not exist.
-std::optional<std::filesystem::path> ResolveInside(const std::filesystem::path& root, std::string_view relative,
-                                                   std::string* why = nullptr);
+ResolvedPath ResolveInside(const std::filesystem::path& root, std::string_view relative);
 
 // True when `path` (canonical) is `root` (canonical) or below it, compared component by component.
 bool IsWithin(const std::filesystem::path& root, const std::filesystem::path& path);

@@ -24,8 +24,19 @@ const char* StageStateName(StageState s) {
       return "running";
     case StageState::kFailed:
       return "failed";
+    case StageState::kSkipped:
+      return "skipped";
+    case StageState::kStopped:
+      return "stopped";
   }
   return "pending";
+}
+
+std::optional<StageState> ParseStageState(std::string_view name) {
+  for (const StageState s : {StageState::kPending, StageState::kDone, StageState::kStale, StageState::kRunning,
+                             StageState::kFailed, StageState::kSkipped, StageState::kStopped})
+    if (name == StageStateName(s)) return s;
+  return std::nullopt;
 }
 
 bool IsWorkspace(const fs::path& dir) {
@@ -126,10 +137,15 @@ nlohmann::json IfExists(const fs::path& ws, const char* rel) {
 }
 }  // namespace
 
-nlohmann::json DescribeWorkspace(const fs::path& ws) {
+nlohmann::json DescribeWorkspace(const fs::path& ws, const std::map<std::string, StageState>& job_states) {
   const core::Workspace w(ws);
   nlohmann::json stages = nlohmann::json::array();
-  for (const auto& s : StageStates(ws)) stages.push_back({{"name", s.name}, {"state", StageStateName(s.state)}});
+  for (auto s : StageStates(ws)) {
+    const auto it = job_states.find(s.name);
+    if (it != job_states.end() && (it->second == StageState::kRunning || s.state != StageState::kDone))
+      s.state = it->second;
+    stages.push_back({{"name", s.name}, {"state", StageStateName(s.state)}});
+  }
   std::error_code ec;
   return {{"name", ws.filename().string()},
           {"stages", stages},

@@ -167,10 +167,11 @@ std::map<uint32_t, MapperCamera> SparseCameras(const io::FramesIndex& index, con
   for (const auto& c : index.cameras) {
     MapperCamera mc;
     mc.camera = c.camera;
-    mc.focal_known = c.prior_source != "guess";
+    mc.focal_known = c.prior_source.kind != io::PriorKind::kGuess;
     // A focal stated by the camera (EXIF) or the sensor database is a nominal lens focal: real lenses are within
     // about 1% of it. Its prior keeps f where the images leave it free (a nadir survey from one height).
-    if (c.prior_source == "exif" || c.prior_source.rfind("sensor-db:", 0) == 0) mc.focal_prior_sigma = 0.01;
+    if (c.prior_source.kind == io::PriorKind::kExif || c.prior_source.kind == io::PriorKind::kSensorDb)
+      mc.focal_prior_sigma = 0.01;
     if (options.focal_px > 0 || options.hfov_deg > 0) {
       const double f = options.focal_px > 0 ? options.focal_px
                                             : 0.5 * mc.camera.width / std::tan(0.5 * options.hfov_deg * M_PI / 180);
@@ -182,7 +183,7 @@ std::map<uint32_t, MapperCamera> SparseCameras(const io::FramesIndex& index, con
     }
     if (mc.focal_prior_sigma > 0)
       spdlog::info("camera {}: focal {:.1f} px from {}, a prior of σ {:.0f}% in bundle adjustment", c.camera.id,
-                   mc.camera.f, c.prior_source, 100 * mc.focal_prior_sigma);
+                   mc.camera.f, io::PriorSourceName(c.prior_source), 100 * mc.focal_prior_sigma);
     cameras[c.camera.id] = mc;
   }
   return cameras;

@@ -13,15 +13,10 @@ extern "C" {
 #include <cstdio>
 
 #include "fmv3d/core/error.h"
+#include "fmv3d/telemetry/av_error.h"
 
 namespace fmv3d::telemetry {
 namespace {
-
-std::string AvError(int err) {
-  char buf[AV_ERROR_MAX_STRING_SIZE] = {0};
-  av_strerror(err, buf, sizeof buf);
-  return buf;
-}
 
 std::string Lower(std::string s) {
   std::transform(s.begin(), s.end(), s.begin(), [](unsigned char c) { return std::tolower(c); });

@@ -15,18 +15,13 @@ extern "C" {
 #include "fmv3d/core/error.h"
 #include "fmv3d/core/files.h"
 #include "fmv3d/telemetry/attitude.h"
+#include "fmv3d/telemetry/av_error.h"
 #include "fmv3d/telemetry/klv_eg0104.h"
 #include "fmv3d/telemetry/klv_st0601.h"
 
 namespace fmv3d::telemetry {
 
 namespace {
-
-std::string AvError(int err) {
-  char buf[AV_ERROR_MAX_STRING_SIZE] = {0};
-  av_strerror(err, buf, sizeof buf);
-  return buf;
-}
 
 bool IsKlvStream(const AVStream* st) {
   const AVCodecParameters* par = st->codecpar;
