@@ -193,8 +193,9 @@ std::string SanitiseUploadName(std::string_view client_name) {
   if (slash != std::string_view::npos) client_name.remove_prefix(slash + 1);
   std::string name;
   for (char c : client_name) name += NameChar(c) ? c : '_';
-  while (!name.empty() && (name.front() == '.' || name.front() == ' ')) name.erase(name.begin());
+  // Shortened before the leading dots go: cutting afterwards could expose a '.' and make a hidden file.
   if (name.size() > 128) name.erase(0, name.size() - 128);
+  while (!name.empty() && (name.front() == '.' || name.front() == ' ')) name.erase(name.begin());
   if (name.empty() || name.find_first_not_of('_') == std::string::npos)
     throw RequestError(400, "the uploaded file has no usable name", "file");
   return name;
