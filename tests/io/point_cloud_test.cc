@@ -5,6 +5,7 @@
 #include <fstream>
 
 #include "fmv3d/core/error.h"
+#include "fmv3d/io/ply_mesh.h"
 #include "test_util.h"
 
 namespace fmv3d::io {
@@ -51,6 +52,63 @@ TEST(PointCloudPly, TruncatedFileIsAClearError) {
     EXPECT_NE(std::string(e.what()).find("truncated"), std::string::npos);
   }
   EXPECT_THROW(ReadPointCloudPly(dir / "missing.ply"), Error);
+}
+
+// An ascii mesh with a quad, a triangle and float colours, as other tools write it.
+const char* kQuadMesh =
+    "ply\nformat ascii 1.0\nelement vertex 5\nproperty float x\nproperty float y\nproperty float z\n"
+    "property float red\nproperty float green\nproperty float blue\n"
+    "element face 2\nproperty list uchar uint vertex_indices\nend_header\n"
+    "0 0 0 1 0 0\n1 0 0 0 1 0\n1 1 0 0 0 1\n0 1 0 1 1 1\n0 0 1 0.5 0.5 0.5\n";
+
+TEST(MeshPly, PolygonsBecomeTriangleFans) {
+  test::TempDir dir;
+  std::ofstream(dir / "m.ply") << kQuadMesh << "4 0 1 2 3\n3 0 1 4\n";
+  const PlyMesh m = ReadMeshPly(dir / "m.ply");
+  ASSERT_EQ(m.vertices.size(), 5u);
+  ASSERT_EQ(m.triangles.size(), 3u);
+  EXPECT_EQ(m.triangles[0], Eigen::Vector3i(0, 1, 2));
+  EXPECT_EQ(m.triangles[1], Eigen::Vector3i(0, 2, 3));
+  EXPECT_EQ(m.triangles[2], Eigen::Vector3i(0, 1, 4));
+  ASSERT_TRUE(m.vertices.has_colors());
+  EXPECT_EQ(m.vertices.colors[1], Rgb8(0, 255, 0));
+  EXPECT_EQ(m.vertices.colors[4], Rgb8(128, 128, 128));
+}
+
+TEST(MeshPly, RoundTripOfOurPointCloudHasNoTriangles) {
+  test::TempDir dir;
+  OrientedPointCloud c;
+  c.positions = {{0, 0, 0}, {1, 0, 0}};
+  WritePointCloudPly(c, dir / "c.ply");
+  const PlyMesh m = ReadMeshPly(dir / "c.ply");
+  EXPECT_EQ(m.vertices.size(), 2u);
+  EXPECT_TRUE(m.triangles.empty());
+}
+
+// A face naming a vertex past the end, a negative one, or fewer than three: an error naming the face, never an
+// index handed on (Open3D's reader crashed on such a polygon).
+TEST(MeshPly, BadFacesAreClearErrors) {
+  test::TempDir dir;
+  const std::pair<const char*, const char*> cases[] = {
+      {"4 0 1 2 9\n3 0 1 4\n", "names a vertex that does not exist"},
+      {"3 0 1 2\n3 0 -1 4\n", "names a vertex that does not exist"},
+      {"3 0 1 2\n2 0 1\n", "fewer than 3 vertices"},
+      {"3 0 1 2\n", "truncated"},
+  };
+  for (const auto& [faces, message] : cases) {
+    std::ofstream(dir / "bad.ply") << kQuadMesh << faces;
+    try {
+      ReadMeshPly(dir / "bad.ply");
+      ADD_FAILURE() << faces;
+    } catch (const Error& e) {
+      EXPECT_NE(std::string(e.what()).find(message), std::string::npos) << e.what();
+    }
+  }
+  std::ofstream(dir / "nofaces.ply")
+      << "ply\nformat ascii 1.0\nelement face 1\nproperty list uchar int vertex_indices\n"
+         "element vertex 3\nproperty float x\nproperty float y\nproperty float z\n"
+         "end_header\n3 0 1 2\n0 0 0\n1 0 0\n0 1 0\n";
+  EXPECT_THROW(ReadMeshPly(dir / "nofaces.ply"), Error);
 }
 
 }  // namespace

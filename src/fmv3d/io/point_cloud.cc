@@ -10,6 +10,7 @@
 #include "fmv3d/core/error.h"
 #include "fmv3d/core/files.h"
 #include "fmv3d/io/ply_header.h"
+#include "fmv3d/io/ply_mesh.h"
 
 namespace fmv3d::io {
 
@@ -144,9 +145,17 @@ struct VertexColumns {
   }
 };
 
-// Reads one element's records; a vertex element fills the cloud, any other is read past.
-void ReadElement(const ply::Element& e, ValueReader& reader, const std::string& file, OrientedPointCloud& cloud) {
+// Where the face element keeps its vertex list (-1: absent).
+int FaceIndexColumn(const ply::Element& e) {
+  return std::max(e.Find("vertex_indices", true), e.Find("vertex_index", true));
+}
+
+// Reads one element's records; a vertex element fills the cloud, a face element (when `triangles` is given) its
+// fan-triangulated polygons, any other is read past.
+void ReadElement(const ply::Element& e, ValueReader& reader, const std::string& file, OrientedPointCloud& cloud,
+                 std::vector<Eigen::Vector3i>* triangles = nullptr) {
   const bool is_vertex = e.name == "vertex";
+  const int face_list = (triangles != nullptr && e.name == "face") ? FaceIndexColumn(e) : -1;
   const VertexColumns c(e);
   if (is_vertex) {
     if (c.x < 0 || c.y < 0 || c.z < 0) throw Error(file + ": PLY vertices have no x, y, z");
@@ -163,7 +172,9 @@ void ReadElement(const ply::Element& e, ValueReader& reader, const std::string& 
     if (std::isnan(v)) return uint8_t{0};
     return static_cast<uint8_t>(std::clamp(unit_colour ? v * 255.0 + 0.5 : v, 0.0, 255.0));
   };
+  const double vertex_count = static_cast<double>(cloud.size());
   std::vector<double> values(e.properties.size());
+  std::vector<int> polygon;
   for (size_t i = 0; i < e.count; ++i) {
     for (size_t k = 0; k < e.properties.size(); ++k) {
       const ply::Property& p = e.properties[k];
@@ -174,12 +185,22 @@ void ReadElement(const ply::Element& e, ValueReader& reader, const std::string& 
       const double n = reader.Read(p.count_type);
       if (n < 0 || n > 1e6) throw Error(file + ": bad PLY list length");
       const bool keep = is_vertex && static_cast<int>(k) == c.visibility;
+      const bool face = static_cast<int>(k) == face_list;
+      if (face && n < 3) throw Error(file + ": PLY face " + std::to_string(i) + " has fewer than 3 vertices");
+      polygon.clear();
       for (int j = 0; j < static_cast<int>(n); ++j) {
         const double v = reader.Read(p.type);
+        if (face) {
+          if (!(v >= 0 && v < vertex_count))
+            throw Error(file + ": PLY face " + std::to_string(i) + " names a vertex that does not exist");
+          polygon.push_back(static_cast<int>(v));
+        }
         if (!keep) continue;
         if (!(v >= 0 && v <= 4294967295.0)) throw Error(file + ": bad PLY visibility index");
         cloud.visibility[i].push_back(static_cast<uint32_t>(v));
       }
+      for (size_t j = 2; face && j < polygon.size(); ++j)
+        triangles->emplace_back(polygon[0], polygon[j - 1], polygon[j]);
     }
     if (!is_vertex) continue;
     cloud.positions[i] = {values[c.x], values[c.y], values[c.z]};
@@ -189,11 +210,9 @@ void ReadElement(const ply::Element& e, ValueReader& reader, const std::string& 
   }
 }
 
-}  // namespace
-
-OrientedPointCloud ReadPointCloudPly(const fs::path& path) {
+// Opens `path` and reads its header, checking the counts fit the bytes after it; leaves `in` at the data.
+ply::Header OpenPly(std::ifstream& in, const fs::path& path) {
   const std::string file = path.string();
-  std::ifstream in(path, std::ios::binary);
   if (!in) throw Error(file + ": cannot open");
   const ply::Header header = ply::ReadHeader(in, file);
   const std::streamoff data_start = in.tellg();
@@ -201,7 +220,15 @@ OrientedPointCloud ReadPointCloudPly(const fs::path& path) {
   const auto data_bytes = static_cast<unsigned long long>(std::max<std::streamoff>(0, in.tellg() - data_start));
   in.seekg(data_start);
   ply::CheckCountsFit(header, data_bytes, file);
+  return header;
+}
 
+}  // namespace
+
+OrientedPointCloud ReadPointCloudPly(const fs::path& path) {
+  const std::string file = path.string();
+  std::ifstream in(path, std::ios::binary);
+  const ply::Header header = OpenPly(in, path);
   OrientedPointCloud cloud;
   ValueReader reader(in, header.format, file);
   for (const ply::Element& e : header.elements) {
@@ -209,6 +236,26 @@ OrientedPointCloud ReadPointCloudPly(const fs::path& path) {
     if (e.name == "vertex") break;  // later elements (faces) are not needed
   }
   return cloud;
+}
+
+PlyMesh ReadMeshPly(const fs::path& path) {
+  const std::string file = path.string();
+  std::ifstream in(path, std::ios::binary);
+  const ply::Header header = OpenPly(in, path);
+  bool seen_vertices = false;
+  for (const ply::Element& e : header.elements) {
+    if (e.name == "vertex") seen_vertices = true;
+    if (e.name == "face" && !seen_vertices) throw Error(file + ": PLY faces come before the vertices they index");
+    if (e.name == "face" && FaceIndexColumn(e) < 0) throw Error(file + ": PLY faces have no vertex_indices list");
+  }
+  if (!seen_vertices) throw Error(file + ": PLY has no vertex element");
+  PlyMesh mesh;
+  ValueReader reader(in, header.format, file);
+  for (const ply::Element& e : header.elements) {
+    ReadElement(e, reader, file, mesh.vertices, &mesh.triangles);
+    if (e.name == "face") break;  // later elements are not needed
+  }
+  return mesh;
 }
 
 }  // namespace fmv3d::io

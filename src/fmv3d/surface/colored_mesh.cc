@@ -1,8 +1,5 @@
 #include "fmv3d/surface/colored_mesh.h"
 
-#include <open3d/geometry/TriangleMesh.h>
-#include <open3d/io/TriangleMeshIO.h>
-
 #include <algorithm>
 #include <cmath>
 #include <cstring>
@@ -10,6 +7,7 @@
 
 #include "fmv3d/core/error.h"
 #include "fmv3d/core/files.h"
+#include "fmv3d/io/ply_mesh.h"
 
 namespace fmv3d::surface {
 
@@ -107,27 +105,13 @@ void WriteMeshPly(const ColoredMesh& mesh, const fs::path& path) {
 
 ColoredMesh ReadMeshPly(const fs::path& path) {
   if (!fs::exists(path)) throw Error(path.string() + ": no such file");
-  open3d::geometry::TriangleMesh o3d;
-  open3d::io::ReadTriangleMeshOptions opt;
-  opt.print_progress = false;
-  if (!open3d::io::ReadTriangleMesh(path.string(), o3d, opt))
-    throw Error(path.string() + ": cannot read (not a triangle-mesh PLY?)");
-  if (o3d.triangles_.empty()) throw Error(path.string() + ": the mesh has no triangles");
+  io::PlyMesh ply = io::ReadMeshPly(path);
+  if (ply.triangles.empty()) throw Error(path.string() + ": the mesh has no triangles");
   ColoredMesh mesh;
-  mesh.vertices = o3d.vertices_;
-  mesh.triangles = o3d.triangles_;
-  if (o3d.vertex_normals_.size() == o3d.vertices_.size()) {
-    mesh.normals.reserve(o3d.vertices_.size());
-    for (const auto& n : o3d.vertex_normals_) mesh.normals.push_back(n.cast<float>());
-  }
-  if (o3d.vertex_colors_.size() == o3d.vertices_.size()) {
-    mesh.colors.reserve(o3d.vertices_.size());
-    for (const auto& c : o3d.vertex_colors_) {
-      io::Rgb8 rgb;
-      for (int k = 0; k < 3; ++k) rgb[k] = static_cast<uint8_t>(std::clamp(std::lround(c[k] * 255.0), 0L, 255L));
-      mesh.colors.push_back(rgb);
-    }
-  }
+  mesh.vertices = std::move(ply.vertices.positions);
+  mesh.normals = std::move(ply.vertices.normals);
+  mesh.colors = std::move(ply.vertices.colors);
+  mesh.triangles = std::move(ply.triangles);
   mesh.Validate();
   return mesh;
 }

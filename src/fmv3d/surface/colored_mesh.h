@@ -5,7 +5,7 @@
 // PLY written (binary little-endian; opened by MeshLab, CloudCompare, Blender, Open3D):
 //   element vertex N: float x y z, float nx ny nz, uchar red green blue
 //   element face M:   list uchar int vertex_indices
-// The reader accepts any triangle-mesh PLY (through Open3D's reader); normals and colours are empty when the
+// The reader accepts any mesh PLY (io::ReadMeshPly: polygons as triangle fans); normals and colours are empty when the
 // file has none.
 #pragma once
 
