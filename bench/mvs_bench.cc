@@ -53,7 +53,7 @@ double GoodFraction(const Views& v, const mvs::DepthMap& map, int view = 0) {
 const Views& TownViews() {
   static const Views v = [] {
     Views out;
-    const synth::Scene scene = synth::MakeScene("town");
+    const synth::Scene scene = synth::MakeScene(synth::SceneKind::kTown);
     synth::SynthOptions o;
     o.width = 960;
     o.height = 540;

@@ -20,7 +20,7 @@ double ProcessCpuSeconds() {
 }
 
 const synth::Scene& Town() {
-  static const synth::Scene scene = synth::MakeScene("town");
+  static const synth::Scene scene = synth::MakeScene(synth::SceneKind::kTown);
   return scene;
 }
 
@@ -66,7 +66,7 @@ BENCHMARK(BM_RenderTown720pDistorted)->Unit(benchmark::kMillisecond)->UseRealTim
 
 void BM_MakeTownScene(benchmark::State& state) {
   for (auto _ : state) {
-    auto s = synth::MakeScene("town");
+    auto s = synth::MakeScene(synth::SceneKind::kTown);
     benchmark::DoNotOptimize(s.mesh.faces.data());
   }
 }

@@ -63,7 +63,7 @@ Setup& Get() {
     fs::create_directories(s->root);
     synth::SynthOptions o;
     const char* scene = std::getenv("FMV3D_BENCH_SCENE");  // building (default) | town | terrain
-    o.scene = scene ? scene : "building";
+    o.scene = scene ? synth::ParseScene(scene) : synth::SceneKind::kBuilding;
     o.flight.frames = static_cast<int>(EnvDouble("FMV3D_BENCH_FRAMES", 24));
     o.width = 1280;
     o.height = 720;
@@ -79,7 +79,7 @@ Setup& Get() {
     c.outlier_share = 0.01;
     c.outlier_range = 2;
     c.region = Eigen::AlignedBox3d(Eigen::Vector3d(-40, -40, -3), Eigen::Vector3d(40, 40, 35));
-    if (o.scene != "building") {  // the modelled area of truth.json (not synth's backdrop ring)
+    if (o.scene != synth::SceneKind::kBuilding) {  // the modelled area of truth.json (not synth's backdrop ring)
       const auto b = core::ReadJson(s->synth_dir / "truth.json").at("bounds");
       c.region = Eigen::AlignedBox3d(
           Eigen::Vector3d(b.at("min")[0].get<double>(), b.at("min")[1].get<double>(), b.at("min")[2].get<double>()),

@@ -78,6 +78,7 @@ const CLI::Validator kList3(
 // and the options whose presence matters.
 struct SynthFlags {
   synth::SynthOptions o;
+  std::string scene = "building", path = "orbit", format = "png";  // spellings, parsed by ToSynthOptions
   std::string size = "1280x720", distortion, look_at, grid_overlap, geo_origin = "38.16,-77.35,60", output;
   double focal = 0, altitude = 0, radius = 0;
   std::vector<double> principal;
@@ -88,10 +89,10 @@ struct SynthFlags {
 
 // Scene, flight path and camera.
 void AddFlightOptions(CLI::App* cmd, SynthFlags* f) {
-  cmd->add_option("--scene", f->o.scene, "Scene: building | town | terrain | board | sand")
-      ->check(CLI::IsMember(synth::SceneNames()))
+  cmd->add_option("--scene", f->scene, "Scene: building | town | terrain | board | sand")
+      ->check(CLI::IsMember({"building", "town", "terrain", "board", "sand"}))
       ->capture_default_str();
-  cmd->add_option("--path", f->o.flight.path, "Flight path: orbit | grid | pass | oblique")
+  cmd->add_option("--path", f->path, "Flight path: orbit | grid | pass | oblique")
       ->check(CLI::IsMember({"orbit", "grid", "pass", "oblique"}))
       ->capture_default_str();
   cmd->add_option("--frames", f->o.flight.frames, "Number of frames")
@@ -140,7 +141,7 @@ void AddRenderOptions(CLI::App* cmd, SynthFlags* f) {
       ->check(CLI::Range(0.0, 19.0))
       ->capture_default_str();
   cmd->add_option("--seed", f->o.flight.seed, "Seed for the flight jitter and sensor noise")->capture_default_str();
-  f->format_opt = cmd->add_option("--format", f->o.format, "Output: png | jpg | mp4 | ts")
+  f->format_opt = cmd->add_option("--format", f->format, "Output: png | jpg | mp4 | ts")
                       ->check(CLI::IsMember({"png", "jpg", "mp4", "ts"}))
                       ->capture_default_str();
   cmd->add_option("--fps", f->o.fps, "Frame rate (video and truth.json)")
@@ -179,6 +180,9 @@ void AddTelemetryOptions(CLI::App* cmd, SynthFlags* f) {
 
 synth::SynthOptions ToSynthOptions(const SynthFlags& f) {
   synth::SynthOptions opts = f.o;
+  opts.scene = synth::ParseScene(f.scene);
+  opts.flight.path = synth::ParseFlightPath(f.path);
+  opts.format = synth::ParseOutputFormat(f.format);
   std::sscanf(f.size.c_str(), "%d%*c%d", &opts.width, &opts.height);
   if (f.focal_opt->count()) opts.focal = f.focal;
   for (const auto& spec : f.degrade)
@@ -208,7 +212,10 @@ synth::SynthOptions ToSynthOptions(const SynthFlags& f) {
       if (!n) spdlog::warn("synth: PROJ's EGM96 grid (egm96_15.gtx) is missing; KLV heights MSL = ellipsoidal");
       opts.klv_options.geoid_undulation = n.value_or(0.0);
     }
-    if (!f.format_opt->count()) opts.format = f.klv_opt->count() ? "ts" : f.exif_opt->count() ? "jpg" : "mp4";
+    if (!f.format_opt->count())
+      opts.format = f.klv_opt->count()    ? synth::OutputFormat::kTs
+                    : f.exif_opt->count() ? synth::OutputFormat::kJpg
+                                          : synth::OutputFormat::kMp4;
   }
   opts.output = f.output;
   return opts;
@@ -244,9 +251,9 @@ void Add(CLI::App& app) {
   cmd->callback([f] {
     const synth::SynthOptions opts = ToSynthOptions(*f);
     const auto r = synth::RunSynth(opts);
-    std::cout << "synth: " << r.frames << " frames of scene '" << opts.scene << "' in " << opts.output.string()
-              << " (characteristic length " << r.characteristic_length << " m, " << r.truth.points.size()
-              << " truth points)\n";
+    std::cout << "synth: " << r.frames << " frames of scene '" << synth::SceneName(opts.scene) << "' in "
+              << opts.output.string() << " (characteristic length " << r.characteristic_length << " m, "
+              << r.truth.points.size() << " truth points)\n";
   });
 }
 

@@ -159,11 +159,11 @@ TEST(SynthGeodesy, EnuRoundTripAndKnownValues) {
 TEST(SynthKlv, TelemetryRoundTripsThroughTheVideoAndFramesStage) {
   test::TempDir dir("synth-klv");
   synth::SynthOptions o;
-  o.scene = "building";
+  o.scene = synth::SceneKind::kBuilding;
   o.flight.frames = 12;
   o.width = 192;
   o.height = 112;
-  o.format = "ts";
+  o.format = synth::OutputFormat::kTs;
   o.fps = 10;
   o.klv = true;
   o.klv_options.geoid_undulation = -33.87;  // EGM96 at the default origin: MSL heights are ellipsoidal + 33.87 m
@@ -233,7 +233,7 @@ TEST(SynthKlv, TelemetryRoundTripsThroughTheVideoAndFramesStage) {
 TEST(SynthKlv, NeedsTransportStream) {
   synth::SynthOptions o;
   o.klv = true;
-  o.format = "mp4";
+  o.format = synth::OutputFormat::kMp4;
   o.output = "/nonexistent";
   EXPECT_THROW(o.Check(), Error);
 }

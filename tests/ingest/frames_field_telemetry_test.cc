@@ -19,9 +19,9 @@
 namespace fmv3d::ingest {
 namespace {
 
-synth::SynthOptions SmallFlight(const std::filesystem::path& out, const std::string& format) {
+synth::SynthOptions SmallFlight(const std::filesystem::path& out, synth::OutputFormat format) {
   synth::SynthOptions o;
-  o.scene = "building";
+  o.scene = synth::SceneKind::kBuilding;
   o.flight.frames = 12;
   o.width = 192;
   o.height = 112;
@@ -61,7 +61,7 @@ double PositionRms(const io::FramesIndex& index, const synth::SynthResult& r, co
 
 TEST(FieldTelemetry, SynthExifJpegsThroughFrames) {
   test::TempDir dir("synth-exif");
-  synth::SynthOptions o = SmallFlight(dir.path(), "jpg");
+  synth::SynthOptions o = SmallFlight(dir.path(), synth::OutputFormat::kJpg);
   o.exif_gps = true;
   const auto result = synth::RunSynth(o);
   // Through the CLI, so that the EXIF focal prior is wired as a user gets it.
@@ -111,7 +111,7 @@ TEST(FieldTelemetry, SynthExifJpegsThroughFrames) {
 
 TEST(FieldTelemetry, CorruptPhotoMetadataIsDroppedWithACount) {
   test::TempDir dir("synth-exif-bad");
-  synth::SynthOptions o = SmallFlight(dir.path(), "jpg");
+  synth::SynthOptions o = SmallFlight(dir.path(), synth::OutputFormat::kJpg);
   o.flight.frames = 4;
   o.exif_gps = true;
   synth::RunSynth(o);
@@ -163,7 +163,7 @@ TEST(FieldTelemetry, CorruptPhotoMetadataIsDroppedWithACount) {
 TEST(FieldTelemetry, SynthGpmfMp4ThroughFrames) {
   for (const bool gps9 : {false, true}) {
     test::TempDir dir("synth-gpmf");
-    synth::SynthOptions o = SmallFlight(dir.path(), "mp4");
+    synth::SynthOptions o = SmallFlight(dir.path(), synth::OutputFormat::kMp4);
     o.gpmf = true;
     o.gpmf_gps9 = gps9;
     const auto result = synth::RunSynth(o);

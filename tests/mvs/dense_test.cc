@@ -42,7 +42,7 @@ const Flight& SmallFlight() {
   static test::TempDir* tmp = new test::TempDir("mvs_flight");  // lives for the whole binary
   static Flight flight = [] {
     synth::SynthOptions so;
-    so.scene = "building";
+    so.scene = synth::SceneKind::kBuilding;
     so.width = 320;
     so.height = 240;
     so.flight.frames = 10;

@@ -17,7 +17,7 @@ namespace {
 TEST(DemoHeldOut, TrueModelScoresHighAndAShiftedOneLower) {
   test::TempDir dir("fmv3d-demo-heldout");
   synth::SynthOptions s;
-  s.scene = "building";
+  s.scene = synth::SceneKind::kBuilding;
   s.flight.frames = 8;
   s.width = 320;
   s.height = 180;

@@ -21,7 +21,7 @@ inline const SyntheticFlight& Flight() {
   static std::unique_ptr<SyntheticFlight> flight = [] {
     auto f = std::make_unique<SyntheticFlight>();
     synth::SynthOptions o;
-    o.scene = "building";
+    o.scene = synth::SceneKind::kBuilding;
     o.flight.frames = 13;
     o.flight.seed = 5;
     o.width = 480;

@@ -14,10 +14,10 @@ namespace {
 TEST(SurveyGrid, FramesAreLaidOutAtTheStatedOverlaps) {
   SceneOptions so;
   so.detail = 0.1;
-  const Scene scene = MakeScene("sand", so);
+  const Scene scene = MakeScene(SceneKind::kSand, so);
   core::Camera cam = core::Camera::Pinhole(1600, 900, 800 / std::tan(M_PI / 6));
   FlightOptions fo;
-  fo.path = "grid";
+  fo.path = FlightPath::kGrid;
   fo.frames = 60;
   fo.altitude = 110;
   fo.grid_overlap = std::make_pair(0.7, 0.4);
@@ -42,8 +42,8 @@ TEST(SurveyGrid, FramesAreLaidOutAtTheStatedOverlaps) {
 TEST(SurveyGrid, SandIsFaintBesideTheTerrainScene) {
   SceneOptions so;
   so.detail = 0.1;
-  auto contrast = [&](const std::string& name) {
-    const Scene s = MakeScene(name, so);
+  auto contrast = [&](SceneKind kind) {
+    const Scene s = MakeScene(kind, so);
     // Local contrast: what is left after removing the structure broader than a few texels.
     cv::Mat tex, smooth;
     s.mesh.materials.front().texture.convertTo(tex, CV_32FC3);
@@ -52,14 +52,14 @@ TEST(SurveyGrid, SandIsFaintBesideTheTerrainScene) {
     cv::meanStdDev(tex - smooth, mean, sd);
     return (sd[0] + sd[1] + sd[2]) / 3;
   };
-  const double sand = contrast("sand"), terrain = contrast("terrain");
+  const double sand = contrast(SceneKind::kSand), terrain = contrast(SceneKind::kTerrain);
   std::printf("local texture contrast (standard deviation): sand %.1f DN, terrain %.1f DN\n", sand, terrain);
   EXPECT_LT(sand, 0.5 * terrain);
 }
 
 TEST(SurveyGrid, OverlapOutOfRangeIsAnError) {
   FlightOptions fo;
-  fo.path = "grid";
+  fo.path = FlightPath::kGrid;
   fo.grid_overlap = std::make_pair(1.2, 0.4);
   EXPECT_THROW(fo.Check(), Error);
 }

@@ -34,7 +34,7 @@ std::string Slurp(const fs::path& p) {
 
 SynthOptions Small(const fs::path& out) {
   SynthOptions o;
-  o.scene = "building";
+  o.scene = SceneKind::kBuilding;
   o.flight.frames = 4;
   o.width = 320;
   o.height = 180;
@@ -116,11 +116,12 @@ TEST(Synth, SameSeedIsByteIdenticalDifferentSeedDiffers) {
 }
 
 TEST(Synth, VideoRoundTripKeepsSizeAndCountAndIsDeterministic) {
-  for (const std::string format : {"mp4", "ts"}) {
+  for (const OutputFormat kind : {OutputFormat::kMp4, OutputFormat::kTs}) {
+    const std::string format = OutputFormatName(kind);
     TempDir a, b;
     SynthOptions o = Small(a.path());
     o.flight.frames = 7;
-    o.format = format;
+    o.format = kind;
     o.write_scene = false;
     o.truth_points = 0;
     RunSynth(o);
@@ -156,7 +157,7 @@ TEST(Synth, VideoFrameMatchesRenderedFrame) {
   o.truth_points = 0;
   RunSynth(o);
   o.output = b.path();
-  o.format = "mp4";
+  o.format = OutputFormat::kMp4;
   RunSynth(o);
   cv::VideoCapture cap((b / "flight.mp4").string());
   cv::Mat decoded;
@@ -168,26 +169,26 @@ TEST(Synth, VideoFrameMatchesRenderedFrame) {
 }
 
 TEST(Synth, FlightsLookWhereTheyShould) {
-  const Scene scene = MakeScene("board");  // cheap scene; geometry only
+  const Scene scene = MakeScene(SceneKind::kBoard);  // cheap scene; geometry only
   const core::Camera cam = core::Camera::Pinhole(640, 480, 554);
   FlightOptions o;
   o.frames = 12;
   o.jitter_deg = 0;
   o.position_jitter = 0;
-  o.path = "grid";
+  o.path = FlightPath::kGrid;
   for (const auto& p : MakeFlight(scene, cam, o)) EXPECT_NEAR(p.ViewDirection().z(), -1.0, 1e-12);
-  o.path = "orbit";
+  o.path = FlightPath::kOrbit;
   const auto orbit = MakeFlight(scene, cam, o);
   ASSERT_EQ(orbit.size(), 12u);
   for (const auto& p : orbit) {
     const Eigen::Vector2d c = cam.Project(p.Transform(scene.target));
     EXPECT_LT((c - Eigen::Vector2d(320, 240)).norm(), 1e-6);
   }
-  o.path = "pass";
+  o.path = FlightPath::kPass;
   const auto pass = MakeFlight(scene, cam, o);
   EXPECT_GT((pass.back().Centre() - pass.front().Centre()).norm(), 0.5);
   // Jitter: bounded, seeded.
-  o.path = "orbit";
+  o.path = FlightPath::kOrbit;
   o.jitter_deg = 0.5;
   const auto j1 = MakeFlight(scene, cam, o), j2 = MakeFlight(scene, cam, o);
   o.seed = 9;
@@ -210,20 +211,22 @@ TEST(Synth, BadOptionsAreErrors) {
   o = Small(dir.path());
   o.flight.frames = 0;
   EXPECT_THROW(RunSynth(o), Error);
-  o = Small(dir.path());
-  o.scene = "moon";
   try {
-    RunSynth(o);
+    ParseScene("moon");
     FAIL();
   } catch (const Error& e) {
     EXPECT_NE(std::string(e.what()).find("moon"), std::string::npos);
   }
+  EXPECT_EQ(ParseScene("sand"), SceneKind::kSand);
+  EXPECT_EQ(ParseFlightPath("oblique"), FlightPath::kOblique);
+  EXPECT_EQ(ParseOutputFormat("ts"), OutputFormat::kTs);
+  EXPECT_THROW(ParseFlightPath("spiral"), Error);
+  EXPECT_THROW(ParseOutputFormat("gif"), Error);
   o = Small(dir.path());
-  o.format = "mp4";
+  o.format = OutputFormat::kMp4;
   o.width = 343;
   o.height = 259;
   EXPECT_THROW(RunSynth(o), Error);
-  EXPECT_THROW(MakeScene("nowhere"), Error);
 }
 
 TEST(Synth, CliValidatesOptions) {
@@ -275,7 +278,7 @@ TEST(Synth, ObjRoundTripKeepsGeometryUvsAndTextures) {
   TempDir dir;
   SceneOptions so;
   so.detail = 0.1;
-  const Scene scene = MakeScene("building", so);
+  const Scene scene = MakeScene(SceneKind::kBuilding, so);
   io::WriteObj(scene.mesh, dir / "scene.obj");
   const io::TexturedMesh back = io::ReadObj(dir / "scene.obj");
   ASSERT_EQ(back.vertices.size(), scene.mesh.vertices.size());
@@ -303,9 +306,9 @@ TEST(Synth, ObjRoundTripKeepsGeometryUvsAndTextures) {
 TEST(Synth, TownFramesAreRichInSiftFeatures) {
   SceneOptions so;
   so.detail = 0.5;  // half the texture resolution keeps the test fast; full detail gives ~2x more keypoints
-  const Scene scene = MakeScene("town", so);
+  const Scene scene = MakeScene(SceneKind::kTown, so);
   SynthOptions o;
-  o.scene = "town";
+  o.scene = SceneKind::kTown;
   o.flight.frames = 8;
   const core::Camera cam = SynthCamera(o);
   const auto poses = MakeFlight(scene, cam, o.flight);
@@ -334,9 +337,9 @@ namespace {
 
 // The calibration board: OpenCV finds its 9x6 inner corners where the ground truth projects them.
 TEST(Synth, ChessboardCornersLandWhereTheyProject) {
-  const Scene scene = MakeScene("board");
+  const Scene scene = MakeScene(SceneKind::kBoard);
   SynthOptions o;
-  o.scene = "board";
+  o.scene = SceneKind::kBoard;
   o.width = 640;
   o.height = 480;
   o.distortion = {-0.1, 0.02, 0, 0};

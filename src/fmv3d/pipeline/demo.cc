@@ -93,13 +93,13 @@ namespace {
 void RenderDemoFlight(const DemoOptions& o) {
   spdlog::info("demo: rendering a {}-frame {}x{} orbit around the CAD building", o.frames, o.width, o.height);
   synth::SynthOptions s;
-  s.scene = "building";
-  s.flight.path = "orbit";
+  s.scene = synth::SceneKind::kBuilding;
+  s.flight.path = synth::FlightPath::kOrbit;
   s.flight.frames = o.frames;
   s.flight.seed = o.seed;
   s.width = o.width;
   s.height = o.height;
-  s.format = "mp4";
+  s.format = synth::OutputFormat::kMp4;
   // One frame every half second, all kept: a 20 s orbit sampled as a keyframe selector would.
   s.fps = 2;
   s.output = o.output;

@@ -24,9 +24,27 @@ struct Normal {
 
 }  // namespace
 
+const char* FlightPathName(FlightPath path) {
+  switch (path) {
+    case FlightPath::kOrbit:
+      return "orbit";
+    case FlightPath::kGrid:
+      return "grid";
+    case FlightPath::kPass:
+      return "pass";
+    case FlightPath::kOblique:
+      return "oblique";
+  }
+  return "orbit";
+}
+
+FlightPath ParseFlightPath(const std::string& name) {
+  for (FlightPath p : {FlightPath::kOrbit, FlightPath::kGrid, FlightPath::kPass, FlightPath::kOblique})
+    if (name == FlightPathName(p)) return p;
+  throw Error("flight: unknown path '" + name + "' (expected orbit, grid, pass or oblique)");
+}
+
 void FlightOptions::Check() const {
-  if (path != "orbit" && path != "grid" && path != "pass" && path != "oblique")
-    throw Error("flight: unknown path '" + path + "' (expected orbit, grid, pass or oblique)");
   if (frames < 1) throw Error("flight: --frames must be at least 1");
   if (!(altitude_swing >= 0)) throw Error("flight: --altitude-swing must be >= 0");
   if (altitude && !std::isfinite(*altitude)) throw Error("flight: altitude must be finite");
@@ -46,14 +64,14 @@ FlightGeometry ResolveFlight(const Scene& scene, const core::Camera& camera, con
   const double half_fov = std::atan(0.5 * std::min(camera.width / camera.fx(), camera.height / camera.fy()));
   const double dist = r / std::tan(half_fov) / 0.7 + r;
   const double ground = scene.ground_height ? scene.ground_height(g.look_at.x(), g.look_at.y()) : 0.0;
-  if (o.path == "orbit") {
+  if (o.path == FlightPath::kOrbit) {
     const double elevation = 40 * M_PI / 180;
     g.radius = o.radius ? *o.radius : dist * std::cos(elevation);
     g.altitude = o.altitude ? *o.altitude : g.look_at.z() + dist * std::sin(elevation);
-  } else if (o.path == "grid") {
+  } else if (o.path == FlightPath::kGrid) {
     g.radius = o.radius ? *o.radius : r * 1.2;
     g.altitude = o.altitude ? *o.altitude : ground + std::max(dist * 0.8, 2.0 * scene.characteristic_length);
-  } else if (o.path == "oblique") {
+  } else if (o.path == FlightPath::kOblique) {
     g.radius = o.radius ? *o.radius : r;
     g.altitude = o.altitude ? *o.altitude : g.look_at.z() + 0.4 * r;
   } else {
@@ -69,14 +87,14 @@ std::vector<core::Pose> MakeFlight(const Scene& scene, const core::Camera& camer
   const int n = o.frames;
   std::vector<Eigen::Vector3d> centres(n);
   std::vector<Eigen::Matrix3d> rotations(n);  // world-to-camera
-  if (o.path == "orbit") {
+  if (o.path == FlightPath::kOrbit) {
     for (int k = 0; k < n; ++k) {
       const double a = 2 * M_PI * k / n - M_PI / 2;  // start south of the target, counter-clockwise
       centres[k] = {g.look_at.x() + g.radius * std::cos(a), g.look_at.y() + g.radius * std::sin(a),
                     g.altitude + o.altitude_swing * std::sin(2 * a)};
       rotations[k] = core::Pose::LookAt(centres[k], g.look_at).R();
     }
-  } else if (o.path == "grid" && o.grid_overlap) {
+  } else if (o.path == FlightPath::kGrid && o.grid_overlap) {
     // Footprint on the ground at the look-at height: across track (image x) and along track (image y).
     const double h = std::max(1.0, g.altitude - g.look_at.z());
     const double step_across = (1 - o.grid_overlap->second) * h * camera.width / camera.fx();
@@ -103,7 +121,7 @@ std::vector<core::Pose> MakeFlight(const Scene& scene, const core::Camera& camer
         rotations[k] = Rwc.transpose();
       }
     }
-  } else if (o.path == "grid") {
+  } else if (o.path == FlightPath::kGrid) {
     // Nadir footprint at this height above the look-at point decides the strip spacing (65% side overlap).
     const double h = std::max(1.0, g.altitude - g.look_at.z());
     const double across = h * camera.width / camera.fx();
@@ -128,7 +146,7 @@ std::vector<core::Pose> MakeFlight(const Scene& scene, const core::Camera& camer
         rotations[k] = Rwc.transpose();
       }
     }
-  } else if (o.path == "oblique") {
+  } else if (o.path == FlightPath::kOblique) {
     // Fly along x, `radius` south of the target, looking north 12° below the horizontal: the horizon is in
     // the upper part of the frame, the land runs from the near ground to the far distance.
     const double length = 2 * g.radius, depression = 12 * M_PI / 180;

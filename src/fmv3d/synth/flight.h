@@ -25,8 +25,14 @@
 
 namespace fmv3d::synth {
 
+enum class FlightPath { kOrbit, kGrid, kPass, kOblique };
+// The spelling of the command line and truth/truth.json: "orbit", "grid", "pass", "oblique".
+const char* FlightPathName(FlightPath path);
+// Throws fmv3d::Error naming the accepted spellings.
+FlightPath ParseFlightPath(const std::string& name);
+
 struct FlightOptions {
-  std::string path = "orbit";  // orbit | grid | pass | oblique
+  FlightPath path = FlightPath::kOrbit;
   int frames = 48;
   std::optional<double> altitude;                         // metres (world z); default per scene
   std::optional<double> radius;                           // orbit radius / grid half-size / pass stand-off, metres

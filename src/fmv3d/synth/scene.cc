@@ -206,9 +206,32 @@ void SceneOptions::Check() const {
   if (!(board_square > 0)) throw Error("scene: board square size must be positive");
 }
 
-const std::vector<std::string>& SceneNames() {
-  static const std::vector<std::string> names = {"building", "town", "terrain", "board", "sand"};
-  return names;
+const std::vector<SceneKind>& SceneKinds() {
+  static const std::vector<SceneKind> kinds = {SceneKind::kBuilding, SceneKind::kTown, SceneKind::kTerrain,
+                                               SceneKind::kBoard, SceneKind::kSand};
+  return kinds;
+}
+
+const char* SceneName(SceneKind kind) {
+  switch (kind) {
+    case SceneKind::kBuilding:
+      return "building";
+    case SceneKind::kTown:
+      return "town";
+    case SceneKind::kTerrain:
+      return "terrain";
+    case SceneKind::kBoard:
+      return "board";
+    case SceneKind::kSand:
+      return "sand";
+  }
+  return "building";
+}
+
+SceneKind ParseScene(const std::string& name) {
+  for (SceneKind k : SceneKinds())
+    if (name == SceneName(k)) return k;
+  throw Error("unknown scene '" + name + "' (expected building, town, terrain, board or sand)");
 }
 
 namespace {
@@ -244,14 +267,14 @@ Scene MakeBoard(const SceneOptions& o) {
 
 }  // namespace
 
-Scene MakeScene(const std::string& name, const SceneOptions& o) {
+Scene MakeScene(SceneKind kind, const SceneOptions& o) {
   o.Check();
-  if (name == "board") return MakeBoard(o);
+  if (kind == SceneKind::kBoard) return MakeBoard(o);
   Scene scene;
-  scene.name = name;
+  scene.name = SceneName(kind);
   double extent = 0, step = 0, ground_tpm = 0;
   const double facade_tpm = 30 * o.detail;
-  if (name == "building") {
+  if (kind == SceneKind::kBuilding) {
     extent = 260, step = 2, ground_tpm = 13;
     scene.ground_height = [](double x, double y) {
       return 3.0 * (Fbm(x / 90, y / 90, 11, 4) - 0.5) * SmoothStep(30, 70, std::hypot(x, y));
@@ -260,7 +283,7 @@ Scene MakeScene(const std::string& name, const SceneOptions& o) {
     scene.buildings.push_back(spec);
     scene.target = {0, 0, 15};
     scene.interest_radius = 20;
-  } else if (name == "town") {
+  } else if (kind == SceneKind::kTown) {
     extent = 480, step = 2.5, ground_tpm = 9;
     scene.ground_height = [](double x, double y) {
       const double r = std::hypot(x, y);
@@ -295,7 +318,7 @@ Scene MakeScene(const std::string& name, const SceneOptions& o) {
     }
     scene.target = {0, 0, scene.ground_height(0, 0) + 10};
     scene.interest_radius = 75;
-  } else if (name == "terrain") {
+  } else if (kind == SceneKind::kTerrain) {
     extent = 800, step = 4, ground_tpm = 5;
     scene.ground_height = [](double x, double y) {
       const double hills = 30.0 * Fbm(x / 220, y / 220, 31, 6);
@@ -305,7 +328,7 @@ Scene MakeScene(const std::string& name, const SceneOptions& o) {
     };
     scene.target = {0, 0, scene.ground_height(0, 0)};
     scene.interest_radius = 140;
-  } else if (name == "sand") {
+  } else if (kind == SceneKind::kSand) {
     extent = 700, step = 2, ground_tpm = 6;
     scene.ground_height = [](double x, double y) {
       const double dunes = 14.0 * Fbm(x / 160, y / 160, 41, 5);
@@ -314,8 +337,6 @@ Scene MakeScene(const std::string& name, const SceneOptions& o) {
     };
     scene.target = {0, 0, scene.ground_height(0, 0)};
     scene.interest_radius = 120;
-  } else {
-    throw Error("unknown scene '" + name + "' (expected building, town, terrain, board or sand)");
   }
   scene.ground_extent =
       Eigen::AlignedBox2d(Eigen::Vector2d(-extent / 2, -extent / 2), Eigen::Vector2d(extent / 2, extent / 2));
@@ -336,9 +357,10 @@ Scene MakeScene(const std::string& name, const SceneOptions& o) {
     return false;
   };
   const int tex = TextureSize(extent, ground_tpm, o.detail);
-  scene.mesh = MakeTerrain(scene.ground_extent, step, scene.ground_height,
-                           name == "sand" ? LowTextureGround(tex, scene.ground_extent, 7)
-                                          : GroundTexture(tex, scene.ground_extent, 7, scene.ground_height, paved));
+  scene.mesh =
+      MakeTerrain(scene.ground_extent, step, scene.ground_height,
+                  kind == SceneKind::kSand ? LowTextureGround(tex, scene.ground_extent, 7)
+                                           : GroundTexture(tex, scene.ground_extent, 7, scene.ground_height, paved));
   double tallest = 0;
   for (const auto& s : scene.buildings) {
     scene.mesh.Append(MakeBuilding(s, facade_tpm));

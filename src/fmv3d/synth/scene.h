@@ -62,8 +62,13 @@ struct Scene {
   Eigen::AlignedBox3d Bounds() const { return bounds; }
 };
 
-const std::vector<std::string>& SceneNames();
-// Throws fmv3d::Error for an unknown name.
-Scene MakeScene(const std::string& name, const SceneOptions& options = {});
+enum class SceneKind { kBuilding, kTown, kTerrain, kBoard, kSand };
+const std::vector<SceneKind>& SceneKinds();
+// The spelling of the command line and truth/truth.json: "building", "town", "terrain", "board", "sand".
+const char* SceneName(SceneKind kind);
+// Throws fmv3d::Error naming the accepted spellings.
+SceneKind ParseScene(const std::string& name);
+
+Scene MakeScene(SceneKind kind, const SceneOptions& options = {});
 
 }  // namespace fmv3d::synth

@@ -22,9 +22,6 @@ namespace fmv3d::synth {
 namespace fs = std::filesystem;
 
 void SynthOptions::Check() const {
-  bool known = false;
-  for (const auto& n : SceneNames()) known |= n == scene;
-  if (!known) throw Error("synth: unknown scene '" + scene + "' (expected building, town, terrain, board or sand)");
   flight.Check();
   render.Check();
   for (const auto& d : degrade)
@@ -39,8 +36,6 @@ void SynthOptions::Check() const {
   for (int k = 0; k < 2; ++k)
     if (!std::isfinite(principal_offset[k]) || std::abs(principal_offset[k]) >= 0.5 * (k ? height : width))
       throw Error("synth: the principal point offset must keep the principal point inside the image");
-  if (format != "png" && format != "jpg" && format != "mp4" && format != "ts")
-    throw Error("synth: unknown format '" + format + "' (expected png, jpg, mp4 or ts)");
   if (IsVideo() && (width % 2 || height % 2))
     throw Error(fmt::format("synth: video needs an even width and height, got {}x{} (use png/jpg)", width, height));
   if (jpeg_quality < 1 || jpeg_quality > 100) throw Error("synth: jpeg quality must be 1..100");
@@ -48,17 +43,18 @@ void SynthOptions::Check() const {
   if (!(detail > 0 && detail <= 4)) throw Error("synth: detail must be in (0, 4]");
   if (truth_points < 0) throw Error("synth: truth points must be >= 0");
   if (output.empty()) throw Error("synth: an output folder is required");
-  if (klv && format != "ts") throw Error("synth: --klv writes an MPEG-TS: use --format ts (got '" + format + "')");
-  if (exif_gps && format != "jpg")
-    throw Error("synth: --exif-gps writes JPEG frames: use --format jpg (got '" + format + "')");
-  if (gpmf && format != "mp4") throw Error("synth: --gpmf writes an MP4: use --format mp4 (got '" + format + "')");
+  const std::string got = std::string(" (got '") + OutputFormatName(format) + "')";
+  if (klv && format != OutputFormat::kTs) throw Error("synth: --klv writes an MPEG-TS: use --format ts" + got);
+  if (exif_gps && format != OutputFormat::kJpg)
+    throw Error("synth: --exif-gps writes JPEG frames: use --format jpg" + got);
+  if (gpmf && format != OutputFormat::kMp4) throw Error("synth: --gpmf writes an MP4: use --format mp4" + got);
   if (HasTelemetry()) klv_options.Check();
 }
 
 nlohmann::json SynthOptions::ToJson() const {
   nlohmann::json j;
-  j["scene"] = scene;
-  j["path"] = flight.path;
+  j["scene"] = SceneName(scene);
+  j["path"] = FlightPathName(flight.path);
   j["frames"] = flight.frames;
   if (!degrade.empty()) {
     j["degrade"] = nlohmann::json::array();
@@ -81,7 +77,7 @@ nlohmann::json SynthOptions::ToJson() const {
   j["exposure"] = render.exposure;
   j["noise"] = render.noise_sigma;
   j["supersample"] = render.supersample;
-  j["format"] = format;
+  j["format"] = OutputFormatName(format);
   j["jpeg_quality"] = jpeg_quality;
   j["fps"] = fps;
   j["detail"] = detail;
@@ -110,6 +106,26 @@ core::Camera SynthCamera(const SynthOptions& o) {
   c.v0 += o.principal_offset[1];
   c.Validate();
   return c;
+}
+
+const char* OutputFormatName(OutputFormat format) {
+  switch (format) {
+    case OutputFormat::kPng:
+      return "png";
+    case OutputFormat::kJpg:
+      return "jpg";
+    case OutputFormat::kMp4:
+      return "mp4";
+    case OutputFormat::kTs:
+      return "ts";
+  }
+  return "png";
+}
+
+OutputFormat ParseOutputFormat(const std::string& name) {
+  for (OutputFormat f : {OutputFormat::kPng, OutputFormat::kJpg, OutputFormat::kMp4, OutputFormat::kTs})
+    if (name == OutputFormatName(f)) return f;
+  throw Error("synth: unknown format '" + name + "' (expected png, jpg, mp4 or ts)");
 }
 
 std::string FrameName(int index, const std::string& ext) { return fmt::format("flight-{:06d}.{}", index, ext); }
@@ -149,7 +165,7 @@ std::vector<Eigen::Vector3d> SampleSurface(const io::TexturedMesh& mesh, int n) 
 void WriteStill(const cv::Mat& image, const fs::path& path, const SynthOptions& o, const core::Camera& camera,
                 const telemetry::klv::St0601Record* record) {
   std::vector<int> params;
-  if (o.format == "jpg")
+  if (o.format == OutputFormat::kJpg)
     params = {cv::IMWRITE_JPEG_QUALITY, o.jpeg_quality};
   else
     params = {cv::IMWRITE_PNG_COMPRESSION, 3};
@@ -228,12 +244,12 @@ nlohmann::json TruthJson(const Scene& scene, const SynthOptions& o, const Flight
   j["seed"] = o.flight.seed;
   j["fps"] = o.fps;
   j["frames"] = frames;
-  j["format"] = o.format;
+  j["format"] = OutputFormatName(o.format);
   j["video"] = o.IsVideo() ? video_path.filename().string() : "";
-  j["frame_names"] =
-      std::string("flight-NNNNNN.") + (o.format == "jpg" ? "jpg" : "png") + " (6 digits, from 0 in decode order)";
+  j["frame_names"] = std::string("flight-NNNNNN.") + (o.format == OutputFormat::kJpg ? "jpg" : "png") +
+                     " (6 digits, from 0 in decode order)";
   j["camera"] = core::CameraToJson(camera);
-  j["flight"] = {{"path", o.flight.path},
+  j["flight"] = {{"path", FlightPathName(o.flight.path)},
                  {"altitude", geo.altitude},
                  {"radius", geo.radius},
                  {"look_at", {geo.look_at.x(), geo.look_at.y(), geo.look_at.z()}}};
@@ -264,7 +280,7 @@ nlohmann::json TruthJson(const Scene& scene, const SynthOptions& o, const Flight
 SynthResult RunSynth(const SynthOptions& o) {
   o.Check();
   const core::Camera camera = SynthCamera(o);
-  spdlog::info("synth: building scene '{}'", o.scene);
+  spdlog::info("synth: building scene '{}'", SceneName(o.scene));
   SceneOptions so;
   so.detail = o.detail;
   const Scene scene = MakeScene(o.scene, so);
@@ -277,7 +293,7 @@ SynthResult RunSynth(const SynthOptions& o) {
   if (!o.IsVideo()) core::EnsureDirectory(frames_dir);
   if (o.write_depth) core::EnsureDirectory(depth_dir);
   std::unique_ptr<ingest::VideoWriter> video;
-  const fs::path video_path = o.output / ("flight." + o.format);
+  const fs::path video_path = o.output / (std::string("flight.") + OutputFormatName(o.format));
   if (o.IsVideo()) {
     ingest::VideoWriterOptions vo;
     vo.fps = o.fps;
@@ -285,7 +301,8 @@ SynthResult RunSynth(const SynthOptions& o) {
     vo.klv_stream = o.klv;
     vo.gpmf_stream = o.gpmf;
     // Write to a temporary and rename at the end, so an interrupted run leaves no truncated video.
-    video = std::make_unique<ingest::VideoWriter>(o.output / ("flight.partial." + o.format), o.width, o.height, vo);
+    video = std::make_unique<ingest::VideoWriter>(
+        o.output / (std::string("flight.partial.") + OutputFormatName(o.format)), o.width, o.height, vo);
   }
 
   SynthResult result;
@@ -322,7 +339,7 @@ SynthResult RunSynth(const SynthOptions& o) {
             static_cast<int64_t>(k), static_cast<int64_t>(last - k));
       }
     } else {
-      WriteStill(frame.image, frames_dir / FrameName(static_cast<int>(k), o.format), o, camera,
+      WriteStill(frame.image, frames_dir / FrameName(static_cast<int>(k), OutputFormatName(o.format)), o, camera,
                  o.HasTelemetry() ? &result.klv[k] : nullptr);
     }
     if (o.write_depth) {
@@ -334,7 +351,8 @@ SynthResult RunSynth(const SynthOptions& o) {
     core::Image img;
     img.id = static_cast<uint32_t>(k + 1);
     img.camera_id = 1;
-    img.name = FrameName(static_cast<int>(k), o.format == "jpg" ? "jpg" : "png");  // as the files / extractor name them
+    img.name = FrameName(static_cast<int>(k),
+                         o.format == OutputFormat::kJpg ? "jpg" : "png");  // as the files / extractor name them
     img.pose = poses[k];
     AddTrueObservations(samples, camera, poses[k], frame, o, &img, &tracks, &colours);
     rec.images[img.id] = std::move(img);
@@ -346,7 +364,7 @@ SynthResult RunSynth(const SynthOptions& o) {
     result.frames = video->frames_written();
     spdlog::info("synth: encoded {} frames with {}", result.frames, video->codec_name());
     video.reset();
-    fs::rename(o.output / ("flight.partial." + o.format), video_path);
+    fs::rename(o.output / (std::string("flight.partial.") + OutputFormatName(o.format)), video_path);
   } else {
     result.frames = static_cast<int>(poses.size());
   }

@@ -38,8 +38,14 @@
 
 namespace fmv3d::synth {
 
+enum class OutputFormat { kPng, kJpg, kMp4, kTs };
+// The spelling of the command line, truth/truth.json and the files' extension: "png", "jpg", "mp4", "ts".
+const char* OutputFormatName(OutputFormat format);
+// Throws fmv3d::Error naming the accepted spellings.
+OutputFormat ParseOutputFormat(const std::string& name);
+
 struct SynthOptions {
-  std::string scene = "building";
+  SceneKind scene = SceneKind::kBuilding;
   FlightOptions flight;
   int width = 1280, height = 720;
   std::optional<double> focal;                   // pixels; default: 60° horizontal field of view
@@ -51,7 +57,7 @@ struct SynthOptions {
     r.noise_sigma = 1.5;
     return r;
   }();
-  std::string format = "png";  // png | jpg | mp4 | ts
+  OutputFormat format = OutputFormat::kPng;
   int jpeg_quality = 92;
   double fps = 10;
   double detail = 1.0;      // scene texture resolution multiplier
@@ -69,7 +75,7 @@ struct SynthOptions {
 
   void Check() const;
   nlohmann::json ToJson() const;
-  bool IsVideo() const { return format == "mp4" || format == "ts"; }
+  bool IsVideo() const { return format == OutputFormat::kMp4 || format == OutputFormat::kTs; }
   bool HasTelemetry() const { return klv || exif_gps || gpmf; }
 };
 
