@@ -167,7 +167,7 @@ void ReadElement(const ply::Element& e, ValueReader& reader, const std::string& 
   }
   // Float colours in [0, 1] are scaled to 8 bits.
   const bool unit_colour =
-      cloud.has_colors() && (e.properties[c.r].type == Type::kF32 || e.properties[c.r].type == Type::kF64);
+      is_vertex && cloud.has_colors() && (e.properties[c.r].type == Type::kF32 || e.properties[c.r].type == Type::kF64);
   auto c8 = [&](double v) {
     if (std::isnan(v)) return uint8_t{0};
     return static_cast<uint8_t>(std::clamp(unit_colour ? v * 255.0 + 0.5 : v, 0.0, 255.0));
