@@ -214,7 +214,7 @@ void ReadElement(const ply::Element& e, ValueReader& reader, const std::string& 
 ply::Header OpenPly(std::ifstream& in, const fs::path& path) {
   const std::string file = path.string();
   if (!in) throw Error(file + ": cannot open");
-  const ply::Header header = ply::ReadHeader(in, file);
+  ply::Header header = ply::ReadHeader(in, file);
   const std::streamoff data_start = in.tellg();
   in.seekg(0, std::ios::end);
   const auto data_bytes = static_cast<unsigned long long>(std::max<std::streamoff>(0, in.tellg() - data_start));
