@@ -135,7 +135,7 @@ void BM_TextureStage(benchmark::State& state) {
   for (int y = 0; y < frame.rows; ++y)
     for (int x = 0; x < frame.cols; ++x) {
       if (r.face.at<int32_t>(y, x) < 0) continue;
-      const cv::Vec3b a = r.image.at<cv::Vec3b>(y, x), b = frame.at<cv::Vec3b>(y, x);
+      const cv::Vec3b &a = r.image.at<cv::Vec3b>(y, x), &b = frame.at<cv::Vec3b>(y, x);
       for (int c = 0; c < 3; ++c) se += (a[c] - b[c]) * (a[c] - b[c]);
       n += 3;
     }
@@ -143,7 +143,7 @@ void BM_TextureStage(benchmark::State& state) {
   state.counters["views"] = report["views"].get<double>();
   state.counters["pages"] = report["atlas"]["pages"].get<double>();
   state.counters["psnr_db"] = 10 * std::log10(255.0 * 255.0 / (se / std::max<size_t>(n, 1)));
-  state.counters["covered_pct"] = 100.0 * (n / 3) / (frame.rows * frame.cols);
+  state.counters["covered_pct"] = 100.0 * static_cast<double>(n / 3) / (frame.rows * frame.cols);
 }
 BENCHMARK(BM_TextureStage)->Unit(benchmark::kSecond)->Iterations(1)->UseRealTime();
 

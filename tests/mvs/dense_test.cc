@@ -60,7 +60,7 @@ const Flight& SmallFlight() {
 }
 
 fs::path MakeWorkspace(const test::TempDir& dir, const Flight& flight) {
-  const fs::path ws = dir / "ws";
+  fs::path ws = dir / "ws";
   fs::create_directories(ws / "sparse");
   fs::copy(flight.dir / "frames", ws / "frames", fs::copy_options::recursive);
   io::WriteColmapText(flight.result.truth, ws / "sparse");

@@ -54,7 +54,8 @@ std::vector<char> SeenSamples(const io::TexturedMesh& cad, const std::vector<Eig
   ro.shading = false;
   ro.cull_backfaces = false;  // a CAD model need not be closed or consistently wound
   core::Progress progress("visibility", cameras.images.size());
-  for (const auto& [id, image] : cameras.images) {
+  for (const auto& entry : cameras.images) {
+    const core::Image& image = entry.second;  // a named reference: C++17 lambdas cannot capture a binding
     core::Camera cam = cameras.cameras.at(image.camera_id);
     const double k = std::min(1.0, double(o.max_render_size) / std::max(cam.width, 1));
     if (k < 1) {  // same field of view, fewer pixels

@@ -67,7 +67,7 @@ HeldOutResult RenderHeldOut(const fs::path& synth_dir, const fs::path& textured_
   for (int y = 0; y < frame.rows; ++y)
     for (int x = 0; x < frame.cols; ++x) {
       if (r.face.at<int32_t>(y, x) < 0) continue;
-      const cv::Vec3b p = r.image.at<cv::Vec3b>(y, x), t = frame.at<cv::Vec3b>(y, x);
+      const cv::Vec3b &p = r.image.at<cv::Vec3b>(y, x), &t = frame.at<cv::Vec3b>(y, x);
       for (int c = 0; c < 3; ++c) se += double(p[c] - t[c]) * (p[c] - t[c]);
       ++n;
     }
