@@ -114,6 +114,31 @@ TEST(FocalScan, BarrelDistortionIsDetectedAndStartsAWideLens) {
   }
 }
 
+// Pincushion (k1 +0.12 at f 700 px on 854x480, a lens that stretches its corners): found at the pinhole decision's
+// focal, with κ > 0 and k1 > 0 as the start; the pinhole decision's focal is kept.
+TEST(FocalScan, PincushionIsDetectedAtThePinholeFocal) {
+  core::Camera lens = TrueCamera();
+  lens.width = 854;
+  lens.height = 480;
+  lens.u0 = 427;
+  lens.v0 = 240;
+  lens.f = 700;
+  lens.k1 = 0.12;
+  core::Camera guess = lens;
+  guess.f = 1.2 * 854;
+  guess.k1 = 0;
+  const auto pairs = OrbitPairs({0, 0, 5}, 20, lens, 34, 14);
+  FocalScanOptions pinhole_only;
+  pinhole_only.scan_distortion = false;
+  const FocalScanResult p = ScanFocal(guess, pairs, pinhole_only);
+  const FocalScanResult r = ScanFocal(guess, pairs);
+  ASSERT_FALSE(r.scores.empty());
+  EXPECT_GT(r.division, 0);
+  EXPECT_GT(r.k1, 0.03);
+  EXPECT_DOUBLE_EQ(r.focal, p.focal);
+  EXPECT_EQ(r.plateau, p.plateau);
+}
+
 TEST(FocalScan, NoUsablePairKeepsTheGuess) {
   core::Camera guess = TrueCamera();
   guess.f = 700;

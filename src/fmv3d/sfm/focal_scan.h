@@ -24,7 +24,8 @@
 // focal and κ trade over a wide range), so the result is a start — the wide end, with the κ found as k1, k2 —
 // and neither a plateau nor a bound: bundle adjustment refines focal and distortion from the first views on, and
 // the views together determine them. On a lens without measurable distortion the extra parameter buys nothing
-// and the pinhole decision is kept as it was.
+// and the pinhole decision is kept as it was. Pincushion (κ > 0) is scored at the pinhole decision's focal, and
+// found, it only adds its k1, k2 to that decision.
 #pragma once
 
 #include <Eigen/Core>
@@ -51,8 +52,11 @@ struct FocalScanOptions {
   // The division scan for barrel distortion; skipped when the prior states a distortion.
   bool scan_distortion = true;
   double min_division = -0.5;    // most negative κ (the corner's undistorted radius 1/(1 + κ) = 2)
-  double division_step = 0.05;   // κ candidates: −step, −2·step, ... down to min_division
+  double max_division = 0.3;     // most positive κ (pincushion)
+  double division_step = 0.05;   // κ candidates: ±step, ±2·step, ... to min_division and max_division
   double distortion_gain = 0.8;  // accepted when its best score ≤ this · the pinhole's best
+  // ... and the error it removes (rms per pair) is at least this share of the half-diagonal (DistortionExplains)
+  double min_distortion_excess = 5e-4;
 };
 
 struct FocalScanResult {
@@ -65,7 +69,8 @@ struct FocalScanResult {
   // chosen focal (a start for bundle adjustment); the best scores of both models; the candidates tried.
   double division = 0, k1 = 0, k2 = 0;
   double pinhole_best = 0, division_best = 0;
-  double division_seconds = 0;                        // the division scan's share of the run time
+  double division_excess = 0;   // the error the division model removes: rms per pair / half-diagonal
+  double division_seconds = 0;  // the division scan's share of the run time
   std::vector<std::array<double, 3>> division_cells;  // (focal, κ, score)
 };
 
