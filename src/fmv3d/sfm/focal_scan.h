@@ -55,8 +55,7 @@ struct FocalScanOptions {
   double max_division = 0.3;     // most positive κ (pincushion)
   double division_step = 0.05;   // κ candidates: ±step, ±2·step, ... to min_division and max_division
   double distortion_gain = 0.8;  // accepted when its best score ≤ this · the pinhole's best
-  // ... and the error it removes (rms per pair) is at least this share of the half-diagonal (DistortionExplains)
-  double min_distortion_excess = 5e-4;
+  double min_kappa = 0.15;       // ... and its |κ| at least this (DistortionExplains)
 };
 
 struct FocalScanResult {
