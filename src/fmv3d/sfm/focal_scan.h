@@ -23,9 +23,10 @@
 // (distortion_gain), the lens is wide and distorting: two views do not decide its focal (with distortion free,
 // focal and κ trade over a wide range), so the result is a start — the wide end, with the κ found as k1, k2 —
 // and neither a plateau nor a bound: bundle adjustment refines focal and distortion from the first views on, and
-// the views together determine them. On a lens without measurable distortion the extra parameter buys nothing
-// and the pinhole decision is kept as it was. Pincushion (κ > 0) is scored at the pinhole decision's focal, and
-// found, it only adds its k1, k2 to that decision.
+// the views together determine them. On a lens without measurable distortion the extra parameter buys nothing,
+// and a mild one (best |κ| below min_kappa: it moves the corner by less than 15%) is refined by bundle adjustment from
+// the pinhole decision as before (DistortionExplains in the source says why the κ and not the score ratio decides).
+// Pincushion (κ > 0) is scored at the pinhole decision's focal and, found, only adds its k1, k2 to that decision.
 #pragma once
 
 #include <Eigen/Core>
@@ -49,7 +50,7 @@ struct FocalScanOptions {
   double flat_tolerance = 0.15;               // undetermined: every candidate within (1 + this) · best
   int ransac_iterations = 1000;
   uint64_t seed = 1;
-  // The division scan for barrel distortion; skipped when the prior states a distortion.
+  // The division scan for barrel and pincushion distortion; skipped when the prior states a distortion.
   bool scan_distortion = true;
   double min_division = -0.5;    // most negative κ (the corner's undistorted radius 1/(1 + κ) = 2)
   double max_division = 0.3;     // most positive κ (pincushion)
