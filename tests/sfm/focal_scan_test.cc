@@ -6,6 +6,7 @@
 
 #include <Eigen/Geometry>
 #include <cmath>
+#include <cstdio>
 #include <random>
 
 #include "fmv3d/core/pose.h"
@@ -106,12 +107,69 @@ TEST(FocalScan, BarrelDistortionIsDetectedAndStartsAWideLens) {
       EXPECT_LT(r.k1, -0.1);
       EXPECT_FALSE(r.plateau);
       EXPECT_LE(r.division_best, 0.8 * r.pinhole_best);
+      EXPECT_LE(r.division, -FocalScanOptions().min_kappa);
       EXPECT_LT(r.focal, guess.f);  // the wide end, where bundle adjustment starts
     } else {
       EXPECT_EQ(r.division, 0);
       EXPECT_EQ(r.k1, 0);
     }
   }
+}
+
+// A mild lens (k1 −0.08 on 960x540 at f 831 px, E2eSparse's) distorts measurably, but bends the image far less than
+// an action camera: the pinhole decision is kept, and not by the score ratio's luck (0.84 here): its best κ is the
+// mildest candidate, far below the bound.
+TEST(FocalScan, MildDistortionKeepsThePinholeDecision) {
+  core::Camera lens = TrueCamera();
+  lens.width = 960;
+  lens.height = 540;
+  lens.u0 = 480;
+  lens.v0 = 270;
+  lens.f = 831;
+  lens.k1 = -0.08;
+  core::Camera guess = lens;
+  guess.f = 1.2 * 960;
+  guess.k1 = 0;
+  const auto pairs = OrbitPairs({0, 0, 5}, 20, lens, 40, 16);
+  const FocalScanResult r = ScanFocal(guess, pairs);
+  ASSERT_FALSE(r.scores.empty());
+  double best_kappa = 0, best_score = 1e9;
+  for (const auto& c : r.division_cells)
+    if (c[2] < best_score) best_score = c[2], best_kappa = c[1];
+  std::printf("pinhole %.3f px², division %.3f px² (ratio %.3f), κ %.2f\n", r.pinhole_best, r.division_best,
+              r.division_best / r.pinhole_best, best_kappa);
+  EXPECT_EQ(r.division, 0);
+  EXPECT_EQ(r.k1, 0);
+  EXPECT_LE(std::abs(best_kappa), 0.5 * FocalScanOptions().min_kappa);
+  // The decision does not hinge on the ratio: a lenient one keeps it too.
+  FocalScanOptions lenient;
+  lenient.distortion_gain = 0.9;
+  EXPECT_EQ(ScanFocal(guess, pairs, lenient).division, 0);
+}
+
+// Pincushion (k1 +0.3 at f 500 px on 854x480, a lens that stretches its corners): found at the pinhole decision's
+// focal, with κ > 0 and k1 > 0 as the start; the pinhole decision's focal is kept.
+TEST(FocalScan, PincushionIsDetectedAtThePinholeFocal) {
+  core::Camera lens = TrueCamera();
+  lens.width = 854;
+  lens.height = 480;
+  lens.u0 = 427;
+  lens.v0 = 240;
+  lens.f = 500;
+  lens.k1 = 0.3;
+  core::Camera guess = lens;
+  guess.f = 1.2 * 854;
+  guess.k1 = 0;
+  const auto pairs = OrbitPairs({0, 0, 5}, 20, lens, 34, 14);
+  FocalScanOptions pinhole_only;
+  pinhole_only.scan_distortion = false;
+  const FocalScanResult p = ScanFocal(guess, pairs, pinhole_only);
+  const FocalScanResult r = ScanFocal(guess, pairs);
+  ASSERT_FALSE(r.scores.empty());
+  EXPECT_GT(r.division, 0);
+  EXPECT_GT(r.k1, 0.03);
+  EXPECT_DOUBLE_EQ(r.focal, p.focal);
+  EXPECT_EQ(r.plateau, p.plateau);
 }
 
 TEST(FocalScan, NoUsablePairKeepsTheGuess) {

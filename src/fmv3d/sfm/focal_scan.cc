@@ -116,28 +116,80 @@ double ScoreLens(const core::Camera& camera, double f, double kappa, const std::
   return total;
 }
 
+int NumUsablePairs(const std::vector<FocalScanPair>& pairs) {
+  return static_cast<int>(std::count_if(pairs.begin(), pairs.end(), [](const FocalScanPair& p) {
+    return p.uv1.size() >= 8 && p.uv1.size() == p.uv2.size();
+  }));
+}
+
+// Does the division model explain the pairs clearly better than any pinhole focal, with a lens that bends the image
+// like an action camera's? Two conditions. Its best score is at most distortion_gain of the pinhole's; and its κ
+// moves the corner by at least min_kappa of its radius. The score ratio alone reads the noise floor and the pairs'
+// baselines as much as the lens: a mild lens (k1 −0.08 on 960x540, E2eSparse's) scored 0.82 there and 0.84 on
+// synthetic orbit pairs, at the edge of 0.8; so does the error the division model removes (2.7e-4 and 5.3e-4 of the
+// half-diagonal, rms per pair, against 8e-4…1.1e-3 on action-camera clips). The best κ does not: −0.05 (the mildest
+// candidate) on both mild flights, −0.30…−0.50 on the action-camera clips (k1 −0.27…−0.30 on 854x480), a factor of two
+// or more on each side of the bound. A mild lens left to the pinhole decision is refined by bundle adjustment as
+// before.
+bool DistortionExplains(const core::Camera& camera, int num_pairs, double kappa, const FocalScanOptions& o,
+                        FocalScanResult* r) {
+  const double half_diagonal = 0.5 * std::hypot(camera.width, camera.height);
+  const double excess = r->pinhole_best - r->division_best;
+  r->division_excess = excess > 0 && num_pairs > 0 ? std::sqrt(excess / num_pairs) / half_diagonal : 0;
+  return r->division_best <= o.distortion_gain * r->pinhole_best && std::abs(kappa) >= o.min_kappa - 1e-9;
+}
+
+// The pinhole curve's decision: a minimum, the knee of a plateau, or a flat curve (FocalScanResult).
+void DecidePinhole(const FocalScanOptions& o, FocalScanResult* out) {
+  FocalScanResult& r = *out;
+  // Flat: every candidate explains the matches about equally well (optical axes that meet, as in an orbit around its
+  // target, or near-affine views), and the best is one candidate's luck (a lucky or failed minimal sample; at very
+  // long focals the five-point solver degenerates). Two views bound nothing: the shortest candidate is the lower
+  // bound, and the multi-view dolly-zoom scan decides from there. The flatness test reads the median of each
+  // candidate and its neighbours, so one such jump does not decide it.
+  const std::vector<double> smooth = MedianOfNeighbours(r.scores);
+  const auto [lo, hi] = std::minmax_element(smooth.begin(), smooth.end());
+  if (*hi <= (1 + o.flat_tolerance) * *lo) {
+    r.undetermined = r.plateau = true;
+    r.focal = r.focals.front();
+    return;
+  }
+  const double best = *std::min_element(r.scores.begin(), r.scores.end());
+  const double limit = (1 + o.tolerance) * best + 1e-12;
+  size_t chosen = 0;
+  while (chosen + 1 < r.scores.size() && r.scores[chosen] > limit) ++chosen;
+  r.focal = r.focals[chosen];
+  r.plateau = r.scores.back() <= limit;
+}
+
 // Barrel distortion at the wide end of the pinhole range (guess · min_factor: a field of view of ~80° for the usual
-// 1.2·width guess), κ in steps of 0.05. Returns true (and sets the decision in *r) when the division model explains
-// the matches clearly better than the pinhole scan's best. Measured on oblique action-camera clips (forward flight
-// over near-planar ground, k1 −0.27…−0.30): a joint (f, κ) grid lowers the score by a third or more at every focal
-// from 0.25x to 2x the guess, but its minimum over f is noise (κ and f trade; a one-parameter model does not fit
-// such a lens to better than a few pixels) and started bundle adjustment at 3.5x the true focal, where it
-// diverged. Two views show that the lens distorts; the views together decide its focal (ScanFocal's header).
+// 1.2·width guess), κ in steps of 0.05; pincushion (κ > 0, a lens that stretches its corners, rarer and milder) at the
+// pinhole scan's own choice, where such a lens's focal is. Returns true (and sets the decision in *r) when the
+// division model explains the matches clearly better than the pinhole scan's best (DistortionExplains). Measured on
+// oblique action-camera clips (forward flight over near-planar ground, k1 −0.27…−0.30): a joint (f, κ) grid lowers the
+// score by a third or more at every focal from 0.25x to 2x the guess, but its minimum over f is noise (κ and f trade; a
+// one-parameter model does not fit such a lens to better than a few pixels) and started bundle adjustment at 3.5x the
+// true focal, where it diverged. Two views show that the lens distorts; the views together decide its focal
+// (ScanFocal's header).
 bool ScanDivision(const core::Camera& camera, const std::vector<FocalScanPair>& pairs, const FocalScanOptions& o,
                   FocalScanResult* r) {
-  const double f = camera.f * o.min_factor;
-  std::array<double, 3> best = {f, 0, std::numeric_limits<double>::infinity()};
-  for (double kappa = -o.division_step; kappa >= o.min_division - 1e-9; kappa -= o.division_step) {
+  std::array<double, 3> best = {0, 0, std::numeric_limits<double>::infinity()};
+  auto score = [&](double f, double kappa) {
     const double s = ScoreLens(camera, f, kappa, pairs, o);
     r->division_cells.push_back({f, kappa, s});
     if (s < best[2]) best = {f, kappa, s};
-  }
+  };
+  const double wide = camera.f * o.min_factor;
+  for (double kappa = -o.division_step; kappa >= o.min_division - 1e-9; kappa -= o.division_step) score(wide, kappa);
+  for (double kappa = o.division_step; kappa <= o.max_division + 1e-9; kappa += o.division_step) score(r->focal, kappa);
   r->division_best = best[2];
-  if (!(best[2] <= o.distortion_gain * r->pinhole_best)) return false;
+  if (!DistortionExplains(camera, NumUsablePairs(pairs), best[1], o, r)) return false;
+  // A pincushion lens keeps the pinhole decision's focal and its kind (a plateau stays a lower bound); a barrel
+  // lens starts at the wide end, neither a plateau nor a bound (the header says why).
+  if (best[1] < 0) r->plateau = r->undetermined = false;
   r->focal = best[0];
   r->division = best[1];
   std::tie(r->k1, r->k2) = DivisionToBrown(best[1], best[0], 0.5 * std::hypot(camera.width, camera.height));
-  r->plateau = r->undetermined = false;
   return true;
 }
 
@@ -162,37 +214,17 @@ FocalScanResult ScanFocal(const core::Camera& camera, const std::vector<FocalSca
                           const FocalScanOptions& o) {
   FocalScanResult r;
   r.focal = camera.f;
-  bool any = false;
-  for (const auto& p : pairs) any = any || (p.uv1.size() >= 8 && p.uv1.size() == p.uv2.size());
-  if (!any) return r;
+  if (NumUsablePairs(pairs) == 0) return r;
   for (double k = o.min_factor; k <= o.max_factor * 1.0001; k *= o.step) r.focals.push_back(camera.f * k);
   r.scores.resize(r.focals.size());
   for (size_t c = 0; c < r.focals.size(); ++c) r.scores[c] = ScoreLens(camera, r.focals[c], 0, pairs, o);
   r.pinhole_best = *std::min_element(r.scores.begin(), r.scores.end());
+  DecidePinhole(o, &r);
   if (o.scan_distortion && !camera.HasDistortion()) {
     const auto start = std::chrono::steady_clock::now();
-    const bool distorted = ScanDivision(camera, pairs, o, &r);
+    ScanDivision(camera, pairs, o, &r);
     r.division_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-    if (distorted) return r;
   }
-  // Flat: every candidate explains the matches about equally well (optical axes that meet, as in an orbit around its
-  // target, or near-affine views), and the best is one candidate's luck (a lucky or failed minimal sample; at very
-  // long focals the five-point solver degenerates). Two views bound nothing: the shortest candidate is the lower
-  // bound, and the multi-view dolly-zoom scan decides from there. The flatness test reads the median of each
-  // candidate and its neighbours, so one such jump does not decide it.
-  const std::vector<double> smooth = MedianOfNeighbours(r.scores);
-  const auto [lo, hi] = std::minmax_element(smooth.begin(), smooth.end());
-  if (*hi <= (1 + o.flat_tolerance) * *lo) {
-    r.undetermined = r.plateau = true;
-    r.focal = r.focals.front();
-    return r;
-  }
-  const double best = *std::min_element(r.scores.begin(), r.scores.end());
-  const double limit = (1 + o.tolerance) * best + 1e-12;
-  size_t chosen = 0;
-  while (chosen + 1 < r.scores.size() && r.scores[chosen] > limit) ++chosen;
-  r.focal = r.focals[chosen];
-  r.plateau = r.scores.back() <= limit;
   return r;
 }
 

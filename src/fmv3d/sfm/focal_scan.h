@@ -23,8 +23,10 @@
 // (distortion_gain), the lens is wide and distorting: two views do not decide its focal (with distortion free,
 // focal and κ trade over a wide range), so the result is a start — the wide end, with the κ found as k1, k2 —
 // and neither a plateau nor a bound: bundle adjustment refines focal and distortion from the first views on, and
-// the views together determine them. On a lens without measurable distortion the extra parameter buys nothing
-// and the pinhole decision is kept as it was.
+// the views together determine them. On a lens without measurable distortion the extra parameter buys nothing,
+// and a mild one (best |κ| below min_kappa: it moves the corner by less than 15%) is refined by bundle adjustment from
+// the pinhole decision as before (DistortionExplains in the source says why the κ and not the score ratio decides).
+// Pincushion (κ > 0) is scored at the pinhole decision's focal and, found, only adds its k1, k2 to that decision.
 #pragma once
 
 #include <Eigen/Core>
@@ -48,11 +50,13 @@ struct FocalScanOptions {
   double flat_tolerance = 0.15;               // undetermined: every candidate within (1 + this) · best
   int ransac_iterations = 1000;
   uint64_t seed = 1;
-  // The division scan for barrel distortion; skipped when the prior states a distortion.
+  // The division scan for barrel and pincushion distortion; skipped when the prior states a distortion.
   bool scan_distortion = true;
   double min_division = -0.5;    // most negative κ (the corner's undistorted radius 1/(1 + κ) = 2)
-  double division_step = 0.05;   // κ candidates: −step, −2·step, ... down to min_division
+  double max_division = 0.3;     // most positive κ (pincushion)
+  double division_step = 0.05;   // κ candidates: ±step, ±2·step, ... to min_division and max_division
   double distortion_gain = 0.8;  // accepted when its best score ≤ this · the pinhole's best
+  double min_kappa = 0.15;       // ... and its |κ| at least this (DistortionExplains)
 };
 
 struct FocalScanResult {
@@ -65,7 +69,8 @@ struct FocalScanResult {
   // chosen focal (a start for bundle adjustment); the best scores of both models; the candidates tried.
   double division = 0, k1 = 0, k2 = 0;
   double pinhole_best = 0, division_best = 0;
-  double division_seconds = 0;                        // the division scan's share of the run time
+  double division_excess = 0;   // the error the division model removes: rms per pair / half-diagonal
+  double division_seconds = 0;  // the division scan's share of the run time
   std::vector<std::array<double, 3>> division_cells;  // (focal, κ, score)
 };
 

@@ -58,9 +58,10 @@ void ModelBuilder::ChooseFocal(const std::vector<InitialPairCandidate>& cands) {
   for (const auto& c : r.division_cells) cells += fmt::format(" {:.0f}/{:.3f}:{:.3f}", c[0], c[1], c[2]);
   spdlog::info(
       "focal scan on {} pairs: {:.1f} px ({:.2f} x the guess){}{} ({:.1f} s)", pairs.size(), r.focal, init_focal_scale_,
-      r.division != 0  ? fmt::format(", barrel distortion: division κ {:.3f} (k1 {:.3f}, k2 {:.3f}) explains the "
-                                      "matches at {:.3f} px² vs the pinhole's {:.3f}",
-                                     r.division, r.k1, r.k2, r.division_best, r.pinhole_best)
+      r.division != 0 ? fmt::format(", {} distortion: division κ {:.3f} (k1 {:.3f}, k2 {:.3f}) explains the matches at "
+                                    "{:.3f} px² vs the pinhole's {:.3f} (removes {:.2g} of the half-diagonal)",
+                                    r.division < 0 ? "barrel" : "pincushion", r.division, r.k1, r.k2, r.division_best,
+                                    r.pinhole_best, r.division_excess)
       : r.undetermined ? ", a flat curve: the shortest candidate as a lower bound, held until the final test"
       : r.plateau      ? ", plateau: a lower bound, held until the final test"
                        : "",
@@ -76,6 +77,7 @@ void ModelBuilder::ChooseFocal(const std::vector<InitialPairCandidate>& cands) {
                                                    : "minimum"},
                      {"pinhole_best_px2", r.pinhole_best},
                      {"division_best_px2", r.division_best},
+                     {"division_excess_of_half_diagonal", r.division_excess},
                      {"division_kappa", r.division},
                      {"initial_k1", r.k1},
                      {"initial_k2", r.k2},
