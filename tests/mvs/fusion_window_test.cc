@@ -26,8 +26,8 @@ TEST(FusionWindowSize, FollowsTheBudgetWithinItsBounds) {
   EXPECT_THROW(ChooseFusionWindow(10, 1, 0, 100), Error);
 }
 
-constexpr int kSize = 96;
-constexpr double kCameraZ = 30.0, kBoxHalf = 1.0, kBoxZ = 4.0;
+constexpr int kStripPx = 96;
+constexpr double kStripCameraZ = 30.0, kStripBoxHalf = 1.0, kStripBoxZ = 4.0;
 
 // Nadir cameras along a strip (1 m apart, a pixel ~0.25 m on the ground) over the ground with a box on it, each
 // map with depth noise and a texture map that varies over the ground: occluding edges to erode, a texture floor
@@ -36,23 +36,23 @@ FusionView StripView(uint32_t id, const std::vector<uint32_t>& neighbours) {
   ViewGeometry g;
   g.image_id = id;
   g.name = "s" + std::to_string(id);
-  g.width = g.height = kSize;
-  g.K << 120, 0, kSize / 2.0, 0, 120, kSize / 2.0, 0, 0, 1;
+  g.width = g.height = kStripPx;
+  g.K << 120, 0, kStripPx / 2.0, 0, 120, kStripPx / 2.0, 0, 0, 1;
   g.R = Eigen::Vector3d(1, -1, -1).asDiagonal();
-  g.t = -g.R * Eigen::Vector3d(1.0 * id, 0, kCameraZ);
+  g.t = -g.R * Eigen::Vector3d(1.0 * id, 0, kStripCameraZ);
   std::mt19937 rng(id);
   std::normal_distribution<double> gauss(0, 1);
   DepthMap map;
-  map.depth.create(kSize, kSize, CV_32F);
-  map.normal.create(kSize, kSize, CV_32FC3);
-  map.cost = cv::Mat::zeros(kSize, kSize, CV_32F);
-  cv::Mat texture(kSize, kSize, CV_32F), color(kSize, kSize, CV_8UC3);
+  map.depth.create(kStripPx, kStripPx, CV_32F);
+  map.normal.create(kStripPx, kStripPx, CV_32FC3);
+  map.cost = cv::Mat::zeros(kStripPx, kStripPx, CV_32F);
+  cv::Mat texture(kStripPx, kStripPx, CV_32F), color(kStripPx, kStripPx, CV_8UC3);
   const Eigen::Vector3d c = g.Centre(), n = g.R * Eigen::Vector3d::UnitZ();
-  for (int y = 0; y < kSize; ++y)
-    for (int x = 0; x < kSize; ++x) {
+  for (int y = 0; y < kStripPx; ++y)
+    for (int x = 0; x < kStripPx; ++x) {
       const Eigen::Vector3d ray = g.R.transpose() * g.K.inverse() * Eigen::Vector3d(x + 0.5, y + 0.5, 1);
-      Eigen::Vector3d X = c + ray * (kBoxZ - c.z()) / ray.z();
-      if (std::abs(X.x() - 5) > kBoxHalf || std::abs(X.y()) > kBoxHalf) X = c + ray * (-c.z() / ray.z());
+      Eigen::Vector3d X = c + ray * (kStripBoxZ - c.z()) / ray.z();
+      if (std::abs(X.x() - 5) > kStripBoxHalf || std::abs(X.y()) > kStripBoxHalf) X = c + ray * (-c.z() / ray.z());
       const double z = (g.R * X + g.t).z();
       map.depth.at<float>(y, x) = static_cast<float>(z + 2e-5 * z * z * gauss(rng));
       map.normal.at<cv::Vec3f>(y, x) = cv::Vec3f(n.x(), n.y(), n.z());
