@@ -66,8 +66,8 @@ web/node_modules/.package-lock.json: web/package-lock.json
 
 # The tests of the multithreaded stages (PatchMatch and fusion, matching, bundle adjustment) under ThreadSanitizer,
 # on a runtime that lets it see the thread pools' synchronisation (scripts/tsan-runtime.sh: oneTBB built with
-# -fsanitize=thread, LLVM's libomp + Archer for Ceres's OpenMP). Every report is listed, then the run fails;
-# tests/tsan.supp holds the suppressions of third-party code, each with its reason.
+# -fsanitize=thread; LLVM's libomp + Archer for the OpenMP of SuiteSparse and Open3D). Every report is listed,
+# then the run fails; tests/tsan.supp holds the suppressions of third-party code, each with its reason.
 TSAN_RUNTIME ?= $(TSAN_BUILD)/runtime
 $(TSAN_BUILD)/build.ninja: | deps
 	cmake -S . -B $(TSAN_BUILD) -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo -DCMAKE_CXX_FLAGS_RELWITHDEBINFO="-O1 -g1 -DNDEBUG" \

@@ -6,8 +6,8 @@
 #   oneTBB release as Debian's (its source package, fetched with apt-get source from a private list, so the
 #   system's apt configuration is untouched) is built with -fsanitize=thread; its libtbb.so.12 replaces the
 #   system one for the whole process (OpenCV's parallel loops included) via LD_LIBRARY_PATH.
-# - OpenMP (Ceres's parallel evaluation of the bundle adjustment's residuals): GCC's libgomp synchronises with
-#   futexes TSan does not see. LLVM's libomp implements libgomp's ABI and, with its Archer tool
+# - OpenMP (libgomp, loaded with Ceres's sparse solvers (SuiteSparse) and with Open3D; Ceres 2.1 itself uses C++
+#   threads, whose mutexes TSan sees): GCC's libgomp synchronises with futexes TSan does not see. LLVM's libomp implements libgomp's ABI and, with its Archer tool
 #   (OMP_TOOL_LIBRARIES), tells TSan about every barrier and task; a libgomp.so.1 link to it in DIR stands in.
 #   The Debian packages libomp5-14 and libomp-14-dev provide both.
 set -euo pipefail
