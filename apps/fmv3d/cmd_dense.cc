@@ -54,6 +54,10 @@ void Add(CLI::App& app) {
                   "cloud's median (0: off)")
       ->capture_default_str();
   cmd->add_option("--seed", o.patch_match.seed, "Random seed")->capture_default_str();
+  cmd->add_option("--max-memory", o.max_memory_mb,
+                  "MB for the views held at once (the undistorted-view cache and fusion's window of depth maps); "
+                  "beyond it fusion drops the least recently used map and reads it again when needed")
+      ->capture_default_str();
   cmd->add_flag("--no-geometric", a->no_geometric, "Skip the geometric-consistency pass (faster, noisier)");
   cmd->add_flag("--no-coarse", a->no_coarse, "No half-resolution first pass");
   cmd->add_flag("--no-visibility-filter", a->no_visibility, "Keep points that other views see through");

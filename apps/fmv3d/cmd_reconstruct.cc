@@ -18,6 +18,7 @@ void Add(CLI::App& app) {
     std::string ws, camera_file, sensor, pairs = "auto", progress_json;
     pipeline::ReconstructOptions opt;
     bool no_report = false, fast = false;
+    double max_memory_mb = 2048;
   };
   auto a = std::make_shared<Args>();
   cmd->add_option("INPUT", a->inputs, "Image files, image folders, videos (any mix)")->required();
@@ -33,6 +34,10 @@ void Add(CLI::App& app) {
                 "Video-speed preset: 5000 features, 5 sequential neighbours, dense at 480 px with depth maps and "
                 "texture for a covering subset of the frames, Poisson one level coarser (a 60 s 960x540 clip: "
                 "~8x faster end to end; bench/RESULTS.md has its accuracy)");
+  cmd->add_option("--max-memory", a->max_memory_mb,
+                  "MB for the working set of the stages that choose a window: matching's descriptors, dense's "
+                  "views and fusion maps (the other stages' peaks: bench/RESULTS.md)")
+      ->capture_default_str();
   cmd->add_flag("--no-report", a->no_report, "Skip report/report.html and its pictures");
   cmd->add_option(
       "--progress-json", a->progress_json,
@@ -46,6 +51,7 @@ void Add(CLI::App& app) {
     o.match.pairs.mode = features::ParsePairMode(a->pairs);
     o.report = !a->no_report;
     if (a->fast) o.ApplyFastPreset();
+    o.SetMaxMemory(a->max_memory_mb);
     if (!a->progress_json.empty()) core::OpenProgressLog(a->progress_json);
     const auto report = pipeline::RunReconstruct(o);
     std::printf("reconstruction in %s\n", a->ws.c_str());

@@ -2,6 +2,7 @@
 
 #include <spdlog/spdlog.h>
 
+#include <algorithm>
 #include <chrono>
 #include <set>
 
@@ -9,6 +10,7 @@
 #include "fmv3d/core/files.h"
 #include "fmv3d/core/logging.h"
 #include "fmv3d/io/colmap_model.h"
+#include "fmv3d/mvs/fusion_window.h"
 
 namespace fmv3d::mvs {
 
@@ -19,6 +21,7 @@ void DenseStageOptions::Check() const {
   if (max_size > 0 && max_size < 64) throw Error("dense: --max-size below 64 pixels leaves nothing to match");
   if (max_sources < 1 || max_sources > 16) throw Error("dense: --max-sources must be in [1, 16]");
   if (cache_views < 1) throw Error("dense: cache_views must be at least 1");
+  if (!(max_memory_mb > 0)) throw Error("dense: --max-memory must be > 0 MB");
   if (references.coverage < 0) throw Error("dense: --reference-coverage must be >= 0 (0 = every view)");
   if (!(references.demand_fraction > 0 && references.demand_fraction <= 1))
     throw Error("dense: the reference cover's demand fraction must be in (0, 1]");
@@ -166,40 +169,66 @@ class DenseRunner {
 
   struct Fused {
     size_t points = 0, valid_pixels = 0, total_pixels = 0;
+    size_t window = 0, loads = 0, peak_resident = 0;  // the fusion window's capacity, map loads, most views held
     FusionStats stats;
   };
-  // Fuses the depth maps straight into `ply` (previews written while the maps are read). The cloud is never held
-  // in memory: it would be the largest part of the stage's memory otherwise.
+  // Fuses the depth maps straight into `ply` (previews written while the maps are first read). Neither the cloud
+  // nor every map is held: the maps stream through a window sized to the memory budget (fusion_window.h).
   Fused Fuse(const fs::path& ply) {
     Fused out;
-    std::map<uint32_t, FusionView> fviews;
     std::map<uint32_t, std::set<uint32_t>> links;
     for (uint32_t id : plan_.references)
       for (const auto& nb : plan_.fusion_selection().at(id).neighbours) {
         links[id].insert(nb.image_id);
         links[nb.image_id].insert(id);  // symmetric: a view checks every view that chose it too
       }
-    core::Progress progress("dense: loading maps for fusion", plan_.references.size());
-    for (uint32_t id : plan_.references) {
+    std::vector<uint32_t> ids = plan_.references;
+    std::sort(ids.begin(), ids.end());
+    core::Progress progress("dense: loading maps for fusion", ids.size());
+    std::set<uint32_t> seen;
+    auto load = [&](uint32_t id) {
       const DepthMap map = ReadDepthMap(MapPath(id, ".dmap"));
-      if (options_.previews && !options_.fuse_only)
-        WriteDepthPreview(map, MapPath(id, ".depth.png"), MapPath(id, ".normal.png"));
-      out.valid_pixels += static_cast<size_t>(map.CountValid());
-      out.total_pixels += map.depth.total();
+      if (seen.insert(id).second) {  // once per view, however often the window reloads it
+        if (options_.previews && !options_.fuse_only)
+          WriteDepthPreview(map, MapPath(id, ".depth.png"), MapPath(id, ".normal.png"));
+        out.valid_pixels += static_cast<size_t>(map.CountValid());
+        out.total_pixels += map.depth.total();
+        progress.Add();
+      }
       const auto view = cache_.Get(id);
       FusionView fv = MakeFusionView(plan_.geoms.at(id), map, view->color,
                                      std::vector<uint32_t>(links[id].begin(), links[id].end()));
       if (options_.fusion.max_relative_uncertainty > 0)
         fv.texture = TexturePrecisionMap(view->color, options_.patch_match.window_radius);
-      fviews.emplace(id, std::move(fv));
-      progress.Add();
-    }
+      return fv;
+    };
+    FusionWindow window(ids, load, FusionWindowFor(ids, links), options_.fusion);
+    out.points = FuseDepthMapsToPly(window, options_.fusion, ply, &out.stats);
     progress.Finish();
-    out.points = FuseDepthMapsToPly(std::move(fviews), options_.fusion, ply, &out.stats);
+    out.window = window.capacity();
+    out.loads = window.loads();
+    out.peak_resident = window.peak_resident();
     return out;
   }
 
  private:
+  // The fusion window's capacity under the memory budget, less what the undistorted-view cache holds; never
+  // below a reference with all its neighbours.
+  size_t FusionWindowFor(const std::vector<uint32_t>& ids, const std::map<uint32_t, std::set<uint32_t>>& links) const {
+    size_t min_views = 1;
+    for (uint32_t id : ids) {
+      size_t n = 1;
+      if (auto it = links.find(id); it != links.end())
+        for (uint32_t j : it->second) n += std::binary_search(ids.begin(), ids.end(), j) && j != id;
+      min_views = std::max(min_views, n);
+    }
+    const auto& g = plan_.geoms.at(ids.front());
+    const double pixels = static_cast<double>(g.width) * g.height;
+    const double cache_mb = static_cast<double>(cache_.capacity()) * pixels * kViewBytesPerPixel / 1048576.0;
+    const double budget_mb = std::max(options_.max_memory_mb - cache_mb, 1.0);
+    return ChooseFusionWindow(ids.size(), min_views, pixels * kFusionBytesPerPixel, budget_mb);
+  }
+
   std::vector<uint32_t> SourcesOf(uint32_t id) const {
     std::vector<uint32_t> s;
     for (const auto& nb : plan_.selection.at(id).neighbours) {
@@ -270,6 +299,11 @@ nlohmann::json DenseReport(const core::Reconstruction& rec, const ViewPlan& plan
         {"geometric_per_view", options.geometric ? t.geometric_pm / n_refs : 0.0},
         {"fusion", t.fusion},
         {"total", total_seconds}}},
+      {"memory",
+       {{"max_memory_mb", options.max_memory_mb},
+        {"fusion_window_views", fused.window},
+        {"fusion_map_loads", fused.loads},
+        {"fusion_peak_views", fused.peak_resident}}},
       {"output", ply.string()}};
 }
 

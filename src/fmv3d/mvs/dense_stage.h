@@ -29,6 +29,10 @@ struct DenseStageOptions {
   bool previews = true;           // write the PNG previews of every map
   bool keep_photometric = false;  // keep the photometric-pass maps (<name>.photometric.dmap)
   int cache_views = 16;           // undistorted views kept in memory
+  // Memory for the views held at once: the undistorted-view cache (cache_views) and fusion's window of maps
+  // (fusion_window.h) get this between them; fusion then holds as many maps as fit (at least a reference with its
+  // neighbours), so the number of frames does not set the stage's memory.
+  double max_memory_mb = 2048;
   // Depth maps only for a subset of views that sees every sparse point reference_coverage times
   // (SelectReferenceViews); the others are stereo sources only.
   ReferenceCoverOptions references;  // .coverage 0 = a map for every view

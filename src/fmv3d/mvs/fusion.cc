@@ -12,6 +12,7 @@
 
 #include "fmv3d/core/error.h"
 #include "fmv3d/core/files.h"
+#include "fmv3d/mvs/fusion_window.h"
 
 namespace fmv3d::mvs {
 
@@ -143,16 +144,6 @@ Eigen::Vector3f NormalAt(const FusionView& v, int x, int y) {
 
 namespace {
 
-// Removes the foreground side of every map's occluding edges (in place).
-void ErodeOccludingEdges(std::map<uint32_t, FusionView>* views, const FusionOptions& opt, FusionStats* st) {
-  if (opt.edge_erosion_px <= 0) return;
-  for (auto& [id, v] : *views) {
-    const cv::Mat mask = OccludingEdgeMask(v.depth, opt.edge_erosion_px, opt.edge_depth_jump);
-    st->edge_pixels += static_cast<size_t>(cv::countNonZero(mask));
-    v.depth.setTo(0, mask);
-  }
-}
-
 // One fused point as it is emitted.
 struct FusedPoint {
   Eigen::Vector3d position;
@@ -166,48 +157,31 @@ struct FusedPoint {
   float scatter = -1;       // RMS spread of the consistent views' points along the normal (-1: fewer than 2)
 };
 
-// The matching floor of the pixel precision p (see fusion.h): the given quantile of p over the pixels with a
-// depth, every 4th row and column of every view with a texture map; 0 when there is none.
-double TexturePrecisionFloor(const std::map<uint32_t, FusionView>& maps, double quantile) {
-  if (!(quantile > 0)) return 0;
-  std::vector<float> p;
-  for (const auto& [id, v] : maps) {
-    if (v.texture.empty()) continue;
-    for (int y = 0; y < v.depth.rows; y += 4)
-      for (int x = 0; x < v.depth.cols; x += 4)
-        if (v.depth.at<float>(y, x) > 0) p.push_back(static_cast<float>(v.texture.at<cv::float16_t>(y, x)));
-  }
-  if (p.empty()) return 0;
-  const size_t k = std::min(p.size() - 1, static_cast<size_t>(quantile * static_cast<double>(p.size())));
-  std::nth_element(p.begin(), p.begin() + static_cast<std::ptrdiff_t>(k), p.end());
-  return p[k];
-}
-
-// The fusion proper over (eroded) maps; every accepted point goes to emit(FusedPoint&&).
-void FuseMaps(const std::map<uint32_t, FusionView>& maps, const FusionOptions& opt, FusionStats* st,
+// The fusion proper over the window's (eroded, surveyed) views, references in id order; every accepted point
+// goes to emit(FusedPoint&&). `p_floor`: the matching floor of the pixel precision p (fusion.h), 0 for none.
+void FuseMaps(FusionWindow& window, const FusionOptions& opt, double p_floor, FusionStats* st,
               const std::function<void(FusedPoint&&)>& emit) {
-  std::map<uint32_t, cv::Mat> used;
-  for (const auto& [id, v] : maps) used[id] = cv::Mat::zeros(v.depth.size(), CV_8U);
   const float cos_max = static_cast<float>(std::cos(opt.max_normal_error_deg * M_PI / 180));
   const double max_reproj2 = opt.max_reproj_error_px * opt.max_reproj_error_px;
   struct Hit {
     const FusionView* view;
+    cv::Mat* used;
     int x, y;
     bool fresh;
   };
   std::vector<Hit> hits;
   const bool uncertainty = opt.max_relative_uncertainty > 0 || opt.write_sigma;
-  const double p_floor = uncertainty ? TexturePrecisionFloor(maps, opt.texture_floor_quantile) : 0;
   st->texture_floor = p_floor;
   std::vector<const ViewGeometry*> hit_views;
   std::vector<double> hit_px;
-  for (const auto& [rid, ref] : maps) {
-    std::vector<const FusionView*> nbs;
-    for (uint32_t j : ref.neighbours) {
-      auto it = maps.find(j);
-      if (it != maps.end() && j != rid) nbs.push_back(&it->second);
-    }
-    cv::Mat& ref_used = used[rid];
+  for (uint32_t rid : window.ids()) {
+    // The reference and its neighbours are held (pinned in the window) while the reference is fused.
+    const std::shared_ptr<FusionWindow::Slot> ref_slot = window.Get(rid);
+    const FusionView& ref = ref_slot->view;
+    std::vector<std::shared_ptr<FusionWindow::Slot>> nbs;
+    for (uint32_t j : ref.neighbours)
+      if (j != rid && window.Contains(j)) nbs.push_back(window.Get(j));
+    cv::Mat& ref_used = ref_slot->used;
     for (int y = 0; y < ref.depth.rows; ++y) {
       for (int x = 0; x < ref.depth.cols; ++x) {
         const float d = ref.depth.at<float>(y, x);
@@ -216,9 +190,10 @@ void FuseMaps(const std::map<uint32_t, FusionView>& maps, const FusionOptions& o
         const Eigen::Vector3d X = ref.geom.Unproject({x + 0.5, y + 0.5}, d);
         const Eigen::Vector3f n_ref = NormalAt(ref, x, y);
         hits.clear();
-        hits.push_back({&ref, x, y, true});
+        hits.push_back({&ref, &ref_used, x, y, true});
         int conflicts = 0;
-        for (const FusionView* nb : nbs) {
+        for (const auto& nb_slot : nbs) {
+          const FusionView* nb = &nb_slot->view;
           Eigen::Vector2d uv;
           double z;
           if (!nb->geom.Project(X, &uv, &z)) continue;
@@ -234,7 +209,7 @@ void FuseMaps(const std::map<uint32_t, FusionView>& maps, const FusionOptions& o
                 (back - Eigen::Vector2d(x + 0.5, y + 0.5)).squaredNorm() > max_reproj2)
               continue;
             if (NormalAt(*nb, u, v).dot(n_ref) >= cos_max)
-              hits.push_back({nb, u, v, used[nb->geom.image_id].at<uint8_t>(v, u) == 0});
+              hits.push_back({nb, &nb_slot->used, u, v, nb_slot->used.at<uint8_t>(v, u) == 0});
           } else if (rel > opt.visibility_margin) {
             ++conflicts;
           }
@@ -260,7 +235,7 @@ void FuseMaps(const std::map<uint32_t, FusionView>& maps, const FusionOptions& o
           nrm += NormalAt(*h.view, h.x, h.y);
           const cv::Vec3b c = h.view->color.at<cv::Vec3b>(h.y, h.x);
           col += Eigen::Vector3f(c[2], c[1], c[0]);
-          used[h.view->geom.image_id].at<uint8_t>(h.y, h.x) = 1;
+          h.used->at<uint8_t>(h.y, h.x) = 1;
           ++fresh;
         }
         pos /= fresh;
@@ -346,22 +321,24 @@ io::OrientedPointCloud FuseDepthMaps(const std::map<uint32_t, FusionView>& views
                                      FusionStats* stats) {
   opt.Check();
   FusionStats st;
-  // Depths with the occluding edges' foreground side removed (a copy of the depths only when eroding).
-  std::map<uint32_t, FusionView> eroded;
-  const std::map<uint32_t, FusionView>* maps = &views;
-  if (opt.edge_erosion_px > 0) {
-    for (const auto& [id, v] : views) {
-      FusionView e = v;
-      e.depth = v.depth.clone();
-      eroded.emplace(id, std::move(e));
-    }
-    ErodeOccludingEdges(&eroded, opt, &st);
-    maps = &eroded;
-  }
+  // Every view at once (nothing evicted), each with a copy of its depths: the erosion works in place.
+  std::vector<uint32_t> ids;
+  for (const auto& [id, v] : views) ids.push_back(id);
+  FusionWindow window(
+      ids,
+      [&views](uint32_t id) {
+        FusionView v = views.at(id);
+        v.depth = v.depth.clone();
+        return v;
+      },
+      ids.size(), opt);
+  const bool uncertainty = opt.max_relative_uncertainty > 0 || opt.write_sigma;
+  window.Survey(&st, uncertainty && opt.texture_floor_quantile > 0);
+  const double p_floor = uncertainty ? window.TextureQuantile(opt.texture_floor_quantile) : 0;
   io::OrientedPointCloud cloud;
   std::vector<int> support_of;
   std::vector<float> sigma_of, stated_of, scatter_of, footprint_of;
-  FuseMaps(*maps, opt, &st, [&](FusedPoint&& p) {
+  FuseMaps(window, opt, p_floor, &st, [&](FusedPoint&& p) {
     cloud.positions.push_back(p.position);
     cloud.normals.push_back(p.normal);
     cloud.colors.push_back(p.color);
@@ -406,9 +383,21 @@ io::OrientedPointCloud FuseDepthMaps(const std::map<uint32_t, FusionView>& views
 
 size_t FuseDepthMapsToPly(std::map<uint32_t, FusionView> views, const FusionOptions& opt,
                           const std::filesystem::path& ply, FusionStats* stats) {
+  std::vector<uint32_t> ids;
+  for (const auto& [id, v] : views) ids.push_back(id);
+  // Every view at once: each is moved into the window once and never reloaded.
+  FusionWindow window(
+      ids, [&views](uint32_t id) { return std::move(views.at(id)); }, ids.size(), opt);
+  return FuseDepthMapsToPly(window, opt, ply, stats);
+}
+
+size_t FuseDepthMapsToPly(FusionWindow& window, const FusionOptions& opt, const std::filesystem::path& ply,
+                          FusionStats* stats) {
   opt.Check();
   FusionStats st;
-  ErodeOccludingEdges(&views, opt, &st);
+  const bool uncertainty = opt.max_relative_uncertainty > 0 || opt.write_sigma;
+  window.Survey(&st, uncertainty && opt.texture_floor_quantile > 0);
+  const double p_floor = uncertainty ? window.TextureQuantile(opt.texture_floor_quantile) : 0;
   // Pass 1: every point's PLY record (float x y z, nx ny nz, uchar r g b, uchar n, n × int32 image id) to a
   // scratch file; only σ_n and the view count stay in memory.
   // A fixed name: a run killed here leaves it, and the resumed run overwrites and then removes it. Removed on
@@ -427,7 +416,7 @@ size_t FuseDepthMapsToPly(std::map<uint32_t, FusionView> views, const FusionOpti
     std::ofstream out(scratch, std::ios::binary);
     if (!out) throw Error(scratch.string() + ": cannot write");
     std::string rec;
-    FuseMaps(views, opt, &st, [&](FusedPoint&& p) {
+    FuseMaps(window, opt, p_floor, &st, [&](FusedPoint&& p) {
       rec.clear();
       auto put = [&](const void* d, size_t n) { rec.append(static_cast<const char*>(d), n); };
       const float xyz[3] = {static_cast<float>(p.position.x()), static_cast<float>(p.position.y()),
@@ -451,7 +440,7 @@ size_t FuseDepthMapsToPly(std::map<uint32_t, FusionView> views, const FusionOpti
     out.flush();
     if (!out) throw Error(scratch.string() + ": write failed (" + std::strerror(errno) + ")");
   }
-  views.clear();
+  window.Release();
   const std::vector<float> relative = RelativeSigmas(sigma_of, footprint_of);
   footprint_of = {};
   SetUncertaintyThreshold(relative, opt, &st);

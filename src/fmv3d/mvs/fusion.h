@@ -82,7 +82,8 @@ struct FusionOptions {
   void Check() const;
 };
 
-// One view's map in compact form (fusion holds all of them: ~13 bytes per pixel with the texture map).
+// One view's map in compact form (~13 bytes per pixel with the texture map and the used mask; fusion holds a
+// bounded window of them, fusion_window.h).
 struct FusionView {
   ViewGeometry geom;
   cv::Mat depth;                     // CV_32F, 0 = none
@@ -131,5 +132,11 @@ io::OrientedPointCloud FuseDepthMaps(const std::map<uint32_t, FusionView>& views
 // maps are eroded in place (pass them with std::move). Returns the number of points written.
 size_t FuseDepthMapsToPly(std::map<uint32_t, FusionView> views, const FusionOptions& options,
                           const std::filesystem::path& ply, FusionStats* stats = nullptr);
+
+// The same from views loaded on demand into a bounded window (fusion_window.h): the same points, in the same
+// order, whatever the window's capacity. The window's views are released before the PLY is assembled.
+class FusionWindow;
+size_t FuseDepthMapsToPly(FusionWindow& window, const FusionOptions& options, const std::filesystem::path& ply,
+                          FusionStats* stats = nullptr);
 
 }  // namespace fmv3d::mvs

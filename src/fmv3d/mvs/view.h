@@ -33,6 +33,9 @@ struct ViewGeometry {
   Eigen::Vector3d Unproject(const Eigen::Vector2d& uv, double z) const;
 };
 
+// Bytes a loaded View holds per pixel: grey (float) and colour (3 × uint8).
+constexpr double kViewBytesPerPixel = 7;
+
 struct View {
   ViewGeometry geom;
   cv::Mat gray;   // CV_32F in [0, 1]
@@ -57,6 +60,7 @@ class ViewCache {
   const ViewGeometry& Geometry(uint32_t image_id) const { return geoms_.at(image_id); }
   const std::map<uint32_t, ViewGeometry>& geometries() const { return geoms_; }
   double load_seconds() const { return load_seconds_; }
+  size_t capacity() const { return capacity_; }
 
  private:
   const core::Reconstruction& rec_;

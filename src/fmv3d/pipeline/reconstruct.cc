@@ -47,6 +47,12 @@ void ReconstructOptions::ApplyFastPreset() {
   texture.view_coverage = 8;
 }
 
+void ReconstructOptions::SetMaxMemory(double mb) {
+  if (!(mb > 0)) throw Error("reconstruct: --max-memory must be > 0 MB");
+  match.max_memory_mb = mb;
+  dense.max_memory_mb = mb;
+}
+
 std::vector<Stage> ReconstructStages(const ReconstructOptions& o) {
   const core::Workspace ws(o.workspace);
   const fs::path& root = ws.root();
@@ -165,6 +171,7 @@ nlohmann::json RunReconstruct(const ReconstructOptions& o, std::vector<StageResu
                         {"max_frames", o.frames.max_frames},
                         {"sift_max_features", o.sift.max_features},
                         {"fast", o.fast},
+                        {"max_memory_mb", o.dense.max_memory_mb},
                         {"from", o.runner.from},
                         {"until", o.runner.until}};
   core::WriteJson(ws.project_json(), project);
