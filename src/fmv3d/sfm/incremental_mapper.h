@@ -34,6 +34,9 @@ struct MapperImage {
   std::string name;
   std::vector<Eigen::Vector2d> keypoints;            // pixels, fmv3d convention
   std::vector<Eigen::Matrix<uint8_t, 3, 1>> colors;  // optional, same size as keypoints
+  // Optional, one row per keypoint: the final polish completes tracks by projection with them
+  // (guided_completion.h). Must outlive the mapper run.
+  const features::Descriptors* descriptors = nullptr;
 };
 
 struct MapperCamera {
@@ -72,6 +75,11 @@ struct MapperOptions {
   double tri_min_angle_deg = 1.5;
   double tri_max_error_px = 4;
   bool tri_ignore_two_view_tracks = true;  // TriangulatorOptions::ignore_two_view_tracks
+  // Before the final adjustment, each point's track gains the keypoints of co-visible images that lie within
+  // tri_max_error_px of its projection and whose descriptors look like the track's (guided_completion.h); needs
+  // MapperImage::descriptors. The descriptor bound is this quantile of the tracks' own members' distances.
+  bool guided_completion = true;
+  double guided_completion_member_quantile = 0.9;
   double filter_max_error_px = 4;
   double filter_min_angle_deg = 1.5;
   // Bundle adjustment.
