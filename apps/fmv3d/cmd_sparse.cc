@@ -42,8 +42,9 @@ void Add(CLI::App& app) {
   cmd->add_flag("!--no-guided-completion", m.guided_completion,
                 "Skip completing the tracks by projection (keypoints near a point's projection whose descriptors "
                 "look like its track's) before the final adjustment");
-  cmd->add_option("--guided-quantile", m.guided_completion_member_quantile,
-                  "Guided completion: descriptor bound as this quantile of the tracks' own member distances")
+  cmd->add_option("--guided-false-accept", m.guided_completion_false_accept_rate,
+                  "Guided completion: share of decoy searches (a keypoint there by chance) the descriptor bound lets "
+                  "through")
       ->check(CLI::Range(0.0, 1.0))
       ->capture_default_str();
   cmd->add_flag("--tangential", m.refine_tangential, "Also refine p1, p2");

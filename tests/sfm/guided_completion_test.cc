@@ -69,8 +69,9 @@ struct Scene {
     for (int c = 0; c < 128; ++c) d[c] = desc.at(t.image_id)(t.point2d_idx, c);
     return d;
   }
+  // A descriptor unlike any point's (values the points' descriptors never take).
   std::array<uint8_t, 128> Unrelated() {
-    std::uniform_int_distribution<int> value(0, 60);
+    std::uniform_int_distribution<int> value(120, 200);
     std::array<uint8_t, 128> d;
     for (auto& v : d) v = static_cast<uint8_t>(value(rng));
     return d;
@@ -98,14 +99,30 @@ struct Scene {
   }
 };
 
+// Keypoints of chance in images 3 and 4, every 5 px outside the part of the image the points project into:
+// where the decoy searches (half an image away from each projection) look. Their descriptors are drawn like the
+// points' own, so the bound is measured against keypoints as alike as any chance keypoint can be.
+void AddChanceKeypoints(Scene* s) {
+  for (uint32_t id : {3u, 4u})
+    for (int y = 2; y < 800; y += 5)
+      for (int x = 2; x < 1000; x += 5)
+        if (x < 250 || x > 750 || y < 150 || y > 650) {
+          std::array<uint8_t, 128> d;
+          std::uniform_int_distribution<int> value(0, 60);
+          for (auto& v : d) v = static_cast<uint8_t>(value(s->rng));
+          s->AddKeypoint(id, Eigen::Vector2d(x, y), d);
+        }
+}
+
 GuidedCompletionOptions SmallSceneOptions() {
   GuidedCompletionOptions o;
-  o.min_members_for_bound = 2 * kPoints;  // the 120 observations of images 1 and 2
+  o.min_decoys_for_bound = 50;
   return o;
 }
 
 TEST(GuidedCompletion, KeypointsNearTheProjectionThatLookLikeTheTrackJoinIt) {
   Scene s;
+  AddChanceKeypoints(&s);
   std::vector<uint32_t> true_kp3(kPoints);
   std::vector<int64_t> expect4(kPoints, -1);  // the keypoint of image 4 point k should gain, or -1
   std::mt19937 rng(3);
@@ -173,6 +190,7 @@ TEST(GuidedCompletion, KeypointsNearTheProjectionThatLookLikeTheTrackJoinIt) {
 
 TEST(GuidedCompletion, OnlyCovisibleImagesAreSearched) {
   Scene s;
+  AddChanceKeypoints(&s);
   for (int k = 0; k < kPoints; ++k) {
     s.AddKeypoint(3, s.Projection(3, k), s.Member(k));
     s.AddKeypoint(4, s.Projection(4, k), s.Member(k));
@@ -187,13 +205,14 @@ TEST(GuidedCompletion, OnlyCovisibleImagesAreSearched) {
   }
 }
 
-TEST(GuidedCompletion, TooFewMembersToMeasureTheBoundAddsNothing) {
+TEST(GuidedCompletion, TooFewDecoysToMeasureTheBoundAddsNothing) {
   Scene s;
   for (int k = 0; k < kPoints; ++k) s.AddKeypoint(3, s.Projection(3, k), s.Member(k));
   GuidedCompletionOptions o;
-  o.min_members_for_bound = 2 * kPoints + 1;
+  o.min_decoys_for_bound = 1000;
   const GuidedCompletionStats st = CompleteTracksByProjection(&s.rec, s.Descriptors(), Scene::AllCovisible(), o);
   EXPECT_EQ(st.accepted, 0u);
+  EXPECT_LT(st.decoys, 1000u);
   EXPECT_EQ(st.member_distances, static_cast<size_t>(2 * kPoints));
   for (const auto& [pid, p] : s.rec.points) EXPECT_EQ(p.track.size(), 2u);
 }

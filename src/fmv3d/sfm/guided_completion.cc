@@ -12,9 +12,9 @@ namespace fmv3d::sfm {
 
 void GuidedCompletionOptions::Check() const {
   if (!(max_error_px > 0)) throw Error("guided completion: max_error_px must be > 0");
-  if (!(member_quantile > 0 && member_quantile <= 1))
-    throw Error("guided completion: member_quantile must be in (0, 1]");
-  if (min_members_for_bound < 1) throw Error("guided completion: min_members_for_bound must be ≥ 1");
+  if (!(false_accept_rate > 0 && false_accept_rate < 1))
+    throw Error("guided completion: false_accept_rate must be in (0, 1)");
+  if (min_decoys_for_bound < 1) throw Error("guided completion: min_decoys_for_bound must be ≥ 1");
 }
 
 namespace {
@@ -126,12 +126,10 @@ GuidedCompletionStats CompleteTracksByProjection(core::Reconstruction* rec,
   }
   std::vector<int> members = MemberDistances(*rec, descriptors);
   stats.member_distances = members.size();
-  if (static_cast<int>(members.size()) < options.min_members_for_bound) return stats;
-  std::sort(members.begin(), members.end());
-  stats.member_median = members[members.size() / 2];
-  const size_t q = std::min(members.size() - 1, static_cast<size_t>(options.member_quantile * (members.size() - 1)));
-  const int bound = members[q];
-  stats.descriptor_bound = bound;
+  if (!members.empty()) {
+    std::nth_element(members.begin(), members.begin() + members.size() / 2, members.end());
+    stats.member_median = members[members.size() / 2];
+  }
 
   std::map<uint32_t, FreeKeypointGrid> grids;
   std::map<uint32_t, double> max_r2;
@@ -143,6 +141,7 @@ GuidedCompletionStats CompleteTracksByProjection(core::Reconstruction* rec,
   }
   const double r2 = options.max_error_px * options.max_error_px;
   std::vector<Claim> claims;
+  std::vector<int> decoys;
   for (const auto& [pid, p] : rec->points) {
     std::set<uint32_t> in_track, targets;
     for (const auto& t : p.track) in_track.insert(t.image_id);
@@ -162,22 +161,41 @@ GuidedCompletionStats CompleteTracksByProjection(core::Reconstruction* rec,
       if (!cam.InImage(uv)) continue;
       ++stats.projections;
       const features::Descriptors& dj = *descriptors.at(id);
-      int best = std::numeric_limits<int>::max();
-      uint32_t best_kp = 0;
-      grids.at(id).Near(uv, [&](uint32_t k) {
-        if ((im.points2d[k] - uv).squaredNorm() > r2) return;
-        for (const auto& t : p.track) {
-          auto d = descriptors.find(t.image_id);
-          if (d == descriptors.end()) continue;
-          const int s = SquaredDistance(*d->second, t.point2d_idx, dj, k);
-          if (s < best) best = s, best_kp = k;
-        }
-      });
-      if (best == std::numeric_limits<int>::max()) continue;
-      ++stats.candidates;
-      if (best <= bound) claims.push_back({best, id, best_kp, pid});
+      // The most similar free keypoint within the radius of a location, by its smallest distance to the track.
+      auto nearest = [&](const Eigen::Vector2d& at, uint32_t* kp) {
+        int best = std::numeric_limits<int>::max();
+        grids.at(id).Near(at, [&](uint32_t k) {
+          if ((im.points2d[k] - at).squaredNorm() > r2) return;
+          for (const auto& t : p.track) {
+            auto d = descriptors.find(t.image_id);
+            if (d == descriptors.end()) continue;
+            const int s = SquaredDistance(*d->second, t.point2d_idx, dj, k);
+            if (s < best) best = s, *kp = k;
+          }
+        });
+        return best;
+      };
+      uint32_t kp = 0, decoy_kp = 0;
+      const int best = nearest(uv, &kp);
+      if (best != std::numeric_limits<int>::max()) {
+        ++stats.candidates;
+        claims.push_back({best, id, kp, pid});
+      }
+      // The decoy: the same search half an image away, where no keypoint is this point except by chance.
+      const Eigen::Vector2d at(std::fmod(uv.x() + 0.5 * cam.width, double(cam.width)),
+                               std::fmod(uv.y() + 0.5 * cam.height, double(cam.height)));
+      const int decoy = nearest(at, &decoy_kp);
+      if (decoy != std::numeric_limits<int>::max()) decoys.push_back(decoy);
     }
   }
+  stats.decoys = decoys.size();
+  if (static_cast<int>(decoys.size()) < options.min_decoys_for_bound) return stats;
+  std::sort(decoys.begin(), decoys.end());
+  // Accepting d ≤ bound takes at most this share of the decoys (a keypoint there by chance).
+  const int bound = decoys[static_cast<size_t>(options.false_accept_rate * (decoys.size() - 1))] - 1;
+  stats.descriptor_bound = bound;
+  claims.erase(std::remove_if(claims.begin(), claims.end(), [&](const Claim& c) { return c.distance > bound; }),
+               claims.end());
   // Most similar first: a keypoint goes to the point it resembles most.
   std::sort(claims.begin(), claims.end(), [](const Claim& a, const Claim& b) {
     return std::tie(a.distance, a.image_id, a.kp, a.point_id) < std::tie(b.distance, b.image_id, b.kp, b.point_id);

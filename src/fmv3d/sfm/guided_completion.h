@@ -11,11 +11,12 @@
 //
 // Candidates: images that share a verified pair with one of the point's images (co-visible ones; a video's
 // model is never projected into all its frames), registered, not yet in the track. The search radius is the
-// triangulator's reprojection bound; only keypoints that observe no point are taken. A candidate is accepted
-// when its smallest descriptor distance to the track's observations is within the distance at which the tracks
-// of the model hold their own members (a quantile of every observation's distance to its nearest fellow
-// observation): it then looks like a member as much as most members look like each other. A keypoint claimed by
-// several points goes to the one it resembles most.
+// triangulator's reprojection bound; only keypoints that observe no point are taken, the one most similar to
+// the track's descriptors (smallest distance to any of them). The descriptor bound controls false additions:
+// every search is repeated at a decoy location half an image away, where a keypoint is this point only by
+// chance, and a candidate is accepted when it is closer than all but a false_accept_rate share of the decoys.
+// A keypoint claimed by several points goes to the one it resembles most. Observations that do not fit after
+// the caller's bundle adjustment are filtered with every other one.
 #pragma once
 
 #include <cstdint>
@@ -28,9 +29,9 @@
 namespace fmv3d::sfm {
 
 struct GuidedCompletionOptions {
-  double max_error_px = 4;           // search radius around the projection (pixels)
-  double member_quantile = 0.9;      // the descriptor bound: this quantile of the members' nearest-member distance
-  int min_members_for_bound = 1000;  // fewer such distances: no bound can be measured, nothing is added
+  double max_error_px = 4;          // search radius around the projection (pixels)
+  double false_accept_rate = 0.01;  // share of the decoy searches the descriptor bound lets through
+  int min_decoys_for_bound = 200;   // fewer decoy searches found a keypoint: no bound is measured, nothing added
   void Check() const;
 };
 
@@ -40,9 +41,10 @@ struct GuidedCompletionStats {
   size_t candidates = 0;        // of those: with a free keypoint inside the radius
   size_t accepted = 0;          // observations added
   size_t conflicts = 0;         // keypoints claimed by more than one point (the most similar one kept)
-  size_t member_distances = 0;  // distances the bound was measured from
+  size_t decoys = 0;            // decoy searches that found a keypoint (the bound's sample)
   double descriptor_bound = 0;  // squared L2 distance on the uint8 descriptors
-  double member_median = 0;     // the members' median nearest-member distance, squared (for the report)
+  size_t member_distances = 0;  // observations of points with ≥ 2 described ones
+  double member_median = 0;     // their median squared distance to the nearest fellow member (for the report)
 };
 
 // Adds observations to the points of *rec. `descriptors` maps an image id to its descriptors (row k belongs to

@@ -31,8 +31,8 @@ void MapperOptions::Check() const {
   if (max_models < 1) throw Error("mapper: max_models must be ≥ 1");
   if (focal_scan_pairs < 1) throw Error("mapper: focal_scan_pairs must be ≥ 1");
   if (!(narrow_field_max_radius >= 0)) throw Error("mapper: narrow_field_max_radius must be ≥ 0");
-  if (!(guided_completion_member_quantile > 0 && guided_completion_member_quantile <= 1))
-    throw Error("mapper: guided_completion_member_quantile must be in (0, 1]");
+  if (!(guided_completion_false_accept_rate > 0 && guided_completion_false_accept_rate < 1))
+    throw Error("mapper: guided_completion_false_accept_rate must be in (0, 1)");
   if (!(self_calibration_min_delta_chi2 >= 0)) throw Error("mapper: self_calibration_min_delta_chi2 must be ≥ 0");
 }
 

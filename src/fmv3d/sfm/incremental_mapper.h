@@ -77,9 +77,10 @@ struct MapperOptions {
   bool tri_ignore_two_view_tracks = true;  // TriangulatorOptions::ignore_two_view_tracks
   // Before the final adjustment, each point's track gains the keypoints of co-visible images that lie within
   // tri_max_error_px of its projection and whose descriptors look like the track's (guided_completion.h); needs
-  // MapperImage::descriptors. The descriptor bound is this quantile of the tracks' own members' distances.
+  // MapperImage::descriptors. The descriptor bound lets this share of decoy searches (a keypoint there by
+  // chance) through.
   bool guided_completion = true;
-  double guided_completion_member_quantile = 0.9;
+  double guided_completion_false_accept_rate = 0.01;
   double filter_max_error_px = 4;
   double filter_min_angle_deg = 1.5;
   // Bundle adjustment.

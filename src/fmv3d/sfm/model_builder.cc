@@ -243,15 +243,15 @@ GrowthStep ModelBuilder::RegisterNextImage() {
   return GrowthStep::kAllFailed;
 }
 
-void ModelBuilder::CompleteTracksByProjection() {
-  if (!opt_.guided_completion) return;
+size_t ModelBuilder::CompleteTracksByProjection() {
+  if (!opt_.guided_completion) return 0;
   const auto start = Clock::now();
   std::map<uint32_t, const features::Descriptors*> descriptors;
   for (const auto& [id, im] : rec_.images) {
     const features::Descriptors* d = images_.at(id)->descriptors;
     if (d && static_cast<size_t>(d->rows()) == im.points2d.size()) descriptors[id] = d;
   }
-  if (descriptors.size() < 2) return;
+  if (descriptors.size() < 2) return 0;
   std::map<uint32_t, std::set<uint32_t>> covisible;
   for (const auto& p : input_.pairs)
     if (!p.inliers.empty() && rec_.images.count(p.image_id1) && rec_.images.count(p.image_id2)) {
@@ -260,7 +260,7 @@ void ModelBuilder::CompleteTracksByProjection() {
     }
   GuidedCompletionOptions o;
   o.max_error_px = opt_.tri_max_error_px;
-  o.member_quantile = opt_.guided_completion_member_quantile;
+  o.false_accept_rate = opt_.guided_completion_false_accept_rate;
   const size_t obs_before = [&] {
     size_t n = 0;
     for (const auto& [pid, p] : rec_.points) n += p.track.size();
@@ -268,21 +268,24 @@ void ModelBuilder::CompleteTracksByProjection() {
   }();
   const GuidedCompletionStats s = sfm::CompleteTracksByProjection(&rec_, descriptors, covisible, o);
   t_->triangulation += Seconds(start);
-  guided_completion_ = {{"run", true},
-                        {"observations_before", obs_before},
-                        {"points", s.points},
-                        {"projections_in_image", s.projections},
-                        {"with_free_keypoint_in_radius", s.candidates},
-                        {"observations_added", s.accepted},
-                        {"conflicts", s.conflicts},
-                        {"radius_px", o.max_error_px},
-                        {"member_distances", s.member_distances},
-                        {"member_quantile", o.member_quantile},
-                        {"descriptor_bound_squared", s.descriptor_bound},
-                        {"member_median_squared", s.member_median},
-                        {"seconds", Seconds(start)}};
+  if (!guided_completion_.is_array()) guided_completion_ = nlohmann::json::array();
+  guided_completion_.push_back({{"run", true},
+                                {"observations_before", obs_before},
+                                {"points", s.points},
+                                {"projections_in_image", s.projections},
+                                {"with_free_keypoint_in_radius", s.candidates},
+                                {"observations_added", s.accepted},
+                                {"conflicts", s.conflicts},
+                                {"radius_px", o.max_error_px},
+                                {"decoy_searches_with_keypoint", s.decoys},
+                                {"false_accept_rate", o.false_accept_rate},
+                                {"expected_false_additions_at_most", o.false_accept_rate * s.candidates},
+                                {"descriptor_bound_squared", s.descriptor_bound},
+                                {"member_nearest_distance_median_squared", s.member_median},
+                                {"seconds", Seconds(start)}});
   spdlog::info("mapper: guided completion added {} observations to {} ({} conflicts; descriptor bound {:.0f})",
                s.accepted, obs_before, s.conflicts, s.descriptor_bound);
+  return s.accepted;
 }
 
 void ModelBuilder::Grow() {
@@ -305,6 +308,8 @@ void ModelBuilder::Grow() {
   Retriangulate();
   CompleteTracksByProjection();
   GlobalBundleAdjust(true);
+  // The adjusted points and cameras project more exactly: a second pass finds what the first one's radius missed.
+  if (CompleteTracksByProjection() > 0) GlobalBundleAdjust(true);
   if (static_cast<int>(rec_.images.size()) >= opt_.refine_principal_point_min_images) {
     bool any = false;
     if (focal_fixed_ && focal_from_plateau_ && TrySelfCalibration(IntrinsicGroup::kFocal)) {

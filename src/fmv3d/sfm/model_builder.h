@@ -127,8 +127,9 @@ class ModelBuilder {
   }
   // Images sitting at a wrong pose moved to one that explains clearly more correspondences; returns how many.
   int ReRegisterWrongPoses();
-  // Completes the tracks by projection into co-visible images (guided_completion.h) when descriptors are given.
-  void CompleteTracksByProjection();
+  // Completes the tracks by projection into co-visible images (guided_completion.h) when descriptors are given;
+  // returns the observations added (each pass is reported).
+  size_t CompleteTracksByProjection();
   void LocalBundleAdjust(uint32_t image_id);
   BundleAdjustmentSummary GlobalBundleAdjust(bool final_pass);
   // After an image was registered: whether the model has grown enough for an intermediate global adjustment
@@ -162,7 +163,7 @@ class ModelBuilder {
   double init_focal_scale_ = 1;
   std::optional<std::pair<double, double>> init_distortion_;  // k1, k2 of a wide lens found by the focal scan
   nlohmann::json focal_decision_;
-  nlohmann::json guided_completion_ = {{"run", false}};
+  nlohmann::json guided_completion_ = {{"run", false}};  // then one entry per pass
   // Focal held through growth: a trusted prior the user wants kept, or a telephoto scan's lower bound (then
   // tested once at the end). Narrow field: distortion is unobservable and stays fixed.
   bool focal_fixed_ = false, focal_from_plateau_ = false, narrow_field_ = false, dolly_done_ = false;
