@@ -39,6 +39,14 @@ void Add(CLI::App& app) {
                 "Also test freeing the pixel aspect (fx/fy) by the nested-model test, after the principal point");
   cmd->add_flag("!--keep-two-view-tracks", m.tri_ignore_two_view_tracks,
                 "Also triangulate matches seen in two images only (no third image can observe them)");
+  cmd->add_flag("--guided-completion", m.guided_completion,
+                "Complete the tracks by projection (keypoints near a point's projection whose descriptors look like "
+                "its track's) around the final adjustment");
+  cmd->add_option("--guided-false-accept", m.guided_completion_false_accept_rate,
+                  "Guided completion: share of decoy searches (a keypoint there by chance) the descriptor bound lets "
+                  "through")
+      ->check(CLI::Range(0.0, 1.0))
+      ->capture_default_str();
   cmd->add_flag("--tangential", m.refine_tangential, "Also refine p1, p2");
   cmd->add_option("--local-ba-iterations", m.local_ba_max_iterations, "Local BA: maximum iterations")
       ->capture_default_str();

@@ -31,6 +31,8 @@ void MapperOptions::Check() const {
   if (max_models < 1) throw Error("mapper: max_models must be ≥ 1");
   if (focal_scan_pairs < 1) throw Error("mapper: focal_scan_pairs must be ≥ 1");
   if (!(narrow_field_max_radius >= 0)) throw Error("mapper: narrow_field_max_radius must be ≥ 0");
+  if (!(guided_completion_false_accept_rate > 0 && guided_completion_false_accept_rate < 1))
+    throw Error("mapper: guided_completion_false_accept_rate must be in (0, 1)");
   if (!(self_calibration_min_delta_chi2 >= 0)) throw Error("mapper: self_calibration_min_delta_chi2 must be ≥ 0");
 }
 
@@ -99,6 +101,8 @@ MapperResult RunIncrementalMapper(const MapperInput& input, const MapperOptions&
 
   mapper::Timings timings;
   std::vector<std::map<uint32_t, std::string>> model_fail;
+  std::vector<nlohmann::json> guided;  // per model, in the order built
+  nlohmann::json guided_largest = {{"run", false}};
   int relocalised = 0;
   while (static_cast<int>(pool.size()) >= options.min_model_size &&
          static_cast<int>(result.models.size()) < options.max_models) {
@@ -116,6 +120,7 @@ MapperResult RunIncrementalMapper(const MapperInput& input, const MapperOptions&
     result.models.push_back(std::move(rec));
     result.self_calibration.push_back(std::move(calibration));
     result.focal_decision.push_back(builder.focal_decision());
+    guided.push_back(builder.guided_completion());
   }
   {  // largest first, each model with its self-calibration tests
     std::vector<size_t> order(result.models.size());
@@ -123,6 +128,7 @@ MapperResult RunIncrementalMapper(const MapperInput& input, const MapperOptions&
     std::stable_sort(order.begin(), order.end(), [&](size_t a, size_t b) {
       return result.models[a].images.size() > result.models[b].images.size();
     });
+    if (!order.empty()) guided_largest = guided[order[0]];
     MapperResult sorted;
     for (size_t i : order) {
       sorted.models.push_back(std::move(result.models[i]));
@@ -149,6 +155,7 @@ MapperResult RunIncrementalMapper(const MapperInput& input, const MapperOptions&
   result.left_out = reasons;
   result.stats = {{"correspondences", graph.NumCorrespondences()},
                   {"tracks", TrackReport(input, num_kp, result.models)},
+                  {"guided_completion", guided_largest},
                   {"invalid_matches_skipped", graph.NumSkipped()},
                   {"models", result.models.size()},
                   {"relocalised_images", relocalised},

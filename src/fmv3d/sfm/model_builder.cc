@@ -243,6 +243,51 @@ GrowthStep ModelBuilder::RegisterNextImage() {
   return GrowthStep::kAllFailed;
 }
 
+size_t ModelBuilder::CompleteTracksByProjection() {
+  if (!opt_.guided_completion) return 0;
+  const auto start = Clock::now();
+  std::map<uint32_t, const features::Descriptors*> descriptors;
+  for (const auto& [id, im] : rec_.images) {
+    const features::Descriptors* d = images_.at(id)->descriptors;
+    if (d && static_cast<size_t>(d->rows()) == im.points2d.size()) descriptors[id] = d;
+  }
+  if (descriptors.size() < 2) return 0;
+  std::map<uint32_t, std::set<uint32_t>> covisible;
+  for (const auto& p : input_.pairs)
+    if (!p.inliers.empty() && rec_.images.count(p.image_id1) && rec_.images.count(p.image_id2)) {
+      covisible[p.image_id1].insert(p.image_id2);
+      covisible[p.image_id2].insert(p.image_id1);
+    }
+  GuidedCompletionOptions o;
+  o.max_error_px = opt_.tri_max_error_px;
+  o.false_accept_rate = opt_.guided_completion_false_accept_rate;
+  const size_t obs_before = [&] {
+    size_t n = 0;
+    for (const auto& [pid, p] : rec_.points) n += p.track.size();
+    return n;
+  }();
+  const GuidedCompletionStats s = sfm::CompleteTracksByProjection(&rec_, descriptors, covisible, o);
+  t_->triangulation += Seconds(start);
+  if (!guided_completion_.is_array()) guided_completion_ = nlohmann::json::array();
+  guided_completion_.push_back({{"run", true},
+                                {"observations_before", obs_before},
+                                {"points", s.points},
+                                {"projections_in_image", s.projections},
+                                {"with_free_keypoint_in_radius", s.candidates},
+                                {"observations_added", s.accepted},
+                                {"conflicts", s.conflicts},
+                                {"radius_px", o.max_error_px},
+                                {"decoy_searches_with_keypoint", s.decoys},
+                                {"false_accept_rate", o.false_accept_rate},
+                                {"expected_false_additions_at_most", o.false_accept_rate * s.candidates},
+                                {"descriptor_bound_squared", s.descriptor_bound},
+                                {"member_nearest_distance_median_squared", s.member_median},
+                                {"seconds", Seconds(start)}});
+  spdlog::info("mapper: guided completion added {} observations to {} ({} conflicts; descriptor bound {:.0f})",
+               s.accepted, obs_before, s.conflicts, s.descriptor_bound);
+  return s.accepted;
+}
+
 void ModelBuilder::Grow() {
   GlobalBundleAdjust(false);
   while (RegisterNextImage() == GrowthStep::kRegistered) {
@@ -261,7 +306,10 @@ void ModelBuilder::Grow() {
   GlobalBundleAdjust(false);
   if (opt_.relocalise && (num_relocalised_ = ReRegisterWrongPoses()) > 0) GlobalBundleAdjust(false);
   Retriangulate();
+  CompleteTracksByProjection();
   GlobalBundleAdjust(true);
+  // The adjusted points and cameras project more exactly: a second pass finds what the first one's radius missed.
+  if (CompleteTracksByProjection() > 0) GlobalBundleAdjust(true);
   if (static_cast<int>(rec_.images.size()) >= opt_.refine_principal_point_min_images) {
     bool any = false;
     if (focal_fixed_ && focal_from_plateau_ && TrySelfCalibration(IntrinsicGroup::kFocal)) {

@@ -17,6 +17,7 @@
 
 #include "fmv3d/sfm/bundle_adjustment.h"
 #include "fmv3d/sfm/correspondence_graph.h"
+#include "fmv3d/sfm/guided_completion.h"
 #include "fmv3d/sfm/incremental_mapper.h"
 #include "fmv3d/sfm/initial_pair.h"
 #include "fmv3d/sfm/mapper_primitives.h"
@@ -93,6 +94,8 @@ class ModelBuilder {
   const std::vector<NestedModelTestResult>& self_calibration() const { return self_calibration_; }
   // How the focal was decided (stated, or the two-view and dolly-zoom scans), for report/sparse.json.
   const nlohmann::json& focal_decision() const { return focal_decision_; }
+  // The final polish's track completion by projection (guided_completion.h), for report/sparse.json.
+  const nlohmann::json& guided_completion() const { return guided_completion_; }
 
  private:
   // Initialisation (mapper_initial_pair.cc).
@@ -124,6 +127,9 @@ class ModelBuilder {
   }
   // Images sitting at a wrong pose moved to one that explains clearly more correspondences; returns how many.
   int ReRegisterWrongPoses();
+  // Completes the tracks by projection into co-visible images (guided_completion.h) when descriptors are given;
+  // returns the observations added (each pass is reported).
+  size_t CompleteTracksByProjection();
   void LocalBundleAdjust(uint32_t image_id);
   BundleAdjustmentSummary GlobalBundleAdjust(bool final_pass);
   // After an image was registered: whether the model has grown enough for an intermediate global adjustment
@@ -157,6 +163,7 @@ class ModelBuilder {
   double init_focal_scale_ = 1;
   std::optional<std::pair<double, double>> init_distortion_;  // k1, k2 of a wide lens found by the focal scan
   nlohmann::json focal_decision_;
+  nlohmann::json guided_completion_ = {{"run", false}};  // then one entry per pass
   // Focal held through growth: a trusted prior the user wants kept, or a telephoto scan's lower bound (then
   // tested once at the end). Narrow field: distortion is unobservable and stays fixed.
   bool focal_fixed_ = false, focal_from_plateau_ = false, narrow_field_ = false, dolly_done_ = false;

@@ -249,6 +249,12 @@ SparseStageInput ReadSparseStageInput(const core::Workspace& ws, const SparseSta
   const fs::path matches_path = features::MatchesPath(ws.matches_dir());
   in.mapper.pairs = features::ReadMatches(matches_path);
   features::ValidateMatches(in.mapper.pairs, num_kp, matches_path.string());
+  // The descriptors stay in feature_sets (a moved vector keeps its elements where they are).
+  for (size_t i = 0; i < in.feature_sets.size(); ++i) {
+    const features::Descriptors& d = in.feature_sets[i].descriptors;
+    if (static_cast<size_t>(d.rows()) == in.mapper.images[i].keypoints.size() && d.rows() > 0)
+      in.mapper.images[i].descriptors = &d;
+  }
   return in;
 }
 
