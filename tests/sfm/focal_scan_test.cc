@@ -26,6 +26,18 @@ core::Camera TrueCamera() {
   return c;
 }
 
+// A centred lens of the given size, focal and k1.
+core::Camera Lens(int width, int height, double f, double k1) {
+  core::Camera c;
+  c.width = width;
+  c.height = height;
+  c.u0 = 0.5 * width;
+  c.v0 = 0.5 * height;
+  c.f = f;
+  c.k1 = k1;
+  return c;
+}
+
 // A camera at `centre` looking at `target` (world z up).
 core::Pose LookAt(const Eigen::Vector3d& centre, const Eigen::Vector3d& target) {
   const Eigen::Vector3d z = (target - centre).normalized();
@@ -88,13 +100,7 @@ TEST(FocalScan, OrbitWhoseAxesMeetLeavesTheFocalUndeterminedFromTheShortestCandi
 // A lens without distortion keeps the pinhole decision.
 TEST(FocalScan, BarrelDistortionIsDetectedAndStartsAWideLens) {
   for (const double k1 : {-0.27, 0.0}) {
-    core::Camera lens = TrueCamera();
-    lens.width = 854;
-    lens.height = 480;
-    lens.u0 = 427;
-    lens.v0 = 240;
-    lens.f = 450;
-    lens.k1 = k1;
+    core::Camera lens = Lens(854, 480, 450, k1);
     lens.k2 = k1 != 0 ? 0.08 : 0;
     core::Camera guess = lens;
     guess.f = 1.2 * 854;
@@ -120,13 +126,7 @@ TEST(FocalScan, BarrelDistortionIsDetectedAndStartsAWideLens) {
 // an action camera: the pinhole decision is kept, and not by the score ratio's luck (0.84 here): its best κ is the
 // mildest candidate, far below the bound.
 TEST(FocalScan, MildDistortionKeepsThePinholeDecision) {
-  core::Camera lens = TrueCamera();
-  lens.width = 960;
-  lens.height = 540;
-  lens.u0 = 480;
-  lens.v0 = 270;
-  lens.f = 831;
-  lens.k1 = -0.08;
+  const core::Camera lens = Lens(960, 540, 831, -0.08);
   core::Camera guess = lens;
   guess.f = 1.2 * 960;
   guess.k1 = 0;
@@ -150,13 +150,7 @@ TEST(FocalScan, MildDistortionKeepsThePinholeDecision) {
 // Pincushion (k1 +0.3 at f 500 px on 854x480, a lens that stretches its corners): found at the pinhole decision's
 // focal, with κ > 0 and k1 > 0 as the start; the pinhole decision's focal is kept.
 TEST(FocalScan, PincushionIsDetectedAtThePinholeFocal) {
-  core::Camera lens = TrueCamera();
-  lens.width = 854;
-  lens.height = 480;
-  lens.u0 = 427;
-  lens.v0 = 240;
-  lens.f = 500;
-  lens.k1 = 0.3;
+  const core::Camera lens = Lens(854, 480, 500, 0.3);
   core::Camera guess = lens;
   guess.f = 1.2 * 854;
   guess.k1 = 0;
