@@ -13,7 +13,7 @@ extern "C" {
 #include <cstdio>
 
 #include "fmv3d/core/error.h"
-#include "fmv3d/telemetry/av_error.h"
+#include "fmv3d/telemetry/av_demux.h"
 
 namespace fmv3d::telemetry {
 namespace {
@@ -69,42 +69,18 @@ void SetOrientation(const Orientation& o, TelemetrySample* s) {
 }  // namespace
 
 std::vector<GpmfPayload> ReadGpmfPayloads(const std::filesystem::path& path) {
-  if (av_log_get_level() > AV_LOG_ERROR) av_log_set_level(AV_LOG_ERROR);
-  AVFormatContext* fmt = nullptr;
-  int err = avformat_open_input(&fmt, path.c_str(), nullptr, nullptr);
-  if (err < 0) throw Error(path.string() + ": cannot open: " + AvError(err));
-  struct Closer {
-    AVFormatContext** f;
-    ~Closer() { avformat_close_input(f); }
-  } closer{&fmt};
-  err = avformat_find_stream_info(fmt, nullptr);
-  if (err < 0) throw Error(path.string() + ": cannot read stream info: " + AvError(err));
-  std::vector<bool> is_gpmd(fmt->nb_streams, false);
-  bool any = false;
-  for (unsigned i = 0; i < fmt->nb_streams; ++i) {
-    const AVCodecParameters* par = fmt->streams[i]->codecpar;
-    is_gpmd[i] = par->codec_type == AVMEDIA_TYPE_DATA && par->codec_tag == MKTAG('g', 'p', 'm', 'd');
-    fmt->streams[i]->discard = is_gpmd[i] ? AVDISCARD_DEFAULT : AVDISCARD_ALL;
-    any = any || is_gpmd[i];
-  }
   std::vector<GpmfPayload> out;
-  if (!any) return out;
-  const double start = fmt->start_time != AV_NOPTS_VALUE ? fmt->start_time / double(AV_TIME_BASE) : 0.0;
-  AVPacket* pkt = av_packet_alloc();
-  if (!pkt) throw Error(path.string() + ": out of memory");
-  while ((err = av_read_frame(fmt, pkt)) >= 0) {
-    if (is_gpmd[pkt->stream_index] && pkt->size > 0) {
-      const AVStream* s = fmt->streams[pkt->stream_index];
-      const int64_t ts = pkt->pts != AV_NOPTS_VALUE ? pkt->pts : pkt->dts;
-      GpmfPayload p;
-      p.time = ts != AV_NOPTS_VALUE ? ts * av_q2d(s->time_base) - start : (out.empty() ? 0.0 : out.back().time + 1.0);
-      p.duration = pkt->duration > 0 ? pkt->duration * av_q2d(s->time_base) : 0.0;
-      p.bytes.assign(pkt->data, pkt->data + pkt->size);
-      out.push_back(std::move(p));
-    }
-    av_packet_unref(pkt);
-  }
-  av_packet_free(&pkt);
+  const auto is_gpmd = [](const AVStream& s) {
+    return s.codecpar->codec_type == AVMEDIA_TYPE_DATA && s.codecpar->codec_tag == MKTAG('g', 'p', 'm', 'd');
+  };
+  DemuxPackets(path, is_gpmd, [&](const DemuxedPacket& pkt) {
+    if (pkt.size == 0) return;
+    GpmfPayload p;
+    p.time = pkt.time ? *pkt.time : (out.empty() ? 0.0 : out.back().time + 1.0);
+    p.duration = pkt.duration;
+    p.bytes.assign(pkt.data, pkt.data + pkt.size);
+    out.push_back(std::move(p));
+  });
   return out;
 }
 

@@ -6,8 +6,6 @@ extern "C" {
 #include <libavutil/avutil.h>
 }
 
-#include <spdlog/spdlog.h>
-
 #include <algorithm>
 #include <cmath>
 #include <map>
@@ -15,7 +13,7 @@ extern "C" {
 #include "fmv3d/core/error.h"
 #include "fmv3d/core/files.h"
 #include "fmv3d/telemetry/attitude.h"
-#include "fmv3d/telemetry/av_error.h"
+#include "fmv3d/telemetry/av_demux.h"
 #include "fmv3d/telemetry/klv_eg0104.h"
 #include "fmv3d/telemetry/klv_st0601.h"
 
@@ -43,58 +41,26 @@ std::optional<double> Number(const klv::Item* it) {
 std::vector<klv::Packet> ReadVideoKlv(const std::filesystem::path& path, TelemetryStats* stats) {
   TelemetryStats local;
   TelemetryStats& st = stats ? *stats : local;
-  // libavformat warns on every asynchronous KLV stream ("start time ... is not set"); keep stderr for errors.
-  if (av_log_get_level() > AV_LOG_ERROR) av_log_set_level(AV_LOG_ERROR);
-  AVFormatContext* fmt = nullptr;
-  int err = avformat_open_input(&fmt, path.c_str(), nullptr, nullptr);
-  if (err < 0) throw Error(path.string() + ": cannot open: " + AvError(err));
-  struct Closer {
-    AVFormatContext** f;
-    ~Closer() { avformat_close_input(f); }
-  } closer{&fmt};
-  err = avformat_find_stream_info(fmt, nullptr);
-  if (err < 0) throw Error(path.string() + ": cannot read stream info: " + AvError(err));
-
-  std::vector<bool> is_klv(fmt->nb_streams, false);
-  bool any = false;
-  for (unsigned i = 0; i < fmt->nb_streams; ++i) {
-    fmt->streams[i]->discard = AVDISCARD_ALL;
-    if (IsKlvStream(fmt->streams[i])) {
-      is_klv[i] = true;
-      any = true;
-    }
-  }
   std::vector<klv::Packet> out;
-  if (!any) return out;
-  // Video packets are read too (not decoded) so that asynchronous KLV without PTS can borrow their time.
-  for (unsigned i = 0; i < fmt->nb_streams; ++i)
-    if (is_klv[i] || fmt->streams[i]->codecpar->codec_type == AVMEDIA_TYPE_VIDEO)
-      fmt->streams[i]->discard = AVDISCARD_DEFAULT;
-
-  const double start = fmt->start_time != AV_NOPTS_VALUE ? fmt->start_time / double(AV_TIME_BASE) : 0.0;
   double last_time = 0.0;
   std::map<int, size_t> per_stream;
-  AVPacket* pkt = av_packet_alloc();
-  if (!pkt) throw Error(path.string() + ": out of memory");
-  while ((err = av_read_frame(fmt, pkt)) >= 0) {
-    const AVStream* s = fmt->streams[pkt->stream_index];
-    const int64_t ts = pkt->pts != AV_NOPTS_VALUE ? pkt->pts : pkt->dts;
-    std::optional<double> t;
-    if (ts != AV_NOPTS_VALUE) t = ts * av_q2d(s->time_base) - start;
-    if (is_klv[pkt->stream_index]) {
-      const size_t before = out.size();
-      klv::ParseBuffer(klv::ByteSpan(pkt->data, static_cast<size_t>(pkt->size)), &out, &st.klv);
-      for (size_t i = before; i < out.size(); ++i) {
-        out[i].stream_index = pkt->stream_index;
-        out[i].time_seconds = t ? *t : last_time;
-      }
-      per_stream[pkt->stream_index] += out.size() - before;
-    }
-    if (t) last_time = *t;
-    av_packet_unref(pkt);
-  }
-  av_packet_free(&pkt);
-  if (err != AVERROR_EOF) spdlog::warn("{}: demuxing stopped early: {}", path.string(), AvError(err));
+  DemuxOptions o;
+  o.with_video_timing = true;  // asynchronous KLV without a PTS borrows the last video packet's time
+  DemuxPackets(
+      path, [](const AVStream& s) { return IsKlvStream(&s); },
+      [&](const DemuxedPacket& pkt) {
+        if (pkt.wanted) {
+          const size_t before = out.size();
+          klv::ParseBuffer(klv::ByteSpan(pkt.data, pkt.size), &out, &st.klv);
+          for (size_t i = before; i < out.size(); ++i) {
+            out[i].stream_index = pkt.stream_index;
+            out[i].time_seconds = pkt.time ? *pkt.time : last_time;
+          }
+          per_stream[pkt.stream_index] += out.size() - before;
+        }
+        if (pkt.time) last_time = *pkt.time;
+      },
+      o);
   for (const auto& [idx, n] : per_stream) st.packets_per_stream.emplace_back(idx, n);
   return out;
 }
