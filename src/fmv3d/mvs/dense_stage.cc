@@ -309,19 +309,18 @@ nlohmann::json DenseReport(const core::Reconstruction& rec, const ViewPlan& plan
 
 }  // namespace
 
-nlohmann::json RunDenseStage(const fs::path& workspace, const DenseStageOptions& options) {
+nlohmann::json RunDenseStage(const core::Workspace& workspace, const DenseStageOptions& options) {
   options.Check();
   const auto t_start = Clock::now();
-  const fs::path sparse_dir = workspace / "sparse", frames_dir = workspace / "frames";
-  const fs::path dense_dir = workspace / "dense", maps_dir = dense_dir / "maps", report_dir = workspace / "report";
-  if (!fs::exists(sparse_dir / "images.txt"))
-    throw Error(workspace.string() + ": no sparse/images.txt — run `fmv3d sparse` first");
+  const fs::path sparse_dir = workspace.sparse_dir(), frames_dir = workspace.frames_dir();
+  const fs::path dense_dir = workspace.dense_dir(), maps_dir = dense_dir / "maps", report_dir = workspace.report_dir();
+  workspace.Require(sparse_dir / "images.txt", "sparse");
   const core::Reconstruction rec = io::ReadColmapText(sparse_dir);
   if (rec.images.size() < 2)
-    throw Error(workspace.string() + ": the sparse model has " + std::to_string(rec.images.size()) +
+    throw Error(workspace.name() + ": the sparse model has " + std::to_string(rec.images.size()) +
                 " registered image(s); dense stereo needs at least 2");
 
-  const ViewPlan plan = PlanViews(workspace, rec, options);
+  const ViewPlan plan = PlanViews(workspace.root(), rec, options);
   core::EnsureDirectory(maps_dir);
   core::EnsureDirectory(report_dir);
   DenseRunner runner(rec, plan, frames_dir, maps_dir, options);

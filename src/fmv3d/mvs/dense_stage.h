@@ -16,6 +16,7 @@
 #include <filesystem>
 #include <nlohmann/json.hpp>
 
+#include "fmv3d/core/workspace.h"
 #include "fmv3d/mvs/fusion.h"
 #include "fmv3d/mvs/patch_match.h"
 #include "fmv3d/mvs/view_selection.h"
@@ -46,7 +47,7 @@ struct DenseStageOptions {
 // Returns the summary also written to WS/report/dense.json. Throws fmv3d::Error when WS/sparse is missing,
 // has fewer than two registered images, or no view has a usable neighbour; single views without a usable
 // neighbour are skipped with a warning (and listed in the report).
-nlohmann::json RunDenseStage(const std::filesystem::path& workspace, const DenseStageOptions& options);
+nlohmann::json RunDenseStage(const core::Workspace& workspace, const DenseStageOptions& options);
 
 // File name of a view's map in WS/dense/maps ("a/b.png" → "a_b.png").
 std::string MapFileStem(const std::string& image_name);

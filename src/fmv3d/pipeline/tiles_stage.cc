@@ -83,8 +83,8 @@ Eigen::Matrix4d EnuToEcef(double lat_deg, double lon_deg, double h) {
 
 namespace {
 // The model → ECEF transform of a georeferenced workspace (null otherwise).
-nlohmann::json RootTransform(const fs::path& ws) {
-  const fs::path path = ws / "geo" / "georef.json";
+nlohmann::json RootTransform(const core::Workspace& ws) {
+  const fs::path path = ws.georef_json();
   if (!fs::exists(path)) return nullptr;
   const nlohmann::json g = core::ReadJson(path);
   try {
@@ -106,11 +106,11 @@ nlohmann::json RootTransform(const fs::path& ws) {
 }
 }  // namespace
 
-nlohmann::json RunTilesStage(const fs::path& ws, const TilesOptions& options) {
+nlohmann::json RunTilesStage(const core::Workspace& ws, const TilesOptions& options) {
   options.octree.Check();
   const auto t0 = std::chrono::steady_clock::now();
-  const fs::path fused = ws / "dense" / "fused.ply";
-  if (!fs::exists(fused)) throw Error(ws.string() + ": dense/fused.ply is missing; run `fmv3d dense` first");
+  const fs::path fused = ws.dense_dir() / "fused.ply";
+  ws.Require(fused, "dense");
   // Streamed straight into the compact tile points (32 bytes each) when the PLY allows; else read whole.
   std::vector<TilePoint> points;
   const bool streamed = io::StreamPlyVertices(
@@ -138,7 +138,7 @@ nlohmann::json RunTilesStage(const fs::path& ws, const TilesOptions& options) {
   }
   if (points.empty()) throw Error(fused.string() + ": no points to tile");
   const PointOctree tree = BuildPointOctree(std::move(points), options.octree);
-  const fs::path out = ws / "tiles", tmp = ws / "tiles.tmp";
+  const fs::path out = ws.root() / "tiles", tmp = ws.root() / "tiles.tmp";
   fs::remove_all(tmp);
   core::EnsureDirectory(tmp);
   nlohmann::json children = nlohmann::json::array();
@@ -146,8 +146,8 @@ nlohmann::json RunTilesStage(const fs::path& ws, const TilesOptions& options) {
   Eigen::AlignedBox3d all = ToDouble(tree.nodes[0].bounds);
   double root_error = 2 * tree.nodes[0].cell.sizes().maxCoeff();
   bool mesh = false;
-  if (fs::exists(ws / "mesh" / "model.glb")) {
-    const std::string glb = core::ReadTextFile(ws / "mesh" / "model.glb");
+  if (fs::exists(ws.mesh_dir() / "model.glb")) {
+    const std::string glb = core::ReadTextFile(ws.mesh_dir() / "model.glb");
     const Eigen::AlignedBox3d box = io::GlbBoundsZUp(glb);
     core::EnsureDirectory(tmp / "mesh");
     core::WriteTextFile(tmp / "mesh" / "model.b3dm", io::EncodeB3dm(glb));

@@ -19,6 +19,7 @@
 #include <filesystem>
 #include <nlohmann/json.hpp>
 
+#include "fmv3d/core/workspace.h"
 #include "fmv3d/pipeline/point_octree.h"
 
 namespace fmv3d::pipeline {
@@ -35,6 +36,6 @@ Eigen::Matrix4d EnuToEcef(double lat_deg, double lon_deg, double height);
 
 // The whole stage on a workspace; returns its summary (points, tiles, levels, seconds). Throws fmv3d::Error
 // when WS/dense/fused.ply is missing or empty.
-nlohmann::json RunTilesStage(const std::filesystem::path& ws, const TilesOptions& options);
+nlohmann::json RunTilesStage(const core::Workspace& ws, const TilesOptions& options);
 
 }  // namespace fmv3d::pipeline

@@ -3,6 +3,7 @@
 
 #include "fmv3d/core/error.h"
 #include "fmv3d/core/files.h"
+#include "fmv3d/core/workspace.h"
 #include "fmv3d/io/colmap_model.h"
 #include "fmv3d/server/geo_json.h"
 #include "fmv3d/server/model_json.h"
@@ -211,23 +212,23 @@ void RegisterApiRoutes(httplib::Server& http, Context& ctx) {
   });
   http.Get(R"(/api/workspaces/([^/]+)/cameras)", [&ctx](const httplib::Request& req, httplib::Response& res) {
     Guard(res, [&] {
-      const fs::path dir = WorkspaceDir(ctx, req.matches[1]);
-      if (!fs::exists(dir / "sparse" / "images.txt")) throw RequestError(404, "no sparse model yet");
-      SendJson(res, 200, CamerasJson(io::ReadColmapText(dir / "sparse")));
+      const core::Workspace ws(WorkspaceDir(ctx, req.matches[1]));
+      if (!fs::exists(ws.sparse_dir() / "images.txt")) throw RequestError(404, "no sparse model yet");
+      SendJson(res, 200, CamerasJson(io::ReadColmapText(ws.sparse_dir())));
     });
   });
   http.Get(R"(/api/workspaces/([^/]+)/sparse)", [&ctx](const httplib::Request& req, httplib::Response& res) {
     Guard(res, [&] {
-      const fs::path dir = WorkspaceDir(ctx, req.matches[1]);
-      if (!fs::exists(dir / "sparse" / "images.txt")) throw RequestError(404, "no sparse model yet");
-      SendJson(res, 200, SparseJson(io::ReadColmapText(dir / "sparse")));
+      const core::Workspace ws(WorkspaceDir(ctx, req.matches[1]));
+      if (!fs::exists(ws.sparse_dir() / "images.txt")) throw RequestError(404, "no sparse model yet");
+      SendJson(res, 200, SparseJson(io::ReadColmapText(ws.sparse_dir())));
     });
   });
   http.Get(R"(/api/workspaces/([^/]+)/report)", [&ctx](const httplib::Request& req, httplib::Response& res) {
     Guard(res, [&] {
-      const fs::path dir = WorkspaceDir(ctx, req.matches[1]);
-      if (!fs::exists(dir / "report" / "report.json")) throw RequestError(404, "no report yet");
-      SendJson(res, 200, core::ReadJson(dir / "report" / "report.json"));
+      const fs::path report = core::Workspace(WorkspaceDir(ctx, req.matches[1])).report_dir() / "report.json";
+      if (!fs::exists(report)) throw RequestError(404, "no report yet");
+      SendJson(res, 200, core::ReadJson(report));
     });
   });
   http.Get(R"(/api/workspaces/([^/]+)/geo)", [&ctx](const httplib::Request& req, httplib::Response& res) {

@@ -5,6 +5,7 @@
 
 #include "fmv3d/core/error.h"
 #include "fmv3d/core/files.h"
+#include "fmv3d/core/workspace.h"
 #include "fmv3d/geo/geodesy.h"
 #include "fmv3d/geo/raster.h"
 #include "fmv3d/io/colmap_model.h"
@@ -108,7 +109,7 @@ nlohmann::json GeoJson(const fs::path& ws) {
   // Track: the keyframes' telemetry positions.
   nlohmann::json track = nlohmann::json::array();
   try {
-    for (const auto& f : io::ReadFramesIndex(ws / "frames" / "frames.json").frames) {
+    for (const auto& f : io::ReadFramesIndex(core::Workspace(ws).frames_json()).frames) {
       const auto& t = f.telemetry;
       if (!t.is_object() || !t.contains("sensor_latitude") || !t.contains("sensor_longitude")) continue;
       const double alt = t.value("sensor_altitude_hae", t.value("sensor_altitude_msl", 0.0));
@@ -119,8 +120,8 @@ nlohmann::json GeoJson(const fs::path& ws) {
   out["track"] = track;
   // Footprints: image corners cast onto the plane z = ground_z (ENU) from the georeferenced cameras.
   nlohmann::json footprints = nlohmann::json::array();
-  if (fs::is_regular_file(ws / "sparse" / "images.txt", ec)) {
-    const core::Reconstruction rec = io::ReadColmapText(ws / "sparse");
+  if (fs::is_regular_file(core::Workspace(ws).sparse_dir() / "images.txt", ec)) {
+    const core::Reconstruction rec = io::ReadColmapText(core::Workspace(ws).sparse_dir());
     const double scale = sim.block<3, 1>(0, 0).norm();
     const Eigen::Matrix3d Rs = sim.block<3, 3>(0, 0) / scale;
     if (!have_ground && !rec.points.empty()) {

@@ -11,6 +11,7 @@
 #include "fmv3d/calib/sensor_db.h"
 #include "fmv3d/core/error.h"
 #include "fmv3d/core/files.h"
+#include "fmv3d/core/workspace.h"
 #include "fmv3d/features/feature_io.h"
 #include "fmv3d/features/matcher.h"
 #include "fmv3d/io/colmap_model.h"
@@ -29,7 +30,7 @@ namespace fs = std::filesystem;
 namespace {
 
 io::FramesIndex RequireFrames(const fs::path& dir) {
-  const fs::path p = dir / "frames" / "frames.json";
+  const fs::path p = core::Workspace(dir).frames_json();
   if (!fs::exists(p)) throw RequestError(404, "no frames yet (run the frames stage first)");
   return io::ReadFramesIndex(p);
 }
@@ -48,8 +49,9 @@ std::map<std::string, const core::Image*> RegisteredByName(const core::Reconstru
 }
 
 std::optional<core::Reconstruction> ReadModel(const fs::path& dir) {
-  if (!fs::exists(dir / "sparse" / "images.txt")) return std::nullopt;
-  return io::ReadColmapText(dir / "sparse");
+  const core::Workspace ws(dir);
+  if (!fs::exists(ws.sparse_dir() / "images.txt")) return std::nullopt;
+  return io::ReadColmapText(ws.sparse_dir());
 }
 
 nlohmann::json FramesJson(const fs::path& dir) {
@@ -58,7 +60,7 @@ nlohmann::json FramesJson(const fs::path& dir) {
   std::map<std::string, const core::Image*> registered;
   if (model) registered = RegisteredByName(*model);
   std::map<std::string, std::string> left_out;
-  const fs::path sparse_report = dir / "report" / "sparse.json";
+  const fs::path sparse_report = core::Workspace(dir).report_dir() / "sparse.json";
   if (fs::exists(sparse_report)) {
     const nlohmann::json r = core::ReadJson(sparse_report);
     if (r.contains("left_out") && r["left_out"].is_array())
@@ -73,7 +75,7 @@ nlohmann::json FramesJson(const fs::path& dir) {
                         {"width", cam ? cam->camera.width : 0},
                         {"height", cam ? cam->camera.height : 0},
                         {"registered", registered.count(f.name) > 0},
-                        {"features", fs::exists(features::FeaturePath(dir / "features", f.name))}};
+                        {"features", fs::exists(features::FeaturePath(core::Workspace(dir).features_dir(), f.name))}};
     if (model && !registered.count(f.name))
       j["left_out"] = left_out.count(f.name) ? left_out[f.name] : "not in the largest model";
     else
@@ -86,7 +88,7 @@ nlohmann::json FramesJson(const fs::path& dir) {
 nlohmann::json KeypointsJson(const fs::path& dir, const std::string& name) {
   const io::FramesIndex index = RequireFrames(dir);
   FindFrame(index, name, "frame");
-  const fs::path p = features::FeaturePath(dir / "features", name);
+  const fs::path p = features::FeaturePath(core::Workspace(dir).features_dir(), name);
   if (!fs::exists(p)) throw RequestError(404, "no features for '" + name + "' yet (run the features stage)");
   const features::FeatureSet fs = features::ReadFeatures(p);
   std::vector<float> flat;
@@ -127,14 +129,15 @@ nlohmann::json PairJson(const fs::path& dir, const std::string& a, const std::st
     if (index.frames[i].name == a) ida = uint32_t(i + 1);
     if (index.frames[i].name == b) idb = uint32_t(i + 1);
   }
-  const fs::path pa = features::FeaturePath(dir / "features", a), pb = features::FeaturePath(dir / "features", b);
+  const fs::path pa = features::FeaturePath(core::Workspace(dir).features_dir(), a),
+                 pb = features::FeaturePath(core::Workspace(dir).features_dir(), b);
   if (!fs::exists(pa) || !fs::exists(pb)) throw RequestError(404, "no features for this pair yet");
   const features::FeatureSet fa = features::ReadFeatures(pa), fb = features::ReadFeatures(pb);
   const bool swap = ida > idb;  // matches.bin stores image_id1 < image_id2
   std::set<std::pair<uint32_t, uint32_t>> inlier_set;
   nlohmann::json F = nullptr;
   std::string f_source;
-  const fs::path mp = features::MatchesPath(dir / "matches");
+  const fs::path mp = features::MatchesPath(core::Workspace(dir).matches_dir());
   if (fs::exists(mp)) {
     for (const auto& p : features::ReadMatches(mp)) {
       if (p.image_id1 != std::min(ida, idb) || p.image_id2 != std::max(ida, idb)) continue;
@@ -277,7 +280,7 @@ io::FrameTable FrameTable(const fs::path& dir) {
   io::FrameTable table = io::FrameTableOf(RequireFrames(dir));
   // Deleted matches index the automatic keypoints: their counts when the features are there.
   for (auto& [name, limits] : table) {
-    const fs::path p = features::FeaturePath(dir / "features", name);
+    const fs::path p = features::FeaturePath(core::Workspace(dir).features_dir(), name);
     if (fs::exists(p)) limits.num_keypoints = features::ReadFeatures(p).keypoints.size();
   }
   return table;

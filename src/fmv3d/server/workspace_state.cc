@@ -41,7 +41,8 @@ std::optional<StageState> ParseStageState(std::string_view name) {
 
 bool IsWorkspace(const fs::path& dir) {
   std::error_code ec;
-  return fs::is_regular_file(dir / "project.json", ec) || fs::is_regular_file(dir / "frames" / "frames.json", ec);
+  const core::Workspace ws(dir);
+  return fs::is_regular_file(ws.project_json(), ec) || fs::is_regular_file(ws.frames_json(), ec);
 }
 
 std::vector<std::string> ListWorkspaces(const fs::path& ws_root) {

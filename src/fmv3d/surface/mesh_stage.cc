@@ -48,20 +48,20 @@ void EstimateNormalsTowardsCameras(io::OrientedPointCloud* cloud, const fs::path
   }
 }
 
-nlohmann::json RunMeshStage(const fs::path& workspace, const MeshStageOptions& options) {
+nlohmann::json RunMeshStage(const core::Workspace& workspace, const MeshStageOptions& options) {
   options.Check();
   const auto start = std::chrono::steady_clock::now();
-  const fs::path fused = workspace / "dense" / "fused.ply";
-  if (!fs::exists(workspace)) throw Error(workspace.string() + ": no such workspace folder");
-  if (!fs::exists(fused))
-    throw Error(workspace.string() + ": no dense/fused.ply — run `fmv3d dense " + workspace.string() + "` first");
+  const std::string ws = workspace.name();
+  const fs::path fused = workspace.dense_dir() / "fused.ply";
+  if (!fs::exists(workspace.root())) throw Error(ws + ": no such workspace folder");
+  if (!fs::exists(fused)) throw Error(ws + ": no dense/fused.ply — run `fmv3d dense " + ws + "` first");
   io::OrientedPointCloud cloud = io::ReadPointCloudPly(fused);
   if (cloud.empty())
     throw Error(fused.string() +
                 ": the dense cloud has no points (check report/dense.json; the dense stage found "
                 "no consistent depths)");
   nlohmann::json report;
-  report["input"] = fs::relative(fused, workspace).string();
+  report["input"] = fs::relative(fused, workspace.root()).string();
   report["normals"] = "input";
   if (!cloud.has_normals()) {
     if (!options.estimate_missing_normals)
@@ -69,7 +69,7 @@ nlohmann::json RunMeshStage(const fs::path& workspace, const MeshStageOptions& o
     spdlog::warn("{}: no normals in the cloud; estimating them from {} neighbours, oriented towards the cameras",
                  fused.string(), options.normal_neighbours);
     try {
-      EstimateNormalsTowardsCameras(&cloud, workspace / "sparse", options.normal_neighbours);
+      EstimateNormalsTowardsCameras(&cloud, workspace.sparse_dir(), options.normal_neighbours);
     } catch (const Error& e) {
       throw Error(fused.string() + ": " + e.what());
     }
@@ -77,7 +77,7 @@ nlohmann::json RunMeshStage(const fs::path& workspace, const MeshStageOptions& o
   }
   nlohmann::json stats;
   const ColoredMesh mesh = ReconstructPoisson(cloud, options.poisson, &stats);
-  const fs::path mesh_dir = workspace / "mesh", report_dir = workspace / "report";
+  const fs::path mesh_dir = workspace.mesh_dir(), report_dir = workspace.report_dir();
   core::EnsureDirectory(mesh_dir);
   core::EnsureDirectory(report_dir);
   WriteMeshPly(mesh, mesh_dir / "poisson.ply");

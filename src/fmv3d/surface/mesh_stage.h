@@ -8,6 +8,7 @@
 #include <filesystem>
 #include <nlohmann/json.hpp>
 
+#include "fmv3d/core/workspace.h"
 #include "fmv3d/io/point_cloud.h"
 #include "fmv3d/surface/poisson.h"
 
@@ -26,6 +27,6 @@ void EstimateNormalsTowardsCameras(io::OrientedPointCloud* cloud, const std::fil
 
 // Returns the summary also written to WS/report/mesh.json. Throws fmv3d::Error naming the missing input and
 // the command that makes it, or the problem with the cloud.
-nlohmann::json RunMeshStage(const std::filesystem::path& workspace, const MeshStageOptions& options);
+nlohmann::json RunMeshStage(const core::Workspace& workspace, const MeshStageOptions& options);
 
 }  // namespace fmv3d::surface

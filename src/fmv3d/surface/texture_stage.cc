@@ -63,16 +63,16 @@ TexturedModel TextureMesh(const ColoredMesh& mesh, const std::vector<TextureView
   return model;
 }
 
-nlohmann::json RunTextureStage(const fs::path& workspace, const TextureStageOptions& options) {
+nlohmann::json RunTextureStage(const core::Workspace& workspace, const TextureStageOptions& options) {
   options.Check();
   const auto start = Clock::now();
-  if (!fs::exists(workspace)) throw Error(workspace.string() + ": no such workspace folder");
-  const fs::path mesh_path = workspace / "mesh" / "poisson.ply";
-  const fs::path sparse = workspace / "sparse";
+  const std::string ws = workspace.name();
+  if (!fs::exists(workspace.root())) throw Error(ws + ": no such workspace folder");
+  const fs::path mesh_path = workspace.mesh_dir() / "poisson.ply";
+  const fs::path sparse = workspace.sparse_dir();
   if (!fs::exists(sparse / "images.txt"))
-    throw Error(workspace.string() + ": no sparse/images.txt — run `fmv3d sparse " + workspace.string() + "` first");
-  if (!fs::exists(mesh_path))
-    throw Error(workspace.string() + ": no mesh/poisson.ply — run `fmv3d mesh " + workspace.string() + "` first");
+    throw Error(ws + ": no sparse/images.txt — run `fmv3d sparse " + ws + "` first");
+  if (!fs::exists(mesh_path)) throw Error(ws + ": no mesh/poisson.ply — run `fmv3d mesh " + ws + "` first");
   const ColoredMesh mesh = ReadMeshPly(mesh_path);
   core::Reconstruction model = io::ReadColmapText(sparse);
   if (model.images.empty()) throw Error((sparse / "images.txt").string() + ": no registered images");
@@ -92,13 +92,13 @@ nlohmann::json RunTextureStage(const fs::path& workspace, const TextureStageOpti
     spdlog::info("texture: colour from {} of {} views (each sparse point in {} of them)", model.images.size(),
                  registered, options.view_coverage);
   }
-  const std::vector<TextureView> views = LoadTextureViews(model, workspace / "frames");
+  const std::vector<TextureView> views = LoadTextureViews(model, workspace.frames_dir());
   const double load_seconds = std::chrono::duration<double>(Clock::now() - start).count();
 
   TexturedModel textured = TextureMesh(mesh, views, options);
 
   const auto write_start = Clock::now();
-  const fs::path dir = workspace / "mesh";
+  const fs::path dir = workspace.mesh_dir();
   // Atlas pages of an earlier run with more pages must not linger beside the new OBJ.
   for (size_t p = textured.mesh.materials.size();; ++p) {
     const fs::path old = dir / ("textured_atlas_" + std::to_string(p) + ".png");
@@ -127,8 +127,8 @@ nlohmann::json RunTextureStage(const fs::path& workspace, const TextureStageOpti
                        {"texturing", textured.stats["seconds"]},
                        {"write", std::chrono::duration<double>(Clock::now() - write_start).count()},
                        {"total", std::chrono::duration<double>(Clock::now() - start).count()}};
-  core::EnsureDirectory(workspace / "report");
-  core::WriteJson(workspace / "report" / "texture.json", report);
+  core::EnsureDirectory(workspace.report_dir());
+  core::WriteJson(workspace.report_dir() / "texture.json", report);
   spdlog::info("texture: {} faces from {} views → {}", textured.mesh.faces.size(), views.size(),
                (dir / "textured.obj").string());
   return report;

@@ -13,6 +13,7 @@
 
 #include "fmv3d/core/error.h"
 #include "fmv3d/core/reconstruction.h"
+#include "fmv3d/core/workspace.h"
 #include "fmv3d/surface/texture_atlas.h"
 #include "fmv3d/surface/view_selection.h"
 
@@ -42,6 +43,6 @@ TexturedModel TextureMesh(const ColoredMesh& mesh, const std::vector<TextureView
 
 // Returns the summary also written to WS/report/texture.json. Throws fmv3d::Error naming the missing input
 // and the command that makes it.
-nlohmann::json RunTextureStage(const std::filesystem::path& workspace, const TextureStageOptions& options);
+nlohmann::json RunTextureStage(const core::Workspace& workspace, const TextureStageOptions& options);
 
 }  // namespace fmv3d::surface
