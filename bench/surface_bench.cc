@@ -143,7 +143,7 @@ void BM_TextureStage(benchmark::State& state) {
   state.counters["views"] = report["views"].get<double>();
   state.counters["pages"] = report["atlas"]["pages"].get<double>();
   state.counters["psnr_db"] = 10 * std::log10(255.0 * 255.0 / (se / std::max<size_t>(n, 1)));
-  state.counters["covered_pct"] = 100.0 * static_cast<double>(n / 3) / (frame.rows * frame.cols);
+  state.counters["covered_pct"] = 100.0 * (static_cast<double>(n) / 3) / (frame.rows * frame.cols);
 }
 BENCHMARK(BM_TextureStage)->Unit(benchmark::kSecond)->Iterations(1)->UseRealTime();
 

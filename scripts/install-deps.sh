@@ -12,7 +12,7 @@ PACKAGES=(
   libcpp-httplib-dev
   ffmpeg
   chromium
-  clang-format
+  clang-format clang-tidy
 )
 # Optional yardstick for bench/ only (COLMAP 3.8, CPU); never needed to build or test.
 if [[ "${FMV3D_WITH_COLMAP:-0}" == "1" ]]; then PACKAGES+=(colmap); fi

@@ -83,6 +83,7 @@ TEST(FusionWindow, ASmallWindowFusesTheSamePointsAsAllViewsAtOnce) {
   const io::OrientedPointCloud mem = FuseDepthMaps(views, FusionOptions{}, &mem_st);
 
   std::vector<uint32_t> ids;
+  ids.reserve(views.size());
   for (const auto& [id, v] : views) ids.push_back(id);
   size_t load_calls = 0;
   FusionWindow window(

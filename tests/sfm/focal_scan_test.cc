@@ -61,6 +61,7 @@ std::vector<FocalScanPair> OrbitPairs(const Eigen::Vector3d& target, double step
   std::uniform_real_distribution<double> ux(-20, 20), uz(0, 15);
   std::normal_distribution<double> noise(0, 0.5);
   std::vector<Eigen::Vector3d> points;
+  points.reserve(600);
   for (int i = 0; i < 600; ++i) points.emplace_back(ux(rng), ux(rng), uz(rng));
   const double w = cam.width, h = cam.height;
   std::vector<FocalScanPair> pairs;

@@ -272,6 +272,7 @@ GcpGeoref EstimateGcpGeoref(const core::Reconstruction& model, const std::vector
   out.crs_name = crs.name();
   out.vertical_datum = crs.vertical_datum();
   std::vector<GeoPoint> wgs84;
+  wgs84.reserve(gcps.size());
   for (const auto& g : gcps) wgs84.push_back(crs.ToWgs84(g.geo));
   if (options.origin) {
     out.origin = *options.origin;

@@ -344,8 +344,7 @@ nlohmann::json RunDenseStage(const core::Workspace& workspace, const DenseStageO
     spdlog::warn("dense: fusion produced no points (no pixel was consistent in {} views)", options.fusion.min_views);
   t.fusion = SecondsSince(t_fuse);
 
-  const nlohmann::json report =
-      DenseReport(rec, plan, fused, t, runner.load_seconds(), SecondsSince(t_start), ply, options);
+  nlohmann::json report = DenseReport(rec, plan, fused, t, runner.load_seconds(), SecondsSince(t_start), ply, options);
   core::WriteJson(report_dir / "dense.json", report);
   spdlog::info("dense: {} points from {} views ({} skipped) in {:.1f} s", fused.points, plan.references.size(),
                plan.skipped.size(), SecondsSince(t_start));

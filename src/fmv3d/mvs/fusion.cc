@@ -51,7 +51,7 @@ double NormalUncertainty(const Eigen::Vector3d& X, const Eigen::Vector3d& n,
   }
   // Fewer than two distinct directions leave a null direction (along the common ray): unconstrained.
   const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es(info);
-  const Eigen::Vector3d ev = es.eigenvalues();  // ascending
+  const Eigen::Vector3d& ev = es.eigenvalues();  // ascending
   if (!(ev(2) > 0) || !(ev(0) > 1e-12 * ev(2))) return std::numeric_limits<double>::infinity();
   const Eigen::Vector3d c = es.eigenvectors().transpose() * n;
   return std::sqrt(c(0) * c(0) / ev(0) + c(1) * c(1) / ev(1) + c(2) * c(2) / ev(2));
@@ -323,6 +323,7 @@ io::OrientedPointCloud FuseDepthMaps(const std::map<uint32_t, FusionView>& views
   FusionStats st;
   // Every view at once (nothing evicted), each with a copy of its depths: the erosion works in place.
   std::vector<uint32_t> ids;
+  ids.reserve(views.size());
   for (const auto& [id, v] : views) ids.push_back(id);
   FusionWindow window(
       ids,
@@ -384,6 +385,7 @@ io::OrientedPointCloud FuseDepthMaps(const std::map<uint32_t, FusionView>& views
 size_t FuseDepthMapsToPly(std::map<uint32_t, FusionView> views, const FusionOptions& opt,
                           const std::filesystem::path& ply, FusionStats* stats) {
   std::vector<uint32_t> ids;
+  ids.reserve(views.size());
   for (const auto& [id, v] : views) ids.push_back(id);
   // Every view at once: each is moved into the window once and never reloaded.
   FusionWindow window(
@@ -461,7 +463,7 @@ size_t FuseDepthMapsToPly(FusionWindow& window, const FusionOptions& opt, const 
         << "property uchar red\nproperty uchar green\nproperty uchar blue\n"
         << (opt.write_sigma ? "property float sigma\n" : "") << "property list uchar int visibility\nend_header\n";
     constexpr size_t kFixed = 6 * sizeof(float) + 3 + 1;
-    char rec[kFixed + 255 * 4];
+    char rec[kFixed + size_t{255} * 4];  // up to 255 int32 visibility entries
     for (size_t i = 0; i < sigma_of.size(); ++i) {
       if (!in.read(rec, kFixed)) throw Error(scratch.string() + ": truncated");
       const size_t n = static_cast<uint8_t>(rec[kFixed - 1]);

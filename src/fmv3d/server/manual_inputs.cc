@@ -1,5 +1,7 @@
 #include "fmv3d/server/manual_inputs.h"
 
+#include <fmt/format.h>
+
 #include <cmath>
 #include <map>
 #include <regex>
@@ -27,7 +29,7 @@ void OnlyKeys(const json& j, std::initializer_list<const char*> keys, const std:
   for (const auto& [k, v] : j.items()) {
     bool ok = false;
     for (const char* key : keys) ok = ok || k == key;
-    if (!ok) throw RequestError(400, where + ": unknown field '" + k + "'", k);
+    if (!ok) throw RequestError(400, fmt::format("{}: unknown field '{}'", where, k), k);
   }
 }
 
@@ -127,7 +129,7 @@ json SaveGcpJson(std::string_view body, const io::FrameTable& frames, const fs::
     OnlyKeys(p, {"name", "x", "y", "z", "check", "observations"}, where);
     const std::string name = String(p, "name", where);
     if (name.find_first_of(" \t\r\n") != std::string::npos)
-      throw RequestError(400, where + ": the name '" + name + "' must not contain spaces", "name");
+      throw RequestError(400, fmt::format("{}: the name '{}' must not contain spaces", where, name), "name");
     where = "GCP '" + name + "'";
     const Eigen::Vector3d geo(Number(p, "x", where), Number(p, "y", where), Number(p, "z", where));
     if (p.contains("check") && !p["check"].is_boolean())
@@ -210,7 +212,7 @@ CalibrationRequest ParseCalibrationRequest(std::string_view body) {
 std::string ParseSensorName(std::string_view body) {
   const json j = ParseObject(body);
   OnlyKeys(j, {"name"}, "sensor");
-  const std::string name = String(j, "name", "sensor");
+  std::string name = String(j, "name", "sensor");
   if (name.size() > 64 || !std::regex_match(name, std::regex(R"([A-Za-z0-9._ -]+)")))
     throw RequestError(400, "'name': 1 to 64 characters of letters, digits, '.', '_', ' ' and '-'", "name");
   return name;

@@ -142,7 +142,9 @@ GuidedCompletionStats CompleteTracksByProjection(core::Reconstruction* rec,
   const double r2 = options.max_error_px * options.max_error_px;
   std::vector<Claim> claims;
   std::vector<int> decoys;
-  for (const auto& [pid, p] : rec->points) {
+  for (const auto& entry : rec->points) {
+    const uint32_t pid = entry.first;
+    const auto& p = entry.second;  // not a structured binding: the search lambda below captures it (C++17)
     std::set<uint32_t> in_track, targets;
     for (const auto& t : p.track) in_track.insert(t.image_id);
     for (uint32_t id : in_track) {

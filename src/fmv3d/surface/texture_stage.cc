@@ -118,8 +118,8 @@ nlohmann::json RunTextureStage(const core::Workspace& workspace, const TextureSt
   nlohmann::json report = textured.stats;
   report["input"] = "mesh/poisson.ply";
   report["outputs"] = {"mesh/textured.obj", "mesh/textured.mtl", "mesh/model.glb", "mesh/textured.ply"};
-  for (size_t p = 0; p < textured.mesh.materials.size(); ++p)
-    report["outputs"].push_back("mesh/textured_" + textured.mesh.materials[p].name + ".png");
+  for (const auto& material : textured.mesh.materials)
+    report["outputs"].push_back("mesh/textured_" + material.name + ".png");
   report["views"] = views.size();
   report["registered_views"] = registered;
   report["faces"] = textured.mesh.faces.size();
