@@ -47,6 +47,12 @@ void Add(CLI::App& app) {
                   "through")
       ->check(CLI::Range(0.0, 1.0))
       ->capture_default_str();
+  cmd->add_option("--guided-ratio", m.guided_completion_ratio,
+                  "Guided completion: ratio test against a rival keypoint near the projection (1: none)")
+      ->check(CLI::Range(0.0, 1.0))
+      ->capture_default_str();
+  cmd->add_flag("!--no-guided-prune", m.guided_completion_prune,
+                "Guided completion: keep the additions the following adjustment does not explain");
   cmd->add_flag("--tangential", m.refine_tangential, "Also refine p1, p2");
   cmd->add_option("--local-ba-iterations", m.local_ba_max_iterations, "Local BA: maximum iterations")
       ->capture_default_str();

@@ -1,20 +1,133 @@
 #include "fmv3d/sfm/guided_completion.h"
 
+#include <Eigen/Eigenvalues>
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <limits>
 #include <tuple>
 #include <vector>
 
 #include "fmv3d/core/error.h"
+#include "fmv3d/sfm/bundle_adjustment.h"
 
 namespace fmv3d::sfm {
+namespace {
+
+// Decoy shifts (fractions of the image width, height): the quarter-image grid, farthest from the projection first.
+constexpr int kMaxDecoys = 8;
+constexpr double kDecoyShifts[kMaxDecoys][2] = {{0.5, 0.5},  {0.5, 0},    {0, 0.5},    {0.25, 0.5},
+                                                {0.75, 0.5}, {0.5, 0.25}, {0.5, 0.75}, {0.25, 0.25}};
+
+}  // namespace
 
 void GuidedCompletionOptions::Check() const {
   if (!(max_error_px > 0)) throw Error("guided completion: max_error_px must be > 0");
   if (!(false_accept_rate > 0 && false_accept_rate < 1))
     throw Error("guided completion: false_accept_rate must be in (0, 1)");
   if (min_decoys_for_bound < 1) throw Error("guided completion: min_decoys_for_bound must be ≥ 1");
+  if (!(search_mass > 0 && search_mass < 1)) throw Error("guided completion: search_mass must be in (0, 1)");
+  if (min_bin_observations < 1) throw Error("guided completion: min_bin_observations must be ≥ 1");
+  if (!(ratio > 0 && ratio <= 1)) throw Error("guided completion: ratio must be in (0, 1]");
+  if (decoys_per_projection < 1 || decoys_per_projection > kMaxDecoys)
+    throw Error("guided completion: decoys_per_projection must be in [1, " + std::to_string(kMaxDecoys) + "]");
+}
+
+namespace {
+
+double MedianSigma(std::vector<double> errors) {
+  if (errors.empty()) return 0;
+  auto mid = errors.begin() + errors.size() / 2;
+  std::nth_element(errors.begin(), mid, errors.end());
+  return *mid / std::sqrt(2 * std::log(2.0));
+}
+
+// d(projection)/d(world point) of image im.
+Eigen::Matrix<double, 2, 3> WorldJacobian(const core::Reconstruction& rec, const core::Image& im,
+                                          const Eigen::Vector3d& xc) {
+  return rec.cameras.at(im.camera_id).ProjectJacobian(xc) * im.pose.R();
+}
+
+// The point's covariance from its observations (Gauss–Newton, cameras held); false when they do not determine it.
+bool PointCovariance(const core::Reconstruction& rec, const core::Point3D& p, const KeypointNoise& noise,
+                     Eigen::Matrix3d* cov) {
+  Eigen::Matrix3d info = Eigen::Matrix3d::Zero();
+  for (const auto& t : p.track) {
+    const core::Image& im = rec.images.at(t.image_id);
+    const Eigen::Vector3d xc = im.pose.Transform(p.xyz);
+    if (!(xc.z() > 0)) continue;
+    const Eigen::Matrix<double, 2, 3> J = WorldJacobian(rec, im, xc);
+    const double s = noise.Sigma(t.image_id, t.point2d_idx);
+    info += J.transpose() * J / (s * s);
+  }
+  Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eig(info);
+  const Eigen::Vector3d ev = eig.eigenvalues();
+  if (!(ev.minCoeff() > 1e-12 * ev.maxCoeff()) || !std::isfinite(ev.maxCoeff())) return false;
+  *cov = eig.eigenvectors() * ev.cwiseInverse().asDiagonal() * eig.eigenvectors().transpose();
+  return true;
+}
+
+// The point's covariance projected into image im (pixels²).
+Eigen::Matrix2d ProjectedCovariance(const core::Reconstruction& rec, const Eigen::Matrix3d& point_cov,
+                                    const core::Image& im, const Eigen::Vector3d& xc) {
+  const Eigen::Matrix<double, 2, 3> J = WorldJacobian(rec, im, xc);
+  return J * point_cov * J.transpose();
+}
+
+}  // namespace
+
+int KeypointNoise::Bin(float scale) {
+  if (!(scale > 1)) return 0;
+  return std::min(kBins - 1, static_cast<int>(std::floor(2 * std::log2(scale))));
+}
+
+KeypointNoise::KeypointNoise(const core::Reconstruction& rec, const KeypointScales& scales, int min_observations) {
+  by_bin_.fill(0);
+  for (const auto& [id, im] : rec.images) {
+    auto sc = scales.find(id);
+    if (sc != scales.end() && sc->second && sc->second->size() == im.points2d.size()) scales_[id] = sc->second;
+  }
+  std::array<std::vector<double>, kBins> per_bin;
+  std::vector<double> all;
+  std::set<uint32_t> images;
+  size_t points = 0;  // with an observation in front of its camera: the ones the adjustment fitted
+  for (const auto& [pid, p] : rec.points) {
+    const size_t before = all.size();
+    for (const auto& t : p.track) {
+      const double e = ObservationError(rec, t.image_id, t.point2d_idx, p.xyz);
+      if (!std::isfinite(e)) continue;
+      all.push_back(e);
+      images.insert(t.image_id);
+      auto sc = scales_.find(t.image_id);
+      if (sc != scales_.end()) per_bin[Bin((*sc->second)[t.point2d_idx])].push_back(e);
+    }
+    points += all.size() > before;
+  }
+  const double measurements = 2.0 * all.size();
+  const double fitted = 3.0 * points + 6.0 * images.size();
+  if (!(measurements > fitted)) return;
+  const double dof = std::sqrt(measurements / (measurements - fitted));
+  overall_ = dof * MedianSigma(std::move(all));
+  for (int b = 0; b < kBins; ++b) {
+    const int n = static_cast<int>(per_bin[b].size());
+    const double s = dof * MedianSigma(std::move(per_bin[b]));
+    by_bin_[b] = n >= min_observations && s > 0 ? s : overall_;
+  }
+}
+
+double KeypointNoise::Sigma(uint32_t image_id, uint32_t kp) const {
+  auto sc = scales_.find(image_id);
+  return sc == scales_.end() ? overall_ : by_bin_[Bin((*sc->second)[kp])];
+}
+
+Eigen::Matrix2d ProjectedPointCovariance(const core::Reconstruction& rec, const core::Point3D& point, uint32_t image_id,
+                                         const KeypointNoise& noise) {
+  Eigen::Matrix3d cov;
+  const core::Image& im = rec.images.at(image_id);
+  const Eigen::Vector3d xc = im.pose.Transform(point.xyz);
+  if (!(xc.z() > 0) || !PointCovariance(rec, point, noise, &cov))
+    return Eigen::Matrix2d::Constant(std::numeric_limits<double>::infinity());
+  return ProjectedCovariance(rec, cov, im, xc);
 }
 
 namespace {
@@ -104,6 +217,43 @@ std::vector<int> MemberDistances(const core::Reconstruction& rec,
   return out;
 }
 
+constexpr int kNone = std::numeric_limits<int>::max();
+
+struct Search {
+  int best = kNone;    // smallest descriptor distance to the track inside the search ellipse
+  uint32_t kp = 0;     // its keypoint
+  int second = kNone;  // the next smallest inside the radius cap
+};
+
+// The search region of keypoint k of the image: rᵀ S⁻¹ r ≤ χ², S = σ_k² I + P (P: the point's covariance
+// projected into the image).
+bool InSearchRegion(const Eigen::Vector2d& r, const Eigen::Matrix2d& P, double sigma, double chi2) {
+  const Eigen::Matrix2d S = P + sigma * sigma * Eigen::Matrix2d::Identity();
+  return r.dot(S.inverse() * r) <= chi2;
+}
+
+// The free keypoints around `at`: the one inside its search region that looks most like the track (smallest
+// squared distance to any member's descriptor), and its most similar rival inside the radius cap.
+Search FindKeypoint(const FreeKeypointGrid& grid, const core::Image& im, const features::Descriptors& dj,
+                    const std::vector<std::pair<const features::Descriptors*, uint32_t>>& members,
+                    const Eigen::Vector2d& at, const Eigen::Matrix2d& P, const KeypointNoise& noise, double chi2,
+                    double cap2) {
+  Search out;
+  grid.Near(at, [&](uint32_t k) {
+    const Eigen::Vector2d r = im.points2d[k] - at;
+    if (r.squaredNorm() > cap2) return;
+    int d = kNone;
+    for (const auto& [desc, row] : members) d = std::min(d, SquaredDistance(*desc, row, dj, k));
+    if (d < out.best && InSearchRegion(r, P, noise.Sigma(im.id, k), chi2)) {
+      out.second = std::min(out.second, out.best);
+      out.best = d, out.kp = k;
+    } else {
+      out.second = std::min(out.second, d);
+    }
+  });
+  return out;
+}
+
 struct Claim {
   int distance;
   uint32_t image_id, kp;
@@ -115,7 +265,7 @@ struct Claim {
 GuidedCompletionStats CompleteTracksByProjection(core::Reconstruction* rec,
                                                  const std::map<uint32_t, const features::Descriptors*>& descriptors,
                                                  const std::map<uint32_t, std::set<uint32_t>>& covisible,
-                                                 const GuidedCompletionOptions& options) {
+                                                 const GuidedCompletionOptions& options, const KeypointScales& scales) {
   options.Check();
   GuidedCompletionStats stats;
   for (const auto& [id, d] : descriptors) {
@@ -131,6 +281,10 @@ GuidedCompletionStats CompleteTracksByProjection(core::Reconstruction* rec,
     stats.member_median = members[members.size() / 2];
   }
 
+  stats.added.clear();
+  const KeypointNoise noise(*rec, scales, options.min_bin_observations);
+  if (!(noise.overall() > 0)) return stats;  // no noise measurable: no search region
+  stats.sigma_px = noise.overall();
   std::map<uint32_t, FreeKeypointGrid> grids;
   std::map<uint32_t, double> max_r2;
   for (const auto& [id, im] : rec->images) {
@@ -139,12 +293,12 @@ GuidedCompletionStats CompleteTracksByProjection(core::Reconstruction* rec,
     grids.emplace(id, FreeKeypointGrid(im, cam, options.max_error_px));
     if (!max_r2.count(im.camera_id)) max_r2[im.camera_id] = MaxNormalisedRadius2(cam);
   }
-  const double r2 = options.max_error_px * options.max_error_px;
+  const double cap2 = options.max_error_px * options.max_error_px;
+  const double chi2 = -2 * std::log(1 - options.search_mass);  // χ²(2) quantile
   std::vector<Claim> claims;
   std::vector<int> decoys;
-  for (const auto& entry : rec->points) {
-    const uint32_t pid = entry.first;
-    const auto& p = entry.second;  // not a structured binding: the search lambda below captures it (C++17)
+  std::vector<double> radii;
+  for (const auto& [pid, p] : rec->points) {
     std::set<uint32_t> in_track, targets;
     for (const auto& t : p.track) in_track.insert(t.image_id);
     for (uint32_t id : in_track) {
@@ -152,6 +306,13 @@ GuidedCompletionStats CompleteTracksByProjection(core::Reconstruction* rec,
       if (c != covisible.end()) targets.insert(c->second.begin(), c->second.end());
     }
     ++stats.points;
+    Eigen::Matrix3d point_cov;
+    if (!PointCovariance(*rec, p, noise, &point_cov)) continue;
+    std::vector<std::pair<const features::Descriptors*, uint32_t>> members_of;
+    for (const auto& t : p.track) {
+      auto d = descriptors.find(t.image_id);
+      if (d != descriptors.end()) members_of.emplace_back(d->second, t.point2d_idx);
+    }
     for (uint32_t id : targets) {
       if (in_track.count(id) || !grids.count(id)) continue;
       const core::Image& im = rec->images.at(id);
@@ -162,33 +323,35 @@ GuidedCompletionStats CompleteTracksByProjection(core::Reconstruction* rec,
       const Eigen::Vector2d uv = cam.Project(xc);
       if (!cam.InImage(uv)) continue;
       ++stats.projections;
+      const Eigen::Matrix2d P = ProjectedCovariance(*rec, point_cov, im, xc);
+      const double s0 = noise.overall();
+      radii.push_back(
+          std::min(options.max_error_px,
+                   std::sqrt(chi2 * (P + s0 * s0 * Eigen::Matrix2d::Identity()).eigenvalues().real().maxCoeff())));
       const features::Descriptors& dj = *descriptors.at(id);
-      // The most similar free keypoint within the radius of a location, by its smallest distance to the track.
-      auto nearest = [&](const Eigen::Vector2d& at, uint32_t* kp) {
-        int best = std::numeric_limits<int>::max();
-        grids.at(id).Near(at, [&](uint32_t k) {
-          if ((im.points2d[k] - at).squaredNorm() > r2) return;
-          for (const auto& t : p.track) {
-            auto d = descriptors.find(t.image_id);
-            if (d == descriptors.end()) continue;
-            const int s = SquaredDistance(*d->second, t.point2d_idx, dj, k);
-            if (s < best) best = s, *kp = k;
-          }
-        });
-        return best;
-      };
-      uint32_t kp = 0, decoy_kp = 0;
-      const int best = nearest(uv, &kp);
-      if (best != std::numeric_limits<int>::max()) {
+      const Search found = FindKeypoint(grids.at(id), im, dj, members_of, uv, P, noise, chi2, cap2);
+      if (found.best != kNone) {
         ++stats.candidates;
-        claims.push_back({best, id, kp, pid});
+        // Lowe's ratio test against the rival: a second keypoint near the projection that looks about as much
+        // like the track (repeated texture, a duplicate detection) leaves the choice to chance.
+        if (options.ratio < 1 && found.second != kNone && !(found.best < options.ratio * options.ratio * found.second))
+          ++stats.ambiguous;
+        else
+          claims.push_back({found.best, id, found.kp, pid});
       }
-      // The decoy: the same search half an image away, where no keypoint is this point except by chance.
-      const Eigen::Vector2d at(std::fmod(uv.x() + 0.5 * cam.width, double(cam.width)),
-                               std::fmod(uv.y() + 0.5 * cam.height, double(cam.height)));
-      const int decoy = nearest(at, &decoy_kp);
-      if (decoy != std::numeric_limits<int>::max()) decoys.push_back(decoy);
+      // The decoys: the same search a quarter to half an image away, where no keypoint is this point except by
+      // chance. Several per projection: a search region of a pixel or two holds a keypoint rarely.
+      for (int i = 0; i < options.decoys_per_projection; ++i) {
+        const Eigen::Vector2d at(std::fmod(uv.x() + kDecoyShifts[i][0] * cam.width, double(cam.width)),
+                                 std::fmod(uv.y() + kDecoyShifts[i][1] * cam.height, double(cam.height)));
+        const int decoy = FindKeypoint(grids.at(id), im, dj, members_of, at, P, noise, chi2, cap2).best;
+        if (decoy != kNone) decoys.push_back(decoy);
+      }
     }
+  }
+  if (!radii.empty()) {
+    std::nth_element(radii.begin(), radii.begin() + radii.size() / 2, radii.end());
+    stats.median_radius_px = radii[radii.size() / 2];
   }
   stats.decoys = decoys.size();
   if (static_cast<int>(decoys.size()) < options.min_decoys_for_bound) return stats;
@@ -210,9 +373,35 @@ GuidedCompletionStats CompleteTracksByProjection(core::Reconstruction* rec,
     }
     im.point3d_ids[c.kp] = static_cast<int64_t>(c.point_id);
     rec->points.at(c.point_id).track.push_back({c.image_id, c.kp});
+    stats.added.push_back({c.point_id, {c.image_id, c.kp}});
     ++stats.accepted;
   }
   return stats;
+}
+
+size_t RemoveAdditionsThatDoNotFit(core::Reconstruction* rec,
+                                   const std::vector<std::pair<uint64_t, core::TrackElement>>& added,
+                                   const GuidedCompletionOptions& options, const KeypointScales& scales) {
+  options.Check();
+  const KeypointNoise noise(*rec, scales, options.min_bin_observations);
+  if (!(noise.overall() > 0)) return 0;
+  const double k = std::sqrt(-2 * std::log(1 - options.search_mass));
+  size_t removed = 0;
+  for (const auto& [pid, el] : added) {
+    auto p = rec->points.find(pid);
+    if (p == rec->points.end()) continue;
+    auto& track = p->second.track;
+    auto it = std::find_if(track.begin(), track.end(), [&](const core::TrackElement& t) {
+      return t.image_id == el.image_id && t.point2d_idx == el.point2d_idx;
+    });
+    if (it == track.end() || track.size() <= 2) continue;
+    const double bound = std::min(options.max_error_px, k * noise.Sigma(el.image_id, el.point2d_idx));
+    if (ObservationError(*rec, el.image_id, el.point2d_idx, p->second.xyz) <= bound) continue;
+    rec->images.at(el.image_id).point3d_ids[el.point2d_idx] = core::kNoPoint3D;
+    track.erase(it);
+    ++removed;
+  }
+  return removed;
 }
 
 }  // namespace fmv3d::sfm

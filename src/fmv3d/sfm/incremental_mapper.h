@@ -37,6 +37,8 @@ struct MapperImage {
   // Optional, one row per keypoint: the final polish completes tracks by projection with them
   // (guided_completion.h). Must outlive the mapper run.
   const features::Descriptors* descriptors = nullptr;
+  // Optional, one per keypoint: SIFT scales, for the keypoint noise of that completion (guided_completion.h).
+  std::vector<float> scales;
 };
 
 struct MapperCamera {
@@ -76,14 +78,16 @@ struct MapperOptions {
   double tri_max_error_px = 4;
   bool tri_ignore_two_view_tracks = true;  // TriangulatorOptions::ignore_two_view_tracks
   // Before the final adjustment (and once more after it), each point's track gains the keypoints of co-visible
-  // images that lie within tri_max_error_px of its projection and whose descriptors look like the track's
-  // (guided_completion.h); needs MapperImage::descriptors. The descriptor bound lets this share of decoy searches
-  // (a keypoint there by chance) through. Off by default: it lengthens the tracks of fountain-P11 and Herz-Jesus-P8
-  // (4.52 → 4.89, 3.77 → 4.15) with better rotations, but on a 36-frame 960x540 synthetic orbit of repetitive
-  // texture (principal point off-centre) it adds 17,000 observations of which up to 10% may be chance keypoints,
-  // and the centre error doubles (0.013 → 0.026%): a 4 px radius is far wider than the 0.3 px noise.
+  // images inside the search region its projection's uncertainty and their keypoint noise set (at most
+  // tri_max_error_px) whose descriptors look like the track's (guided_completion.h); needs
+  // MapperImage::descriptors (and ::scales for the noise by keypoint size). The descriptor bound lets this share of
+  // decoy searches (a keypoint there by chance) through. Off by default: checked against the true cameras, even
+  // these additions are off by more than 1 px twice as often as the matcher's observations (fountain-P11 32% vs
+  // 18%), and on a 36-frame 960x540 synthetic orbit of repetitive texture the centre error grows (0.013 → 0.022%).
   bool guided_completion = false;
   double guided_completion_false_accept_rate = 0.01;
+  double guided_completion_ratio = 0.8;  // ratio test against a rival keypoint near the projection (1: off)
+  bool guided_completion_prune = true;   // drop additions the following adjustment does not explain
   double filter_max_error_px = 4;
   double filter_min_angle_deg = 1.5;
   // Bundle adjustment.

@@ -251,6 +251,7 @@ size_t ModelBuilder::CompleteTracksByProjection() {
     const features::Descriptors* d = images_.at(id)->descriptors;
     if (d && static_cast<size_t>(d->rows()) == im.points2d.size()) descriptors[id] = d;
   }
+  const KeypointScales scales = Scales();
   if (descriptors.size() < 2) return 0;
   std::map<uint32_t, std::set<uint32_t>> covisible;
   for (const auto& p : input_.pairs)
@@ -261,12 +262,14 @@ size_t ModelBuilder::CompleteTracksByProjection() {
   GuidedCompletionOptions o;
   o.max_error_px = opt_.tri_max_error_px;
   o.false_accept_rate = opt_.guided_completion_false_accept_rate;
+  o.ratio = opt_.guided_completion_ratio;
   const size_t obs_before = [&] {
     size_t n = 0;
     for (const auto& [pid, p] : rec_.points) n += p.track.size();
     return n;
   }();
-  const GuidedCompletionStats s = sfm::CompleteTracksByProjection(&rec_, descriptors, covisible, o);
+  GuidedCompletionStats s = sfm::CompleteTracksByProjection(&rec_, descriptors, covisible, o, scales);
+  guided_added_ = std::move(s.added);
   t_->triangulation += Seconds(start);
   if (!guided_completion_.is_array()) guided_completion_ = nlohmann::json::array();
   guided_completion_.push_back({{"run", true},
@@ -276,16 +279,41 @@ size_t ModelBuilder::CompleteTracksByProjection() {
                                 {"with_free_keypoint_in_radius", s.candidates},
                                 {"observations_added", s.accepted},
                                 {"conflicts", s.conflicts},
-                                {"radius_px", o.max_error_px},
+                                {"ambiguous", s.ambiguous},
+                                {"ratio", o.ratio},
+                                {"radius_cap_px", o.max_error_px},
+                                {"search_mass", o.search_mass},
+                                {"keypoint_sigma_px", s.sigma_px},
+                                {"median_search_radius_px", s.median_radius_px},
                                 {"decoy_searches_with_keypoint", s.decoys},
                                 {"false_accept_rate", o.false_accept_rate},
                                 {"expected_false_additions_at_most", o.false_accept_rate * s.candidates},
                                 {"descriptor_bound_squared", s.descriptor_bound},
                                 {"member_nearest_distance_median_squared", s.member_median},
                                 {"seconds", Seconds(start)}});
-  spdlog::info("mapper: guided completion added {} observations to {} ({} conflicts; descriptor bound {:.0f})",
-               s.accepted, obs_before, s.conflicts, s.descriptor_bound);
+  spdlog::info(
+      "mapper: guided completion added {} observations to {} ({} conflicts; search radius {:.2f} px median, σ {:.2f} "
+      "px; descriptor bound {:.0f})",
+      s.accepted, obs_before, s.conflicts, s.median_radius_px, s.sigma_px, s.descriptor_bound);
   return s.accepted;
+}
+
+KeypointScales ModelBuilder::Scales() const {
+  KeypointScales scales;
+  for (const auto& [id, im] : rec_.images)
+    if (!images_.at(id)->scales.empty()) scales[id] = &images_.at(id)->scales;
+  return scales;
+}
+
+size_t ModelBuilder::PruneGuidedAdditions() {
+  if (!opt_.guided_completion_prune || guided_added_.empty() || !guided_completion_.is_array()) return 0;
+  GuidedCompletionOptions o;
+  o.max_error_px = opt_.tri_max_error_px;
+  const size_t removed = RemoveAdditionsThatDoNotFit(&rec_, guided_added_, o, Scales());
+  guided_added_.clear();
+  guided_completion_.back()["removed_after_adjustment"] = removed;
+  spdlog::info("mapper: {} guided additions removed after the adjustment (outside their search bound)", removed);
+  return removed;
 }
 
 void ModelBuilder::Grow() {
@@ -309,7 +337,11 @@ void ModelBuilder::Grow() {
   CompleteTracksByProjection();
   GlobalBundleAdjust(true);
   // The adjusted points and cameras project more exactly: a second pass finds what the first one's radius missed.
-  if (CompleteTracksByProjection() > 0) GlobalBundleAdjust(true);
+  // Each pass's additions that the adjustment after it does not explain are dropped again, and the model
+  // adjusted without them.
+  const size_t pruned = PruneGuidedAdditions();
+  if (CompleteTracksByProjection() > 0 || pruned > 0) GlobalBundleAdjust(true);
+  if (PruneGuidedAdditions() > 0) GlobalBundleAdjust(true);
   if (static_cast<int>(rec_.images.size()) >= opt_.refine_principal_point_min_images) {
     bool any = false;
     if (focal_fixed_ && focal_from_plateau_ && TrySelfCalibration(IntrinsicGroup::kFocal)) {

@@ -130,6 +130,10 @@ class ModelBuilder {
   // Completes the tracks by projection into co-visible images (guided_completion.h) when descriptors are given;
   // returns the observations added (each pass is reported).
   size_t CompleteTracksByProjection();
+  // After the adjustment that followed a completion: removes the additions it does not explain
+  // (RemoveAdditionsThatDoNotFit); returns how many.
+  size_t PruneGuidedAdditions();
+  KeypointScales Scales() const;  // the registered images' keypoint scales, where known
   void LocalBundleAdjust(uint32_t image_id);
   BundleAdjustmentSummary GlobalBundleAdjust(bool final_pass);
   // After an image was registered: whether the model has grown enough for an intermediate global adjustment
@@ -163,7 +167,8 @@ class ModelBuilder {
   double init_focal_scale_ = 1;
   std::optional<std::pair<double, double>> init_distortion_;  // k1, k2 of a wide lens found by the focal scan
   nlohmann::json focal_decision_;
-  nlohmann::json guided_completion_ = {{"run", false}};  // then one entry per pass
+  nlohmann::json guided_completion_ = {{"run", false}};                // then one entry per pass
+  std::vector<std::pair<uint64_t, core::TrackElement>> guided_added_;  // the last completion's additions
   // Focal held through growth: a trusted prior the user wants kept, or a telephoto scan's lower bound (then
   // tested once at the end). Narrow field: distortion is unobservable and stays fixed.
   bool focal_fixed_ = false, focal_from_plateau_ = false, narrow_field_ = false, dolly_done_ = false;

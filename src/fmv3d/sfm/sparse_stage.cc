@@ -235,7 +235,8 @@ SparseStageInput ReadSparseStageInput(const core::Workspace& ws, const SparseSta
       in.feature_sets[i] = features::ReadFeatures(fp);
       const features::FeatureSet& fs_ = in.feature_sets[i];
       im.keypoints.reserve(fs_.keypoints.size());
-      for (const auto& k : fs_.keypoints) im.keypoints.emplace_back(k.x, k.y);
+      im.scales.reserve(fs_.keypoints.size());
+      for (const auto& k : fs_.keypoints) im.keypoints.emplace_back(k.x, k.y), im.scales.push_back(k.scale);
       if (fs_.colors.size() == fs_.keypoints.size()) im.colors = fs_.colors;
     }
     num_kp.push_back(im.keypoints.size());
