@@ -387,8 +387,9 @@ size_t RemoveAdditionsThatDoNotFit(core::Reconstruction* rec,
   if (!(noise.overall() > 0)) return 0;
   const double k = std::sqrt(-2 * std::log(1 - options.search_mass));
   size_t removed = 0;
-  for (const auto& [pid, el] : added) {
-    auto p = rec->points.find(pid);
+  for (const auto& addition : added) {
+    const core::TrackElement& el = addition.second;  // not a structured binding: the lambda below captures it
+    auto p = rec->points.find(addition.first);
     if (p == rec->points.end()) continue;
     auto& track = p->second.track;
     auto it = std::find_if(track.begin(), track.end(), [&](const core::TrackElement& t) {
