@@ -50,13 +50,13 @@ class TinyBa {
   }
 
   ceres::Problem& problem() { return problem_; }
-  std::vector<double*> Points() {
-    std::vector<double*> out;
+  std::vector<const double*> Points() {
+    std::vector<const double*> out;
     for (auto& p : points_) out.push_back(p.data());
     return out;
   }
-  std::vector<double*> Intrinsics() {
-    std::vector<double*> out;
+  std::vector<const double*> Intrinsics() {
+    std::vector<const double*> out;
     for (auto& in : intr_) out.push_back(in->data());
     return out;
   }
@@ -89,16 +89,16 @@ class TinyBa {
 };
 
 // Ceres' covariance of each block by dense SVD of the whole Jacobian (loss applied), ambient coordinates.
-std::vector<Eigen::MatrixXd> CeresCovariance(ceres::Problem* problem, const std::vector<double*>& blocks) {
+std::vector<Eigen::MatrixXd> CeresCovariance(ceres::Problem* problem, const std::vector<const double*>& blocks) {
   ceres::Covariance::Options o;
   o.algorithm_type = ceres::DENSE_SVD;
   o.apply_loss_function = true;
   ceres::Covariance cov(o);
   std::vector<std::pair<const double*, const double*>> pairs;
-  for (double* b : blocks) pairs.emplace_back(b, b);
+  for (const double* b : blocks) pairs.emplace_back(b, b);
   if (!cov.Compute(pairs, problem)) return {};
   std::vector<Eigen::MatrixXd> out;
-  for (double* b : blocks) {
+  for (const double* b : blocks) {
     Eigen::Matrix<double, core::kNumIntrinsics, core::kNumIntrinsics, Eigen::RowMajor> m;
     EXPECT_TRUE(cov.GetCovarianceBlock(b, b, m.data()));
     out.emplace_back(m);

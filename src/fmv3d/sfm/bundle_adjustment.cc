@@ -173,13 +173,16 @@ class BundleProblem {
   // The posterior covariance of each camera's free intrinsics (points eliminated, poses marginalised:
   // intrinsics_covariance.h), scaled by σ² = SSE / dof. Nothing when the system is rank-deficient.
   void IntrinsicsCovariance(BundleAdjustmentSummary* out) const {
-    std::vector<double*> targets, points;
+    std::vector<const double*> targets, points;
     std::vector<uint32_t> ids;
-    for (auto& [cid, params] : intr_)
-      if (!problem_.IsParameterBlockConstant(params)) targets.push_back(params), ids.push_back(cid);
+    for (const auto& [cid, params] : intr_) {
+      if (problem_.IsParameterBlockConstant(params)) continue;
+      targets.push_back(params);
+      ids.push_back(cid);
+    }
     if (targets.empty()) return;
     points.reserve(pts_.size());
-    for (auto& X : pts_) points.push_back(const_cast<double*>(X.data()));
+    for (const auto& X : pts_) points.push_back(X.data());
     const auto start = std::chrono::steady_clock::now();
     const auto cov = MarginalCovariance(problem_, points, targets);
     spdlog::debug("BA: intrinsics covariance {:.3f} s{}",

@@ -43,25 +43,25 @@ struct Layout {
   int num_targets = 0, num_points = 0;
 };
 
-std::optional<Layout> Classify(const ceres::Problem& problem, const std::vector<double*>& eliminated,
-                               const std::vector<double*>& targets) {
+std::optional<Layout> Classify(const ceres::Problem& problem, const std::vector<const double*>& eliminated,
+                               const std::vector<const double*>& targets) {
   Layout l;
   std::vector<double*> all;
   problem.GetParameterBlocks(&all);
   for (double* b : all)
     if (!problem.IsParameterBlockConstant(b)) l.blocks[b].size = problem.ParameterBlockTangentSize(b);
-  auto claim = [&](double* b, BlockInfo::Kind kind, int index) {
+  auto claim = [&](const double* b, BlockInfo::Kind kind, int index) {
     auto it = l.blocks.find(b);
     if (it == l.blocks.end() || it->second.kind != BlockInfo::kConstant) return false;
     it->second.kind = kind;
     it->second.index = index;
     return true;
   };
-  for (double* t : targets) {
+  for (const double* t : targets) {
     if (!claim(t, BlockInfo::kCamera, l.num_targets++)) return std::nullopt;  // constant, unknown or repeated
     l.camera_sizes.push_back(l.blocks.at(t).size);
   }
-  for (double* p : eliminated)
+  for (const double* p : eliminated)
     if (claim(p, BlockInfo::kPoint, l.num_points)) ++l.num_points;
   for (double* b : all)
     if (claim(b, BlockInfo::kCamera, static_cast<int>(l.camera_sizes.size())))
@@ -278,8 +278,8 @@ std::optional<Eigen::MatrixXd> SolveTargets(const ReducedSystem& S, const Layout
 }  // namespace
 
 std::optional<std::vector<Eigen::MatrixXd>> MarginalCovariance(const ceres::Problem& problem,
-                                                               const std::vector<double*>& eliminated,
-                                                               const std::vector<double*>& targets) {
+                                                               const std::vector<const double*>& eliminated,
+                                                               const std::vector<const double*>& targets) {
   if (targets.empty()) return std::nullopt;
   const auto layout = Classify(problem, eliminated, targets);
   if (!layout) return std::nullopt;
@@ -296,7 +296,7 @@ std::optional<std::vector<Eigen::MatrixXd>> MarginalCovariance(const ceres::Prob
   // Lift each target's tangent block to its ambient coordinates: P Σ Pᵀ with P the manifold's plus-Jacobian.
   std::vector<Eigen::MatrixXd> out;
   int offset = 0;
-  for (double* t : targets) {
+  for (const double* t : targets) {
     const int ambient = problem.ParameterBlockSize(t), tangent = layout->blocks.at(t).size;
     Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor> P =
         Eigen::MatrixXd::Identity(ambient, tangent);

@@ -35,7 +35,7 @@ namespace fmv3d::sfm {
 // Returns nothing when the information matrix is singular in the non-eliminated parameters (a gauge freedom left,
 // a target the data do not determine), when a target is constant or a residual involves two eliminated blocks.
 std::optional<std::vector<Eigen::MatrixXd>> MarginalCovariance(const ceres::Problem& problem,
-                                                               const std::vector<double*>& eliminated,
-                                                               const std::vector<double*>& targets);
+                                                               const std::vector<const double*>& eliminated,
+                                                               const std::vector<const double*>& targets);
 
 }  // namespace fmv3d::sfm
