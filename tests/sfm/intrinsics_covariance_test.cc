@@ -167,13 +167,7 @@ TEST(IntrinsicsCovariance, PointWithOneObservationIsPseudoInverted) {
 // Six images from one height over a scene with 2 m of relief, exact observations; tilt_deg = 0: straight down.
 core::Reconstruction GridFlight(double tilt_deg) {
   core::Reconstruction rec;
-  core::Camera cam;
-  cam.id = 1;
-  cam.width = 1000;
-  cam.height = 800;
-  cam.f = 900;
-  cam.u0 = 500;
-  cam.v0 = 400;
+  core::Camera cam = core::Camera::Pinhole(1000, 800, 900);
   cam.k1 = -0.05;
   cam.k2 = 0.01;
   rec.cameras[1] = cam;
