@@ -18,6 +18,7 @@
 #include "fmv3d/core/threading.h"
 #include "fmv3d/geometry/reprojection_error.h"
 #include "fmv3d/sfm/ba_priors.h"
+#include "fmv3d/sfm/intrinsics_covariance.h"
 
 namespace fmv3d::sfm {
 
@@ -169,24 +170,29 @@ class BundleProblem {
     return n;
   }
 
-  // The posterior covariance of each camera's free intrinsics (Ceres Covariance), scaled by σ² = SSE / dof.
-  void IntrinsicsCovariance(BundleAdjustmentSummary* out) {
-    ceres::Covariance::Options co;
-    co.num_threads = NumThreads();
-    co.apply_loss_function = true;
-    ceres::Covariance covariance(co);
-    std::vector<std::pair<const double*, const double*>> blocks;
-    for (auto& [cid, params] : intr_)
-      if (!problem_.IsParameterBlockConstant(params)) blocks.emplace_back(params, params);
+  // The posterior covariance of each camera's free intrinsics (points eliminated, poses marginalised:
+  // intrinsics_covariance.h), scaled by σ² = SSE / dof. Nothing when the system is rank-deficient.
+  void IntrinsicsCovariance(BundleAdjustmentSummary* out) const {
+    std::vector<const double*> targets, points;
+    std::vector<uint32_t> ids;
+    for (const auto& [cid, params] : intr_) {
+      if (problem_.IsParameterBlockConstant(params)) continue;
+      targets.push_back(params);
+      ids.push_back(cid);
+    }
+    if (targets.empty()) return;
+    points.reserve(pts_.size());
+    for (const auto& X : pts_) points.push_back(X.data());
+    const auto start = std::chrono::steady_clock::now();
+    const auto cov = MarginalCovariance(problem_, points, targets);
+    spdlog::debug("BA: intrinsics covariance {:.3f} s{}",
+                  std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count(),
+                  cov ? "" : ", rank-deficient");
+    if (!cov) return;
     const double n = static_cast<double>(num_residuals());
     const double dof = std::max(1.0, 2.0 * n - out->num_parameters);
     const double sigma2 = out->final_rms_px * out->final_rms_px * n / dof;  // SSE / dof
-    if (blocks.empty() || !covariance.Compute(blocks, &problem_)) return;
-    for (auto& [cid, params] : intr_) {
-      if (problem_.IsParameterBlockConstant(params)) continue;
-      Eigen::Matrix<double, core::kNumIntrinsics, core::kNumIntrinsics, Eigen::RowMajor> m;
-      if (covariance.GetCovarianceBlock(params, params, m.data())) out->intrinsics_covariance[cid] = sigma2 * m;
-    }
+    for (size_t i = 0; i < ids.size(); ++i) out->intrinsics_covariance[ids[i]] = sigma2 * (*cov)[i];
   }
 
   // Copies the adjusted poses, intrinsics and points into the reconstruction and updates the points' errors.

@@ -47,8 +47,8 @@ struct BundleAdjustmentOptions {
   // would differ in its last digits between two runs and every later stage with it. One thread keeps a resumed
   // or repeated run bit-for-bit equal to the first; 0 uses core::NumThreads() where speed matters more.
   int num_threads = 1;
-  // After solving: the posterior covariance of each camera's free intrinsics (Ceres Covariance, sparse QR of the
-  // whole Jacobian), scaled by the residual variance σ² = SSE / (residuals − parameters).
+  // After solving: the posterior covariance of each camera's free intrinsics (points eliminated, poses
+  // marginalised: intrinsics_covariance.h), scaled by the residual variance σ² = SSE / (residuals − parameters).
   bool compute_intrinsics_covariance = false;
   void Check() const;
 };
@@ -106,7 +106,7 @@ struct BundleAdjustmentSummary {
   double seconds = 0;
   int num_parameters = 0;  // free parameters (tangent space)
   // With compute_intrinsics_covariance: camera id → covariance in core::IntrinsicIndex order (rows and columns
-  // of held intrinsics are zero). Missing when Ceres found the problem rank-deficient.
+  // of held intrinsics are zero). Missing when the system is rank-deficient.
   std::map<uint32_t, Eigen::Matrix<double, core::kNumIntrinsics, core::kNumIntrinsics>> intrinsics_covariance;
 };
 

@@ -14,7 +14,7 @@
 //     went 8.5 px off, trading against a common tilt, with the focal 0.9% short) while inflating σ², and the
 //     pull passed for signal. Both fits therefore use only the observations inside the Gaussian core of the null
 //     model's fit: within the bound a χ²(2) exceeds with probability 1 − core_mass, σ from the median error.
-//  2. Do the data determine it? The posterior covariance of the freed parameters (the BA's covariance, Ceres)
+//  2. Do the data determine it? The posterior covariance of the freed parameters (the BA's covariance)
 //     gives each one's standard deviation σ_θ. Holding a parameter costs the squared shift Δθ² the data ask for
 //     (its bias), freeing it costs σ_θ² (its variance): each freed parameter must move by more than its σ. One
 //     the data leave uncertain (a principal point trading against a common tilt of the cameras, a focal on a
