@@ -95,6 +95,7 @@ std::vector<Eigen::MatrixXd> CeresCovariance(ceres::Problem* problem, const std:
   o.apply_loss_function = true;
   ceres::Covariance cov(o);
   std::vector<std::pair<const double*, const double*>> pairs;
+  pairs.reserve(blocks.size());
   for (const double* b : blocks) pairs.emplace_back(b, b);
   if (!cov.Compute(pairs, problem)) return {};
   std::vector<Eigen::MatrixXd> out;
@@ -178,7 +179,8 @@ core::Reconstruction GridFlight(double tilt_deg) {
     core::Image im;
     im.id = id;
     im.camera_id = 1;
-    const Eigen::Vector3d centre(2.0 * ((id - 1) % 3), 2.0 * ((id - 1) / 3), 10);
+    const int row = static_cast<int>(id - 1) / 3, column = static_cast<int>(id - 1) % 3;  // a 3-wide grid
+    const Eigen::Vector3d centre(2.0 * column, 2.0 * row, 10);
     const double tilt = tilt_deg * M_PI / 180 * (id % 2 ? 1 : -1);
     const Eigen::Vector3d axis = id <= 3 ? Eigen::Vector3d::UnitX() : Eigen::Vector3d::UnitY();
     im.pose.q = Eigen::AngleAxisd(tilt, axis) * down;

@@ -61,7 +61,7 @@ bool PointCovariance(const core::Reconstruction& rec, const core::Point3D& p, co
     info += J.transpose() * J / (s * s);
   }
   Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eig(info);
-  const Eigen::Vector3d ev = eig.eigenvalues();
+  const Eigen::Vector3d& ev = eig.eigenvalues();
   if (!(ev.minCoeff() > 1e-12 * ev.maxCoeff()) || !std::isfinite(ev.maxCoeff())) return false;
   *cov = eig.eigenvectors() * ev.cwiseInverse().asDiagonal() * eig.eigenvectors().transpose();
   return true;
