@@ -11,7 +11,10 @@
 // lower bound of the order of the true focal (the remaining ambiguity is the affine one: focal and depth trade).
 // A curve flat over the whole range determines nothing (the optical axes of an orbit around its target meet, which
 // makes the two-view focal undefined; near-affine views explain as well at any focal): its shortest candidate is
-// the lower bound, and the multi-view dolly-zoom scan (dolly_zoom_scan.h) decides from there. Measured: with each
+// the lower bound, and the multi-view dolly-zoom scan (dolly_zoom_scan.h) decides from there. So is a curve whose
+// "plateau" is not supported: its level is read on the median of neighbouring candidates (lucky minimal samples at
+// the long end do not make one), and the shortest candidates must score knee_contrast times worse than it
+// (DecidePinhole). Measured: with each
 // candidate's pose refined to its optimum rather than taken from a minimal sample, telephoto curves are flat too;
 // a knee comes from how the five-point solver fails at focals far too short, so it is only a lower bound.
 //
