@@ -178,5 +178,45 @@ TEST(FocalScan, NoUsablePairKeepsTheGuess) {
   EXPECT_DOUBLE_EQ(r.focal, 700);
 }
 
+// The curve of a 100-frame 960x540 town orbit (guess 1152 px, true focal 831): noise of ±10–20% between neighbouring
+// candidates over a drift of about 20%, and two lucky minimal samples at 64x and 100x the guess (0.314, 0.312 px²)
+// where the rest sits near 0.40. Read as a plateau, its knee held the focal at 73,825 px and the model broke (rotation
+// 69°). It has no knee: the shortest candidate is the lower bound for the multi-view scan.
+FocalScanResult CurveOf(const std::vector<double>& scores, double guess) {
+  FocalScanResult r;
+  for (size_t i = 0; i < scores.size(); ++i) r.focals.push_back(guess * 0.5 * std::pow(1.26, i));
+  r.scores = scores;
+  return r;
+}
+
+TEST(FocalScanDecision, NoisyDriftWithLuckyLongSamplesIsUndetermined) {
+  FocalScanResult r = CurveOf({0.473, 0.561, 0.468, 0.548, 0.494, 0.557, 0.483, 0.519, 0.542, 0.490, 0.481, 0.476,
+                               0.408, 0.408, 0.403, 0.391, 0.415, 0.403, 0.419, 0.418, 0.420, 0.314, 0.577, 0.312},
+                              1152);
+  DecidePinhole(FocalScanOptions(), &r);
+  EXPECT_TRUE(r.undetermined);
+  EXPECT_TRUE(r.plateau);
+  EXPECT_DOUBLE_EQ(r.focal, r.focals.front());
+}
+
+// A knee the curve supports (the five-point solver failing at focals far too short, then a level held by every
+// longer candidate) stays a plateau, its knee read past one lucky sample.
+TEST(FocalScanDecision, SteepKneeStaysAPlateauAtItsSupportedLevel) {
+  FocalScanResult r = CurveOf({9.1, 8.7, 8.9, 6.2, 3.4, 1.31, 1.02, 1.00, 1.03, 0.99, 0.80, 1.01, 1.02, 1.00}, 432);
+  DecidePinhole(FocalScanOptions(), &r);
+  EXPECT_FALSE(r.undetermined);
+  EXPECT_TRUE(r.plateau);
+  EXPECT_DOUBLE_EQ(r.focal, r.focals[6]);  // not the lucky 0.80 at index 10, nor 1.31 above the level
+}
+
+// A clear minimum (an ordinary lens) is a start for bundle adjustment, neither a bound nor undetermined.
+TEST(FocalScanDecision, ClearMinimumIsAStart) {
+  FocalScanResult r = CurveOf({3.0, 2.1, 1.2, 0.6, 0.45, 0.7, 1.3, 1.9, 2.4, 2.8}, 768);
+  DecidePinhole(FocalScanOptions(), &r);
+  EXPECT_FALSE(r.plateau);
+  EXPECT_FALSE(r.undetermined);
+  EXPECT_DOUBLE_EQ(r.focal, r.focals[4]);
+}
+
 }  // namespace
 }  // namespace fmv3d::sfm

@@ -139,9 +139,11 @@ bool DistortionExplains(const core::Camera& camera, int num_pairs, double kappa,
   return r->division_best <= o.distortion_gain * r->pinhole_best && std::abs(kappa) >= o.min_kappa - 1e-9;
 }
 
-// The pinhole curve's decision: a minimum, the knee of a plateau, or a flat curve (FocalScanResult).
+}  // namespace
+
 void DecidePinhole(const FocalScanOptions& o, FocalScanResult* out) {
   FocalScanResult& r = *out;
+  if (r.scores.empty()) return;
   // Flat: every candidate explains the matches about equally well (optical axes that meet, as in an orbit around its
   // target, or near-affine views), and the best is one candidate's luck (a lucky or failed minimal sample; at very
   // long focals the five-point solver degenerates). Two views bound nothing: the shortest candidate is the lower
@@ -149,18 +151,36 @@ void DecidePinhole(const FocalScanOptions& o, FocalScanResult* out) {
   // candidate and its neighbours, so one such jump does not decide it.
   const std::vector<double> smooth = MedianOfNeighbours(r.scores);
   const auto [lo, hi] = std::minmax_element(smooth.begin(), smooth.end());
-  if (*hi <= (1 + o.flat_tolerance) * *lo) {
+  auto undetermined = [&r] {
     r.undetermined = r.plateau = true;
     r.focal = r.focals.front();
+  };
+  if (*hi <= (1 + o.flat_tolerance) * *lo) return undetermined();
+  // A plateau holds the focal as a lower bound through growth, and the dolly-zoom scan only lengthens it: it must be
+  // a level and a knee the curve supports. Both are read on the smoothed curve (a level held by several neighbouring
+  // candidates, not by lucky minimal samples at the long end), and the candidates short of the knee must score
+  // clearly worse than that level (knee_contrast): a focal far too short leaves the five-point solver's residuals
+  // near their truncation, while a curve that only drifts down by tens of percent under noise of ±10–20% between
+  // neighbours (orbit pairs) has no knee. Without one, it is the flat case.
+  const double level = *lo, smooth_limit = (1 + o.tolerance) * level + 1e-12;
+  if (smooth.back() <= smooth_limit) {
+    if (smooth.front() < o.knee_contrast * level) return undetermined();
+    size_t knee = 0;
+    while (knee + 1 < smooth.size() && smooth[knee] > smooth_limit) ++knee;
+    r.focal = r.focals[knee];
+    r.plateau = true;
     return;
   }
+  // A minimum: a start for bundle adjustment, which refines it.
   const double best = *std::min_element(r.scores.begin(), r.scores.end());
   const double limit = (1 + o.tolerance) * best + 1e-12;
   size_t chosen = 0;
   while (chosen + 1 < r.scores.size() && r.scores[chosen] > limit) ++chosen;
   r.focal = r.focals[chosen];
-  r.plateau = r.scores.back() <= limit;
+  r.plateau = false;
 }
+
+namespace {
 
 // Barrel distortion at the wide end of the pinhole range (guess · min_factor: a field of view of ~80° for the usual
 // 1.2·width guess), κ in steps of 0.05; pincushion (κ > 0, a lens that stretches its corners, rarer and milder) at the

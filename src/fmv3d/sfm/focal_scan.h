@@ -11,7 +11,10 @@
 // lower bound of the order of the true focal (the remaining ambiguity is the affine one: focal and depth trade).
 // A curve flat over the whole range determines nothing (the optical axes of an orbit around its target meet, which
 // makes the two-view focal undefined; near-affine views explain as well at any focal): its shortest candidate is
-// the lower bound, and the multi-view dolly-zoom scan (dolly_zoom_scan.h) decides from there. Measured: with each
+// the lower bound, and the multi-view dolly-zoom scan (dolly_zoom_scan.h) decides from there. So is a curve whose
+// "plateau" is not supported: its level is read on the median of neighbouring candidates (lucky minimal samples at
+// the long end do not make one), and the shortest candidates must score knee_contrast times worse than it
+// (DecidePinhole). Measured: with each
 // candidate's pose refined to its optimum rather than taken from a minimal sample, telephoto curves are flat too;
 // a knee comes from how the five-point solver fails at focals far too short, so it is only a lower bound.
 //
@@ -48,6 +51,7 @@ struct FocalScanOptions {
   double threshold_px = 2.0;                  // MSAC truncation and RANSAC inlier threshold
   double tolerance = 0.05;                    // knee: first candidate with score ≤ (1 + tolerance) · best
   double flat_tolerance = 0.15;               // undetermined: every candidate within (1 + this) · best
+  double knee_contrast = 2;                   // plateau: the shortest candidate scores ≥ this · the plateau's level
   int ransac_iterations = 1000;
   uint64_t seed = 1;
   // The division scan for barrel and pincushion distortion; skipped when the prior states a distortion.
@@ -77,6 +81,10 @@ struct FocalScanResult {
 // Brown k1, k2 (core::Camera) of a division model κ (on ρ = pixel radius / half_diagonal) at focal f: the least
 // squares fit over the image's radii.
 std::pair<double, double> DivisionToBrown(double kappa, double f, double half_diagonal);
+
+// The pinhole curve's decision from r->focals and r->scores (ascending focals): sets focal, plateau and
+// undetermined — a minimum (a start for bundle adjustment), the knee of a plateau (a lower bound), or a flat curve.
+void DecidePinhole(const FocalScanOptions& options, FocalScanResult* r);
 
 // camera: the prior (principal point, distortion; its f is the guess the factors multiply).
 // Deterministic for a fixed seed. Returns the guess (and empty scores) when no pair has ≥ 8 matches.

@@ -8,6 +8,7 @@
 #include <utility>
 
 #include "fmv3d/sfm/dolly_zoom_scan.h"
+#include "fmv3d/sfm/focal_scan.h"
 #include "fmv3d/sfm/model_builder.h"
 
 namespace fmv3d::sfm::mapper {
@@ -86,11 +87,16 @@ void ModelBuilder::DollyZoomFocalScan() {
   cfg.gauge_image2 = gauge2_;
   DollyZoomScanOptions so;
   so.max_factor = opt_.focal_dolly_max_factor;
+  // Shorter focals down to the two-view scan's shortest candidate: the start is that scan's reading, and a knee
+  // read from a noisy curve can be far too long (a 100-frame orbit: 64x the guess, 89x the true focal).
+  const uint32_t cid = rec_.cameras.begin()->first;
+  const double shortest = input_.cameras.at(cid).camera.f * FocalScanOptions().min_factor;
+  so.min_factor = std::min(1.0, shortest / rec_.cameras.begin()->second.f);
   DollyZoomScanResult r = ScanFocalDollyZoom(rec_, cfg, BaOptions(), so);
   t_->global_ba += Seconds(start);
-  spdlog::info("focal dolly-zoom scan on {} images: x{:.2f} → {:.1f} px ({:.1f} s); rms px by focal:{}",
+  spdlog::info("focal dolly-zoom scan on {} images: x{:.3g} → {:.1f} px ({:.1f} s); rms px by focal:{}{}",
                rec_.images.size(), r.best_factor, r.best.cameras.empty() ? 0.0 : r.best.cameras.begin()->second.f,
-               Seconds(start), r.curve);
+               Seconds(start), r.curve, r.curve_shorter.empty() ? "" : "; shorter:" + r.curve_shorter);
   // The two-view scan's "lower bound" can be wrong for an ordinary lens (a 40-frame 960x540 orbit: bound 1452 px,
   // true 831). Then the error rises steeply from the bound on — no plateau — and holding the focal there builds
   // the whole model on it (0.08% centre error, distortion absorbing the rest). The data do determine the focal:
@@ -109,15 +115,26 @@ void ModelBuilder::DollyZoomFocalScan() {
     spdlog::info("focal: the error rises again beyond {:.1f} px ({:.3f} → {:.3f} px): a minimum, refined from here",
                  r.best.cameras.begin()->second.f, r.rms_best_px, r.rms_longest_px);
   }
+  // A shorter focal explains the views better than the start: the two-view "bound" was none, and the views
+  // determine the focal (the error rises again towards the start): refined from the best.
+  if (r.best_factor < 1) {
+    focal_fixed_ = focal_from_plateau_ = false;
+    spdlog::info(
+        "focal: the views prefer {:.1f} px to the two-view scan's bound ({:.3f} vs {:.3f} px): not a bound, "
+        "refined from here",
+        r.best.cameras.begin()->second.f, r.rms_best_px, r.rms_at_start_px);
+  }
   focal_decision_["dolly_zoom"] = {{"images", rec_.images.size()},
                                    {"factor", r.best_factor},
                                    {"focal_px", r.best.cameras.empty() ? 0.0 : r.best.cameras.begin()->second.f},
+                                   {"shortest_factor", so.min_factor},
                                    {"released", !focal_fixed_},
                                    {"seconds", Seconds(start)}};
   if (r.best_factor != 1 && !r.best.images.empty()) {
     rec_ = std::move(r.best);
     const auto& cam = rec_.cameras.begin()->second;
-    narrow_field_ = narrow_field_ || 0.5 * std::hypot(cam.width, cam.height) / cam.f < opt_.narrow_field_max_radius;
+    // The field the start was judged by changed with the focal (narrower, or wider again below the start).
+    narrow_field_ = 0.5 * std::hypot(cam.width, cam.height) / cam.f < opt_.narrow_field_max_radius;
     FilterPoints(nullptr);
   }
 }

@@ -350,7 +350,12 @@ void ModelBuilder::Grow() {
     }
     // Radial first: the principal point is tested on the model the final adjustment will keep.
     any = TryRadialSelfCalibration() || any;
-    any = TrySelfCalibration(IntrinsicGroup::kPrincipalPoint) || any;
+    const bool pp_freed = TrySelfCalibration(IntrinsicGroup::kPrincipalPoint);
+    // The radial terms were decided with the principal point held at the prior. An off-centre one held at the
+    // centre bends the residuals radially, which k1/k2 (and the focal) absorb through growth: freed, it may explain
+    // what they did, so the terms still free are asked again on the model with it free.
+    if (pp_freed) TryRadialSelfCalibration();
+    any = pp_freed || any;
     // Then, when asked, the aspect (s_u; square pixels held), on the model with the principal point decided
     // (MapperOptions::self_calibrate_aspect says why not by default). Tangential distortion stays untested: with
     // the principal point free it trades against it beyond what the per-group covariance shows (fountain-P11:
