@@ -199,6 +199,18 @@ TEST(FocalScanDecision, NoisyDriftWithLuckyLongSamplesIsUndetermined) {
   EXPECT_DOUBLE_EQ(r.focal, r.focals.front());
 }
 
+// The best score at the shortest candidate, clearly below every other (a 24-frame 960x540 town orbit, seed 7,
+// recorded; truth 831 px): a minimum there, which bundle adjustment refines, not a flat curve's bound to hold.
+TEST(FocalScanDecision, ClearBestAtTheShortestCandidateIsAStart) {
+  FocalScanResult r = CurveOf({0.480, 0.846, 0.774, 0.720, 0.685, 0.660, 0.643, 0.632, 0.625, 0.620, 0.617, 0.615,
+                               0.614, 0.613, 0.613, 0.612, 0.612, 0.612, 0.612, 0.612, 0.612, 0.612, 0.612, 0.611},
+                              1152);
+  DecidePinhole(FocalScanOptions(), &r);
+  EXPECT_FALSE(r.undetermined);
+  EXPECT_FALSE(r.plateau);
+  EXPECT_DOUBLE_EQ(r.focal, r.focals.front());
+}
+
 // A knee the curve supports (the five-point solver failing at focals far too short, then a level held by every
 // longer candidate) stays a plateau, its knee read past one lucky sample.
 TEST(FocalScanDecision, SteepKneeStaysAPlateauAtItsSupportedLevel) {

@@ -128,7 +128,7 @@ TEST(IncrementalMapper, WideLensDecidesFocalAndDistortion) {
   EXPECT_LE(out.eval.lens_residual_corner_px, 3);
   EXPECT_LE(out.eval.median_rotation_error_deg, 0.1);
   ASSERT_EQ(out.result.focal_decision.size(), out.result.models.size());
-  EXPECT_EQ(out.result.focal_decision[0].at("decision"), "distorted");
+  EXPECT_EQ(out.result.focal_decision[0].kind, FocalDecisionKind::kDistorted);
 }
 
 // Bad input: unrelated images, a frame without features, a frame with too few matches, matches with indices

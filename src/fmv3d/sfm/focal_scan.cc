@@ -156,6 +156,17 @@ void DecidePinhole(const FocalScanOptions& o, FocalScanResult* out) {
     r.focal = r.focals.front();
   };
   if (*hi <= (1 + o.flat_tolerance) * *lo) return undetermined();
+  // The smoothing below erases a minimum at the shortest candidate (its median takes the two candidates after it).
+  // The widest field is where the five-point solver is best conditioned, so a shortest candidate that beats every
+  // other by more than the tolerance is a minimum there: a start that bundle adjustment refines, not a bound to hold
+  // (a 24-frame 960x540 orbit: 0.480 px² at 576 px, every longer candidate ≥ 0.611; truth 831; held at 576 through
+  // growth it ended 0.39% off, refined from it 0.007%).
+  const double rest = *std::min_element(r.scores.begin() + 1, r.scores.end());
+  if (r.scores.front() * (1 + o.tolerance) < rest) {
+    r.focal = r.focals.front();
+    r.plateau = false;
+    return;
+  }
   // A plateau holds the focal as a lower bound through growth, and the dolly-zoom scan only lengthens it: it must be
   // a level and a knee the curve supports. Both are read on the smoothed curve (a level held by several neighbouring
   // candidates, not by lucky minimal samples at the long end), and the candidates short of the knee must score

@@ -24,6 +24,7 @@
 
 #include "fmv3d/core/reconstruction.h"
 #include "fmv3d/features/types.h"
+#include "fmv3d/sfm/focal_decision.h"
 #include "fmv3d/sfm/self_calibration.h"
 
 namespace fmv3d::sfm {
@@ -141,7 +142,7 @@ struct MapperOptions {
 struct MapperResult {
   std::vector<core::Reconstruction> models;                          // largest first
   std::vector<std::vector<NestedModelTestResult>> self_calibration;  // per model: the final tests, in order
-  std::vector<nlohmann::json> focal_decision;                        // per model: how its focal was decided
+  std::vector<FocalDecision> focal_decision;                         // per model: how its focal was decided
   std::map<uint32_t, std::string> left_out;  // image id → reason it is not in the largest model
   nlohmann::json stats;                      // counts and timings per stage
 };

@@ -124,12 +124,13 @@ void ModelBuilder::DollyZoomFocalScan() {
         "refined from here",
         r.best.cameras.begin()->second.f, r.rms_best_px, r.rms_at_start_px);
   }
-  focal_decision_["dolly_zoom"] = {{"images", rec_.images.size()},
-                                   {"factor", r.best_factor},
-                                   {"focal_px", r.best.cameras.empty() ? 0.0 : r.best.cameras.begin()->second.f},
-                                   {"shortest_factor", so.min_factor},
-                                   {"released", !focal_fixed_},
-                                   {"seconds", Seconds(start)}};
+  DollyZoomDecision& d = focal_decision_.dolly_zoom.emplace();
+  d.images = rec_.images.size();
+  d.factor = r.best_factor;
+  d.focal_px = r.best.cameras.empty() ? 0.0 : r.best.cameras.begin()->second.f;
+  d.shortest_factor = so.min_factor;
+  d.released = !focal_fixed_;
+  d.seconds = Seconds(start);
   if (r.best_factor != 1 && !r.best.images.empty()) {
     rec_ = std::move(r.best);
     const auto& cam = rec_.cameras.begin()->second;

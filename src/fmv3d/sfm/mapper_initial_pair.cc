@@ -25,7 +25,9 @@ void ModelBuilder::ChooseFocal(const std::vector<InitialPairCandidate>& cands) {
     return 0.5 * std::hypot(mc.camera.width, mc.camera.height) / f < opt_.narrow_field_max_radius;
   };
   if (mc.focal_known) {
-    focal_decision_ = {{"decision", "known"}, {"focal_px", mc.camera.f}};
+    focal_decision_ = FocalDecision{};
+    focal_decision_.kind = FocalDecisionKind::kKnown;
+    focal_decision_.known_focal_px = mc.camera.f;
     focal_fixed_ = opt_.fix_known_focal;
     narrow_field_ = narrow(mc.camera.f);
     return;
@@ -68,22 +70,24 @@ void ModelBuilder::ChooseFocal(const std::vector<InitialPairCandidate>& cands) {
       narrow_field_ ? ", narrow field: distortion fixed" : "", seconds);
   spdlog::debug("focal scan (f: px²):{}", curve);
   spdlog::debug("focal scan with a division model (f/κ: px²):{}", cells);
-  focal_decision_ = {{"guess_px", mc.camera.f},
-                     {"pairs", pairs.size()},
-                     {"two_view_focal_px", r.focal},
-                     {"decision", r.division != 0  ? "distorted"
-                                  : r.undetermined ? "undetermined"
-                                  : r.plateau      ? "plateau"
-                                                   : "minimum"},
-                     {"pinhole_best_px2", r.pinhole_best},
-                     {"division_best_px2", r.division_best},
-                     {"division_excess_of_half_diagonal", r.division_excess},
-                     {"division_kappa", r.division},
-                     {"initial_k1", r.k1},
-                     {"initial_k2", r.k2},
-                     {"candidates", r.focals.size() + r.division_cells.size()},
-                     {"seconds", seconds},
-                     {"division_seconds", r.division_seconds}};
+  focal_decision_ = FocalDecision{};
+  FocalDecision& d = focal_decision_;
+  d.kind = r.division != 0  ? FocalDecisionKind::kDistorted
+           : r.undetermined ? FocalDecisionKind::kUndetermined
+           : r.plateau      ? FocalDecisionKind::kPlateau
+                            : FocalDecisionKind::kMinimum;
+  d.guess_px = mc.camera.f;
+  d.pairs = pairs.size();
+  d.two_view_focal_px = r.focal;
+  d.pinhole_best_px2 = r.pinhole_best;
+  d.division_best_px2 = r.division_best;
+  d.division_excess_of_half_diagonal = r.division_excess;
+  d.division_kappa = r.division;
+  d.initial_k1 = r.k1;
+  d.initial_k2 = r.k2;
+  d.candidates = r.focals.size() + r.division_cells.size();
+  d.seconds = seconds;
+  d.division_seconds = r.division_seconds;
 }
 
 core::Camera ModelBuilder::InitialCamera(uint32_t camera_id) const {

@@ -17,6 +17,7 @@
 
 #include "fmv3d/sfm/bundle_adjustment.h"
 #include "fmv3d/sfm/correspondence_graph.h"
+#include "fmv3d/sfm/focal_decision.h"
 #include "fmv3d/sfm/guided_completion.h"
 #include "fmv3d/sfm/incremental_mapper.h"
 #include "fmv3d/sfm/initial_pair.h"
@@ -93,7 +94,7 @@ class ModelBuilder {
   int num_relocalised() const { return num_relocalised_; }
   const std::vector<NestedModelTestResult>& self_calibration() const { return self_calibration_; }
   // How the focal was decided (stated, or the two-view and dolly-zoom scans), for report/sparse.json.
-  const nlohmann::json& focal_decision() const { return focal_decision_; }
+  const FocalDecision& focal_decision() const { return focal_decision_; }
   // The final polish's track completion by projection (guided_completion.h), for report/sparse.json.
   const nlohmann::json& guided_completion() const { return guided_completion_; }
 
@@ -166,7 +167,7 @@ class ModelBuilder {
   const CorrespondenceGraph& graph_;
   double init_focal_scale_ = 1;
   std::optional<std::pair<double, double>> init_distortion_;  // k1, k2 of a wide lens found by the focal scan
-  nlohmann::json focal_decision_;
+  FocalDecision focal_decision_;
   nlohmann::json guided_completion_ = {{"run", false}};                // then one entry per pass
   std::vector<std::pair<uint64_t, core::TrackElement>> guided_added_;  // the last completion's additions
   // Focal held through growth: a trusted prior the user wants kept, or a telephoto scan's lower bound (then

@@ -304,6 +304,32 @@ void WriteSparseModels(const core::Workspace& ws, const std::vector<core::Recons
 }
 
 // The report's per-model section: size, accuracy, cameras, self-calibration tests and how the focal was decided.
+nlohmann::json ToJson(const FocalDecision& d) {
+  nlohmann::json j;  // null: no decision recorded
+  if (d.kind == FocalDecisionKind::kKnown) {
+    j = {{"decision", FocalDecisionName(d.kind)}, {"focal_px", d.known_focal_px}};
+  } else if (d.kind != FocalDecisionKind::kNone) {
+    j = {{"guess_px", d.guess_px},
+         {"pairs", d.pairs},
+         {"two_view_focal_px", d.two_view_focal_px},
+         {"decision", FocalDecisionName(d.kind)},
+         {"pinhole_best_px2", d.pinhole_best_px2},
+         {"division_best_px2", d.division_best_px2},
+         {"division_excess_of_half_diagonal", d.division_excess_of_half_diagonal},
+         {"division_kappa", d.division_kappa},
+         {"initial_k1", d.initial_k1},
+         {"initial_k2", d.initial_k2},
+         {"candidates", d.candidates},
+         {"seconds", d.seconds},
+         {"division_seconds", d.division_seconds}};
+  }
+  if (const auto& z = d.dolly_zoom)
+    j["dolly_zoom"] = {{"images", z->images},     {"factor", z->factor},
+                       {"focal_px", z->focal_px}, {"shortest_factor", z->shortest_factor},
+                       {"released", z->released}, {"seconds", z->seconds}};
+  return j;
+}
+
 nlohmann::json ModelReport(const core::Reconstruction& rec, const std::vector<NestedModelTestResult>* calibration,
                            const nlohmann::json& focal_decision) {
   nlohmann::json tests = nlohmann::json::array();
@@ -333,7 +359,7 @@ nlohmann::json SparseReport(const MapperInput& input, const MapperResult& result
   for (size_t m = 0; m < result.models.size(); ++m)
     report["models"].push_back(
         ModelReport(result.models[m], m < result.self_calibration.size() ? &result.self_calibration[m] : nullptr,
-                    m < result.focal_decision.size() ? result.focal_decision[m] : nlohmann::json::object()));
+                    m < result.focal_decision.size() ? ToJson(result.focal_decision[m]) : nlohmann::json::object()));
   const core::Reconstruction* best = result.models.empty() ? nullptr : &result.models[0];
   report["registered_images"] = best ? best->images.size() : 0;
   report["points"] = best ? best->points.size() : 0;
