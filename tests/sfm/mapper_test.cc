@@ -9,6 +9,7 @@
 #include "fmv3d/core/error.h"
 #include "fmv3d/sfm/evaluation.h"
 #include "fmv3d/sfm/incremental_mapper.h"
+#include "fmv3d/sfm/mapper_report.h"
 #include "fmv3d/sfm/synthetic_correspondences.h"
 
 namespace fmv3d::sfm {
@@ -24,7 +25,7 @@ Outcome RunAndEvaluate(const SyntheticScene& scene, const MapperOptions& options
   out.result = RunIncrementalMapper(scene.input, options);
   if (!out.result.models.empty()) out.eval = EvaluateSparse(out.result.models[0], scene.truth);
   const auto& rec = out.result.models.empty() ? core::Reconstruction() : out.result.models[0];
-  std::printf("%s\n", out.result.stats.dump().c_str());
+  std::printf("%s\n", ToJson(out.result.stats).dump().c_str());
   if (!rec.cameras.empty()) {
     const auto& c = rec.cameras.begin()->second;
     std::printf(
@@ -52,10 +53,10 @@ TEST(IncrementalMapper, OrbitSelfCalibratesFocalAndDistortion) {
   EXPECT_TRUE(out.result.left_out.empty());
   // The tracks against the union–find tracks of the matches (10% of them wrong): the model's figure is COLMAP's
   // (observations / points), and it holds nearly every keypoint of the tracks it touches.
-  const auto& tracks = out.result.stats.at("tracks");
-  EXPECT_DOUBLE_EQ(tracks.at("model_mean_track_length").get<double>(), rec.MeanTrackLength());
-  const double held = tracks.at("keypoints_of_touched_tracks_held").get<double>();
-  EXPECT_GE(held, 0.9 * tracks.at("keypoints_of_touched_tracks").get<double>());
+  ASSERT_TRUE(out.result.stats.tracks.largest_model.has_value());
+  const TrackCoverage& tracks = *out.result.stats.tracks.largest_model;
+  EXPECT_DOUBLE_EQ(static_cast<double>(tracks.observations) / tracks.points, rec.MeanTrackLength());
+  EXPECT_GE(tracks.held_of_touched_tracks, 0.9 * tracks.keypoints_of_touched_tracks);
   rec.Validate();
 }
 
@@ -355,7 +356,7 @@ TEST(IncrementalMapper, ImageRegisteredOnAmbiguousMatchesIsRelocalised) {
   const auto& rec = fixed.models[0];
   EXPECT_EQ(rec.images.size(), 24u);
   EXPECT_EQ(wrong(rec), 0);
-  EXPECT_GE(fixed.stats.at("relocalised_images").get<int>(), 1);
+  EXPECT_GE(fixed.stats.relocalised_images, 1);
   EXPECT_LE(EvaluateSparse(rec, scene.truth).centre_rmse_fraction, 0.001);
 }
 

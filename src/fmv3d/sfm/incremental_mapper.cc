@@ -38,28 +38,17 @@ void MapperOptions::Check() const {
 
 namespace {
 
-// The largest model's tracks against those the matches allow (track_builder.h).
-nlohmann::json TrackReport(const MapperInput& input, const std::map<uint32_t, size_t>& num_kp,
-                           const std::vector<core::Reconstruction>& models) {
+TrackSummary SummariseTracks(const MapperInput& input, const std::map<uint32_t, size_t>& num_kp,
+                             const std::vector<core::Reconstruction>& models) {
   const TrackSet tracks = BuildTracks(num_kp, input.pairs);
-  nlohmann::json j = {{"union_find_tracks", tracks.tracks.size()},
-                      {"union_find_links", tracks.num_links},
-                      {"union_find_conflicts_cut", tracks.num_conflicts},
-                      {"union_find_mean_length", tracks.MeanLength()},
-                      {"union_find_mean_length_3_or_more_views", tracks.MeanLengthMultiView()},
-                      {"definition",
-                       "mean track length = observations / points of the model (as COLMAP reports it); union_find: "
-                       "tracks of all verified matches, a link putting two keypoints of one image in a track cut"}};
-  if (models.empty()) return j;
-  const TrackCoverage c = MeasureTrackCoverage(tracks, models[0]);
-  j["model_points"] = c.points;
-  j["model_observations"] = c.observations;
-  j["model_mean_track_length"] = c.points ? static_cast<double>(c.observations) / c.points : 0.0;
-  j["union_find_tracks_touched"] = c.tracks_touched;
-  j["keypoints_of_touched_tracks"] = c.keypoints_of_touched_tracks;
-  j["keypoints_of_touched_tracks_held"] = c.held_of_touched_tracks;
-  j["touched_tracks_split_over_points"] = c.tracks_split;
-  return j;
+  TrackSummary t;
+  t.union_find_tracks = tracks.tracks.size();
+  t.union_find_links = tracks.num_links;
+  t.union_find_conflicts_cut = tracks.num_conflicts;
+  t.union_find_mean_length = tracks.MeanLength();
+  t.union_find_mean_length_3_or_more_views = tracks.MeanLengthMultiView();
+  if (!models.empty()) t.largest_model = MeasureTrackCoverage(tracks, models[0]);
+  return t;
 }
 
 }  // namespace
@@ -99,10 +88,10 @@ MapperResult RunIncrementalMapper(const MapperInput& input, const MapperOptions&
   spdlog::info("mapper: {} images, {} verified pairs, {} correspondences ({} invalid skipped)", images.size(),
                input.pairs.size(), graph.NumCorrespondences(), graph.NumSkipped());
 
-  mapper::Timings timings;
+  MapperTimings timings;
   std::vector<std::map<uint32_t, std::string>> model_fail;
-  std::vector<nlohmann::json> guided;  // per model, in the order built
-  nlohmann::json guided_largest = {{"run", false}};
+  std::vector<std::vector<GuidedCompletionPass>> guided;  // per model, in the order built
+  std::vector<GuidedCompletionPass> guided_largest;
   int relocalised = 0;
   while (static_cast<int>(pool.size()) >= options.min_model_size &&
          static_cast<int>(result.models.size()) < options.max_models) {
@@ -153,20 +142,15 @@ MapperResult RunIncrementalMapper(const MapperInput& input, const MapperOptions&
     if (!(result.models.size() && result.models[0].images.count(id)) && !reasons.count(id))
       reasons[id] = "not registered";
   result.left_out = reasons;
-  result.stats = {{"correspondences", graph.NumCorrespondences()},
-                  {"tracks", TrackReport(input, num_kp, result.models)},
-                  {"guided_completion", guided_largest},
-                  {"invalid_matches_skipped", graph.NumSkipped()},
-                  {"models", result.models.size()},
-                  {"relocalised_images", relocalised},
-                  {"seconds",
-                   {{"initial_pair", timings.init},
-                    {"absolute_pose", timings.registration},
-                    {"triangulation", timings.triangulation},
-                    {"local_ba", timings.local_ba},
-                    {"global_ba", timings.global_ba},
-                    {"filtering", timings.filtering},
-                    {"total", Seconds(start)}}}};
+  MapperStats& st = result.stats;
+  st.correspondences = graph.NumCorrespondences();
+  st.invalid_matches_skipped = graph.NumSkipped();
+  st.models = result.models.size();
+  st.relocalised_images = relocalised;
+  st.tracks = SummariseTracks(input, num_kp, result.models);
+  st.guided_completion = std::move(guided_largest);
+  st.seconds = timings;
+  st.seconds.total = Seconds(start);
   return result;
 }
 

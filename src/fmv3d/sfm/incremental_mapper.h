@@ -18,14 +18,16 @@
 #include <Eigen/Core>
 #include <cstdint>
 #include <map>
-#include <nlohmann/json.hpp>
+#include <optional>
 #include <string>
 #include <vector>
 
 #include "fmv3d/core/reconstruction.h"
 #include "fmv3d/features/types.h"
 #include "fmv3d/sfm/focal_decision.h"
+#include "fmv3d/sfm/guided_completion.h"
 #include "fmv3d/sfm/self_calibration.h"
+#include "fmv3d/sfm/track_builder.h"
 
 namespace fmv3d::sfm {
 
@@ -139,12 +141,42 @@ struct MapperOptions {
   void Check() const;
 };
 
+// Seconds spent per kind of work, summed over every model built.
+struct MapperTimings {
+  double init = 0, registration = 0, triangulation = 0, local_ba = 0, global_ba = 0, filtering = 0;
+  double total = 0;  // the whole mapper run
+};
+
+// The largest model's tracks against those the verified matches allow (track_builder.h).
+struct TrackSummary {
+  size_t union_find_tracks = 0, union_find_links = 0, union_find_conflicts_cut = 0;
+  double union_find_mean_length = 0, union_find_mean_length_3_or_more_views = 0;
+  std::optional<TrackCoverage> largest_model;  // none when no model was built
+};
+
+// One pass of track completion by projection (guided_completion.h) and what the next adjustment removed of it.
+struct GuidedCompletionPass {
+  size_t observations_before = 0;
+  GuidedCompletionOptions options;
+  GuidedCompletionStats stats;  // without the list of additions
+  double seconds = 0;
+  std::optional<size_t> removed_after_adjustment;  // set when the additions were pruned
+};
+
+struct MapperStats {
+  size_t correspondences = 0, invalid_matches_skipped = 0, models = 0;
+  int relocalised_images = 0;
+  TrackSummary tracks;
+  std::vector<GuidedCompletionPass> guided_completion;  // the largest model's passes; empty when not run
+  MapperTimings seconds;
+};
+
 struct MapperResult {
   std::vector<core::Reconstruction> models;                          // largest first
   std::vector<std::vector<NestedModelTestResult>> self_calibration;  // per model: the final tests, in order
   std::vector<FocalDecision> focal_decision;                         // per model: how its focal was decided
   std::map<uint32_t, std::string> left_out;  // image id → reason it is not in the largest model
-  nlohmann::json stats;                      // counts and timings per stage
+  MapperStats stats;                         // counts and timings per stage
 };
 
 // Never throws on bad data (too few matches, unrelated images): such images are left out with a reason.

@@ -271,31 +271,19 @@ size_t ModelBuilder::CompleteTracksByProjection() {
   GuidedCompletionStats s = sfm::CompleteTracksByProjection(&rec_, descriptors, covisible, o, scales);
   guided_added_ = std::move(s.added);
   t_->triangulation += Seconds(start);
-  if (!guided_completion_.is_array()) guided_completion_ = nlohmann::json::array();
-  guided_completion_.push_back({{"run", true},
-                                {"observations_before", obs_before},
-                                {"points", s.points},
-                                {"projections_in_image", s.projections},
-                                {"with_free_keypoint_in_radius", s.candidates},
-                                {"observations_added", s.accepted},
-                                {"conflicts", s.conflicts},
-                                {"ambiguous", s.ambiguous},
-                                {"ratio", o.ratio},
-                                {"radius_cap_px", o.max_error_px},
-                                {"search_mass", o.search_mass},
-                                {"keypoint_sigma_px", s.sigma_px},
-                                {"median_search_radius_px", s.median_radius_px},
-                                {"decoy_searches_with_keypoint", s.decoys},
-                                {"false_accept_rate", o.false_accept_rate},
-                                {"expected_false_additions_at_most", o.false_accept_rate * s.candidates},
-                                {"descriptor_bound_squared", s.descriptor_bound},
-                                {"member_nearest_distance_median_squared", s.member_median},
-                                {"seconds", Seconds(start)}});
   spdlog::info(
       "mapper: guided completion added {} observations to {} ({} conflicts; search radius {:.2f} px median, σ {:.2f} "
       "px; descriptor bound {:.0f})",
       s.accepted, obs_before, s.conflicts, s.median_radius_px, s.sigma_px, s.descriptor_bound);
-  return s.accepted;
+  const size_t accepted = s.accepted;
+  GuidedCompletionPass pass;
+  pass.observations_before = obs_before;
+  pass.options = o;
+  pass.stats = std::move(s);
+  pass.stats.added.clear();
+  pass.seconds = Seconds(start);
+  guided_completion_.push_back(std::move(pass));
+  return accepted;
 }
 
 KeypointScales ModelBuilder::Scales() const {
@@ -306,12 +294,12 @@ KeypointScales ModelBuilder::Scales() const {
 }
 
 size_t ModelBuilder::PruneGuidedAdditions() {
-  if (!opt_.guided_completion_prune || guided_added_.empty() || !guided_completion_.is_array()) return 0;
+  if (!opt_.guided_completion_prune || guided_added_.empty() || guided_completion_.empty()) return 0;
   GuidedCompletionOptions o;
   o.max_error_px = opt_.tri_max_error_px;
   const size_t removed = RemoveAdditionsThatDoNotFit(&rec_, guided_added_, o, Scales());
   guided_added_.clear();
-  guided_completion_.back()["removed_after_adjustment"] = removed;
+  guided_completion_.back().removed_after_adjustment = removed;
   spdlog::info("mapper: {} guided additions removed after the adjustment (outside their search bound)", removed);
   return removed;
 }

@@ -8,7 +8,6 @@
 
 #include <chrono>
 #include <map>
-#include <nlohmann/json.hpp>
 #include <optional>
 #include <set>
 #include <string>
@@ -33,10 +32,6 @@ using Clock = std::chrono::steady_clock;
 inline double Seconds(Clock::time_point since) { return std::chrono::duration<double>(Clock::now() - since).count(); }
 
 // Seconds spent per part of the mapper, summed over every model.
-struct Timings {
-  double init = 0, registration = 0, triangulation = 0, local_ba = 0, global_ba = 0, filtering = 0;
-};
-
 // Why an image of the pool is not (yet) in the model; turned into a sentence only for MapperResult::left_out.
 struct RegistrationFailure {
   enum class Kind { kTooFewVisiblePoints, kAbsolutePose };
@@ -62,7 +57,7 @@ class ModelBuilder {
  public:
   ModelBuilder(const MapperInput& input, const std::map<uint32_t, const MapperImage*>& images,
                const CorrespondenceGraph& graph, const MapperOptions& options, const std::set<uint32_t>& pool,
-               Timings* timings)
+               MapperTimings* timings)
       : input_(input),
         images_(images),
         graph_(graph),
@@ -96,7 +91,7 @@ class ModelBuilder {
   // How the focal was decided (stated, or the two-view and dolly-zoom scans), for report/sparse.json.
   const FocalDecision& focal_decision() const { return focal_decision_; }
   // The final polish's track completion by projection (guided_completion.h), for report/sparse.json.
-  const nlohmann::json& guided_completion() const { return guided_completion_; }
+  const std::vector<GuidedCompletionPass>& guided_completion() const { return guided_completion_; }
 
  private:
   // Initialisation (mapper_initial_pair.cc).
@@ -168,7 +163,7 @@ class ModelBuilder {
   double init_focal_scale_ = 1;
   std::optional<std::pair<double, double>> init_distortion_;  // k1, k2 of a wide lens found by the focal scan
   FocalDecision focal_decision_;
-  nlohmann::json guided_completion_ = {{"run", false}};                // then one entry per pass
+  std::vector<GuidedCompletionPass> guided_completion_;                // one entry per pass
   std::vector<std::pair<uint64_t, core::TrackElement>> guided_added_;  // the last completion's additions
   // Focal held through growth: a trusted prior the user wants kept, or a telephoto scan's lower bound (then
   // tested once at the end). Narrow field: distortion is unobservable and stays fixed.
@@ -176,7 +171,7 @@ class ModelBuilder {
   const MapperOptions& opt_;
   std::set<uint32_t> pool_;
   int num_relocalised_ = 0;
-  Timings* t_;
+  MapperTimings* t_;
   core::Reconstruction rec_;
   // Angle thresholds of this model: the options', lowered for narrow-baseline (telephoto) models, see Initialize.
   IncrementalTriangulator triangulator_;

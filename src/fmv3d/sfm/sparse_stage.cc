@@ -16,6 +16,7 @@
 #include "fmv3d/features/manual_matches.h"
 #include "fmv3d/io/colmap_model.h"
 #include "fmv3d/io/frames_index.h"
+#include "fmv3d/sfm/mapper_report.h"
 #include "fmv3d/sfm/relocalise.h"
 
 namespace fmv3d::sfm {
@@ -370,7 +371,7 @@ nlohmann::json SparseReport(const MapperInput& input, const MapperResult& result
   nlohmann::json left = nlohmann::json::array();
   for (const auto& [id, why] : result.left_out) left.push_back({{"image", input.images[id - 1].name}, {"reason", why}});
   report["left_out"] = left;
-  report["mapper"] = result.stats;
+  report["mapper"] = ToJson(result.stats);
   return report;
 }
 
@@ -395,7 +396,7 @@ nlohmann::json RunSparseStage(const core::Workspace& ws, const SparseStageOption
   report["relocalisation"] = relocalisation;
   report["manual"] = manual_report;
   report["seconds"] = {{"load", load_seconds},
-                       {"mapping", result.stats["seconds"]["total"]},
+                       {"mapping", result.stats.seconds.total},
                        {"write", std::chrono::duration<double>(Clock::now() - write_start).count()},
                        {"total", std::chrono::duration<double>(Clock::now() - start).count()}};
   core::WriteJson(ws.report_dir() / "sparse.json", report);
