@@ -36,13 +36,13 @@ io::FramesIndex GridFlight(const fs::path& dir, bool with_telemetry_on_all) {
       f.frame_index = line * 8 + k;
       const double east = 30.0 * (line % 2 ? 7 - k : k), north = 200.0 * line;
       if (with_telemetry_on_all || (line * 8 + k) % 5 != 0)
-        f.telemetry = {{"time", 0.0},
-                       {"source", "DJI-SRT"},
-                       {"sensor_latitude", LatOf(north)},
-                       {"sensor_longitude", LonOf(east)},
-                       {"sensor_relative_altitude", 100.0},
-                       {"gimbal_yaw", 90.0},
-                       {"gimbal_pitch", -90.0}};
+        f.telemetry = core::TelemetryFromJson({{"time", 0.0},
+                                               {"source", "DJI-SRT"},
+                                               {"sensor_latitude", LatOf(north)},
+                                               {"sensor_longitude", LonOf(east)},
+                                               {"sensor_relative_altitude", 100.0},
+                                               {"gimbal_yaw", 90.0},
+                                               {"gimbal_pitch", -90.0}});
       index.frames.push_back(f);
     }
   io::WriteFramesIndex(index, dir / "frames.json");
@@ -108,13 +108,14 @@ TEST(SpatialPairs, ObliqueOrbitUsesTheFrameCentre) {
     io::FrameRecord f;
     f.name = "orbit-" + std::to_string(k) + ".png";
     const double a = k * 30 * kDeg;
-    f.telemetry = {{"sensor_latitude", LatOf(2000 * std::cos(a))},
-                   {"sensor_longitude", LonOf(2000 * std::sin(a))},
-                   {"sensor_altitude_msl", 1300.0},
-                   {"frame_center_latitude", LatOf(0)},
-                   {"frame_center_longitude", LonOf(0)},
-                   {"frame_center_elevation", 300.0},
-                   {"horizontal_fov", 2.0}};
+    f.telemetry = core::TelemetryFromJson({{"time", 0.0},
+                                           {"sensor_latitude", LatOf(2000 * std::cos(a))},
+                                           {"sensor_longitude", LonOf(2000 * std::sin(a))},
+                                           {"sensor_altitude_msl", 1300.0},
+                                           {"frame_center_latitude", LatOf(0)},
+                                           {"frame_center_longitude", LonOf(0)},
+                                           {"frame_center_elevation", 300.0},
+                                           {"horizontal_fov", 2.0}});
     index.frames.push_back(f);
   }
   const auto fps = FootprintsFromTelemetry(index);

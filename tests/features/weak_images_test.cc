@@ -88,9 +88,10 @@ io::FramesIndex Photos(int n, bool gps_on_all, bool one_source) {
     f.name = "p" + std::to_string(k) + ".jpg";
     f.source = one_source ? "clip.mp4" : "/in/p" + std::to_string(k) + ".jpg";
     if (gps_on_all || k != 3)
-      f.telemetry = {{"sensor_latitude", 47.0 + 1e-5 * (k % 10)},
-                     {"sensor_longitude", 8.0 + 1e-5 * (k / 10)},
-                     {"sensor_relative_altitude", 80.0}};
+      f.telemetry = core::TelemetryFromJson({{"time", 0.0},
+                                             {"sensor_latitude", 47.0 + 1e-5 * (k % 10)},
+                                             {"sensor_longitude", 8.0 + 1e-5 * (k / 10)},
+                                             {"sensor_relative_altitude", 80.0}});
     index.frames.push_back(f);
   }
   return index;

@@ -172,28 +172,32 @@ void MakeGeorefCase(GeorefCase* g, int n, double noise, bool straight, int outli
     if (k == outlier) noisy += Eigen::Vector3d(150, -80, 40);
     if (10 * k >= 7 * n) noisy += Eigen::Vector3d(bend, 0, 0);  // the model's last 30% is not where the flight was
     const GeoPoint p = frame.ToGeodetic(noisy);
-    f.telemetry = {{"time", k * 0.1},           {"source", "ST0601"},           {"sensor_latitude", p.lat},
-                   {"sensor_longitude", p.lon}, {"sensor_altitude_hae", p.alt}, {"sensor_altitude_msl", p.alt}};
+    f.telemetry = core::TelemetryFromJson({{"time", k * 0.1},
+                                           {"source", "ST0601"},
+                                           {"sensor_latitude", p.lat},
+                                           {"sensor_longitude", p.lon},
+                                           {"sensor_altitude_hae", p.alt},
+                                           {"sensor_altitude_msl", p.alt}});
     if (attitude_noise >= 0) {
       // Split the true attitude for a nominal platform, then state a noisy (and offset) platform, as synth does:
       // the telemetry's camera attitude is off by about attitude_noise per axis (and by heading_offset).
       const Eigen::Matrix3d cam_to_enu = core::Pose::LookAt(c, look_at).R().transpose();
       const auto a = telemetry::St0601FromCameraToEnu(cam_to_enu, 90, 0, 0);
-      f.telemetry["platform_heading"] = 90 + heading_offset + attitude_noise * Na(rng_att);
-      f.telemetry["platform_pitch"] = attitude_noise * Na(rng_att);
-      f.telemetry["platform_roll"] = attitude_noise * Na(rng_att);
-      f.telemetry["sensor_relative_azimuth"] = a.sensor_relative_azimuth;
-      f.telemetry["sensor_relative_elevation"] = a.sensor_relative_elevation;
-      f.telemetry["sensor_relative_roll"] = a.sensor_relative_roll;
+      f.telemetry->platform_heading = 90 + heading_offset + attitude_noise * Na(rng_att);
+      f.telemetry->platform_pitch = attitude_noise * Na(rng_att);
+      f.telemetry->platform_roll = attitude_noise * Na(rng_att);
+      f.telemetry->sensor_relative_azimuth = a.sensor_relative_azimuth;
+      f.telemetry->sensor_relative_elevation = a.sensor_relative_elevation;
+      f.telemetry->sensor_relative_roll = a.sensor_relative_roll;
     }
     if (frame_centre_noise >= 0) {
       std::normal_distribution<double> Nf(0, frame_centre_noise);
       const Eigen::Vector3d fc = look_at + Eigen::Vector3d(Nf(rng_att), Nf(rng_att), Nf(rng_att)) + frame_centre_offset;
       const GeoPoint q = frame.ToGeodetic(fc);
-      f.telemetry["frame_center_latitude"] = q.lat;
-      f.telemetry["frame_center_longitude"] = q.lon;
-      f.telemetry["frame_center_elevation"] = q.alt;
-      f.telemetry["slant_range"] = (c - look_at).norm();  // to the true look-at point
+      f.telemetry->frame_center_latitude = q.lat;
+      f.telemetry->frame_center_longitude = q.lon;
+      f.telemetry->frame_center_elevation = q.alt;
+      f.telemetry->slant_range = (c - look_at).norm();  // to the true look-at point
     }
     index.frames.push_back(f);
   }
@@ -453,7 +457,7 @@ TEST(Georef, FrameCentresFromThePlatformsOwnGpsDoNotHurt) {
       const LocalFrame frame(kOrigin);
       for (size_t k = 0; k < index.frames.size(); ++k) {
         auto& f = index.frames[k];
-        auto& t = f.telemetry;
+        nlohmann::json t = core::ToJson(*f.telemetry);
         if (smooth) {
           const double a = 2 * M_PI * k / n;
           const Eigen::Vector3d drift = 3.0 * Eigen::Vector3d(std::sin(a + 1), std::cos(a + 2), std::sin(a));
@@ -461,6 +465,7 @@ TEST(Georef, FrameCentresFromThePlatformsOwnGpsDoNotHurt) {
               frame.ToEnu({t["sensor_latitude"], t["sensor_longitude"], t["sensor_altitude_hae"]}) + drift);
           t["sensor_latitude"] = p.lat, t["sensor_longitude"] = p.lon, t["sensor_altitude_hae"] = p.alt;
           t["sensor_altitude_msl"] = p.alt;
+          f.telemetry = core::TelemetryFromJson(t);
         }
         telemetry::St0601Attitude a;
         a.platform_heading = t["platform_heading"], a.platform_pitch = t["platform_pitch"];
@@ -473,10 +478,10 @@ TEST(Georef, FrameCentresFromThePlatformsOwnGpsDoNotHurt) {
         ASSERT_LT(d.z(), 0);
         const double range = -p.z() / d.z();
         const GeoPoint q = frame.ToGeodetic(p + range * d);
-        f.telemetry["frame_center_latitude"] = q.lat;
-        f.telemetry["frame_center_longitude"] = q.lon;
-        f.telemetry["frame_center_elevation"] = q.alt;
-        f.telemetry["slant_range"] = range;
+        f.telemetry->frame_center_latitude = q.lat;
+        f.telemetry->frame_center_longitude = q.lon;
+        f.telemetry->frame_center_elevation = q.alt;
+        f.telemetry->slant_range = range;
       }
       io::WriteFramesIndex(index, g.dir / "frames/frames.json");
       GeorefOptions o;
@@ -540,7 +545,7 @@ TEST(Georef, FrameCentreHeightsInBothDatumsNarrowTheStep) {
     MakeGeorefCase(&g, 40, 3.0, false, -1, 1.0, 0, 200, 0, 0.0, Eigen::Vector3d::Zero(), 0, 17);
     io::FramesIndex index = io::ReadFramesIndex(g.dir / "frames/frames.json");
     for (auto& f : index.frames) {
-      auto& t = f.telemetry;
+      nlohmann::json t = core::ToJson(*f.telemetry);
       const double hae = t["frame_center_elevation"].get<double>();  // written true (HAE = MSL) by the case
       t.erase("frame_center_elevation");
       t["frame_center_hae"] = code(hae);
@@ -549,6 +554,7 @@ TEST(Georef, FrameCentreHeightsInBothDatumsNarrowTheStep) {
       t["sensor_altitude_hae"] = code(sensor);
       t["sensor_altitude_msl"] = code(sensor - n_geoid);
       if (both) t["frame_center_elevation"] = code(hae - n_geoid);
+      f.telemetry = core::TelemetryFromJson(t);
     }
     io::WriteFramesIndex(index, g.dir / "frames/frames.json");
     GeorefOptions o;
@@ -712,7 +718,7 @@ TEST(Georef, ClearErrors) {
   GeorefCase g;
   MakeGeorefCase(&g, 10, 0, false, -1);
   io::FramesIndex index = io::ReadFramesIndex(g.dir / "frames/frames.json");
-  for (auto& f : index.frames) f.telemetry = nullptr;
+  for (auto& f : index.frames) f.telemetry.reset();
   io::WriteFramesIndex(index, g.dir / "frames/frames.json");
   try {
     RunGeorefStage(g.dir.path());

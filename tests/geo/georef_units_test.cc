@@ -193,16 +193,16 @@ SightCase MakeSightCase(const LocalFrame& frame, LookAt look_at, Stated stated) 
     r.name = img.name;
     r.frame_index = k;
     r.timestamp = 0.5 * k;
-    r.telemetry = {{"time", r.timestamp},
-                   {"source", "ST0601"},
-                   {"sensor_latitude", pair.pos.lat},
-                   {"sensor_longitude", pair.pos.lon},
-                   {"sensor_altitude_hae", pair.pos.alt},
-                   {"sensor_altitude_msl", pair.pos.alt},
-                   {"frame_center_latitude", f.lat},
-                   {"frame_center_longitude", f.lon},
-                   {"frame_center_elevation", f.alt},
-                   {"slant_range", *pair.slant_range}};
+    r.telemetry = core::TelemetryFromJson({{"time", r.timestamp},
+                                           {"source", "ST0601"},
+                                           {"sensor_latitude", pair.pos.lat},
+                                           {"sensor_longitude", pair.pos.lon},
+                                           {"sensor_altitude_hae", pair.pos.alt},
+                                           {"sensor_altitude_msl", pair.pos.alt},
+                                           {"frame_center_latitude", f.lat},
+                                           {"frame_center_longitude", f.lon},
+                                           {"frame_center_elevation", f.alt},
+                                           {"slant_range", *pair.slant_range}});
     c.index.frames.push_back(r);
   }
   return c;

@@ -218,11 +218,11 @@ TEST(SynthKlv, TelemetryRoundTripsThroughTheVideoAndFramesStage) {
   const auto index = io::ReadFramesIndex(dir / "ws/frames/frames.json");
   ASSERT_EQ(index.frames.size(), 12u);
   for (const auto& f : index.frames) {
-    ASSERT_TRUE(f.telemetry.is_object()) << f.name;
+    ASSERT_TRUE(f.telemetry.has_value()) << f.name;
     const auto& r = result.klv.at(f.frame_index);
-    EXPECT_NEAR(f.telemetry.at("sensor_latitude").get<double>(), r.sensor_latitude, 0.5 * kLatStep + 1e-9) << f.name;
-    EXPECT_NEAR(f.telemetry.at("sensor_longitude").get<double>(), r.sensor_longitude, 0.5 * kLonStep + 1e-9) << f.name;
-    EXPECT_NEAR(f.telemetry.at("sensor_altitude_msl").get<double>(), r.sensor_true_altitude, 0.5 * kAltStep + 1e-6)
+    EXPECT_NEAR(f.telemetry->sensor_latitude.value_or(NAN), r.sensor_latitude, 0.5 * kLatStep + 1e-9) << f.name;
+    EXPECT_NEAR(f.telemetry->sensor_longitude.value_or(NAN), r.sensor_longitude, 0.5 * kLonStep + 1e-9) << f.name;
+    EXPECT_NEAR(f.telemetry->sensor_altitude_msl.value_or(NAN), r.sensor_true_altitude, 0.5 * kAltStep + 1e-6)
         << f.name;
   }
   const auto dump = test::RunCli("klv " + (dir / "flight.ts").string());

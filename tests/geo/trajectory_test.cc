@@ -132,7 +132,7 @@ TEST(Georef, EveryTelemetryPacketAgainstTheTrajectory) {
     f.source = "flight.ts";
     f.frame_index = k;
     f.timestamp = t;
-    f.telemetry = telemetry::ToJson(track.samples.back());
+    f.telemetry = track.samples.back();
     index.frames.push_back(f);
   }
   core::EnsureDirectory(dir / "frames");

@@ -45,7 +45,7 @@ double PositionRms(const io::FramesIndex& index, const synth::SynthResult& r, co
   size_t n = 0;
   for (size_t k = 0; k < index.frames.size(); ++k) {
     const auto& f = index.frames[k];
-    const auto& t = f.telemetry;
+    const nlohmann::json t = core::ToJson(*f.telemetry);
     const double alt = t.contains("sensor_altitude_hae")
                            ? t.at("sensor_altitude_hae").get<double>()
                            : t.at("sensor_altitude_msl").get<double>() + undulation_to_add;
@@ -71,14 +71,15 @@ TEST(FieldTelemetry, SynthExifJpegsThroughFrames) {
   ASSERT_EQ(index.frames.size(), 12u);
   for (size_t k = 0; k < index.frames.size(); ++k) {
     const auto& f = index.frames[k];
-    ASSERT_TRUE(f.telemetry.is_object()) << f.name;
-    EXPECT_EQ(f.telemetry.at("source"), "EXIF+DJI-XMP");
+    ASSERT_TRUE(f.telemetry.has_value()) << f.name;
+    EXPECT_EQ(f.telemetry->source, "EXIF+DJI-XMP");
     const auto& r = result.klv.at(k);  // frames are named in order
-    EXPECT_NEAR(f.telemetry.at("sensor_latitude").get<double>(), r.sensor_latitude, 3e-8) << f.name;
-    EXPECT_NEAR(f.telemetry.at("sensor_longitude").get<double>(), r.sensor_longitude, 3e-8) << f.name;
-    EXPECT_NEAR(f.telemetry.at("sensor_altitude_msl").get<double>(), r.sensor_true_altitude, 1e-6) << f.name;
+    EXPECT_NEAR(f.telemetry->sensor_latitude.value_or(NAN), r.sensor_latitude, 3e-8) << f.name;
+    EXPECT_NEAR(f.telemetry->sensor_longitude.value_or(NAN), r.sensor_longitude, 3e-8) << f.name;
+    EXPECT_NEAR(f.telemetry->sensor_altitude_msl.value_or(NAN), r.sensor_true_altitude, 1e-6) << f.name;
     // The stated attitude reproduces the truth camera within the attitude noise (0.5° per platform angle).
-    auto num = [&](const char* key) { return f.telemetry.at(key).get<double>(); };
+    const nlohmann::json t = core::ToJson(*f.telemetry);
+    auto num = [&](const char* key) { return t.at(key).get<double>(); };
     const telemetry::St0601Attitude a{num("platform_heading"),
                                       num("platform_pitch"),
                                       num("platform_roll"),
@@ -106,7 +107,7 @@ TEST(FieldTelemetry, SynthExifJpegsThroughFrames) {
   ASSERT_EQ(cli.exit_code, 0) << cli.err;
   const auto j = nlohmann::json::parse(cli.out);
   EXPECT_EQ(j.at("kind"), "photo");
-  EXPECT_EQ(j.at("telemetry").at("sensor_latitude"), index.frames[3].telemetry.at("sensor_latitude"));
+  EXPECT_EQ(j.at("telemetry").at("sensor_latitude"), index.frames[3].telemetry->sensor_latitude.value_or(NAN));
 }
 
 TEST(FieldTelemetry, CorruptPhotoMetadataIsDroppedWithACount) {
@@ -156,8 +157,8 @@ TEST(FieldTelemetry, CorruptPhotoMetadataIsDroppedWithACount) {
   io_opts.workspace = dir / "ws";
   const io::FramesIndex index = IngestFrames({dir / "frames"}, io_opts);
   ASSERT_EQ(index.frames.size(), 4u);  // every photo kept
-  EXPECT_TRUE(index.frames[0].telemetry.is_object());
-  for (int k = 1; k < 4; ++k) EXPECT_TRUE(index.frames[k].telemetry.is_null()) << k;
+  EXPECT_TRUE(index.frames[0].telemetry.has_value());
+  for (int k = 1; k < 4; ++k) EXPECT_FALSE(index.frames[k].telemetry.has_value()) << k;
 }
 
 TEST(FieldTelemetry, SynthGpmfMp4ThroughFrames) {
@@ -173,17 +174,17 @@ TEST(FieldTelemetry, SynthGpmfMp4ThroughFrames) {
     const io::FramesIndex index = IngestFrames({dir / "flight.mp4"}, io_opts);
     ASSERT_EQ(index.frames.size(), 12u) << gps9;
     for (const auto& f : index.frames) {
-      ASSERT_TRUE(f.telemetry.is_object()) << f.name;
-      EXPECT_EQ(f.telemetry.at("source"), "GPMF");
+      ASSERT_TRUE(f.telemetry.has_value()) << f.name;
+      EXPECT_EQ(f.telemetry->source, "GPMF");
       const auto& r = result.klv.at(static_cast<size_t>(f.frame_index));
       // One fix per frame at the frame's time: the frame gets its own fix (GPMF stores 1e-7 degrees, 1 mm).
-      EXPECT_NEAR(f.telemetry.at("sensor_latitude").get<double>(), r.sensor_latitude, 1.1e-7) << f.name;
-      EXPECT_NEAR(f.telemetry.at("sensor_longitude").get<double>(), r.sensor_longitude, 1.1e-7) << f.name;
-      EXPECT_NEAR(f.telemetry.at("sensor_altitude_hae").get<double>(), *r.sensor_ellipsoid_height, 2e-3) << f.name;
+      EXPECT_NEAR(f.telemetry->sensor_latitude.value_or(NAN), r.sensor_latitude, 1.1e-7) << f.name;
+      EXPECT_NEAR(f.telemetry->sensor_longitude.value_or(NAN), r.sensor_longitude, 1.1e-7) << f.name;
+      EXPECT_NEAR(f.telemetry->sensor_altitude_hae.value_or(NAN), *r.sensor_ellipsoid_height, 2e-3) << f.name;
       // CORI: the truth rotation relative to frame 0 (16-bit components).
       const Eigen::Quaterniond q(
-          f.telemetry.at("camera_orientation_w").get<double>(), f.telemetry.at("camera_orientation_x").get<double>(),
-          f.telemetry.at("camera_orientation_y").get<double>(), f.telemetry.at("camera_orientation_z").get<double>());
+          f.telemetry->camera_orientation_w.value_or(NAN), f.telemetry->camera_orientation_x.value_or(NAN),
+          f.telemetry->camera_orientation_y.value_or(NAN), f.telemetry->camera_orientation_z.value_or(NAN));
       const auto& truth = result.truth.images;
       const Eigen::Matrix3d rel =
           truth.at(1).pose.R() * truth.at(static_cast<uint32_t>(f.frame_index + 1)).pose.R().transpose();

@@ -18,9 +18,9 @@ TEST(FramesTelemetry, KlvPositionsReachFramesJson) {
   const auto index = IngestFrames({test::SharedData() / "fmv/kwiver/videos/aphill_klv_10s.ts"}, options);
   ASSERT_FALSE(index.frames.empty());
   for (const auto& f : index.frames) {
-    ASSERT_TRUE(f.telemetry.is_object()) << f.name;
-    EXPECT_NEAR(f.telemetry.at("sensor_latitude").get<double>(), 38.16, 0.05) << f.name;
-    EXPECT_NEAR(f.telemetry.at("sensor_longitude").get<double>(), -77.35, 0.05) << f.name;
+    ASSERT_TRUE(f.telemetry.has_value()) << f.name;
+    EXPECT_NEAR(f.telemetry->sensor_latitude.value_or(NAN), 38.16, 0.05) << f.name;
+    EXPECT_NEAR(f.telemetry->sensor_longitude.value_or(NAN), -77.35, 0.05) << f.name;
   }
   const auto back = io::ReadFramesIndex(ws / "frames/frames.json");
   EXPECT_EQ(back.frames.front().telemetry, index.frames.front().telemetry);
@@ -37,7 +37,7 @@ TEST(FramesTelemetry, VideoWithoutKlvHasNone) {
   options.workspace = ws.path();
   const auto index = IngestFrames({test::SharedData() / "fmv/kwiver/videos/h264_no_klv.ts"}, options);
   ASSERT_FALSE(index.frames.empty());
-  for (const auto& f : index.frames) EXPECT_TRUE(f.telemetry.is_null()) << f.name;
+  for (const auto& f : index.frames) EXPECT_FALSE(f.telemetry.has_value()) << f.name;
   EXPECT_EQ(fmv3d::io::PriorSourceName(index.cameras.at(0).prior_source), "guess");
 }
 

@@ -85,8 +85,8 @@ void MakeWorkspaceRoot(const fs::path& tmp) {
   for (int i = 1; i <= 2; ++i) {
     io::FrameRecord f;
     f.name = "f" + std::to_string(i) + ".png";
-    f.telemetry = {
-        {"time", i}, {"sensor_latitude", 47.0 + 1e-5 * i}, {"sensor_longitude", 8.0}, {"sensor_altitude_hae", 510.0}};
+    f.telemetry = core::TelemetryFromJson(
+        {{"time", i}, {"sensor_latitude", 47.0 + 1e-5 * i}, {"sensor_longitude", 8.0}, {"sensor_altitude_hae", 510.0}});
     index.frames.push_back(f);
     std::ofstream(ws / "frames" / f.name) << "PNG-ish bytes " << i;
   }

@@ -298,15 +298,14 @@ mvs::DenseStageOptions MergedDenseOptions(const std::vector<Track>& tracks) {
   bool seen = false, full = false, geometric = false;
   int max_size = 0, max_sources = 0, coverage = 0;
   for (const auto& t : tracks) {
-    const auto& r = t.dense_report;
-    if (!r.is_object()) continue;
+    if (!t.dense_settings) continue;
+    const DenseSettings& d = *t.dense_settings;
     seen = true;
-    const int size = r.value("max_size", o.max_size);
-    if (size == 0) full = true;
-    max_size = std::max(max_size, size);
-    max_sources = std::max(max_sources, r.value("max_sources", o.max_sources));
-    geometric = geometric || r.value("geometric_pass", o.geometric);
-    coverage = std::max(coverage, r.value("reference_coverage", 0));
+    if (d.max_size == 0) full = true;
+    max_size = std::max(max_size, d.max_size);
+    max_sources = std::max(max_sources, d.max_sources);
+    geometric = geometric || d.geometric_pass;
+    coverage = std::max(coverage, d.reference_coverage);
   }
   if (!seen) return o;
   o.max_size = full ? 0 : max_size;

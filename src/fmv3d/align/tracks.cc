@@ -19,6 +19,7 @@
 #include "fmv3d/features/pairs.h"
 #include "fmv3d/geometry/similarity.h"
 #include "fmv3d/io/colmap_model.h"
+#include "fmv3d/mvs/dense_stage.h"
 
 namespace fmv3d::align {
 namespace {
@@ -313,7 +314,15 @@ Track LoadTrack(const fs::path& workspace) {
   const fs::path fused = ws.dense_dir() / "fused.ply";
   if (fs::exists(fused)) t.dense = io::ReadPointCloudPly(fused);
   const fs::path dense_report = ws.report_dir() / "dense.json";
-  if (fs::exists(dense_report)) t.dense_report = core::ReadJson(dense_report);
+  const nlohmann::json r = fs::exists(dense_report) ? core::ReadJson(dense_report) : nlohmann::json();
+  if (r.is_object()) {
+    const mvs::DenseStageOptions defaults;
+    DenseSettings& d = t.dense_settings.emplace();
+    d.max_size = r.value("max_size", defaults.max_size);
+    d.max_sources = r.value("max_sources", defaults.max_sources);
+    d.geometric_pass = r.value("geometric_pass", defaults.geometric);
+    d.reference_coverage = r.value("reference_coverage", 0);
+  }
   t.radius = RmsRadius(Positions(t.sparse));
   return t;
 }

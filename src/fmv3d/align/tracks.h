@@ -19,6 +19,7 @@
 
 #include <filesystem>
 #include <nlohmann/json.hpp>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -31,14 +32,23 @@
 
 namespace fmv3d::align {
 
+// The dense stage's settings a workspace was made with (WS/report/dense.json): a merged cloud is recomputed with the
+// finest of every track's.
+struct DenseSettings {
+  int max_size = 0;  // 0: full resolution
+  int max_sources = 0;
+  bool geometric_pass = false;
+  int reference_coverage = 0;
+};
+
 // One workspace's products.
 struct Track {
   std::filesystem::path workspace;
-  std::string name;              // the workspace folder's name (for messages and reports)
-  core::Reconstruction sparse;   // WS/sparse (COLMAP text)
-  io::OrientedPointCloud dense;  // WS/dense/fused.ply, empty when absent
-  nlohmann::json dense_report;   // WS/report/dense.json (the dense stage's settings), null when absent
-  double radius = 0;             // RMS distance of the sparse points to their centroid (model units)
+  std::string name;                             // the workspace folder's name (for messages and reports)
+  core::Reconstruction sparse;                  // WS/sparse (COLMAP text)
+  io::OrientedPointCloud dense;                 // WS/dense/fused.ply, empty when absent
+  std::optional<DenseSettings> dense_settings;  // none when the workspace has no dense report
+  double radius = 0;                            // RMS distance of the sparse points to their centroid (model units)
 };
 
 // Throws fmv3d::Error when WS/sparse is missing or has fewer than 3 images or 3 points.

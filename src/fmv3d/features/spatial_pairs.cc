@@ -15,12 +15,13 @@ constexpr double kEarthRadius = 6378137.0;
 // footprint is then large, so such frames pair generously rather than not at all).
 constexpr double kMinDepressionDeg = 10.0;
 
-std::optional<double> Field(const nlohmann::json& t, const char* name) {
-  if (!t.is_object()) return std::nullopt;
-  auto it = t.find(name);
-  if (it == t.end() || !it->is_number()) return std::nullopt;
-  const double v = it->get<double>();
-  return std::isfinite(v) ? std::optional<double>(v) : std::nullopt;
+using Sample = core::TelemetrySample;
+
+// A field of a frame's telemetry when the frame has one and the value is finite.
+std::optional<double> Field(const std::optional<Sample>& t, std::optional<double> Sample::*field) {
+  if (!t) return std::nullopt;
+  const std::optional<double>& v = (*t).*field;
+  return v && std::isfinite(*v) ? v : std::nullopt;
 }
 
 struct LocalFrame {  // equirectangular east-north metres about an origin: exact enough for footprint overlap
@@ -41,23 +42,23 @@ std::vector<Footprint> FootprintsFromTelemetry(const io::FramesIndex& index) {
   for (size_t i = 0; i < index.frames.size(); ++i) {
     const auto& t = index.frames[i].telemetry;
     Footprint& fp = out[i];
-    const auto lat = Field(t, "sensor_latitude"), lon = Field(t, "sensor_longitude");
+    const auto lat = Field(t, &Sample::sensor_latitude), lon = Field(t, &Sample::sensor_longitude);
     if (!lat || !lon) {
-      fp.why_invalid = t.is_null() ? "no telemetry" : "no sensor latitude/longitude";
+      fp.why_invalid = !t ? "no telemetry" : "no sensor latitude/longitude";
       continue;
     }
     // Height above the ground: altitude minus the ground's (frame centre) elevation in the same datum; a
     // relative altitude (DJI: above the take-off point) is taken as height above flat ground.
     std::optional<double> height;
-    if (auto a = Field(t, "sensor_altitude_hae"); a && Field(t, "frame_center_hae"))
-      height = *a - *Field(t, "frame_center_hae");
-    else if (auto m = Field(t, "sensor_altitude_msl"); m && Field(t, "frame_center_elevation"))
-      height = *m - *Field(t, "frame_center_elevation");
-    else if (auto r = Field(t, "sensor_relative_altitude"))
+    if (auto a = Field(t, &Sample::sensor_altitude_hae); a && Field(t, &Sample::frame_center_hae))
+      height = *a - *Field(t, &Sample::frame_center_hae);
+    else if (auto m = Field(t, &Sample::sensor_altitude_msl); m && Field(t, &Sample::frame_center_elevation))
+      height = *m - *Field(t, &Sample::frame_center_elevation);
+    else if (auto r = Field(t, &Sample::sensor_relative_altitude))
       height = *r;
-    else if (auto m2 = Field(t, "sensor_altitude_msl"))
+    else if (auto m2 = Field(t, &Sample::sensor_altitude_msl))
       height = *m2;  // no ground elevation: assume ground near sea level (the footprint is then an upper bound)
-    else if (auto h2 = Field(t, "sensor_altitude_hae"))
+    else if (auto h2 = Field(t, &Sample::sensor_altitude_hae))
       height = *h2;
     if (!height || !(*height > 0)) {
       fp.why_invalid = "no usable altitude above the ground";
@@ -73,12 +74,12 @@ std::vector<Footprint> FootprintsFromTelemetry(const io::FramesIndex& index) {
       hfov = 2 * std::atan(0.5 * cam->camera.width / cam->camera.fx());
       vfov = 2 * std::atan(0.5 * cam->camera.height / cam->camera.fy());
     }
-    if (auto h = Field(t, "horizontal_fov"); h && *h > 0 && *h < 180) {
+    if (auto h = Field(t, &Sample::horizontal_fov); h && *h > 0 && *h < 180) {
       const double aspect = (hfov > 0 && vfov > 0) ? std::tan(vfov / 2) / std::tan(hfov / 2) : 0.75;
       hfov = *h * kDeg;
       vfov = 2 * std::atan(aspect * std::tan(hfov / 2));
     }
-    if (auto v = Field(t, "vertical_fov"); v && *v > 0 && *v < 180) vfov = *v * kDeg;
+    if (auto v = Field(t, &Sample::vertical_fov); v && *v > 0 && *v < 180) vfov = *v * kDeg;
     if (!(hfov > 0) || !(vfov > 0)) {
       fp.why_invalid = "no field of view (telemetry or camera prior)";
       continue;
@@ -86,24 +87,25 @@ std::vector<Footprint> FootprintsFromTelemetry(const io::FramesIndex& index) {
 
     // Pointing: where the optical axis meets the ground and how oblique it is.
     double depression = 90, range = *height;
-    const auto fc_lat = Field(t, "frame_center_latitude"), fc_lon = Field(t, "frame_center_longitude");
+    const auto fc_lat = Field(t, &Sample::frame_center_latitude), fc_lon = Field(t, &Sample::frame_center_longitude);
     if (fc_lat && fc_lon) {
       fp.centre = frame->ToLocal(*fc_lat, *fc_lon);
       const double ground = (fp.centre - sensor).norm();
       depression = std::atan2(*height, ground) / kDeg;
       range = std::hypot(*height, ground);
-      if (auto s = Field(t, "slant_range"); s && *s > 0) range = *s;
+      if (auto s = Field(t, &Sample::slant_range); s && *s > 0) range = *s;
     } else {
       std::optional<double> azimuth, elevation;
-      if (auto y = Field(t, "gimbal_yaw")) {
+      if (auto y = Field(t, &Sample::gimbal_yaw)) {
         azimuth = y;
-        elevation = Field(t, "gimbal_pitch");
+        elevation = Field(t, &Sample::gimbal_pitch);
       } else {
-        if (auto n = Field(t, "sensor_angle_to_north"))
+        if (auto n = Field(t, &Sample::sensor_angle_to_north))
           azimuth = n;
-        else if (auto h = Field(t, "platform_heading"))
-          azimuth = *h + Field(t, "sensor_relative_azimuth").value_or(0);
-        if (auto e = Field(t, "sensor_relative_elevation")) elevation = *e + Field(t, "platform_pitch").value_or(0);
+        else if (auto h = Field(t, &Sample::platform_heading))
+          azimuth = *h + Field(t, &Sample::sensor_relative_azimuth).value_or(0);
+        if (auto e = Field(t, &Sample::sensor_relative_elevation))
+          elevation = *e + Field(t, &Sample::platform_pitch).value_or(0);
       }
       if (elevation) depression = std::clamp(-*elevation, kMinDepressionDeg, 90.0);
       depression = std::max(depression, kMinDepressionDeg);

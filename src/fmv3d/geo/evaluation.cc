@@ -241,12 +241,12 @@ TelemetryErrors FrameTelemetryErrors(const io::FramesIndex& index, const core::R
   TelemetryErrors e;
   for (const auto& f : index.frames) {
     const core::Image* t = tru.FindImageByName(f.name);
-    const auto& tel = f.telemetry;
-    if (!t || !tel.is_object() || !tel.contains("sensor_latitude") || !tel.contains("sensor_longitude")) continue;
-    const char* alt = !msl && tel.contains("sensor_altitude_hae") ? "sensor_altitude_hae" : "sensor_altitude_msl";
-    if (!tel.contains(alt)) continue;
-    const GeoPoint p{tel["sensor_latitude"].get<double>(), tel["sensor_longitude"].get<double>(),
-                     tel[alt].get<double>()};
+    if (!t || !f.telemetry || !f.telemetry->sensor_latitude || !f.telemetry->sensor_longitude) continue;
+    const auto& tel = *f.telemetry;
+    const std::optional<double> alt =
+        !msl && tel.sensor_altitude_hae ? tel.sensor_altitude_hae : tel.sensor_altitude_msl;
+    if (!alt) continue;
+    const GeoPoint p{*tel.sensor_latitude, *tel.sensor_longitude, *alt};
     e.Add(fg.ToEnu(p) - to_ws(t->pose.Centre()));
   }
   return e;

@@ -70,15 +70,8 @@ PairedTelemetry PairTelemetry(const io::FramesIndex& index, const core::Reconstr
   for (const auto& f : index.frames) {
     const core::Image* img = rec.FindImageByName(f.name);
     if (img) knots_by_source[f.source].push_back({f.timestamp, img->pose.Centre(), img->pose.q});
-    if (!f.telemetry.is_object()) continue;
-    nlohmann::json t = f.telemetry;
-    if (!t.contains("time")) t["time"] = f.timestamp;
-    telemetry::TelemetrySample s;
-    try {
-      s = telemetry::TelemetryFromJson(t);
-    } catch (const Error& e) {
-      throw Error(where + ": frame " + f.name + ": " + e.what());
-    }
+    if (!f.telemetry) continue;
+    const telemetry::TelemetrySample& s = *f.telemetry;
     if (!HasPosition(s)) continue;
     ++out.frames_with_position;
     if (img) out.keyframes.push_back(MakePair(f.name, img->pose.Centre(), img->pose.q, s));

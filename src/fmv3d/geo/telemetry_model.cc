@@ -119,16 +119,12 @@ TelemetryCameras PlaceCameras(const std::vector<GeorefPair>& keyframes, const Lo
 
 // The whole prior camera where the intrinsics came from the telemetry's HFOV: the image model's distortion was
 // fitted along with its degenerate shape (a synthetic telephoto pass: k2 −1.84 on a lens without distortion).
-nlohmann::json UseTelemetryCameras(const io::FramesIndex& index, core::Reconstruction* rec) {
-  nlohmann::json focal = nlohmann::json::array();
+std::vector<TelemetryFocal> UseTelemetryCameras(const io::FramesIndex& index, core::Reconstruction* rec) {
+  std::vector<TelemetryFocal> focal;
   for (const auto& cp : index.cameras) {
     const auto it = rec->cameras.find(cp.camera.id);
     if (it == rec->cameras.end() || cp.prior_source.kind != io::PriorKind::kTelemetryHfov) continue;
-    focal.push_back({{"camera", cp.camera.id},
-                     {"f_image_model", it->second.f},
-                     {"f", cp.camera.f},
-                     {"k1_image_model", it->second.k1},
-                     {"k2_image_model", it->second.k2}});
+    focal.push_back({cp.camera.id, cp.camera.f, it->second.f, it->second.k1, it->second.k2});
     const uint32_t id = it->second.id;
     it->second = cp.camera;
     it->second.id = id;
@@ -206,10 +202,17 @@ void AdjustWithSightPriors(const std::map<std::string, std::pair<Eigen::Vector3d
 }  // namespace
 
 nlohmann::json TelemetryModel::ToJson(const TelemetryModelOptions& o) const {
+  nlohmann::json focal = nlohmann::json::array();
+  for (const TelemetryFocal& t : focal_from_telemetry)
+    focal.push_back({{"camera", t.camera},
+                     {"f_image_model", t.f_image_model},
+                     {"f", t.f},
+                     {"k1_image_model", t.k1_image_model},
+                     {"k2_image_model", t.k2_image_model}});
   return {{"keyframes", keyframes},
           {"frames_left_out", frames_left_out},
           {"ground_z_start_m", ground_z_start ? nlohmann::json(*ground_z_start) : nlohmann::json()},
-          {"focal_from_telemetry", focal_from_telemetry},
+          {"focal_from_telemetry", focal},
           {"prior_sigma_m", o.prior_sigma_m},
           {"attitude_sigma_deg", o.attitude_sigma_deg},
           {"mean_reprojection_px_start", mean_reprojection_px_start},

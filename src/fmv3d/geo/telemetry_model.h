@@ -29,11 +29,18 @@ struct TelemetryModelOptions {
   double attitude_sigma_deg = 1.0;  // the telemetry line of sight's accuracy
 };
 
+// A camera whose focal came from the telemetry's field of view, replacing the image model's.
+struct TelemetryFocal {
+  uint32_t camera = 0;
+  double f = 0;  // the telemetry's
+  double f_image_model = 0, k1_image_model = 0, k2_image_model = 0;
+};
+
 struct TelemetryModel {
   core::Reconstruction model;  // ENU of the frame given
   size_t keyframes = 0, frames_left_out = 0;
-  std::optional<double> ground_z_start;                           // m, ENU
-  nlohmann::json focal_from_telemetry = nlohmann::json::array();  // per camera: the image model's f, k and the prior's
+  std::optional<double> ground_z_start;  // m, ENU
+  std::vector<TelemetryFocal> focal_from_telemetry;
   double mean_reprojection_px_start = 0, reprojection_rms_px = 0;
   size_t observations_dropped = 0, frame_centre_priors = 0;
   std::vector<double> frame_centre_prior_sigma_m;  // per variance-component round

@@ -121,9 +121,8 @@ void FocalFromTelemetryHfov(const io::FramesIndex& index, uint32_t camera_id, co
                             io::PriorSource* source) {
   std::vector<double> hfov;
   for (const auto& f : index.frames)
-    if (f.camera_id == camera_id && f.telemetry.is_object() && f.telemetry.contains("horizontal_fov") &&
-        f.telemetry["horizontal_fov"].is_number()) {
-      const double h = f.telemetry["horizontal_fov"].get<double>();
+    if (f.camera_id == camera_id && f.telemetry && f.telemetry->horizontal_fov) {
+      const double h = *f.telemetry->horizontal_fov;
       if (h > 0.01 && h < 170) hfov.push_back(h);
     }
   if (hfov.empty()) return;
@@ -247,7 +246,7 @@ class FramesBuilder {
     const telemetry::PhotoTelemetry t = telemetry::TelemetryFromPhoto(exif, options_.telemetry);
     photo_fixes_.Add(t.rejection);
     if (exif.damaged) ++damaged_exif_;
-    if (t.sample) r.telemetry = telemetry::ToJson(*t.sample);
+    r.telemetry = t.sample;
     if (t.dji.malformed > 0)
       spdlog::warn("{}: {} DJI XMP fields are not numbers (ignored)", file.string(), t.dji.malformed);
     index_.frames.push_back(r);
@@ -294,7 +293,7 @@ class FramesBuilder {
         r.frame_index = k.index;
         r.timestamp = k.timestamp;
         r.sharpness = k.sharpness;
-        if (auto t = telemetry::InterpolateTelemetry(samples, k.timestamp)) r.telemetry = telemetry::ToJson(*t);
+        r.telemetry = telemetry::InterpolateTelemetry(samples, k.timestamp);
         // PNG encoding costs more than decoding: it runs beside the decoder, at most 4 frames in flight.
         if (++in_flight > 4) {
           writers.wait();

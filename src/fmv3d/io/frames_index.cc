@@ -66,7 +66,7 @@ void WriteFramesIndex(const FramesIndex& index, const std::filesystem::path& pat
     nlohmann::json fj = {{"name", f.name},           {"camera_id", f.camera_id},
                          {"source", f.source},       {"frame_index", f.frame_index},
                          {"timestamp", f.timestamp}, {"sharpness", f.sharpness}};
-    if (!f.telemetry.is_null()) fj["telemetry"] = f.telemetry;
+    if (f.telemetry) fj["telemetry"] = core::ToJson(*f.telemetry);
     j["frames"].push_back(fj);
   }
   core::WriteJson(path, j);
@@ -96,7 +96,15 @@ FramesIndex ReadFramesIndex(const std::filesystem::path& path) {
       f.frame_index = fj.value("frame_index", int64_t{0});
       f.timestamp = fj.value("timestamp", 0.0);
       f.sharpness = fj.value("sharpness", 0.0);
-      if (fj.contains("telemetry")) f.telemetry = fj["telemetry"];
+      if (fj.contains("telemetry") && !fj["telemetry"].is_null()) {
+        nlohmann::json t = fj["telemetry"];
+        if (t.is_object() && !t.contains("time")) t["time"] = f.timestamp;
+        try {
+          f.telemetry = core::TelemetryFromJson(t);
+        } catch (const Error& e) {
+          throw Error("frame " + f.name + ": " + e.what());
+        }
+      }
       index.frames.push_back(f);
     }
   } catch (const nlohmann::json::exception& e) {

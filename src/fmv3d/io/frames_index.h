@@ -10,7 +10,8 @@
 //                                  (PriorSource below),
 //                  "source": "path/of/video/or/image/folder" } ],
 //   "frames":  [ { "name": "flight-000012.png", "camera_id": 1, "source": "flight.mp4", "frame_index": 12,
-//                  "timestamp": 0.4, "sharpness": 153.2, "telemetry": { ... optional ... } } ]
+//                  "timestamp": 0.4, "sharpness": 153.2,
+//                  "telemetry": { ... optional: core/telemetry_sample.h, "time" defaults to the timestamp ... } } ]
 // }
 #pragma once
 
@@ -21,6 +22,7 @@
 #include <vector>
 
 #include "fmv3d/core/camera.h"
+#include "fmv3d/core/telemetry_sample.h"
 
 namespace fmv3d::io {
 
@@ -55,7 +57,7 @@ struct FrameRecord {
   int64_t frame_index = 0;  // decode-order index in a video; 0 for still images
   double timestamp = 0;     // seconds from the start of the video; 0 for still images
   double sharpness = 0;
-  nlohmann::json telemetry;  // null when there is none
+  std::optional<core::TelemetrySample> telemetry;
 };
 
 struct FramesIndex {

@@ -96,7 +96,7 @@ std::vector<Stage> ReconstructStages(const ReconstructOptions& o) {
     return [ws, stage, needs, run] {
       const io::FramesIndex index = io::ReadFramesIndex(ws.frames_json());
       const bool any = std::any_of(index.frames.begin(), index.frames.end(),
-                                   [](const io::FrameRecord& f) { return !f.telemetry.is_null(); });
+                                   [](const io::FrameRecord& f) { return f.telemetry.has_value(); });
       if (!any && !fs::exists(ws.manual_dir() / "gcp_list.txt")) {
         spdlog::info("{}: no telemetry in frames.json (KLV, SRT or GPS) nor GCPs, no georeferenced products", stage);
         return nlohmann::json{{"skipped", "no telemetry"}};

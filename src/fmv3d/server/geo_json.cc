@@ -110,10 +110,10 @@ nlohmann::json GeoJson(const fs::path& ws) {
   nlohmann::json track = nlohmann::json::array();
   try {
     for (const auto& f : io::ReadFramesIndex(core::Workspace(ws).frames_json()).frames) {
-      const auto& t = f.telemetry;
-      if (!t.is_object() || !t.contains("sensor_latitude") || !t.contains("sensor_longitude")) continue;
-      const double alt = t.value("sensor_altitude_hae", t.value("sensor_altitude_msl", 0.0));
-      track.push_back({t["sensor_latitude"].get<double>(), t["sensor_longitude"].get<double>(), alt});
+      if (!f.telemetry || !f.telemetry->sensor_latitude || !f.telemetry->sensor_longitude) continue;
+      const auto& t = *f.telemetry;
+      const double alt = t.sensor_altitude_hae.value_or(t.sensor_altitude_msl.value_or(0.0));
+      track.push_back({*t.sensor_latitude, *t.sensor_longitude, alt});
     }
   } catch (const std::exception&) {
   }

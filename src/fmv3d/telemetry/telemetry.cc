@@ -137,50 +137,7 @@ std::vector<TelemetrySample> ReadVideoTelemetry(const std::filesystem::path& pat
 
 namespace {
 
-using Field = std::optional<double> TelemetrySample::*;
-
-enum class Interp { kLinear, kAngle360, kLongitude, kNearest };
-
-struct FieldSpec {
-  const char* name;
-  Field field;
-  Interp interp;
-};
-
-const FieldSpec kFields[] = {
-    {"sensor_latitude", &TelemetrySample::sensor_latitude, Interp::kLinear},
-    {"sensor_longitude", &TelemetrySample::sensor_longitude, Interp::kLongitude},
-    {"sensor_altitude_msl", &TelemetrySample::sensor_altitude_msl, Interp::kLinear},
-    {"sensor_altitude_hae", &TelemetrySample::sensor_altitude_hae, Interp::kLinear},
-    {"sensor_relative_altitude", &TelemetrySample::sensor_relative_altitude, Interp::kLinear},
-    {"platform_heading", &TelemetrySample::platform_heading, Interp::kAngle360},
-    {"platform_pitch", &TelemetrySample::platform_pitch, Interp::kLinear},
-    {"platform_roll", &TelemetrySample::platform_roll, Interp::kLinear},
-    {"sensor_relative_azimuth", &TelemetrySample::sensor_relative_azimuth, Interp::kAngle360},
-    {"sensor_relative_elevation", &TelemetrySample::sensor_relative_elevation, Interp::kLinear},
-    {"sensor_relative_roll", &TelemetrySample::sensor_relative_roll, Interp::kAngle360},
-    {"sensor_angle_to_north", &TelemetrySample::sensor_angle_to_north, Interp::kAngle360},
-    {"sensor_obliquity", &TelemetrySample::sensor_obliquity, Interp::kAngle360},
-    {"gimbal_yaw", &TelemetrySample::gimbal_yaw, Interp::kLongitude},
-    {"gimbal_pitch", &TelemetrySample::gimbal_pitch, Interp::kLinear},
-    {"gimbal_roll", &TelemetrySample::gimbal_roll, Interp::kLinear},
-    {"horizontal_fov", &TelemetrySample::horizontal_fov, Interp::kLinear},
-    {"vertical_fov", &TelemetrySample::vertical_fov, Interp::kLinear},
-    {"slant_range", &TelemetrySample::slant_range, Interp::kLinear},
-    {"frame_center_latitude", &TelemetrySample::frame_center_latitude, Interp::kLinear},
-    {"frame_center_longitude", &TelemetrySample::frame_center_longitude, Interp::kLongitude},
-    {"frame_center_elevation", &TelemetrySample::frame_center_elevation, Interp::kLinear},
-    {"frame_center_hae", &TelemetrySample::frame_center_hae, Interp::kLinear},
-    {"gps_dop", &TelemetrySample::gps_dop, Interp::kLinear},
-    {"gps_fix", &TelemetrySample::gps_fix, Interp::kNearest},
-    {"horizontal_accuracy", &TelemetrySample::horizontal_accuracy, Interp::kLinear},
-    {"vertical_accuracy", &TelemetrySample::vertical_accuracy, Interp::kLinear},
-    {"rtk_flag", &TelemetrySample::rtk_flag, Interp::kNearest},
-    {"camera_orientation_w", &TelemetrySample::camera_orientation_w, Interp::kNearest},
-    {"camera_orientation_x", &TelemetrySample::camera_orientation_x, Interp::kNearest},
-    {"camera_orientation_y", &TelemetrySample::camera_orientation_y, Interp::kNearest},
-    {"camera_orientation_z", &TelemetrySample::camera_orientation_z, Interp::kNearest},
-};
+using Interp = core::TelemetryInterp;
 
 // Interpolates along the shorter arc; the result keeps the convention of the inputs' range.
 double Lerp(double a, double b, double w, Interp mode) {
@@ -219,7 +176,7 @@ std::optional<TelemetrySample> InterpolateTelemetry(const std::vector<TelemetryS
   const double w = span > 0 ? (t - a.time) / span : 0.0;
   TelemetrySample s = w < 0.5 ? a : b;  // nearest, for discrete fields
   s.time = t;
-  for (const auto& f : kFields) {
+  for (const auto& f : core::TelemetryFields()) {
     const auto& va = a.*(f.field);
     const auto& vb = b.*(f.field);
     if (va && vb && f.interp != Interp::kNearest) s.*(f.field) = Lerp(*va, *vb, w, f.interp);
@@ -229,32 +186,6 @@ std::optional<TelemetrySample> InterpolateTelemetry(const std::vector<TelemetryS
     const double ua = static_cast<double>(*a.unix_time_us), ub = static_cast<double>(*b.unix_time_us);
     s.unix_time_us = static_cast<uint64_t>(std::llround(ua + w * (ub - ua)));
   }
-  return s;
-}
-
-nlohmann::json ToJson(const TelemetrySample& s) {
-  nlohmann::json j;
-  j["time"] = s.time;
-  j["source"] = s.source;
-  for (const auto& f : kFields)
-    if (const auto& v = s.*(f.field)) j[f.name] = *v;
-  if (s.unix_time_us) j["unix_time_us"] = *s.unix_time_us;
-  return j;
-}
-
-TelemetrySample TelemetryFromJson(const nlohmann::json& j) {
-  if (!j.is_object() || !j.contains("time") || !j["time"].is_number())
-    throw Error("telemetry sample without a numeric \"time\"");
-  TelemetrySample s;
-  s.time = j["time"].get<double>();
-  if (j.contains("source") && j["source"].is_string()) s.source = j["source"].get<std::string>();
-  for (const auto& f : kFields) {
-    if (!j.contains(f.name)) continue;
-    if (!j[f.name].is_number()) throw Error(std::string("telemetry field \"") + f.name + "\" is not a number");
-    s.*(f.field) = j[f.name].get<double>();
-  }
-  if (j.contains("unix_time_us") && j["unix_time_us"].is_number_unsigned())
-    s.unix_time_us = j["unix_time_us"].get<uint64_t>();
   return s;
 }
 

@@ -1,7 +1,7 @@
 // Telemetry of a video or a photo, independent of its source (MISB ST 0601 / EG 0104 KLV in MPEG-TS, DJI .SRT
 // subtitles, GoPro GPMF in MP4 (gpmf_telemetry.h), EXIF GPS / DJI XMP of photos (photo_telemetry.h)): one
-// TelemetrySample per packet, with its presentation time; interpolation at a frame's time; the JSON that
-// frames.json carries per frame ("telemetry").
+// TelemetrySample (core/telemetry_sample.h) per packet, with its presentation time; interpolation at a frame's
+// time.
 //
 // Units: degrees (WGS84 latitude/longitude, angles), metres, seconds. Every field is optional: a packet
 // carries what it carries, and an "error"/"N/A" encoding leaves the field empty.
@@ -18,45 +18,14 @@
 #include <string>
 #include <vector>
 
+#include "fmv3d/core/telemetry_sample.h"
 #include "fmv3d/telemetry/klv.h"
 
 namespace fmv3d::telemetry {
 
-struct TelemetrySample {
-  double time = 0;     // seconds, see above
-  std::string source;  // "ST0601", "EG0104", "DJI-SRT", "GPMF", "EXIF", "EXIF+DJI-XMP"
-
-  std::optional<double> sensor_latitude, sensor_longitude;
-  std::optional<double> sensor_altitude_msl;       // ST 0601 tag 15 "true altitude" (MSL); EG0104 device altitude
-                                                   // (MSL); DJI abs_alt / GPS altitude
-  std::optional<double> sensor_altitude_hae;       // ST 0601 tag 75 / 104 (height above WGS84 ellipsoid)
-  std::optional<double> sensor_relative_altitude;  // DJI rel_alt / BAROMETER: above the take-off point
-
-  std::optional<double> platform_heading, platform_pitch, platform_roll;
-  // Sensor pointing relative to the platform (ST 0601 tags 18-20). For EG0104 the azimuth is derived as
-  // angle_to_north - platform_heading (wrapped to [0, 360)); the raw EG0104 angles are kept too.
-  std::optional<double> sensor_relative_azimuth, sensor_relative_elevation, sensor_relative_roll;
-  std::optional<double> sensor_angle_to_north, sensor_obliquity;  // EG0104 only
-  std::optional<double> gimbal_yaw, gimbal_pitch, gimbal_roll;    // DJI gb_yaw/gb_pitch/gb_roll (absolute)
-
-  std::optional<double> horizontal_fov, vertical_fov;
-  std::optional<double> slant_range;
-  std::optional<double> frame_center_latitude, frame_center_longitude;
-  std::optional<double> frame_center_elevation;  // MSL (ST 0601 tag 25, EG0104)
-  std::optional<double> frame_center_hae;        // ST 0601 tag 78
-
-  // Fix quality as the source states it (fix_quality.h screens on it).
-  std::optional<double> gps_dop;              // dilution of precision (EXIF GPSDOP, GPMF GPSP / 100 or GPS9)
-  std::optional<double> gps_fix;              // 0 no lock, 2 = 2D, 3 = 3D (GPMF GPSF / GPS9, EXIF GPSMeasureMode)
-  std::optional<double> horizontal_accuracy;  // metres, 1σ (EXIF GPSHPositioningError, DJI RTK std dev)
-  std::optional<double> vertical_accuracy;    // metres, 1σ (DJI RtkStdHgt)
-  std::optional<double> rtk_flag;             // DJI RtkFlag: 0 none, 16 single point, 34 float, 50 fixed
-  // GoPro CORI: the camera's orientation relative to its orientation at the start of the recording (unit
-  // quaternion w, x, y, z in the camera's own frame); not an absolute attitude.
-  std::optional<double> camera_orientation_w, camera_orientation_x, camera_orientation_y, camera_orientation_z;
-
-  std::optional<uint64_t> unix_time_us;  // ST 0601 precision timestamp / EG0104 user-defined timestamp / GPS UTC
-};
+using core::TelemetryFromJson;
+using core::TelemetrySample;
+using core::ToJson;
 
 struct TelemetryStats {
   klv::ParseStats klv;
@@ -80,12 +49,6 @@ std::vector<TelemetrySample> ReadVideoTelemetry(const std::filesystem::path& pat
 // t is within `max_extrapolation` seconds of it, else nullopt (as for an empty list).
 std::optional<TelemetrySample> InterpolateTelemetry(const std::vector<TelemetrySample>& samples, double t,
                                                     double max_extrapolation = 0.5);
-
-// {"time": .., "source": "ST0601", "sensor_latitude": ..., ...}; absent fields are omitted.
-nlohmann::json ToJson(const TelemetrySample& s);
-// The inverse of ToJson; unknown keys are ignored. Throws fmv3d::Error when "time" is missing or a known
-// field is not a number.
-TelemetrySample TelemetryFromJson(const nlohmann::json& j);
 
 // The whole telemetry of a video (every packet, not only the kept frames'), so that later stages can use all
 // of it: georef fits the model's trajectory to every position (frames.json only carries the keyframes').
