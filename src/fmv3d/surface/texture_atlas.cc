@@ -1,12 +1,14 @@
 #include "fmv3d/surface/texture_atlas.h"
 
 #include <spdlog/spdlog.h>
+#include <tbb/parallel_for.h>
 
 #include <Eigen/Dense>
 #include <algorithm>
 #include <array>
 #include <cmath>
 #include <limits>
+#include <map>
 #include <numeric>
 #include <opencv2/imgproc.hpp>
 #include <unordered_map>
@@ -87,41 +89,69 @@ void AtlasOptions::Check() const {
 
 namespace {
 
-// 2. Per-view colour gains from the seams (log colour: a gain is an offset there).
+// 2. Per-view colour gains from the seams (log colour: a gain is an offset there). Each seam edge is sampled at
+// three points in both views; the samples' colours are read view by view in one pass over the frame window, then
+// summed in face order (the same sums, to the bit, whatever the window holds).
 std::vector<Eigen::Vector3f> SeamGains(const ColoredMesh& mesh, const std::vector<Eigen::Vector3i>& adjacency,
-                                       const std::vector<TextureView>& views, const std::vector<int>& labels,
-                                       const AtlasOptions& options, nlohmann::json* stats) {
+                                       const std::vector<TextureView>& views, FrameWindow& frames,
+                                       const std::vector<int>& labels, const AtlasOptions& options,
+                                       nlohmann::json* stats) {
   const size_t nf = mesh.triangles.size();
   auto& st = *stats;
   std::vector<Eigen::Vector3f> gain(views.size(), Eigen::Vector3f::Ones());
   size_t seam_edges = 0;
   if (options.adjust_colors && views.size() > 1) {
-    const int nvw = static_cast<int>(views.size());
-    Eigen::MatrixXd A = Eigen::MatrixXd::Zero(nvw, nvw);
-    Eigen::MatrixXd b = Eigen::MatrixXd::Zero(nvw, 3);
+    struct SeamSample {
+      uint32_t face;
+      uint8_t edge, step;  // the face's edge k, and t = step / 2 along it
+      Eigen::Vector3d Point(const ColoredMesh& m) const {
+        const double t = 0.5 * step;
+        return (1 - t) * m.vertices[m.triangles[face][edge]] + t * m.vertices[m.triangles[face][(edge + 1) % 3]];
+      }
+    };
+    std::vector<SeamSample> samples;
     for (size_t f = 0; f < nf; ++f)
       for (int k = 0; k < 3; ++k) {
         const int g = adjacency[f][k];
         if (g <= static_cast<int>(f) || labels[f] < 0 || labels[g] < 0 || labels[g] == labels[f]) continue;
         ++seam_edges;
-        const int va = labels[f], vb = labels[g];
-        const Eigen::Vector3d p0 = mesh.vertices[mesh.triangles[f][k]],
-                              p1 = mesh.vertices[mesh.triangles[f][(k + 1) % 3]];
-        for (double t : {0.0, 0.5, 1.0}) {
-          const Eigen::Vector3d p = (1 - t) * p0 + t * p1;
-          const Eigen::Vector2d ua = views[va].camera.Project(views[va].pose.Transform(p));
-          const Eigen::Vector2d ub = views[vb].camera.Project(views[vb].pose.Transform(p));
-          const Eigen::Vector3f ca = Bilinear(views[va].image, ua.x(), ua.y());
-          const Eigen::Vector3f cb = Bilinear(views[vb].image, ub.x(), ub.y());
-          // log(ca) + ga = log(cb) + gb
-          A(va, va) += 1, A(vb, vb) += 1, A(va, vb) -= 1, A(vb, va) -= 1;
-          for (int ch = 0; ch < 3; ++ch) {
-            const double d = std::log(cb[ch] + 1.0) - std::log(ca[ch] + 1.0);
-            b(va, ch) += d;
-            b(vb, ch) -= d;
-          }
-        }
+        for (uint8_t step = 0; step < 3; ++step)
+          samples.push_back({static_cast<uint32_t>(f), static_cast<uint8_t>(k), step});
       }
+    // Sample s is read in views labels[face] (colour[2s]) and labels[neighbour] (colour[2s + 1]).
+    const auto view_of = [&](size_t read) {
+      const SeamSample& sm = samples[read / 2];
+      return read % 2 == 0 ? labels[sm.face] : labels[adjacency[sm.face][sm.edge]];
+    };
+    std::vector<std::vector<size_t>> reads_of_view(views.size());
+    for (size_t r = 0; r < 2 * samples.size(); ++r) reads_of_view[view_of(r)].push_back(r);
+    std::vector<size_t> seam_views;
+    for (size_t v = 0; v < views.size(); ++v)
+      if (!reads_of_view[v].empty()) seam_views.push_back(v);
+    std::vector<Eigen::Vector3f> colour(2 * samples.size());
+    frames.ForEach(seam_views, [&](size_t v, const cv::Mat& image) {
+      const std::vector<size_t>& reads = reads_of_view[v];
+      tbb::parallel_for(size_t{0}, reads.size(), [&](size_t i) {
+        const Eigen::Vector2d uv = views[v].camera.Project(views[v].pose.Transform(samples[reads[i] / 2].Point(mesh)));
+        colour[reads[i]] = Bilinear(image, uv.x(), uv.y());
+      });
+      std::vector<size_t>().swap(reads_of_view[v]);
+    });
+    const int nvw = static_cast<int>(views.size());
+    Eigen::MatrixXd A = Eigen::MatrixXd::Zero(nvw, nvw);
+    Eigen::MatrixXd b = Eigen::MatrixXd::Zero(nvw, 3);
+    for (size_t s = 0; s < samples.size(); ++s) {
+      const int va = view_of(2 * s), vb = view_of(2 * s + 1);
+      const Eigen::Vector3f& ca = colour[2 * s];
+      const Eigen::Vector3f& cb = colour[2 * s + 1];
+      // log(ca) + ga = log(cb) + gb
+      A(va, va) += 1, A(vb, vb) += 1, A(va, vb) -= 1, A(vb, va) -= 1;
+      for (int ch = 0; ch < 3; ++ch) {
+        const double d = std::log(cb[ch] + 1.0) - std::log(ca[ch] + 1.0);
+        b(va, ch) += d;
+        b(vb, ch) -= d;
+      }
+    }
     // Regularisation relative to the mean number of seam terms per view keeps the gains near 1 where a view
     // has few seams, and fixes the common scale (no seam says anything about it).
     const double lambda = options.gain_regularisation * std::max(1.0, A.trace() / nvw);
@@ -220,7 +250,7 @@ std::vector<Chart> MakeCharts(const ColoredMesh& mesh, const std::vector<Texture
 }
 
 // 4. Shelf packing of the charts into pages, tallest first; the charts' pixels copied in.
-std::vector<cv::Mat> PackCharts(std::vector<Chart>* charts_io, const std::vector<TextureView>& views,
+std::vector<cv::Mat> PackCharts(std::vector<Chart>* charts_io, FrameWindow& frames,
                                 const std::vector<Eigen::Vector3f>& gain, const AtlasOptions& options,
                                 nlohmann::json* stats) {
   std::vector<Chart>& charts = *charts_io;
@@ -254,13 +284,21 @@ std::vector<cv::Mat> PackCharts(std::vector<Chart>* charts_io, const std::vector
   std::vector<cv::Mat> pages(num_pages);
   for (int p = 0; p < num_pages; ++p)
     pages[p] = cv::Mat(std::min(options.max_page_size, NextPow2(page_used_h[p])), page_w, CV_8UC3, cv::Scalar(0, 0, 0));
-  for (const Chart& c : charts) {
+  // Charts do not overlap on the pages: they are copied view by view, in one pass over the frame window.
+  std::map<size_t, std::vector<size_t>> charts_of_view;
+  for (size_t i = 0; i < charts.size(); ++i) {
+    const Chart& c = charts[i];
     if (c.view >= 0) {
-      CopyChart(views[c.view].image, c, gain[c.view], &pages[c.page]);
+      charts_of_view[c.view].push_back(i);
     } else {
       pages[c.page](cv::Rect(c.px, c.py, c.w, c.h)).setTo(cv::Scalar(c.flat_bgr[0], c.flat_bgr[1], c.flat_bgr[2]));
     }
   }
+  std::vector<size_t> chart_views;
+  for (const auto& [v, list] : charts_of_view) chart_views.push_back(v);
+  frames.ForEach(chart_views, [&](size_t v, const cv::Mat& image) {
+    for (size_t i : charts_of_view[v]) CopyChart(image, charts[i], gain[v], &pages[charts[i].page]);
+  });
   st["pages"] = num_pages;
   st["page_size"] = nlohmann::json::array();
   for (const auto& p : pages) st["page_size"].push_back({p.cols, p.rows});
@@ -356,8 +394,8 @@ std::vector<io::Rgb8> VertexColours(const ColoredMesh& mesh, const io::TexturedM
 }  // namespace
 
 TexturedModel BuildTextureAtlas(const ColoredMesh& mesh, const std::vector<Eigen::Vector3i>& adjacency,
-                                const std::vector<TextureView>& views, const std::vector<int>& labels,
-                                const AtlasOptions& options) {
+                                const std::vector<TextureView>& views, FrameWindow& frames,
+                                const std::vector<int>& labels, const AtlasOptions& options) {
   options.Check();
   const size_t nf = mesh.triangles.size();
   if (labels.size() != nf || adjacency.size() != nf) throw Error("texture: labels or adjacency do not match the mesh");
@@ -380,14 +418,14 @@ TexturedModel BuildTextureAtlas(const ColoredMesh& mesh, const std::vector<Eigen
       if (g >= 0 && labels[f] >= 0 && labels[g] == labels[f]) patches.Union(static_cast<int>(f), g);
     }
 
-  const std::vector<Eigen::Vector3f> gain = SeamGains(mesh, adjacency, views, labels, options, &st);
+  const std::vector<Eigen::Vector3f> gain = SeamGains(mesh, adjacency, views, frames, labels, options, &st);
   size_t num_patches = 0;
   for (size_t f = 0; f < nf; ++f)
     num_patches += labels[f] >= 0 && patches.Find(static_cast<int>(f)) == static_cast<int>(f);
   st["patches"] = num_patches;
   std::vector<int> chart_of_face;
   std::vector<Chart> charts = MakeCharts(mesh, views, labels, corner, options, &chart_of_face, &st);
-  const std::vector<cv::Mat> pages = PackCharts(&charts, views, gain, options, &st);
+  const std::vector<cv::Mat> pages = PackCharts(&charts, frames, gain, options, &st);
   model.mesh = UvMesh(mesh, charts, chart_of_face, corner, pages);
   model.vertex_colors = VertexColours(mesh, model.mesh, pages);
   spdlog::info("texture: {} patches in {} charts on {} atlas page(s) of {} px wide ({:.0f}% filled)", num_patches,
