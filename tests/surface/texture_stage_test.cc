@@ -233,7 +233,7 @@ std::string FileBytes(const fs::path& path) {
   return std::string(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
 }
 
-// Frames decoded on demand in a one-frame window (each decoded again by the later passes) give the same files,
+// Frames decoded on demand in a one-frame window (each decoded again by the second pass) give the same files,
 // to the byte, as every frame held at once.
 TEST(TextureStage, OneFrameWindowGivesTheSameFiles) {
   test::TempDir all("fmv3d-texture"), one("fmv3d-texture");
@@ -248,7 +248,9 @@ TEST(TextureStage, OneFrameWindowGivesTheSameFiles) {
   EXPECT_EQ(wide["memory"]["frame_loads"].get<size_t>(), views);
   EXPECT_EQ(narrow["memory"]["frame_window"].get<size_t>(), 1u);
   EXPECT_EQ(narrow["memory"]["peak_frames_held"].get<size_t>(), 1u);
-  EXPECT_GT(narrow["memory"]["frame_loads"].get<size_t>(), views + views / 2);
+  // Two passes (visibility; seam colours and chart copies): each frame decoded at most twice.
+  EXPECT_GT(narrow["memory"]["frame_loads"].get<size_t>(), views);
+  EXPECT_LE(narrow["memory"]["frame_loads"].get<size_t>(), 2 * views);
   std::vector<std::string> files = {"mesh/textured.obj", "mesh/textured.mtl", "mesh/model.glb", "mesh/textured.ply"};
   for (int p = 0; p < wide["atlas"]["pages"].get<int>(); ++p)
     files.push_back("mesh/textured_atlas_" + std::to_string(p) + ".png");

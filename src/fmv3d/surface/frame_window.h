@@ -1,5 +1,5 @@
-// The frames texturing reads, held in a bounded window. Texturing reads every frame in a few passes (visibility
-// over all views, then seam colours and chart copies over the labelled ones); each pass needs one frame at a time,
+// The frames texturing reads, held in a bounded window. Texturing reads the frames in two passes (visibility over
+// all views, then seam colours and chart copies over the labelled ones); each pass needs one frame at a time,
 // so frames are decoded on demand and the least recently used one is dropped when the window is full. A pass
 // declares its order up front (Prefetch): the next frames are decoded in parallel, as many as fit, and passes
 // alternate direction so that a pass starts on the frames the previous one ended with. Memory is then the

@@ -37,7 +37,7 @@ struct TexturedModel {
   nlohmann::json stats;
 };
 
-// `frames` gives views[i]'s pixels: read in two passes over the labelled views (seam colours, chart copies).
+// `frames` gives views[i]'s pixels: read in one pass over the labelled views (seam colours and chart copies).
 TexturedModel BuildTextureAtlas(const ColoredMesh& mesh, const std::vector<Eigen::Vector3i>& adjacency,
                                 const std::vector<TextureView>& views, FrameWindow& frames,
                                 const std::vector<int>& labels, const AtlasOptions& options);

@@ -26,8 +26,8 @@ struct TextureStageOptions {
   // instead of every registered view; the visibility pass costs per view, and video keyframes see each face
   // from 20-30 views, most of them near-duplicates. 0 = every view.
   int view_coverage = 0;
-  // MB of decoded frames held at once (frame_window.h): the frames are read in three passes, and those that do
-  // not fit are decoded again in the next pass. The output does not depend on it.
+  // MB of decoded frames held at once (frame_window.h): the frames are read in two passes, and those that do
+  // not fit are decoded again in the second. The output does not depend on it.
   double max_memory_mb = 2048;
   void Check() const {
     selection.Check();
