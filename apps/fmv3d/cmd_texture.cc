@@ -30,6 +30,9 @@ void Add(CLI::App& app) {
   cmd->add_option("--view-coverage", a->opt.view_coverage,
                   "Colour from the fewest views that see every sparse point this many times (0: every view)")
       ->capture_default_str();
+  cmd->add_option("--max-memory", a->opt.max_memory_mb,
+                  "MB of decoded frames held at once (frames that do not fit are decoded again; same output)")
+      ->capture_default_str();
   cmd->add_option("--page-size", t.max_page_size, "Largest atlas page side, texels (power of two)")
       ->capture_default_str();
   cmd->add_option("--texel-scale", t.texel_scale, "Atlas texels per source pixel")->capture_default_str();

@@ -9,6 +9,8 @@
 #include <gtest/gtest.h>
 #include <tiny_gltf.h>  // declarations only: the implementation lives in fmv3d_surface
 
+#include <fstream>
+#include <iterator>
 #include <memory>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
@@ -223,6 +225,36 @@ TEST(TextureStage, CliSplitsTheAtlasIntoSmallPages) {
   EXPECT_EQ(mesh.materials.size(), static_cast<size_t>(pages));
   for (const auto& f : mesh.faces) ASSERT_TRUE(f.material >= 0 && f.material < pages);
   EXPECT_EQ(test::RunCli("texture " + ws.path().string() + " --page-size 1000").exit_code, 1);
+}
+
+std::string FileBytes(const fs::path& path) {
+  std::ifstream in(path, std::ios::binary);
+  EXPECT_TRUE(in) << path;
+  return std::string(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
+}
+
+// Frames decoded on demand in a one-frame window (each decoded again by the second pass) give the same files,
+// to the byte, as every frame held at once.
+TEST(TextureStage, OneFrameWindowGivesTheSameFiles) {
+  test::TempDir all("fmv3d-texture"), one("fmv3d-texture");
+  PrepareMeshed(all.path());
+  PrepareMeshed(one.path());
+  const nlohmann::json wide = RunTextureStage(all.path(), TextureStageOptions{});
+  const auto r = test::RunCli("-q texture " + one.path().string() + " --max-memory 0.5");  // a frame is 0.37 MB
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const nlohmann::json narrow = core::ReadJson(one / "report/texture.json");
+  const size_t views = wide["views"].get<size_t>();
+  EXPECT_EQ(wide["memory"]["frame_window"].get<size_t>(), views);
+  EXPECT_EQ(wide["memory"]["frame_loads"].get<size_t>(), views);
+  EXPECT_EQ(narrow["memory"]["frame_window"].get<size_t>(), 1u);
+  EXPECT_EQ(narrow["memory"]["peak_frames_held"].get<size_t>(), 1u);
+  // Two passes (visibility; seam colours and chart copies): each frame decoded at most twice.
+  EXPECT_GT(narrow["memory"]["frame_loads"].get<size_t>(), views);
+  EXPECT_LE(narrow["memory"]["frame_loads"].get<size_t>(), 2 * views);
+  std::vector<std::string> files = {"mesh/textured.obj", "mesh/textured.mtl", "mesh/model.glb", "mesh/textured.ply"};
+  for (int p = 0; p < wide["atlas"]["pages"].get<int>(); ++p)
+    files.push_back("mesh/textured_atlas_" + std::to_string(p) + ".png");
+  for (const auto& f : files) EXPECT_TRUE(FileBytes(all / f) == FileBytes(one / f)) << f << " differs";
 }
 
 TEST(TextureStage, MissingInputsNameTheCommand) {

@@ -1,6 +1,7 @@
 #include "fmv3d/surface/texture_atlas.h"
 
 #include <spdlog/spdlog.h>
+#include <tbb/parallel_for.h>
 
 #include <Eigen/Dense>
 #include <algorithm>
@@ -59,8 +60,8 @@ int NextPow2(int v) {
 }
 
 // Copies image pixels [x0, x1) × [y0, y1) (the rectangle may reach past the border: edge pixels repeat),
-// multiplied by a per-channel gain and resized to w × h, into dst at (px, py).
-void CopyChart(const cv::Mat& image, const Chart& c, const Eigen::Vector3f& gain, cv::Mat* dst) {
+// resized to w × h, into dst at (px, py).
+void CopyChart(const cv::Mat& image, const Chart& c, cv::Mat* dst) {
   const cv::Rect want(c.x0, c.y0, c.x1 - c.x0, c.y1 - c.y0);
   const cv::Rect have = want & cv::Rect(0, 0, image.cols, image.rows);
   cv::Mat region;
@@ -71,8 +72,17 @@ void CopyChart(const cv::Mat& image, const Chart& c, const Eigen::Vector3f& gain
                        want.br().x - have.br().x, cv::BORDER_REPLICATE);
   }
   if (region.cols != c.w || region.rows != c.h) cv::resize(region, region, cv::Size(c.w, c.h), 0, 0, cv::INTER_AREA);
-  if ((gain.array() != 1.0f).any()) cv::multiply(region, cv::Scalar(gain[0], gain[1], gain[2]), region);
   region.copyTo((*dst)(cv::Rect(c.px, c.py, c.w, c.h)));
+}
+
+// Multiplies a copied chart by its view's per-channel gain (on a continuous copy of the texels, as the product
+// was taken before the chart was placed).
+void ApplyGain(const Chart& c, const Eigen::Vector3f& gain, cv::Mat* dst) {
+  if (!(gain.array() != 1.0f).any()) return;
+  const cv::Rect where(c.px, c.py, c.w, c.h);
+  cv::Mat region = (*dst)(where).clone();
+  cv::multiply(region, cv::Scalar(gain[0], gain[1], gain[2]), region);
+  region.copyTo((*dst)(where));
 }
 
 }  // namespace
@@ -87,56 +97,95 @@ void AtlasOptions::Check() const {
 
 namespace {
 
-// 2. Per-view colour gains from the seams (log colour: a gain is an offset there).
-std::vector<Eigen::Vector3f> SeamGains(const ColoredMesh& mesh, const std::vector<Eigen::Vector3i>& adjacency,
-                                       const std::vector<TextureView>& views, const std::vector<int>& labels,
-                                       const AtlasOptions& options, nlohmann::json* stats) {
-  const size_t nf = mesh.triangles.size();
-  auto& st = *stats;
-  std::vector<Eigen::Vector3f> gain(views.size(), Eigen::Vector3f::Ones());
-  size_t seam_edges = 0;
-  if (options.adjust_colors && views.size() > 1) {
-    const int nvw = static_cast<int>(views.size());
-    Eigen::MatrixXd A = Eigen::MatrixXd::Zero(nvw, nvw);
-    Eigen::MatrixXd b = Eigen::MatrixXd::Zero(nvw, 3);
-    for (size_t f = 0; f < nf; ++f)
+// 2. Per-view colour gains from the seams (log colour: a gain is an offset there). Each seam edge is sampled at
+// three points in both views; the samples' colours are read view by view in the atlas's pass over the frame
+// window, then summed in face order (the same sums, to the bit, whatever the window holds).
+class SeamSamples {
+ public:
+  SeamSamples(const ColoredMesh& mesh, const std::vector<Eigen::Vector3i>& adjacency, const std::vector<int>& labels,
+              size_t num_views, const AtlasOptions& options)
+      : mesh_(mesh), adjacency_(adjacency), labels_(labels), reads_of_view_(num_views) {
+    if (!options.adjust_colors || num_views < 2) return;
+    for (size_t f = 0; f < mesh.triangles.size(); ++f)
       for (int k = 0; k < 3; ++k) {
         const int g = adjacency[f][k];
         if (g <= static_cast<int>(f) || labels[f] < 0 || labels[g] < 0 || labels[g] == labels[f]) continue;
-        ++seam_edges;
-        const int va = labels[f], vb = labels[g];
-        const Eigen::Vector3d p0 = mesh.vertices[mesh.triangles[f][k]],
-                              p1 = mesh.vertices[mesh.triangles[f][(k + 1) % 3]];
-        for (double t : {0.0, 0.5, 1.0}) {
-          const Eigen::Vector3d p = (1 - t) * p0 + t * p1;
-          const Eigen::Vector2d ua = views[va].camera.Project(views[va].pose.Transform(p));
-          const Eigen::Vector2d ub = views[vb].camera.Project(views[vb].pose.Transform(p));
-          const Eigen::Vector3f ca = Bilinear(views[va].image, ua.x(), ua.y());
-          const Eigen::Vector3f cb = Bilinear(views[vb].image, ub.x(), ub.y());
-          // log(ca) + ga = log(cb) + gb
-          A(va, va) += 1, A(vb, vb) += 1, A(va, vb) -= 1, A(vb, va) -= 1;
-          for (int ch = 0; ch < 3; ++ch) {
-            const double d = std::log(cb[ch] + 1.0) - std::log(ca[ch] + 1.0);
-            b(va, ch) += d;
-            b(vb, ch) -= d;
-          }
-        }
+        ++seam_edges_;
+        for (uint8_t step = 0; step < 3; ++step)
+          samples_.push_back({static_cast<uint32_t>(f), static_cast<uint8_t>(k), step});
       }
-    // Regularisation relative to the mean number of seam terms per view keeps the gains near 1 where a view
-    // has few seams, and fixes the common scale (no seam says anything about it).
-    const double lambda = options.gain_regularisation * std::max(1.0, A.trace() / nvw);
-    A.diagonal().array() += lambda;
-    const Eigen::MatrixXd g = A.ldlt().solve(b);
-    double max_dev = 0;
-    for (int v = 0; v < nvw; ++v)
-      for (int ch = 0; ch < 3; ++ch) {
-        gain[v][ch] = static_cast<float>(std::clamp(std::exp(g(v, ch)), 0.5, 2.0));
-        max_dev = std::max(max_dev, std::abs(gain[v][ch] - 1.0));
-      }
-    st["max_gain_deviation"] = max_dev;
+    for (size_t r = 0; r < 2 * samples_.size(); ++r) reads_of_view_[ViewOf(r)].push_back(r);
+    colour_.resize(2 * samples_.size());
   }
-  st["seam_edges"] = seam_edges;
+  size_t seam_edges() const { return seam_edges_; }
+  bool Reads(size_t view) const { return !reads_of_view_[view].empty(); }
+  // The colours of the samples seen in `view`, from its pixels.
+  void Read(size_t view, const TextureView& v, const cv::Mat& image) {
+    std::vector<size_t>& reads = reads_of_view_[view];
+    tbb::parallel_for(size_t{0}, reads.size(), [&](size_t i) {
+      const Eigen::Vector2d uv = v.camera.Project(v.pose.Transform(samples_[reads[i] / 2].Point(mesh_)));
+      colour_[reads[i]] = Bilinear(image, uv.x(), uv.y());
+    });
+    std::vector<size_t>().swap(reads);
+  }
+  std::vector<Eigen::Vector3f> Gains(size_t num_views, const AtlasOptions& options, nlohmann::json* stats) const;
 
+ private:
+  struct Sample {
+    uint32_t face;
+    uint8_t edge, step;  // the face's edge k, and t = step / 2 along it
+    Eigen::Vector3d Point(const ColoredMesh& m) const {
+      const double t = 0.5 * step;
+      return (1 - t) * m.vertices[m.triangles[face][edge]] + t * m.vertices[m.triangles[face][(edge + 1) % 3]];
+    }
+  };
+  // Read 2s is sample s in its face's view, read 2s + 1 in the neighbour's.
+  int ViewOf(size_t read) const {
+    const Sample& sm = samples_[read / 2];
+    return read % 2 == 0 ? labels_[sm.face] : labels_[adjacency_[sm.face][sm.edge]];
+  }
+
+  const ColoredMesh& mesh_;
+  const std::vector<Eigen::Vector3i>& adjacency_;
+  const std::vector<int>& labels_;
+  std::vector<Sample> samples_;
+  std::vector<std::vector<size_t>> reads_of_view_;
+  std::vector<Eigen::Vector3f> colour_;  // per read
+  size_t seam_edges_ = 0;
+};
+
+std::vector<Eigen::Vector3f> SeamSamples::Gains(size_t num_views, const AtlasOptions& options,
+                                                nlohmann::json* stats) const {
+  auto& st = *stats;
+  std::vector<Eigen::Vector3f> gain(num_views, Eigen::Vector3f::Ones());
+  st["seam_edges"] = seam_edges_;
+  if (!options.adjust_colors || num_views < 2) return gain;
+  const int nvw = static_cast<int>(num_views);
+  Eigen::MatrixXd A = Eigen::MatrixXd::Zero(nvw, nvw);
+  Eigen::MatrixXd b = Eigen::MatrixXd::Zero(nvw, 3);
+  for (size_t s = 0; s < samples_.size(); ++s) {
+    const int va = ViewOf(2 * s), vb = ViewOf(2 * s + 1);
+    const Eigen::Vector3f &ca = colour_[2 * s], &cb = colour_[2 * s + 1];
+    // log(ca) + ga = log(cb) + gb
+    A(va, va) += 1, A(vb, vb) += 1, A(va, vb) -= 1, A(vb, va) -= 1;
+    for (int ch = 0; ch < 3; ++ch) {
+      const double d = std::log(cb[ch] + 1.0) - std::log(ca[ch] + 1.0);
+      b(va, ch) += d;
+      b(vb, ch) -= d;
+    }
+  }
+  // Regularisation relative to the mean number of seam terms per view keeps the gains near 1 where a view
+  // has few seams, and fixes the common scale (no seam says anything about it).
+  const double lambda = options.gain_regularisation * std::max(1.0, A.trace() / nvw);
+  A.diagonal().array() += lambda;
+  const Eigen::MatrixXd g = A.ldlt().solve(b);
+  double max_dev = 0;
+  for (int v = 0; v < nvw; ++v)
+    for (int ch = 0; ch < 3; ++ch) {
+      gain[v][ch] = static_cast<float>(std::clamp(std::exp(g(v, ch)), 0.5, 2.0));
+      max_dev = std::max(max_dev, std::abs(gain[v][ch] - 1.0));
+    }
+  st["max_gain_deviation"] = max_dev;
   return gain;
 }
 
@@ -219,10 +268,8 @@ std::vector<Chart> MakeCharts(const ColoredMesh& mesh, const std::vector<Texture
   return charts;
 }
 
-// 4. Shelf packing of the charts into pages, tallest first; the charts' pixels copied in.
-std::vector<cv::Mat> PackCharts(std::vector<Chart>* charts_io, const std::vector<TextureView>& views,
-                                const std::vector<Eigen::Vector3f>& gain, const AtlasOptions& options,
-                                nlohmann::json* stats) {
+// 4. Shelf packing of the charts into pages, tallest first; the pages made, with the flat charts in them.
+std::vector<cv::Mat> PackCharts(std::vector<Chart>* charts_io, const AtlasOptions& options, nlohmann::json* stats) {
   std::vector<Chart>& charts = *charts_io;
   auto& st = *stats;
   double area = 0;
@@ -254,13 +301,9 @@ std::vector<cv::Mat> PackCharts(std::vector<Chart>* charts_io, const std::vector
   std::vector<cv::Mat> pages(num_pages);
   for (int p = 0; p < num_pages; ++p)
     pages[p] = cv::Mat(std::min(options.max_page_size, NextPow2(page_used_h[p])), page_w, CV_8UC3, cv::Scalar(0, 0, 0));
-  for (const Chart& c : charts) {
-    if (c.view >= 0) {
-      CopyChart(views[c.view].image, c, gain[c.view], &pages[c.page]);
-    } else {
+  for (const Chart& c : charts)
+    if (c.view < 0)
       pages[c.page](cv::Rect(c.px, c.py, c.w, c.h)).setTo(cv::Scalar(c.flat_bgr[0], c.flat_bgr[1], c.flat_bgr[2]));
-    }
-  }
   st["pages"] = num_pages;
   st["page_size"] = nlohmann::json::array();
   for (const auto& p : pages) st["page_size"].push_back({p.cols, p.rows});
@@ -356,8 +399,8 @@ std::vector<io::Rgb8> VertexColours(const ColoredMesh& mesh, const io::TexturedM
 }  // namespace
 
 TexturedModel BuildTextureAtlas(const ColoredMesh& mesh, const std::vector<Eigen::Vector3i>& adjacency,
-                                const std::vector<TextureView>& views, const std::vector<int>& labels,
-                                const AtlasOptions& options) {
+                                const std::vector<TextureView>& views, FrameWindow& frames,
+                                const std::vector<int>& labels, const AtlasOptions& options) {
   options.Check();
   const size_t nf = mesh.triangles.size();
   if (labels.size() != nf || adjacency.size() != nf) throw Error("texture: labels or adjacency do not match the mesh");
@@ -380,14 +423,30 @@ TexturedModel BuildTextureAtlas(const ColoredMesh& mesh, const std::vector<Eigen
       if (g >= 0 && labels[f] >= 0 && labels[g] == labels[f]) patches.Union(static_cast<int>(f), g);
     }
 
-  const std::vector<Eigen::Vector3f> gain = SeamGains(mesh, adjacency, views, labels, options, &st);
   size_t num_patches = 0;
   for (size_t f = 0; f < nf; ++f)
     num_patches += labels[f] >= 0 && patches.Find(static_cast<int>(f)) == static_cast<int>(f);
   st["patches"] = num_patches;
   std::vector<int> chart_of_face;
   std::vector<Chart> charts = MakeCharts(mesh, views, labels, corner, options, &chart_of_face, &st);
-  const std::vector<cv::Mat> pages = PackCharts(&charts, views, gain, options, &st);
+  std::vector<cv::Mat> pages = PackCharts(&charts, options, &st);
+
+  // One pass over the frame window reads the seam colours and copies the charts (they do not overlap on the
+  // pages); the gains, which need every seam, are applied to the copies after it.
+  SeamSamples seams(mesh, adjacency, labels, views.size(), options);
+  std::vector<std::vector<size_t>> charts_of_view(views.size());
+  for (size_t i = 0; i < charts.size(); ++i)
+    if (charts[i].view >= 0) charts_of_view[charts[i].view].push_back(i);
+  std::vector<size_t> read;
+  for (size_t v = 0; v < views.size(); ++v)
+    if (seams.Reads(v) || !charts_of_view[v].empty()) read.push_back(v);
+  frames.ForEach(read, [&](size_t v, const cv::Mat& image) {
+    seams.Read(v, views[v], image);
+    for (size_t i : charts_of_view[v]) CopyChart(image, charts[i], &pages[charts[i].page]);
+  });
+  const std::vector<Eigen::Vector3f> gain = seams.Gains(views.size(), options, &st);
+  for (const Chart& c : charts)
+    if (c.view >= 0) ApplyGain(c, gain[c.view], &pages[c.page]);
   model.mesh = UvMesh(mesh, charts, chart_of_face, corner, pages);
   model.vertex_colors = VertexColours(mesh, model.mesh, pages);
   spdlog::info("texture: {} patches in {} charts on {} atlas page(s) of {} px wide ({:.0f}% filled)", num_patches,

@@ -37,8 +37,9 @@ struct TexturedModel {
   nlohmann::json stats;
 };
 
+// `frames` gives views[i]'s pixels: read in one pass over the labelled views (seam colours and chart copies).
 TexturedModel BuildTextureAtlas(const ColoredMesh& mesh, const std::vector<Eigen::Vector3i>& adjacency,
-                                const std::vector<TextureView>& views, const std::vector<int>& labels,
-                                const AtlasOptions& options);
+                                const std::vector<TextureView>& views, FrameWindow& frames,
+                                const std::vector<int>& labels, const AtlasOptions& options);
 
 }  // namespace fmv3d::surface

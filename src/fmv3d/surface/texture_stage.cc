@@ -1,7 +1,6 @@
 #include "fmv3d/surface/texture_stage.h"
 
 #include <spdlog/spdlog.h>
-#include <tbb/parallel_for.h>
 
 #include <algorithm>
 #include <chrono>
@@ -32,28 +31,31 @@ std::vector<TextureView> LoadTextureViews(const core::Reconstruction& model, con
   }
   for (const auto& v : views)
     if (!fs::exists(frames_dir / v.name)) throw Error((frames_dir / v.name).string() + ": registered frame is missing");
-  tbb::parallel_for(size_t{0}, views.size(),
-                    [&](size_t i) { views[i].image = io::ReadImage(frames_dir / views[i].name); });
-  for (const auto& v : views)
-    if (v.image.cols != v.camera.width || v.image.rows != v.camera.height)
-      throw Error((frames_dir / v.name).string() + ": image is " + std::to_string(v.image.cols) + "x" +
-                  std::to_string(v.image.rows) + " but its camera is " + std::to_string(v.camera.width) + "x" +
-                  std::to_string(v.camera.height));
   return views;
 }
 
-TexturedModel TextureMesh(const ColoredMesh& mesh, const std::vector<TextureView>& views,
+cv::Mat LoadTextureFrame(const TextureView& v, const fs::path& frames_dir) {
+  cv::Mat image = io::ReadImage(frames_dir / v.name);
+  if (image.cols != v.camera.width || image.rows != v.camera.height)
+    throw Error((frames_dir / v.name).string() + ": image is " + std::to_string(image.cols) + "x" +
+                std::to_string(image.rows) + " but its camera is " + std::to_string(v.camera.width) + "x" +
+                std::to_string(v.camera.height));
+  return image;
+}
+
+TexturedModel TextureMesh(const ColoredMesh& mesh, const std::vector<TextureView>& views, FrameWindow& frames,
                           const TextureStageOptions& options) {
   options.Check();
   if (mesh.empty()) throw Error("texture: the mesh has no faces");
   if (views.empty()) throw Error("texture: no registered views");
+  if (frames.frames() != views.size()) throw Error("texture: the frame window does not match the views");
   const auto start = Clock::now();
   ColoredMesh m = mesh;
   if (m.normals.size() != m.vertices.size()) m.ComputeVertexNormals();
   const std::vector<Eigen::Vector3i> adjacency = FaceAdjacency(m.triangles);
-  const ViewSelection selection = SelectViews(m, adjacency, views, options.selection);
+  const ViewSelection selection = SelectViews(m, adjacency, views, frames, options.selection);
   const auto atlas_start = Clock::now();
-  TexturedModel model = BuildTextureAtlas(m, adjacency, views, selection.labels, options.atlas);
+  TexturedModel model = BuildTextureAtlas(m, adjacency, views, frames, selection.labels, options.atlas);
   model.stats["seconds"] = std::chrono::duration<double>(Clock::now() - atlas_start).count();
   nlohmann::json st;
   st["selection"] = selection.stats;
@@ -61,6 +63,13 @@ TexturedModel TextureMesh(const ColoredMesh& mesh, const std::vector<TextureView
   st["seconds"] = std::chrono::duration<double>(Clock::now() - start).count();
   model.stats = std::move(st);
   return model;
+}
+
+TexturedModel TextureMesh(const ColoredMesh& mesh, const std::vector<TextureView>& views,
+                          const TextureStageOptions& options) {
+  FrameWindow frames(
+      views.size(), [&](size_t i) { return views[i].image; }, views.size());
+  return TextureMesh(mesh, views, frames, options);
 }
 
 nlohmann::json RunTextureStage(const core::Workspace& workspace, const TextureStageOptions& options) {
@@ -92,10 +101,17 @@ nlohmann::json RunTextureStage(const core::Workspace& workspace, const TextureSt
     spdlog::info("texture: colour from {} of {} views (each sparse point in {} of them)", model.images.size(),
                  registered, options.view_coverage);
   }
-  const std::vector<TextureView> views = LoadTextureViews(model, workspace.frames_dir());
+  const fs::path frames_dir = workspace.frames_dir();
+  const std::vector<TextureView> views = LoadTextureViews(model, frames_dir);
+  double frame_bytes = 1;
+  for (const auto& v : views) frame_bytes = std::max(frame_bytes, 3.0 * v.camera.width * v.camera.height);
+  FrameWindow frames(
+      views.size(), [&](size_t i) { return LoadTextureFrame(views[i], frames_dir); },
+      ChooseFrameWindow(views.size(), frame_bytes, options.max_memory_mb));
   const double load_seconds = std::chrono::duration<double>(Clock::now() - start).count();
 
-  TexturedModel textured = TextureMesh(mesh, views, options);
+  TexturedModel textured = TextureMesh(mesh, views, frames, options);
+  frames.Release();
 
   const auto write_start = Clock::now();
   const fs::path dir = workspace.mesh_dir();
@@ -123,14 +139,19 @@ nlohmann::json RunTextureStage(const core::Workspace& workspace, const TextureSt
   report["views"] = views.size();
   report["registered_views"] = registered;
   report["faces"] = textured.mesh.faces.size();
+  report["memory"] = {{"max_memory_mb", options.max_memory_mb},
+                      {"frame_window", frames.capacity()},
+                      {"frame_loads", frames.loads()},
+                      {"peak_frames_held", frames.peak_resident()}};
   report["seconds"] = {{"load", load_seconds},
                        {"texturing", textured.stats["seconds"]},
                        {"write", std::chrono::duration<double>(Clock::now() - write_start).count()},
                        {"total", std::chrono::duration<double>(Clock::now() - start).count()}};
   core::EnsureDirectory(workspace.report_dir());
   core::WriteJson(workspace.report_dir() / "texture.json", report);
-  spdlog::info("texture: {} faces from {} views → {}", textured.mesh.faces.size(), views.size(),
-               (dir / "textured.obj").string());
+  spdlog::info("texture: {} faces from {} views → {} ({} frame loads, at most {} frames held)",
+               textured.mesh.faces.size(), views.size(), (dir / "textured.obj").string(), frames.loads(),
+               frames.peak_resident());
   return report;
 }
 

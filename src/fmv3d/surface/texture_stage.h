@@ -26,18 +26,28 @@ struct TextureStageOptions {
   // instead of every registered view; the visibility pass costs per view, and video keyframes see each face
   // from 20-30 views, most of them near-duplicates. 0 = every view.
   int view_coverage = 0;
+  // MB of decoded frames held at once (frame_window.h): the frames are read in two passes, and those that do
+  // not fit are decoded again in the second. The output does not depend on it.
+  double max_memory_mb = 2048;
   void Check() const {
     selection.Check();
     atlas.Check();
     if (view_coverage < 0) throw Error("texture: --view-coverage must be >= 0 (0 = every view)");
+    if (!(max_memory_mb > 0)) throw Error("texture: --max-memory must be > 0 MB");
   }
 };
 
-// The registered images of `model` with their pixels from `frames_dir`. Throws fmv3d::Error naming a
-// missing or unreadable frame, or one whose size differs from its camera's.
+// The registered images of `model`, without their pixels (LoadTextureFrame reads them). Throws fmv3d::Error
+// naming a missing frame.
 std::vector<TextureView> LoadTextureViews(const core::Reconstruction& model, const std::filesystem::path& frames_dir);
+// The pixels of `view` from `frames_dir`. Throws fmv3d::Error naming an unreadable frame or one whose size
+// differs from its camera's.
+cv::Mat LoadTextureFrame(const TextureView& view, const std::filesystem::path& frames_dir);
 
-// View selection + atlas for a mesh (the library entry without files).
+// View selection + atlas for a mesh (the library entry without files): `frames` gives views[i]'s pixels.
+TexturedModel TextureMesh(const ColoredMesh& mesh, const std::vector<TextureView>& views, FrameWindow& frames,
+                          const TextureStageOptions& options);
+// The same for views that hold their pixels.
 TexturedModel TextureMesh(const ColoredMesh& mesh, const std::vector<TextureView>& views,
                           const TextureStageOptions& options);
 

@@ -8,6 +8,7 @@
 #include <array>
 #include <chrono>
 #include <cmath>
+#include <numeric>
 
 #include "fmv3d/core/error.h"
 #include "fmv3d/core/logging.h"
@@ -89,7 +90,7 @@ Eigen::Vector3f SampleBilinear(const cv::Mat& img, double u, double v) {
 
 // The candidates of one view, offered to the store.
 void ViewCandidates(const ColoredMesh& mesh, const std::vector<Eigen::Vector3d>& face_normals,
-                    const render::Renderer& renderer, const TextureView& view, int view_index,
+                    const render::Renderer& renderer, const TextureView& view, const cv::Mat& image, int view_index,
                     const ViewSelectionOptions& options, CandidateStore* store) {
   const core::Camera& cam = view.camera;
   const double s = options.visibility_scale;
@@ -114,7 +115,7 @@ void ViewCandidates(const ColoredMesh& mesh, const std::vector<Eigen::Vector3d>&
   for (int y = 0; y < small.height; ++y) {
     const int32_t* fr = r.face.ptr<int32_t>(y);
     const int iy = std::min(cam.height - 1, static_cast<int>((y + 0.5) / sy));
-    const cv::Vec3b* ir = view.image.ptr<cv::Vec3b>(iy);
+    const cv::Vec3b* ir = image.ptr<cv::Vec3b>(iy);
     for (int x = 0; x < small.width; ++x) {
       const int f = fr[x];
       if (f < 0) continue;
@@ -161,7 +162,7 @@ void ViewCandidates(const ColoredMesh& mesh, const std::vector<Eigen::Vector3d>&
         const double footprint = xc.z() / small.f;
         if (!(d > 0) || std::abs(xc.z() - d) > 0.01 * xc.z() + 3 * footprint) continue;
         const Eigen::Vector2d pf = cam.Project(xc);
-        cand.color = Rounded(SampleBilinear(view.image, pf.x(), pf.y()));
+        cand.color = Rounded(SampleBilinear(image, pf.x(), pf.y()));
       }
       store->Offer(f, cand);
     }
@@ -221,7 +222,7 @@ struct FaceCandidates {
   }
 };
 
-FaceCandidates CollectCandidates(const ColoredMesh& mesh, const std::vector<TextureView>& views,
+FaceCandidates CollectCandidates(const ColoredMesh& mesh, const std::vector<TextureView>& views, FrameWindow& frames,
                                  const ViewSelectionOptions& options) {
   const size_t nf = mesh.triangles.size();
   const io::TexturedMesh geometry = mesh.ToTexturedMesh();
@@ -231,10 +232,16 @@ FaceCandidates CollectCandidates(const ColoredMesh& mesh, const std::vector<Text
   FaceCandidates fc;
   CandidateStore store(nf, options.max_candidates_per_face);
   core::Progress progress("texture: visibility", views.size());
-  for (size_t v = 0; v < views.size(); ++v) {
-    ViewCandidates(mesh, face_normals, renderer, views[v], static_cast<int>(v), options, &store);
-    progress.Add();
-  }
+  // In ascending view order: the store keeps the first offered of equal-quality candidates.
+  std::vector<size_t> all(views.size());
+  std::iota(all.begin(), all.end(), size_t{0});
+  frames.ForEach(
+      all,
+      [&](size_t v, const cv::Mat& image) {
+        ViewCandidates(mesh, face_normals, renderer, views[v], image, static_cast<int>(v), options, &store);
+        progress.Add();
+      },
+      /*ascending=*/true);
   store.ToCsr(&fc.offset, &fc.cand);
   return fc;
 }
@@ -328,7 +335,8 @@ nlohmann::json LabelFaces(const FaceCandidates& fc, const std::vector<char>& con
 }  // namespace
 
 ViewSelection SelectViews(const ColoredMesh& mesh, const std::vector<Eigen::Vector3i>& adjacency,
-                          const std::vector<TextureView>& views, const ViewSelectionOptions& options) {
+                          const std::vector<TextureView>& views, FrameWindow& frames,
+                          const ViewSelectionOptions& options) {
   options.Check();
   const auto start = Clock::now();
   const size_t nf = mesh.triangles.size();
@@ -337,7 +345,7 @@ ViewSelection SelectViews(const ColoredMesh& mesh, const std::vector<Eigen::Vect
   if (nf == 0 || views.empty()) return result;
   if (views.size() > 65535) throw Error("texture: at most 65535 views");
 
-  const FaceCandidates fc = CollectCandidates(mesh, views, options);
+  const FaceCandidates fc = CollectCandidates(mesh, views, frames, options);
   const double seconds_visibility = std::chrono::duration<double>(Clock::now() - start).count();
   size_t rejected = 0;
   const std::vector<char> consistent = ConsistentCandidates(fc, adjacency, nf, options, &rejected);

@@ -28,10 +28,12 @@
 #include "fmv3d/core/camera.h"
 #include "fmv3d/core/pose.h"
 #include "fmv3d/surface/colored_mesh.h"
+#include "fmv3d/surface/frame_window.h"
 
 namespace fmv3d::surface {
 
-// A registered photograph: its camera, world-to-camera pose and pixels (CV_8UC3 BGR, the camera's size).
+// A registered photograph: its camera, world-to-camera pose and pixels (CV_8UC3 BGR, the camera's size; empty
+// when a FrameWindow gives them on demand).
 struct TextureView {
   uint32_t image_id = 0;
   std::string name;
@@ -61,7 +63,9 @@ struct ViewSelection {
   nlohmann::json stats;     // candidate counts, rejections, labelled share, seconds
 };
 
+// `frames` gives views[i]'s pixels (one pass over all of them).
 ViewSelection SelectViews(const ColoredMesh& mesh, const std::vector<Eigen::Vector3i>& adjacency,
-                          const std::vector<TextureView>& views, const ViewSelectionOptions& options);
+                          const std::vector<TextureView>& views, FrameWindow& frames,
+                          const ViewSelectionOptions& options);
 
 }  // namespace fmv3d::surface
