@@ -128,7 +128,7 @@ class SeamSamples {
     });
     std::vector<size_t>().swap(reads);
   }
-  std::vector<Eigen::Vector3f> Gains(size_t num_views, const AtlasOptions& options, nlohmann::json* stats) const;
+  std::vector<Eigen::Vector3f> Gains(size_t num_views, const AtlasOptions& options, AtlasStats* stats) const;
 
  private:
   struct Sample {
@@ -155,10 +155,10 @@ class SeamSamples {
 };
 
 std::vector<Eigen::Vector3f> SeamSamples::Gains(size_t num_views, const AtlasOptions& options,
-                                                nlohmann::json* stats) const {
+                                                AtlasStats* stats) const {
   auto& st = *stats;
   std::vector<Eigen::Vector3f> gain(num_views, Eigen::Vector3f::Ones());
-  st["seam_edges"] = seam_edges_;
+  st.seam_edges = seam_edges_;
   if (!options.adjust_colors || num_views < 2) return gain;
   const int nvw = static_cast<int>(num_views);
   Eigen::MatrixXd A = Eigen::MatrixXd::Zero(nvw, nvw);
@@ -185,7 +185,7 @@ std::vector<Eigen::Vector3f> SeamSamples::Gains(size_t num_views, const AtlasOpt
       gain[v][ch] = static_cast<float>(std::clamp(std::exp(g(v, ch)), 0.5, 2.0));
       max_dev = std::max(max_dev, std::abs(gain[v][ch] - 1.0));
     }
-  st["max_gain_deviation"] = max_dev;
+  st.max_gain_deviation = max_dev;
   return gain;
 }
 
@@ -194,7 +194,7 @@ std::vector<Eigen::Vector3f> SeamSamples::Gains(size_t num_views, const AtlasOpt
 // a view's scattered patches do not drag the whole frame into the atlas. Unseen faces get a flat chart each.
 std::vector<Chart> MakeCharts(const ColoredMesh& mesh, const std::vector<TextureView>& views,
                               const std::vector<int>& labels, const std::vector<std::array<Eigen::Vector2d, 3>>& corner,
-                              const AtlasOptions& options, std::vector<int>* chart_of_face_out, nlohmann::json* stats) {
+                              const AtlasOptions& options, std::vector<int>* chart_of_face_out, AtlasStats* stats) {
   const size_t nf = mesh.triangles.size();
   auto& st = *stats;
   std::vector<Chart> charts;
@@ -262,14 +262,14 @@ std::vector<Chart> MakeCharts(const ColoredMesh& mesh, const std::vector<Texture
     ch.w = std::clamp(static_cast<int>(std::ceil(sw * ch.scale)), 1, options.max_page_size);
     ch.h = std::clamp(static_cast<int>(std::ceil(sh * ch.scale)), 1, options.max_page_size);
   }
-  st["charts"] = view_charts;
-  st["unseen_faces"] = charts.size() - view_charts;
+  st.charts = view_charts;
+  st.unseen_faces = charts.size() - view_charts;
 
   return charts;
 }
 
 // 4. Shelf packing of the charts into pages, tallest first; the pages made, with the flat charts in them.
-std::vector<cv::Mat> PackCharts(std::vector<Chart>* charts_io, const AtlasOptions& options, nlohmann::json* stats) {
+std::vector<cv::Mat> PackCharts(std::vector<Chart>* charts_io, const AtlasOptions& options, AtlasStats* stats) {
   std::vector<Chart>& charts = *charts_io;
   auto& st = *stats;
   double area = 0;
@@ -304,10 +304,9 @@ std::vector<cv::Mat> PackCharts(std::vector<Chart>* charts_io, const AtlasOption
   for (const Chart& c : charts)
     if (c.view < 0)
       pages[c.page](cv::Rect(c.px, c.py, c.w, c.h)).setTo(cv::Scalar(c.flat_bgr[0], c.flat_bgr[1], c.flat_bgr[2]));
-  st["pages"] = num_pages;
-  st["page_size"] = nlohmann::json::array();
-  for (const auto& p : pages) st["page_size"].push_back({p.cols, p.rows});
-  st["atlas_fill"] =
+  st.pages = num_pages;
+  for (const auto& p : pages) st.page_size.emplace_back(p.cols, p.rows);
+  st.atlas_fill =
       area / (static_cast<double>(page_w) *
               std::accumulate(pages.begin(), pages.end(), 0.0, [](double s, const cv::Mat& m) { return s + m.rows; }));
 
@@ -405,7 +404,7 @@ TexturedModel BuildTextureAtlas(const ColoredMesh& mesh, const std::vector<Eigen
   const size_t nf = mesh.triangles.size();
   if (labels.size() != nf || adjacency.size() != nf) throw Error("texture: labels or adjacency do not match the mesh");
   TexturedModel model;
-  auto& st = model.stats;
+  AtlasStats& st = model.atlas;
 
   // Image coordinates of every labelled face corner (pixel-corner convention, camera.h).
   std::vector<std::array<Eigen::Vector2d, 3>> corner(nf);
@@ -426,7 +425,7 @@ TexturedModel BuildTextureAtlas(const ColoredMesh& mesh, const std::vector<Eigen
   size_t num_patches = 0;
   for (size_t f = 0; f < nf; ++f)
     num_patches += labels[f] >= 0 && patches.Find(static_cast<int>(f)) == static_cast<int>(f);
-  st["patches"] = num_patches;
+  st.patches = num_patches;
   std::vector<int> chart_of_face;
   std::vector<Chart> charts = MakeCharts(mesh, views, labels, corner, options, &chart_of_face, &st);
   std::vector<cv::Mat> pages = PackCharts(&charts, options, &st);
@@ -450,8 +449,7 @@ TexturedModel BuildTextureAtlas(const ColoredMesh& mesh, const std::vector<Eigen
   model.mesh = UvMesh(mesh, charts, chart_of_face, corner, pages);
   model.vertex_colors = VertexColours(mesh, model.mesh, pages);
   spdlog::info("texture: {} patches in {} charts on {} atlas page(s) of {} px wide ({:.0f}% filled)", num_patches,
-               st["charts"].get<size_t>(), pages.size(), pages.empty() ? 0 : pages.front().cols,
-               100 * st["atlas_fill"].get<double>());
+               st.charts, pages.size(), pages.empty() ? 0 : pages.front().cols, 100 * st.atlas_fill);
   return model;
 }
 

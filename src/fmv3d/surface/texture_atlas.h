@@ -13,7 +13,8 @@
 //             sides). Faces no view sees get a small flat block in their vertex colour.
 #pragma once
 
-#include <nlohmann/json.hpp>
+#include <optional>
+#include <utility>
 #include <vector>
 
 #include "fmv3d/io/mesh.h"
@@ -31,10 +32,24 @@ struct AtlasOptions {
   void Check() const;
 };
 
+struct AtlasStats {
+  size_t patches = 0;       // edge-connected faces on one view
+  size_t charts = 0;        // view charts (a patch grown by the margin; overlapping ones merged)
+  size_t unseen_faces = 0;  // faces no view textures (a flat block each)
+  size_t seam_edges = 0;
+  std::optional<double> max_gain_deviation;  // when the colours were adjusted
+  int pages = 0;
+  std::vector<std::pair<int, int>> page_size;  // width, height per page
+  double atlas_fill = 0;                       // share of the pages' texels in a chart
+  double seconds = 0;
+};
+
 struct TexturedModel {
   io::TexturedMesh mesh;                // faces grouped by page; materials "atlas_<page>" with their textures
   std::vector<io::Rgb8> vertex_colors;  // per mesh vertex, averaged from the texture (RGB)
-  nlohmann::json stats;
+  AtlasStats atlas;
+  ViewSelectionStats selection;  // set by TextureMesh
+  double seconds = 0;            // TextureMesh's whole run
 };
 
 // `frames` gives views[i]'s pixels: read in one pass over the labelled views (seam colours and chart copies).

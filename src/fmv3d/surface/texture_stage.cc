@@ -43,6 +43,33 @@ cv::Mat LoadTextureFrame(const TextureView& v, const fs::path& frames_dir) {
   return image;
 }
 
+namespace {
+
+nlohmann::json ToJson(const ViewSelectionStats& s) {
+  return {{"faces", s.faces},
+          {"views", s.views},
+          {"candidates", s.candidates},
+          {"mean_candidates_per_face", s.mean_candidates_per_face},
+          {"inconsistent_candidates", s.inconsistent_candidates},
+          {"labelled_faces", s.labelled_faces},
+          {"labelled_share", s.labelled_share},
+          {"smoothing_changes", s.smoothing_changes},
+          {"seconds_visibility", s.seconds_visibility},
+          {"seconds", s.seconds}};
+}
+
+nlohmann::json ToJson(const AtlasStats& s) {
+  nlohmann::json j = {{"patches", s.patches},       {"charts", s.charts}, {"unseen_faces", s.unseen_faces},
+                      {"seam_edges", s.seam_edges}, {"pages", s.pages},   {"atlas_fill", s.atlas_fill},
+                      {"seconds", s.seconds}};
+  if (s.max_gain_deviation) j["max_gain_deviation"] = *s.max_gain_deviation;
+  j["page_size"] = nlohmann::json::array();
+  for (const auto& [w, h] : s.page_size) j["page_size"].push_back({w, h});
+  return j;
+}
+
+}  // namespace
+
 TexturedModel TextureMesh(const ColoredMesh& mesh, const std::vector<TextureView>& views, FrameWindow& frames,
                           const TextureStageOptions& options) {
   options.Check();
@@ -56,12 +83,9 @@ TexturedModel TextureMesh(const ColoredMesh& mesh, const std::vector<TextureView
   const ViewSelection selection = SelectViews(m, adjacency, views, frames, options.selection);
   const auto atlas_start = Clock::now();
   TexturedModel model = BuildTextureAtlas(m, adjacency, views, frames, selection.labels, options.atlas);
-  model.stats["seconds"] = std::chrono::duration<double>(Clock::now() - atlas_start).count();
-  nlohmann::json st;
-  st["selection"] = selection.stats;
-  st["atlas"] = std::move(model.stats);
-  st["seconds"] = std::chrono::duration<double>(Clock::now() - start).count();
-  model.stats = std::move(st);
+  model.atlas.seconds = std::chrono::duration<double>(Clock::now() - atlas_start).count();
+  model.selection = selection.stats;
+  model.seconds = std::chrono::duration<double>(Clock::now() - start).count();
   return model;
 }
 
@@ -131,7 +155,8 @@ nlohmann::json RunTextureStage(const core::Workspace& workspace, const TextureSt
   for (const auto& f : textured.mesh.faces) colored.triangles.emplace_back(f.v[0], f.v[1], f.v[2]);
   WriteMeshPly(colored, dir / "textured.ply");
 
-  nlohmann::json report = textured.stats;
+  nlohmann::json report = {
+      {"selection", ToJson(textured.selection)}, {"atlas", ToJson(textured.atlas)}, {"seconds", textured.seconds}};
   report["input"] = "mesh/poisson.ply";
   report["outputs"] = {"mesh/textured.obj", "mesh/textured.mtl", "mesh/model.glb", "mesh/textured.ply"};
   for (const auto& material : textured.mesh.materials)
@@ -144,7 +169,7 @@ nlohmann::json RunTextureStage(const core::Workspace& workspace, const TextureSt
                       {"frame_loads", frames.loads()},
                       {"peak_frames_held", frames.peak_resident()}};
   report["seconds"] = {{"load", load_seconds},
-                       {"texturing", textured.stats["seconds"]},
+                       {"texturing", textured.seconds},
                        {"write", std::chrono::duration<double>(Clock::now() - write_start).count()},
                        {"total", std::chrono::duration<double>(Clock::now() - start).count()}};
   core::EnsureDirectory(workspace.report_dir());

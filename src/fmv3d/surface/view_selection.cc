@@ -293,9 +293,9 @@ std::vector<char> ConsistentCandidates(const FaceCandidates& fc, const std::vect
 
 // Labels: the best consistent candidate per face, then label voting (Gauss–Seidel sweeps in face order:
 // deterministic, and converges in a few sweeps). Returns the number of changes per sweep.
-nlohmann::json LabelFaces(const FaceCandidates& fc, const std::vector<char>& consistent,
-                          const std::vector<Eigen::Vector3i>& adjacency, const ViewSelectionOptions& options,
-                          std::vector<int>& labels) {
+std::vector<size_t> LabelFaces(const FaceCandidates& fc, const std::vector<char>& consistent,
+                               const std::vector<Eigen::Vector3i>& adjacency, const ViewSelectionOptions& options,
+                               std::vector<int>& labels) {
   const size_t nf = labels.size();
   std::vector<float> best_quality(nf, 0);
   for (size_t f = 0; f < nf; ++f)
@@ -304,7 +304,7 @@ nlohmann::json LabelFaces(const FaceCandidates& fc, const std::vector<char>& con
         best_quality[f] = fc.cand[i].quality;
         labels[f] = fc.cand[i].view;
       }
-  nlohmann::json changes = nlohmann::json::array();
+  std::vector<size_t> changes;
   for (int it = 0; it < options.smoothing_iterations && options.smoothness > 0; ++it) {
     size_t changed = 0;
     for (size_t f = 0; f < nf; ++f) {
@@ -349,23 +349,23 @@ ViewSelection SelectViews(const ColoredMesh& mesh, const std::vector<Eigen::Vect
   const double seconds_visibility = std::chrono::duration<double>(Clock::now() - start).count();
   size_t rejected = 0;
   const std::vector<char> consistent = ConsistentCandidates(fc, adjacency, nf, options, &rejected);
-  const nlohmann::json changes = LabelFaces(fc, consistent, adjacency, options, result.labels);
+  std::vector<size_t> changes = LabelFaces(fc, consistent, adjacency, options, result.labels);
 
   size_t labelled = 0;
   for (int l : result.labels) labelled += l >= 0;
   auto& st = result.stats;
-  st["faces"] = nf;
-  st["views"] = views.size();
-  st["candidates"] = fc.cand.size();
-  st["mean_candidates_per_face"] = static_cast<double>(fc.cand.size()) / nf;
-  st["inconsistent_candidates"] = rejected;
-  st["labelled_faces"] = labelled;
-  st["labelled_share"] = static_cast<double>(labelled) / nf;
-  st["smoothing_changes"] = changes;
-  st["seconds_visibility"] = seconds_visibility;
-  st["seconds"] = std::chrono::duration<double>(Clock::now() - start).count();
+  st.faces = nf;
+  st.views = views.size();
+  st.candidates = fc.cand.size();
+  st.mean_candidates_per_face = static_cast<double>(fc.cand.size()) / nf;
+  st.inconsistent_candidates = rejected;
+  st.labelled_faces = labelled;
+  st.labelled_share = static_cast<double>(labelled) / nf;
+  st.smoothing_changes = std::move(changes);
+  st.seconds_visibility = seconds_visibility;
+  st.seconds = std::chrono::duration<double>(Clock::now() - start).count();
   spdlog::info("texture: {} of {} faces seen ({:.1f} candidate views per face, {} inconsistent dropped)", labelled, nf,
-               st["mean_candidates_per_face"].get<double>(), rejected);
+               st.mean_candidates_per_face, rejected);
   return result;
 }
 

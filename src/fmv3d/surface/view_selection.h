@@ -21,7 +21,6 @@
 #pragma once
 
 #include <cstdint>
-#include <nlohmann/json.hpp>
 #include <opencv2/core.hpp>
 #include <vector>
 
@@ -58,9 +57,19 @@ struct ViewSelectionOptions {
 // Edge-adjacent faces (-1 where an edge has no or more than one other face), three per face.
 std::vector<Eigen::Vector3i> FaceAdjacency(const std::vector<Eigen::Vector3i>& triangles);
 
+struct ViewSelectionStats {
+  size_t faces = 0, views = 0, candidates = 0;
+  double mean_candidates_per_face = 0;
+  size_t inconsistent_candidates = 0;  // candidates the photo-consistency check rejected
+  size_t labelled_faces = 0;
+  double labelled_share = 0;
+  std::vector<size_t> smoothing_changes;  // labels changed per smoothing iteration
+  double seconds_visibility = 0, seconds = 0;
+};
+
 struct ViewSelection {
   std::vector<int> labels;  // per face: index into the views, -1 when no view sees it
-  nlohmann::json stats;     // candidate counts, rejections, labelled share, seconds
+  ViewSelectionStats stats;
 };
 
 // `frames` gives views[i]'s pixels (one pass over all of them).
