@@ -67,7 +67,6 @@ BundleAdjustmentOptions ModelBuilder::BaOptions() const {
   o.refine_principal_point = false;  // only the final model-selection tests free it (and aspect, tangential)
   o.refine_tangential = opt_.refine_tangential && n >= opt_.refine_principal_point_min_images;
   for (IntrinsicGroup g : freed_groups_) SetRefine(g, true, &o);
-  if (principal_point_from_core_) o.refine_principal_point = false;
   return o;
 }
 
@@ -317,30 +316,6 @@ size_t ModelBuilder::PruneGuidedAdditions() {
   return removed;
 }
 
-// A freed principal point is often only weakly determined (self_calibration.h: an orbit at one altitude over flat
-// ground determines the focal and v0 together, along a line; a 36-frame 960x540 orbit: σ ≈ 1 px along it). The final
-// adjustment's Cauchy loss over every observation lets the heavy tail pull it along that line (3.5 px on such an
-// orbit, the focal 0.36% short, a common tilt of 0.24°); fitted on the Gaussian core, as its test was, it is held
-// there while the final adjustment places the cameras and the focal.
-void ModelBuilder::PrincipalPointFromCore() {
-  BundleAdjustmentConfig cfg = NewBaConfig();
-  cfg.gauge_image1 = gauge1_;
-  cfg.gauge_image2 = gauge2_;
-  BundleAdjustmentOptions o = BaOptions();
-  o.function_tolerance = std::max(opt_.final_ba_function_tolerance, 1e-6);
-  o.max_iterations = opt_.final_ba_max_iterations;
-  const auto start = Clock::now();
-  const core::Camera before = rec_.cameras.begin()->second;
-  if (!FitIntrinsicsOnCore(&rec_, cfg, o)) return;
-  t_->global_ba += Seconds(start);
-  principal_point_from_core_ = true;
-  const core::Camera& after = rec_.cameras.begin()->second;
-  spdlog::info(
-      "self-calibration: principal point fitted on the Gaussian core ({:.2f}, {:.2f}) → ({:.2f}, {:.2f}), "
-      "focal {:.2f} → {:.2f}; held there by the final adjustment",
-      before.u0, before.v0, after.u0, after.v0, before.f, after.f);
-}
-
 void ModelBuilder::Grow() {
   GlobalBundleAdjust(false);
   while (RegisterNextImage() == GrowthStep::kRegistered) {
@@ -386,7 +361,6 @@ void ModelBuilder::Grow() {
     // the principal point free it trades against it beyond what the per-group covariance shows (fountain-P11:
     // rotation error 0.077° → 0.127°).
     if (opt_.self_calibrate_aspect) any = TrySelfCalibration(IntrinsicGroup::kAspect) || any;
-    if (pp_freed) PrincipalPointFromCore();
     if (any) GlobalBundleAdjust(true);
   }
   UpdatePointErrors(&rec_);

@@ -135,8 +135,6 @@ class ModelBuilder {
   // (RemoveAdditionsThatDoNotFit); returns how many.
   size_t PruneGuidedAdditions();
   KeypointScales Scales() const;  // the registered images' keypoint scales, where known
-  // Fits the freed principal point (with the other free intrinsics) on the Gaussian core and holds it there.
-  void PrincipalPointFromCore();
   void LocalBundleAdjust(uint32_t image_id);
   BundleAdjustmentSummary GlobalBundleAdjust(bool final_pass);
   // After an image was registered: whether the model has grown enough for an intermediate global adjustment
@@ -191,7 +189,6 @@ class ModelBuilder {
   int num_global_ba_ = 0;
   std::set<IntrinsicGroup> freed_groups_;   // freed by the final self-calibration tests
   bool k1_held_ = false, k2_held_ = false;  // back at the prior's values by the final tests
-  bool principal_point_from_core_ = false;  // freed, then fitted on the core and held (PrincipalPointFromCore)
   std::vector<NestedModelTestResult> self_calibration_;
 };
 

@@ -130,23 +130,6 @@ std::pair<int, double> KeepGaussianCore(core::Reconstruction* rec, double core_m
 
 }  // namespace
 
-bool FitIntrinsicsOnCore(core::Reconstruction* rec, const BundleAdjustmentConfig& config,
-                         BundleAdjustmentOptions options, double core_mass) {
-  core::Reconstruction core = *rec;
-  KeepGaussianCore(&core, core_mass);
-  options.loss = BundleAdjustmentOptions::Loss::kTrivial;
-  options.compute_intrinsics_covariance = false;
-  options.initial_trust_region_radius = std::max(options.initial_trust_region_radius, kNearOptimumTrustRegion);
-  const auto s = BundleAdjust(&core, config, options);
-  if (!s.success) return false;
-  for (const auto& entry : rec->cameras) {
-    const auto it = core.cameras.find(entry.first);
-    if (it == core.cameras.end() || !(it->second.f > 0)) return false;
-  }
-  for (auto& [id, cam] : rec->cameras) cam = core.cameras.at(id);
-  return true;
-}
-
 NestedModelTestResult TestNestedModel(core::Reconstruction* rec, const BundleAdjustmentConfig& config,
                                       BundleAdjustmentOptions options, IntrinsicGroup group,
                                       const NestedModelTestOptions& test_options) {

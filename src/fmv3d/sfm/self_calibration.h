@@ -87,14 +87,4 @@ NestedModelTestResult TestNestedModel(core::Reconstruction* rec, const BundleAdj
                                       BundleAdjustmentOptions options, IntrinsicGroup group,
                                       const NestedModelTestOptions& test_options);
 
-// Refits the intrinsics that options free on the Gaussian core of *rec's observations (core_mass as in
-// NestedModelTestOptions) with plain squared errors, poses and points of a copy adjusted with them, and gives *rec
-// the fitted intrinsics (its poses and points are the caller's to adjust). A parameter the views barely determine
-// (a principal point on an orbit at one altitude over flat ground, where it trades against the focal and a common
-// tilt) goes wherever the heavy tail pulls it in a robust fit over every observation: features on occlusion
-// contours and near-repeats move with the viewpoint, and a Cauchy loss at several core σ still follows them.
-// Returns false (rec unchanged) when the fit fails.
-bool FitIntrinsicsOnCore(core::Reconstruction* rec, const BundleAdjustmentConfig& config,
-                         BundleAdjustmentOptions options, double core_mass = NestedModelTestOptions().core_mass);
-
 }  // namespace fmv3d::sfm
