@@ -56,6 +56,22 @@ TEST(SelfCalibration, OffCentrePrincipalPointIsFreedAndRecovered) {
   EXPECT_NEAR(cam.u0, 0.5 * so.width + 20, 1.0);
 }
 
+// Off-centre along u only: v0 is at the prior and moves by less than its σ (v0 trades against a common tilt here),
+// which must not hold the whole point at the centre. The group is freed when its squared shift exceeds its
+// variance summed over u0 and v0.
+TEST(SelfCalibration, PrincipalPointOffCentreAlongOneAxisIsFreed) {
+  const SyntheticSceneOptions so = Scene(20, 0);
+  core::Reconstruction rec = CentredStart(so);
+  const NestedModelTestResult r =
+      TestNestedModel(&rec, {}, BundleAdjustmentOptions(), IntrinsicGroup::kPrincipalPoint, {});
+  ASSERT_EQ(r.sigmas.size(), 2u);
+  const double dv0 = r.freed_values[1] - r.held_values[1];
+  std::printf("u0 %.2f ± %.3f, v0 moved %.2f ± %.2f\n", r.freed.u0, r.sigmas[0], dv0, r.sigmas[1]);
+  EXPECT_LT(std::abs(dv0), r.sigmas[1]);  // the case: v0 alone is not determined
+  EXPECT_EQ(r.decision, NestedModelDecision::kFreed);
+  EXPECT_NEAR(rec.cameras.at(1).u0, 0.5 * so.width + 20, 1.0);
+}
+
 TEST(SelfCalibration, CentredPrincipalPointStaysHeld) {
   const SyntheticSceneOptions so = Scene(0, 0);
   core::Reconstruction rec = CentredStart(so);

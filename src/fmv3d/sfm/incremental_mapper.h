@@ -113,7 +113,7 @@ struct MapperOptions {
   int refine_k2_min_images = 6;
   // From this many images on, the final adjustment tests holding k2 and k1 at the prior, then freeing the
   // principal point (and a telephoto scan's focal), each by the nested-model test of self_calibration.h:
-  // significant by BIC and determined by the BA's covariance (each moves by more than its posterior σ).
+  // significant by BIC and determined by the BA's covariance (its squared shift exceeds its posterior variance).
   int refine_principal_point_min_images = 8;
   // A fixed Δχ² threshold instead of BIC's k·ln(n) (0). A threshold tuned on our own renders is no model selection:
   // 1000 held Herz-Jesus-P8's principal point (Δχ² 585, 17 px off: centre 0.041% of the extent, BIC 0.027%) and

@@ -338,12 +338,10 @@ void ModelBuilder::Grow() {
     }
     // Radial first: the principal point is tested on the model the final adjustment will keep.
     any = TryRadialSelfCalibration() || any;
-    const bool pp_freed = TrySelfCalibration(IntrinsicGroup::kPrincipalPoint);
-    // The radial terms were decided with the principal point held at the prior. An off-centre one held at the
-    // centre bends the residuals radially, which k1/k2 (and the focal) absorb through growth: freed, it may explain
-    // what they did, so the terms still free are asked again on the model with it free.
-    if (pp_freed) TryRadialSelfCalibration();
-    any = pp_freed || any;
+    // The radial terms are not asked again once the principal point is freed: on an orbit the freed point sits on a
+    // weakly determined focal–v0 line, and re-deciding k1/k2 there only moved it along that line (better on one
+    // off-centre orbit, worse on another and on fountain-P11: bench/results/pp10.md).
+    any = TrySelfCalibration(IntrinsicGroup::kPrincipalPoint) || any;
     // Then, when asked, the aspect (s_u; square pixels held), on the model with the principal point decided
     // (MapperOptions::self_calibrate_aspect says why not by default). Tangential distortion stays untested: with
     // the principal point free it trades against it beyond what the per-group covariance shows (fountain-P11:

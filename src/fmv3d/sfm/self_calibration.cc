@@ -183,18 +183,23 @@ NestedModelTestResult TestNestedModel(core::Reconstruction* rec, const BundleAdj
   if (test_options.require_determined) {
     auto cov = s1.intrinsics_covariance.find(cid);
     if (cov == s1.intrinsics_covariance.end()) return r;  // rank-deficient: not determined either
-    bool determined = true;
+    // "Determined": bias against variance. Holding the group costs the squared shift the data ask for (its bias,
+    // Σ Δθ²), freeing it costs its variance (Σ σ_θ²): the group is freed when the first exceeds the second. A group
+    // the data leave uncertain (a principal point trading against a common tilt of the cameras, a focal on a
+    // telephoto plateau) would only move the cameras by its uncertainty: it stays held. Summed over the group (its
+    // parameters share a unit), not required of each: a principal point off-centre along one axis only has the
+    // other coordinate at the prior, which moves by less than its σ (a 20 px vertical offset was held at the
+    // centre because u0 moved 0.009 px with σ 0.009).
+    double bias2 = 0, variance = 0;
     for (size_t i = 0; i < r.parameters.size(); ++i) {
       const auto p = r.parameters[i];
       const double sigma = std::sqrt(std::max(0.0, cov->second(p, p)));
       r.sigmas.push_back(sigma);
       r.max_sigma_px = std::max(r.max_sigma_px, sigma * CornerDisplacementPerUnit(r.freed, p));
-      // "Determined": bias against variance. Holding a parameter costs the squared shift Δθ² the data ask for (its
-      // bias), freeing it costs σ_θ² (its variance), so each freed parameter must move by more than its σ. One
-      // the data leave uncertain (a principal point trading against a common tilt of the cameras, a focal on a
-      // telephoto plateau) would only move the cameras by its uncertainty: it stays held.
-      determined = determined && sigma < std::abs(r.freed_values[i] - r.held_values[i]);
+      bias2 += (r.freed_values[i] - r.held_values[i]) * (r.freed_values[i] - r.held_values[i]);
+      variance += sigma * sigma;
     }
+    const bool determined = variance < bias2;
     if (!determined) {
       r.decision = NestedModelDecision::kUndetermined;
       return r;

@@ -15,8 +15,8 @@
 //     pull passed for signal. Both fits therefore use only the observations inside the Gaussian core of the null
 //     model's fit: within the bound a χ²(2) exceeds with probability 1 − core_mass, σ from the median error.
 //  2. Do the data determine it? The posterior covariance of the freed parameters (the BA's covariance)
-//     gives each one's standard deviation σ_θ. Holding a parameter costs the squared shift Δθ² the data ask for
-//     (its bias), freeing it costs σ_θ² (its variance): each freed parameter must move by more than its σ. One
+//     gives each one's standard deviation σ_θ. Holding a group costs the squared shift ΣΔθ² the data ask for
+//     (its bias), freeing it costs Σσ_θ² (its variance): the group must move by more than its uncertainty. One
 //     the data leave uncertain (a principal point trading against a common tilt of the cameras, a focal on a
 //     telephoto plateau) would only move the cameras by its uncertainty: it stays held. The 1σ displacement at
 //     the image corner is reported beside it.

@@ -126,10 +126,12 @@ nlohmann::json ToJson(const NestedModelTestResult& r) {
           {"freed", r.freed_decision()},
           {"delta_chi2", r.delta_chi2},
           {"delta_chi2_needed", r.threshold},
-          {"criterion", std::string(r.fixed_threshold ? "free when delta_chi2 exceeds a fixed threshold"
-                                                      : "free when delta_chi2 > k ln(n) (BIC; k extra parameters, "
-                                                        "n residuals)") +
-                            " and each freed parameter moves by more than its posterior sigma (BA covariance)"},
+          {"criterion",
+           std::string(r.fixed_threshold ? "free when delta_chi2 exceeds a fixed threshold"
+                                         : "free when delta_chi2 > k ln(n) (BIC; k extra parameters, "
+                                           "n residuals)") +
+               " and the squared shift of its parameters exceeds their posterior variance (BA covariance), summed over "
+               "the group"},
           {"extra_parameters", r.num_parameters},
           {"observations", r.num_observations},
           {"observations_outside_gaussian_core", r.observations_left_out},
