@@ -200,9 +200,8 @@ TEST(Renderer, DepthEqualsRayDistanceToPlaneAndBox) {
   std::printf("depth: %d box + %d ground pixels, max relative error %.2e\n", box_pixels, ground_pixels, worst);
 }
 
-// A principal point moved by whole pixels moves the image by exactly as many pixels (the camera and pose unchanged):
-// a sign, half-pixel or aspect slip in how the rasteriser and the shading rays place it would show here.
-TEST(Renderer, OffCentrePrincipalPointTranslatesTheImage) {
+// The ground quad with a random texture over its whole extent.
+io::TexturedMesh RandomlyTexturedGround() {
   io::TexturedMesh mesh = BlackGround();
   cv::Mat tex(64, 64, CV_8UC3);
   cv::randu(tex, 0, 255);
@@ -210,7 +209,13 @@ TEST(Renderer, OffCentrePrincipalPointTranslatesTheImage) {
   mesh.uvs = {{0, 0}, {1, 0}, {1, 1}, {0, 1}};
   mesh.faces[0].vt[0] = 0, mesh.faces[0].vt[1] = 1, mesh.faces[0].vt[2] = 2;
   mesh.faces[1].vt[0] = 0, mesh.faces[1].vt[1] = 2, mesh.faces[1].vt[2] = 3;
-  const Renderer renderer(mesh);
+  return mesh;
+}
+
+// A principal point moved by whole pixels moves the image by exactly as many pixels (the camera and pose unchanged):
+// a sign, half-pixel or aspect slip in how the rasteriser and the shading rays place it would show here.
+TEST(Renderer, OffCentrePrincipalPointTranslatesTheImage) {
+  const Renderer renderer(RandomlyTexturedGround());
   const auto centred = core::Camera::Pinhole(320, 240, 280);
   core::Camera shifted = centred;
   const int du = 7, dv = -5;
@@ -225,14 +230,7 @@ TEST(Renderer, OffCentrePrincipalPointTranslatesTheImage) {
 }
 
 TEST(Renderer, DeterministicAndNoiseFollowsTheSeed) {
-  io::TexturedMesh mesh = BlackGround();
-  cv::Mat tex(64, 64, CV_8UC3);
-  cv::randu(tex, 0, 255);
-  mesh.materials[0].texture = tex;
-  mesh.uvs = {{0, 0}, {1, 0}, {1, 1}, {0, 1}};
-  mesh.faces[0].vt[0] = 0, mesh.faces[0].vt[1] = 1, mesh.faces[0].vt[2] = 2;
-  mesh.faces[1].vt[0] = 0, mesh.faces[1].vt[1] = 2, mesh.faces[1].vt[2] = 3;
-  const Renderer renderer(mesh);
+  const Renderer renderer(RandomlyTexturedGround());
   const auto cam = core::Camera::Pinhole(320, 240, 280);
   RenderOptions o;
   o.noise_sigma = 3;
