@@ -215,7 +215,8 @@ io::TexturedMesh RandomlyTexturedGround() {
 // A principal point moved by whole pixels moves the image by exactly as many pixels (the camera and pose unchanged):
 // a sign, half-pixel or aspect slip in how the rasteriser and the shading rays place it would show here.
 TEST(Renderer, OffCentrePrincipalPointTranslatesTheImage) {
-  const Renderer renderer(RandomlyTexturedGround());
+  const io::TexturedMesh mesh = RandomlyTexturedGround();  // the renderer keeps a reference
+  const Renderer renderer(mesh);
   const auto centred = core::Camera::Pinhole(320, 240, 280);
   core::Camera shifted = centred;
   const int du = 7, dv = -5;
@@ -230,7 +231,8 @@ TEST(Renderer, OffCentrePrincipalPointTranslatesTheImage) {
 }
 
 TEST(Renderer, DeterministicAndNoiseFollowsTheSeed) {
-  const Renderer renderer(RandomlyTexturedGround());
+  const io::TexturedMesh mesh = RandomlyTexturedGround();  // the renderer keeps a reference
+  const Renderer renderer(mesh);
   const auto cam = core::Camera::Pinhole(320, 240, 280);
   RenderOptions o;
   o.noise_sigma = 3;
