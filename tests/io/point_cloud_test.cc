@@ -54,6 +54,25 @@ TEST(PointCloudPly, TruncatedFileIsAClearError) {
   EXPECT_THROW(ReadPointCloudPly(dir / "missing.ply"), Error);
 }
 
+TEST(PointCloudPly, AnElementDeclaredTwiceIsAClearError) {
+  // Found by ply_fuzz: the second vertex element (no normals) was read over the first (with normals), and its
+  // normals were taken from column −1.
+  test::TempDir dir;
+  std::ofstream(dir / "twice.ply") << "ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float y\n"
+                                      "property float z\nproperty float nx\nproperty float ny\nproperty float nz\n"
+                                      "element vertex 1\nproperty float x\nproperty float y\nproperty float z\n"
+                                      "end_header\n0 0 0 0 0 1\n1 1 1\n";
+  for (auto read : {+[](const std::filesystem::path& p) { ReadPointCloudPly(p); },
+                    +[](const std::filesystem::path& p) { ReadMeshPly(p); }}) {
+    try {
+      read(dir / "twice.ply");
+      ADD_FAILURE();
+    } catch (const Error& e) {
+      EXPECT_NE(std::string(e.what()).find("element 'vertex' declared twice"), std::string::npos) << e.what();
+    }
+  }
+}
+
 // An ascii mesh with a quad, a triangle and float colours, as other tools write it.
 const char* kQuadMesh =
     "ply\nformat ascii 1.0\nelement vertex 5\nproperty float x\nproperty float y\nproperty float z\n"

@@ -51,6 +51,9 @@ Header ReadHeader(std::istream& in, const std::string& file) {
       ls >> e.name >> count;
       if (count < 0 || count > (1LL << 34)) throw Error(file + ": bad PLY element count");
       e.count = static_cast<size_t>(count);
+      // Readers look elements up by name: a second "vertex" would be read over the first with other columns.
+      for (const Element& earlier : h.elements)
+        if (earlier.name == e.name) throw Error(file + ": PLY element '" + e.name + "' declared twice");
       h.elements.push_back(e);
     } else if (word == "property") {
       if (h.elements.empty()) throw Error(file + ": PLY property before any element");
