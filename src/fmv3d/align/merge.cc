@@ -411,6 +411,7 @@ nlohmann::json RunAlignStage(const std::vector<fs::path>& workspaces, const fs::
     if (fs::exists(output) && fs::exists(ws) && fs::equivalent(ws, output))
       throw Error("align: the output " + output.string() + " is one of the inputs");
   std::vector<Track> tracks;
+  tracks.reserve(workspaces.size());
   for (const auto& ws : workspaces) tracks.push_back(LoadTrack(ws));
   const MultiTrackAlignment alignment = AlignTracks(tracks, options);
   MergedModel merged = MergeTracks(tracks, alignment);

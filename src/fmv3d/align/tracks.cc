@@ -116,6 +116,7 @@ std::vector<std::pair<size_t, size_t>> CandidatePairs(const std::vector<ImageFea
     return {cand.begin(), cand.end()};
   }
   std::vector<const features::Descriptors*> all;
+  all.reserve(fa.size() + fb.size());
   for (const auto& f : fa) all.push_back(&f.descriptors);
   for (const auto& f : fb) all.push_back(&f.descriptors);
   features::PairOptions po;

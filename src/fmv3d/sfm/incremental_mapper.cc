@@ -122,7 +122,7 @@ MapperResult RunIncrementalMapper(const MapperInput& input, const MapperOptions&
     for (size_t i : order) {
       sorted.models.push_back(std::move(result.models[i]));
       sorted.self_calibration.push_back(std::move(result.self_calibration[i]));
-      sorted.focal_decision.push_back(std::move(result.focal_decision[i]));
+      sorted.focal_decision.push_back(result.focal_decision[i]);
     }
     result.models = std::move(sorted.models);
     result.self_calibration = std::move(sorted.self_calibration);
