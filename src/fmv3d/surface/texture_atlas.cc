@@ -47,7 +47,7 @@ Eigen::Vector3f Bilinear(const cv::Mat& img, double u, double v) {
   const int x1 = std::min(x0 + 1, img.cols - 1), y1 = std::min(y0 + 1, img.rows - 1);
   const float ax = static_cast<float>(x - x0), ay = static_cast<float>(y - y0);
   const auto px = [&](int xx, int yy) {
-    const cv::Vec3b p = img.at<cv::Vec3b>(yy, xx);
+    const cv::Vec3b& p = img.at<cv::Vec3b>(yy, xx);
     return Eigen::Vector3f(p[0], p[1], p[2]);
   };
   return (1 - ay) * ((1 - ax) * px(x0, y0) + ax * px(x1, y0)) + ay * ((1 - ax) * px(x0, y1) + ax * px(x1, y1));

@@ -25,7 +25,7 @@ struct Candidate {
   float quality;
   uint16_t view;
   std::array<uint8_t, 3> color;  // BGR mean over the face's pixels, rounded
-  Eigen::Vector3f Color() const { return Eigen::Vector3f(color[0], color[1], color[2]); }
+  Eigen::Vector3f Color() const { return {color[0], color[1], color[2]}; }
 };
 
 // Per face, the `k` best candidates by quality (a fixed slot array; faces are only ever touched by one thread).
@@ -78,7 +78,7 @@ Eigen::Vector3f SampleBilinear(const cv::Mat& img, double u, double v) {
   const float ax = static_cast<float>(x - x0), ay = static_cast<float>(y - y0);
   Eigen::Vector3f c = Eigen::Vector3f::Zero();
   const auto add = [&](int xx, int yy, float w) {
-    const cv::Vec3b p = img.at<cv::Vec3b>(yy, xx);
+    const cv::Vec3b& p = img.at<cv::Vec3b>(yy, xx);
     c += w * Eigen::Vector3f(p[0], p[1], p[2]);
   };
   add(x0, y0, (1 - ax) * (1 - ay));
