@@ -68,12 +68,13 @@ Comparison CompareWithFrame(const fs::path& ws, const std::string& name, const c
   for (int y = 0; y < frame.rows; ++y)
     for (int x = 0; x < frame.cols; ++x) {
       if (r.face.at<int32_t>(y, x) < 0) continue;
-      const cv::Vec3b a = r.image.at<cv::Vec3b>(y, x), b = frame.at<cv::Vec3b>(y, x);
+      const cv::Vec3b& a = r.image.at<cv::Vec3b>(y, x);
+      const cv::Vec3b& b = frame.at<cv::Vec3b>(y, x);
       for (int c = 0; c < 3; ++c) se += (a[c] - b[c]) * (a[c] - b[c]);
       n += 3;
     }
   Comparison cmp;
-  cmp.covered = static_cast<double>(n / 3) / (frame.rows * frame.cols);
+  cmp.covered = static_cast<double>(n) / 3 / (frame.rows * frame.cols);  // n counts 3 channels per pixel
   cmp.psnr = n ? 10 * std::log10(255.0 * 255.0 / (se / n)) : 0;
   return cmp;
 }
@@ -230,7 +231,7 @@ TEST(TextureStage, CliSplitsTheAtlasIntoSmallPages) {
 std::string FileBytes(const fs::path& path) {
   std::ifstream in(path, std::ios::binary);
   EXPECT_TRUE(in) << path;
-  return std::string(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
+  return {std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
 }
 
 // Frames decoded on demand in a one-frame window (each decoded again by the second pass) give the same files,
