@@ -90,7 +90,7 @@ io::FramesIndex Photos(int n, bool gps_on_all, bool one_source) {
     if (gps_on_all || k != 3)
       f.telemetry = core::TelemetryFromJson({{"time", 0.0},
                                              {"sensor_latitude", 47.0 + 1e-5 * (k % 10)},
-                                             {"sensor_longitude", 8.0 + 1e-5 * static_cast<double>(k / 10)},
+                                             {"sensor_longitude", 8.0 + 1e-5 * std::floor(k / 10.0)},
                                              {"sensor_relative_altitude", 80.0}});
     index.frames.push_back(f);
   }

@@ -43,7 +43,7 @@ Header ReadHeader(std::istream& in, const std::string& file) {
       else if (f == "binary_big_endian")
         h.format = Format::kBinaryBigEndian;
       else
-        throw Error(file + ": unknown PLY format '" + f + "'");
+        throw Error(std::string(file).append(": unknown PLY format '").append(f).append("'"));
       has_format = true;
     } else if (word == "element") {
       Element e;
