@@ -188,8 +188,7 @@ NestedModelTestResult TestNestedModel(core::Reconstruction* rec, const BundleAdj
     // the data leave uncertain (a principal point trading against a common tilt of the cameras, a focal on a
     // telephoto plateau) would only move the cameras by its uncertainty: it stays held. Summed over the group (its
     // parameters share a unit), not required of each: a principal point off-centre along one axis only has the
-    // other coordinate at the prior, which moves by less than its σ (a 20 px vertical offset was held at the
-    // centre because u0 moved 0.009 px with σ 0.009).
+    // other coordinate at its prior, where it rightly moves by less than its σ.
     double bias2 = 0, variance = 0;
     for (size_t i = 0; i < r.parameters.size(); ++i) {
       const auto p = r.parameters[i];
