@@ -7,7 +7,7 @@
 #            all                                                                    (every section)
 #
 # Each section writes its workspaces and the evaluation JSON files (report/*_eval.json, compare.json, ...) under
-# OUT/SECTION/ and prints where the figures are. Needs a built fmv3d (make build); sparse-colmap and geo's COLMAP
+# OUT/SECTION/ and prints where the figures are. Needs a built fmv3d and benchmarks (make bench); sparse-colmap and geo's COLMAP
 # column need `colmap` (FMV3D_WITH_COLMAP=1 scripts/install-deps.sh); sections on real data need ../shared/data.
 # A section takes minutes to hours on 2 cores (dense and geo the longest); run them on a quiet machine.
 set -euo pipefail
@@ -29,7 +29,8 @@ while [[ $# -gt 0 ]]; do
   esac
 done
 [[ ${#sections[@]} -gt 0 ]] || { sed -n '2,11p' "$0" >&2; exit 2; }
-[[ -x "$FMV3D" ]] || { echo "$FMV3D not built: make build" >&2; exit 1; }
+[[ -x "$FMV3D" ]] || { echo "$FMV3D not built: make bench" >&2; exit 1; }
+[[ -x "$here/build/bench/align_bench" ]] || { echo "benchmarks not built: make bench" >&2; exit 1; }
 log() { echo "[bench] $*" >&2; }
 timed() { /usr/bin/time -f '%e s wall, %U+%S CPU-s, %M kB peak' "$@"; }
 

@@ -95,7 +95,8 @@ CompletenessResult Completeness(const std::vector<Eigen::Vector3d>& pts, const g
   render::RenderOptions ro;
   ro.supersample = 1;
   ro.shading = false;
-  for (const auto& [id, im] : truth.images) {
+  for (const auto& entry : truth.images) {  // named, not bound: C++17 lambdas cannot capture bindings
+    const auto& im = entry.second;
     const core::Camera cam = truth.cameras.at(im.camera_id).FitWithin(opt.render_max_size);
     const cv::Mat depth = renderer.Render(cam, im.pose, ro).depth;
     tbb::parallel_for(size_t{0}, samples.size(), [&](size_t i) {

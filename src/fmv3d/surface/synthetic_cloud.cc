@@ -47,7 +47,9 @@ SyntheticCloud SampleOrientedCloud(const io::TexturedMesh& truth, const core::Re
   const render::Renderer renderer(truth);
   render::RenderOptions ro;
   ro.supersample = 1;
-  for (const auto& [id, image] : cameras.images) {
+  for (const auto& entry : cameras.images) {  // named, not bound: C++17 lambdas cannot capture bindings
+    const uint32_t id = entry.first;
+    const auto& image = entry.second;
     const core::Camera& cam = cameras.cameras.at(image.camera_id);
     const render::RenderResult r = renderer.Render(cam, image.pose, ro);
     const Eigen::Vector3d centre = image.pose.Centre();
