@@ -77,6 +77,16 @@ TEST(SparseStage, WritesModelPlyAndReport) {
   EXPECT_GT(std::filesystem::file_size(dir / "sparse" / "sparse.ply"), rec.points.size() * 15);
   const auto json = core::ReadJson(dir / "report" / "sparse.json");
   EXPECT_EQ(json["registered_images"], 10);
+  // The final model's posterior of each free intrinsic, with the weak flag the operator sees (the focal of
+  // 10 images of 0.5 px keypoints: about 4 px, 3 px at the image corner: weak).
+  ASSERT_EQ(json["intrinsics_posterior"].size(), 1u);
+  const auto& posterior = json["intrinsics_posterior"][0];
+  EXPECT_TRUE(posterior["determined"].get<bool>());
+  const auto& focal = posterior["parameters"]["f"];
+  EXPECT_GT(focal["posterior_sigma"].get<double>(), 0);
+  EXPECT_EQ(focal["weakly_determined"].get<bool>(),
+            focal["corner_displacement_1sigma_px"].get<double>() > posterior["weak_above_corner_px"].get<double>());
+  EXPECT_EQ(posterior["warnings"].size(), focal["weakly_determined"].get<bool>() ? 1u : 0u);
   EXPECT_LE(EvaluateSparse(rec, scene.truth).centre_rmse_fraction, 0.001);
 
   // The CLI evaluation against the truth written as a COLMAP model.

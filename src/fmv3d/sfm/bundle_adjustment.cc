@@ -488,4 +488,26 @@ BundleAdjustmentSummary BundleAdjust(core::Reconstruction* rec, const BundleAdju
   return out;
 }
 
+BundleAdjustmentSummary IntrinsicsCovarianceAt(const core::Reconstruction& rec, const BundleAdjustmentConfig& config,
+                                               const BundleAdjustmentOptions& options) {
+  options.Check();
+  BundleAdjustmentSummary out;
+  if (rec.images.size() < 2) return out;
+  std::set<uint32_t> variable = config.variable_images;
+  if (variable.empty())
+    for (const auto& [id, im] : rec.images) variable.insert(id);
+  std::vector<uint64_t> point_ids = PointsOfImages(rec, variable);
+  if (point_ids.empty()) return out;
+  // The problem reads the model only (WriteBack, the one writer, is not called).
+  BundleProblem problem(const_cast<core::Reconstruction*>(&rec), config, options, std::move(variable),
+                        std::move(point_ids));
+  problem.Build();
+  out.initial_rms_px = out.final_rms_px = problem.Rms();
+  out.num_residuals = static_cast<int>(problem.num_residuals());
+  out.num_parameters = problem.NumFreeParameters();
+  out.success = true;
+  problem.IntrinsicsCovariance(&out);
+  return out;
+}
+
 }  // namespace fmv3d::sfm

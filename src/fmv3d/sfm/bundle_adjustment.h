@@ -115,6 +115,13 @@ struct BundleAdjustmentSummary {
 BundleAdjustmentSummary BundleAdjust(core::Reconstruction* rec, const BundleAdjustmentConfig& config,
                                      const BundleAdjustmentOptions& options);
 
+// The posterior covariance of each camera's free intrinsics at the model's current values, without adjusting it:
+// what compute_intrinsics_covariance gives after BundleAdjust (the same at a converged model), and the bound the
+// data allow when the model is the truth. rms and parameter counts are the current values'; no covariance when
+// the system is rank-deficient.
+BundleAdjustmentSummary IntrinsicsCovarianceAt(const core::Reconstruction& rec, const BundleAdjustmentConfig& config,
+                                               const BundleAdjustmentOptions& options);
+
 // Recomputes Point3D::error (mean reprojection error over the track) for all points.
 void UpdatePointErrors(core::Reconstruction* rec);
 

@@ -34,6 +34,7 @@ void MapperOptions::Check() const {
   if (!(guided_completion_false_accept_rate > 0 && guided_completion_false_accept_rate < 1))
     throw Error("mapper: guided_completion_false_accept_rate must be in (0, 1)");
   if (!(self_calibration_min_delta_chi2 >= 0)) throw Error("mapper: self_calibration_min_delta_chi2 must be ≥ 0");
+  if (!(weak_intrinsic_corner_px > 0)) throw Error("mapper: weak_intrinsic_corner_px must be > 0");
 }
 
 namespace {
@@ -108,6 +109,7 @@ MapperResult RunIncrementalMapper(const MapperInput& input, const MapperOptions&
     spdlog::info("model {}: {} images, {} points", result.models.size(), rec.images.size(), rec.points.size());
     result.models.push_back(std::move(rec));
     result.self_calibration.push_back(std::move(calibration));
+    result.intrinsics_posterior.push_back(builder.intrinsics_posterior());
     result.focal_decision.push_back(builder.focal_decision());
     guided.push_back(builder.guided_completion());
   }
@@ -122,10 +124,12 @@ MapperResult RunIncrementalMapper(const MapperInput& input, const MapperOptions&
     for (size_t i : order) {
       sorted.models.push_back(std::move(result.models[i]));
       sorted.self_calibration.push_back(std::move(result.self_calibration[i]));
+      sorted.intrinsics_posterior.push_back(std::move(result.intrinsics_posterior[i]));
       sorted.focal_decision.push_back(result.focal_decision[i]);
     }
     result.models = std::move(sorted.models);
     result.self_calibration = std::move(sorted.self_calibration);
+    result.intrinsics_posterior = std::move(sorted.intrinsics_posterior);
     result.focal_decision = std::move(sorted.focal_decision);
   }
   for (size_t m = 0; m < result.models.size(); ++m)

@@ -126,6 +126,9 @@ struct MapperOptions {
   // orbiting at one roll see an fx/fy change almost as a vertical stretch of the scene (self_calibration_test.cc),
   // so a small systematic error decides it; rolled cameras determine it.
   bool self_calibrate_aspect = false;
+  // The final model states the posterior σ of each free intrinsic (IntrinsicsPosterior); one whose 1σ moves the
+  // image corner's projection by more than this (pixels) is reported as weakly determined.
+  double weak_intrinsic_corner_px = 1.0;
   // Focal. A guessed prior is replaced by a scan over focal candidates on the strongest pairs (focal_scan.h).
   int focal_scan_pairs = 5;
   int focal_dolly_min_images = 15;       // telephoto: multi-view focal scan once the model has this many images
@@ -172,9 +175,10 @@ struct MapperStats {
 };
 
 struct MapperResult {
-  std::vector<core::Reconstruction> models;                          // largest first
-  std::vector<std::vector<NestedModelTestResult>> self_calibration;  // per model: the final tests, in order
-  std::vector<FocalDecision> focal_decision;                         // per model: how its focal was decided
+  std::vector<core::Reconstruction> models;                            // largest first
+  std::vector<std::vector<NestedModelTestResult>> self_calibration;    // per model: the final tests, in order
+  std::vector<std::vector<IntrinsicsPosterior>> intrinsics_posterior;  // per model: each camera's, final model
+  std::vector<FocalDecision> focal_decision;                           // per model: how its focal was decided
   std::map<uint32_t, std::string> left_out;  // image id → reason it is not in the largest model
   MapperStats stats;                         // counts and timings per stage
 };

@@ -79,6 +79,41 @@ bool ModelBuilder::TryRadialSelfCalibration() {
   return changed;
 }
 
+// The covariance at the final adjustment's optimum (the model is converged: no further adjustment), every free
+// intrinsic at once. The tests' σ above are those of each group's fit on the Gaussian core; this is what the
+// cameras handed on carry.
+void ModelBuilder::DescribeIntrinsicsPosterior() {
+  const auto start = Clock::now();
+  BundleAdjustmentConfig cfg = NewBaConfig();
+  cfg.gauge_image1 = gauge1_;
+  cfg.gauge_image2 = gauge2_;
+  const BundleAdjustmentOptions o = BaOptions();
+  const BundleAdjustmentSummary s = IntrinsicsCovarianceAt(rec_, cfg, o);
+  t_->global_ba += Seconds(start);
+  posterior_.clear();
+  for (const auto& [cid, cam] : rec_.cameras) {
+    const auto cov = s.intrinsics_covariance.find(cid);
+    IntrinsicsPosterior p =
+        DescribePosterior(cam, FreeIntrinsics(o), cov == s.intrinsics_covariance.end() ? nullptr : &cov->second,
+                          opt_.weak_intrinsic_corner_px);
+    p.camera_id = cid;
+    std::string figures;
+    for (const auto& u : p.parameters)
+      figures += fmt::format(" {} {:.6g} ± {:.3g} ({:.2f} px at the corner{})", IntrinsicName(u.parameter), u.value,
+                             u.sigma, u.corner_sigma_px, u.weak ? ", weak" : "");
+    if (!p.determined && !p.parameters.empty())
+      spdlog::warn("camera {}: the free intrinsics are not all determined by the data (rank-deficient)", cid);
+    else if (!p.parameters.empty())
+      spdlog::info("camera {} posterior (1σ):{}; least determined combination ±{:.2f} px at the corner ({:.2f} s)", cid,
+                   figures, p.weakest_corner_sigma_px, Seconds(start));
+    for (const auto& u : p.parameters)
+      if (u.weak)
+        spdlog::warn("camera {}: {} is weakly determined on these images: ±{:.3g} (1σ), {:.2f} px at the corner", cid,
+                     IntrinsicName(u.parameter), u.sigma, u.corner_sigma_px);
+    posterior_.push_back(std::move(p));
+  }
+}
+
 void ModelBuilder::DollyZoomFocalScan() {
   dolly_done_ = true;
   const auto start = Clock::now();

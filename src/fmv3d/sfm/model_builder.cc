@@ -349,6 +349,7 @@ void ModelBuilder::Grow() {
     if (opt_.self_calibrate_aspect) any = TrySelfCalibration(IntrinsicGroup::kAspect) || any;
     if (any) GlobalBundleAdjust(true);
   }
+  DescribeIntrinsicsPosterior();
   UpdatePointErrors(&rec_);
 }
 

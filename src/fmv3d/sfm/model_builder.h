@@ -88,6 +88,8 @@ class ModelBuilder {
   int num_global_ba() const { return num_global_ba_; }
   int num_relocalised() const { return num_relocalised_; }
   const std::vector<NestedModelTestResult>& self_calibration() const { return self_calibration_; }
+  // The final model's posterior uncertainty of each camera's free intrinsics (self_calibration.h).
+  const std::vector<IntrinsicsPosterior>& intrinsics_posterior() const { return posterior_; }
   // How the focal was decided (stated, or the two-view and dolly-zoom scans), for report/sparse.json.
   const FocalDecision& focal_decision() const { return focal_decision_; }
   // The final polish's track completion by projection (guided_completion.h), for report/sparse.json.
@@ -155,6 +157,8 @@ class ModelBuilder {
   bool TestRadialTerm(IntrinsicGroup group, bool* held);
   // One nested-model test on *rec (rec_ or a copy), recorded in self_calibration_.
   bool RunSelfCalibrationTest(IntrinsicGroup group, core::Reconstruction* rec);
+  // The final model's intrinsics posterior (posterior_), logged with a warning for each weakly determined one.
+  void DescribeIntrinsicsPosterior();
   BundleAdjustmentOptions BaOptions() const;
 
   const MapperInput& input_;
@@ -185,6 +189,7 @@ class ModelBuilder {
   std::set<IntrinsicGroup> freed_groups_;   // freed by the final self-calibration tests
   bool k1_held_ = false, k2_held_ = false;  // back at the prior's values by the final tests
   std::vector<NestedModelTestResult> self_calibration_;
+  std::vector<IntrinsicsPosterior> posterior_;
 };
 
 }  // namespace fmv3d::sfm::mapper

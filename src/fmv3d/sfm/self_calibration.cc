@@ -1,5 +1,6 @@
 #include "fmv3d/sfm/self_calibration.h"
 
+#include <Eigen/Eigenvalues>
 #include <algorithm>
 #include <cmath>
 #include <tuple>
@@ -25,6 +26,11 @@ const char* ToString(IntrinsicGroup group) {
       return "k2";
   }
   return "?";
+}
+
+const char* IntrinsicName(core::IntrinsicIndex p) {
+  static const char* kNames[core::kNumIntrinsics] = {"f", "aspect", "u0", "v0", "k1", "k2", "p1", "p2"};
+  return p >= 0 && p < core::kNumIntrinsics ? kNames[p] : "?";
 }
 
 const char* ToString(NestedModelDecision decision) {
@@ -104,6 +110,58 @@ double CornerDisplacementPerUnit(const core::Camera& c, core::IntrinsicIndex p) 
     default:
       return 0;
   }
+}
+
+std::vector<core::IntrinsicIndex> FreeIntrinsics(const BundleAdjustmentOptions& o) {
+  std::vector<core::IntrinsicIndex> out;
+  if (o.refine_focal) out.push_back(core::kF);
+  if (o.refine_aspect) out.push_back(core::kAspect);
+  if (o.refine_principal_point) out.insert(out.end(), {core::kU0, core::kV0});
+  if (o.refine_k1) out.push_back(core::kK1);
+  if (o.refine_k2) out.push_back(core::kK2);
+  if (o.refine_tangential) out.insert(out.end(), {core::kP1, core::kP2});
+  return out;
+}
+
+IntrinsicsPosterior DescribePosterior(const core::Camera& camera, const std::vector<core::IntrinsicIndex>& free,
+                                      const Eigen::Matrix<double, core::kNumIntrinsics, core::kNumIntrinsics>* cov,
+                                      double weak_corner_px) {
+  IntrinsicsPosterior out;
+  out.camera_id = camera.id;
+  out.weak_corner_px = weak_corner_px;
+  out.determined = cov != nullptr;
+  const auto values = camera.Params();
+  const int n = static_cast<int>(free.size());
+  Eigen::MatrixXd corner(n, n);  // the covariance in corner pixels
+  for (int i = 0; i < n; ++i) {
+    IntrinsicUncertainty u;
+    u.parameter = free[i];
+    u.value = values[free[i]];
+    if (cov) {
+      u.sigma = std::sqrt(std::max(0.0, (*cov)(free[i], free[i])));
+      u.corner_sigma_px = u.sigma * CornerDisplacementPerUnit(camera, free[i]);
+      u.weak = u.corner_sigma_px > weak_corner_px;
+      for (int j = 0; j < n; ++j)
+        corner(i, j) = (*cov)(free[i], free[j]) * CornerDisplacementPerUnit(camera, free[i]) *
+                       CornerDisplacementPerUnit(camera, free[j]);
+    }
+    out.parameters.push_back(u);
+  }
+  if (!cov || n == 0) return out;
+  out.correlation = Eigen::MatrixXd::Identity(n, n);
+  for (int i = 0; i < n; ++i)
+    for (int j = 0; j < n; ++j) {
+      const double s = out.parameters[i].sigma * out.parameters[j].sigma;
+      if (i != j && s > 0) out.correlation(i, j) = (*cov)(free[i], free[j]) / s;
+    }
+  const Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> eig(corner);
+  out.weakest_corner_sigma_px = std::sqrt(std::max(0.0, eig.eigenvalues()[n - 1]));
+  Eigen::VectorXd d = eig.eigenvectors().col(n - 1);
+  Eigen::Index largest = 0;
+  d.cwiseAbs().maxCoeff(&largest);
+  if (d[largest] < 0) d = -d;  // a stable sign: the dominant parameter positive
+  out.weakest_direction.assign(d.data(), d.data() + n);
+  return out;
 }
 
 namespace {

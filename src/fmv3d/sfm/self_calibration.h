@@ -22,6 +22,8 @@
 //     the image corner is reported beside it.
 #pragma once
 
+#include <Eigen/Core>
+#include <algorithm>
 #include <array>
 #include <string>
 #include <vector>
@@ -36,6 +38,8 @@ namespace fmv3d::sfm {
 enum class IntrinsicGroup { kFocal, kPrincipalPoint, kAspect, kTangential, kK1, kK2 };
 
 const char* ToString(IntrinsicGroup group);
+// "f", "aspect", "u0", "v0", "k1", "k2", "p1", "p2".
+const char* IntrinsicName(core::IntrinsicIndex parameter);
 // The parameters the group frees (per camera), in core::IntrinsicIndex.
 std::vector<core::IntrinsicIndex> Parameters(IntrinsicGroup group);
 // Sets the refine flag(s) of the group in options.
@@ -86,5 +90,42 @@ struct NestedModelTestResult {
 NestedModelTestResult TestNestedModel(core::Reconstruction* rec, const BundleAdjustmentConfig& config,
                                       BundleAdjustmentOptions options, IntrinsicGroup group,
                                       const NestedModelTestOptions& test_options);
+
+// The posterior uncertainty of a camera's free intrinsics in the final model (the BA covariance at the final
+// adjustment's optimum), stated for the operator whatever the tests decided. A parameter is weakly determined when
+// its 1σ moves the projection at the image corner by more than weak_corner_px: the cameras built on it are then
+// uncertain at the pixel level (an orbit at one altitude and depression over flat ground leaves the focal and v0
+// one weakly determined combination: bench/results/pp11.md).
+struct IntrinsicUncertainty {
+  core::IntrinsicIndex parameter = core::kF;
+  double value = 0, sigma = 0;
+  double corner_sigma_px = 0;  // σ · CornerDisplacementPerUnit
+  bool weak = false;
+};
+
+struct IntrinsicsPosterior {
+  uint32_t camera_id = 0;
+  double weak_corner_px = 1;
+  // False: the covariance is rank-deficient (some combination of the free parameters is not determined at all);
+  // parameters then carry their values only.
+  bool determined = false;
+  std::vector<IntrinsicUncertainty> parameters;  // the free ones, in core::IntrinsicIndex order
+  Eigen::MatrixXd correlation;                   // between them (determined only)
+  // The least determined combination: the largest eigenvalue of the covariance in corner pixels (each parameter
+  // scaled by its corner displacement per unit), its 1σ and unit direction (per parameter, in that scaling).
+  double weakest_corner_sigma_px = 0;
+  std::vector<double> weakest_direction;
+  bool any_weak() const {
+    return !determined || std::any_of(parameters.begin(), parameters.end(), [](const auto& p) { return p.weak; });
+  }
+};
+
+// The intrinsics options frees, in core::IntrinsicIndex order.
+std::vector<core::IntrinsicIndex> FreeIntrinsics(const BundleAdjustmentOptions& options);
+
+// Describes the posterior of camera's free parameters from the BA covariance (nullptr: rank-deficient).
+IntrinsicsPosterior DescribePosterior(const core::Camera& camera, const std::vector<core::IntrinsicIndex>& free,
+                                      const Eigen::Matrix<double, core::kNumIntrinsics, core::kNumIntrinsics>* cov,
+                                      double weak_corner_px);
 
 }  // namespace fmv3d::sfm

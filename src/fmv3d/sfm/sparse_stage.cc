@@ -1,5 +1,6 @@
 #include "fmv3d/sfm/sparse_stage.h"
 
+#include <fmt/format.h>
 #include <spdlog/spdlog.h>
 
 #include <algorithm>
@@ -108,18 +109,13 @@ nlohmann::json RelocaliseLeftOut(const MapperInput& input, const std::vector<fea
 
 namespace {
 
-const char* ParameterName(core::IntrinsicIndex p) {
-  static const char* kNames[core::kNumIntrinsics] = {"f", "aspect", "u0", "v0", "k1", "k2", "p1", "p2"};
-  return kNames[p];
-}
-
 // One self-calibration decision with the figures that made it (self_calibration.h).
 nlohmann::json ToJson(const NestedModelTestResult& r) {
   nlohmann::json params = nlohmann::json::object();
   for (size_t i = 0; i < r.parameters.size(); ++i) {
     nlohmann::json p = {{"held", r.held_values[i]}, {"free_fit", r.freed_values[i]}};
     if (i < r.sigmas.size()) p["posterior_sigma"] = r.sigmas[i];
-    params[ParameterName(r.parameters[i])] = p;
+    params[IntrinsicName(r.parameters[i])] = p;
   }
   return {{"group", ToString(r.group)},
           {"decision", ToString(r.decision)},
@@ -140,6 +136,46 @@ nlohmann::json ToJson(const NestedModelTestResult& r) {
           {"rms_held_px", r.rms_held_px},
           {"rms_free_px", r.rms_freed_px},
           {"parameters", params}};
+}
+
+// The final model's posterior of one camera's free intrinsics, and in words what the operator must know: which
+// parameters the images leave uncertain at the pixel level, and by how much.
+nlohmann::json ToJson(const IntrinsicsPosterior& p) {
+  nlohmann::json params = nlohmann::json::object(), warnings = nlohmann::json::array();
+  for (const auto& u : p.parameters) {
+    nlohmann::json j = {{"value", u.value}};
+    if (p.determined) {
+      j["posterior_sigma"] = u.sigma;
+      j["corner_displacement_1sigma_px"] = u.corner_sigma_px;
+      j["weakly_determined"] = u.weak;
+    }
+    params[IntrinsicName(u.parameter)] = j;
+    if (u.weak)
+      warnings.push_back(
+          fmt::format("{} is weakly determined by these images: ±{:.3g} (1σ), {:.2f} px at the image "
+                      "corner",
+                      IntrinsicName(u.parameter), u.sigma, u.corner_sigma_px));
+  }
+  if (!p.determined && !p.parameters.empty())
+    warnings.push_back("the free intrinsics are not all determined by these images (the covariance is rank-deficient)");
+  nlohmann::json j = {{"camera_id", p.camera_id},
+                      {"determined", p.determined},
+                      {"weak_above_corner_px", p.weak_corner_px},
+                      {"parameters", params},
+                      {"warnings", warnings}};
+  if (p.determined && !p.parameters.empty()) {
+    nlohmann::json corr = nlohmann::json::object(), dir = nlohmann::json::object();
+    for (size_t a = 0; a < p.parameters.size(); ++a) {
+      dir[IntrinsicName(p.parameters[a].parameter)] = p.weakest_direction[a];
+      for (size_t b = a + 1; b < p.parameters.size(); ++b)
+        corr[fmt::format("{},{}", IntrinsicName(p.parameters[a].parameter), IntrinsicName(p.parameters[b].parameter))] =
+            p.correlation(a, b);
+    }
+    j["correlation"] = corr;
+    j["least_determined_combination"] = {{"corner_displacement_1sigma_px", p.weakest_corner_sigma_px},
+                                         {"direction_in_corner_px", dir}};
+  }
+  return j;
 }
 
 }  // namespace
@@ -334,10 +370,12 @@ nlohmann::json ToJson(const FocalDecision& d) {
 }
 
 nlohmann::json ModelReport(const core::Reconstruction& rec, const std::vector<NestedModelTestResult>* calibration,
-                           const nlohmann::json& focal_decision) {
-  nlohmann::json tests = nlohmann::json::array();
+                           const std::vector<IntrinsicsPosterior>* posterior, const nlohmann::json& focal_decision) {
+  nlohmann::json tests = nlohmann::json::array(), uncertainty = nlohmann::json::array();
   if (calibration)
     for (const auto& t : *calibration) tests.push_back(ToJson(t));
+  if (posterior)
+    for (const auto& p : *posterior) uncertainty.push_back(ToJson(p));
   nlohmann::json cams = nlohmann::json::array();
   for (const auto& [id, c] : rec.cameras) {
     nlohmann::json cam = core::IntrinsicsToJson(c);
@@ -350,6 +388,7 @@ nlohmann::json ModelReport(const core::Reconstruction& rec, const std::vector<Ne
           {"mean_reprojection_error_px", rec.MeanReprojectionError()},
           {"cameras", cams},
           {"self_calibration", tests},
+          {"intrinsics_posterior", uncertainty},
           {"focal_decision", focal_decision}};
 }
 
@@ -362,6 +401,7 @@ nlohmann::json SparseReport(const MapperInput& input, const MapperResult& result
   for (size_t m = 0; m < result.models.size(); ++m)
     report["models"].push_back(
         ModelReport(result.models[m], m < result.self_calibration.size() ? &result.self_calibration[m] : nullptr,
+                    m < result.intrinsics_posterior.size() ? &result.intrinsics_posterior[m] : nullptr,
                     m < result.focal_decision.size() ? ToJson(result.focal_decision[m]) : nlohmann::json::object()));
   const core::Reconstruction* best = result.models.empty() ? nullptr : &result.models[0];
   report["registered_images"] = best ? best->images.size() : 0;
@@ -369,6 +409,7 @@ nlohmann::json SparseReport(const MapperInput& input, const MapperResult& result
   report["mean_track_length"] = best ? best->MeanTrackLength() : 0.0;
   report["mean_reprojection_error_px"] = best ? best->MeanReprojectionError() : 0.0;
   report["self_calibration"] = best ? report["models"][0]["self_calibration"] : nlohmann::json::array();
+  report["intrinsics_posterior"] = best ? report["models"][0]["intrinsics_posterior"] : nlohmann::json::array();
   report["focal_decision"] = best ? report["models"][0]["focal_decision"] : nlohmann::json::object();
   nlohmann::json left = nlohmann::json::array();
   for (const auto& [id, why] : result.left_out) left.push_back({{"image", input.images[id - 1].name}, {"reason", why}});
