@@ -20,9 +20,9 @@ namespace fmv3d::features {
 
 struct SiftOptions;
 
-// Bytes per pixel of the image SIFT is given (pyramid + initial image copies): peak RSS of one image on one thread
-// minus the process and the decoded frame measured 231 at 0.5–4.3 MP (bench/results/feat11.md; theory 235), so
-// 250 keeps ≈ 8% margin.
+// Bytes per pixel of the image SIFT is given (pyramid + initial image copies): the peak RSS of one image on one
+// thread grows by 236 bytes per extraction pixel from 0.5 to 4.3 MP (bench/results/feat11.md; theory 235); 250
+// keeps a 6% margin.
 constexpr double kSiftBytesPerPixel = 250;
 // Bytes per pixel of the decoded frame: BGR (3) + its grey copy (1).
 constexpr double kFrameBytesPerPixel = 4;
