@@ -4,8 +4,8 @@
 // octave_layers + 2 difference-of-Gaussian float images: 4 bytes × 4 (doubled) × 11 × 4/3 (octaves) ≈ 235 bytes per
 // pixel of the image it is given, plus the transient float copies of its initial image. At 12 MP (extracted at
 // 3200x2400) that is ≈ 1.8 GB for one image. The stage therefore
-//   - estimates each image's working set from its pixel count (EstimateSiftMemory, a model fitted to measured
-//     peaks with a margin: bench/results/feat11.md),
+//   - estimates each image's working set from its pixel count (PlanSiftMemory, a model fitted to measured peaks
+//     with a margin: bench/results/feat11.md),
 //   - runs an image only while the estimates in flight fit the budget (MemoryGate; one image is always admitted),
 //   - and, when one whole image alone exceeds the budget, runs SIFT on overlapping tiles (PlanSiftTiles) whose
 //     working sets fit it.
