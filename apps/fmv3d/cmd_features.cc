@@ -26,6 +26,10 @@ void Add(CLI::App& app) {
                   "SIFT contrast threshold (OpenCV scale; OpenCV's default 0.04 keeps far fewer)")
       ->capture_default_str();
   cmd->add_option("--edge-threshold", a->opt.edge_threshold, "SIFT edge threshold")->capture_default_str();
+  cmd->add_option("--max-memory", a->opt.max_memory_mb,
+                  "Memory budget, MB: images run in parallel while their SIFT working sets fit; a larger image is "
+                  "extracted in tiles")
+      ->capture_default_str();
   cmd->add_flag("--no-root-sift", a->no_root_sift, "Plain L2-normalised SIFT instead of RootSIFT");
   cmd->add_flag("--upright", a->opt.upright, "One orientation per keypoint (no in-plane rotation expected)");
   cmd->add_flag("--force", a->force, "Re-extract even when a .feat file is newer than its image");

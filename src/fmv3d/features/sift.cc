@@ -1,26 +1,15 @@
 #include "fmv3d/features/sift.h"
 
-#include <spdlog/spdlog.h>
-#include <tbb/parallel_for.h>
-
 #include <algorithm>
-#include <atomic>
-#include <chrono>
 #include <cmath>
 #include <map>
 #include <opencv2/features2d.hpp>
-#include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
+#include <tuple>
 
 #include "fmv3d/core/error.h"
-#include "fmv3d/core/files.h"
-#include "fmv3d/core/logging.h"
-#include "fmv3d/core/workspace.h"
-#include "fmv3d/features/feature_io.h"
-#include "fmv3d/io/frames_index.h"
 
 namespace fmv3d::features {
-namespace fs = std::filesystem;
 
 void SiftOptions::Check() const {
   if (max_features < 0) throw Error("features: --max-features must be >= 0");
@@ -32,6 +21,7 @@ void SiftOptions::Check() const {
   if (min_features < 0) throw Error("features: minimum features must be >= 0");
   if (!(min_coverage >= 0 && min_coverage <= 1)) throw Error("features: minimum coverage must be in [0, 1]");
   if (!(min_contrast_threshold > 0)) throw Error("features: minimum contrast threshold must be > 0");
+  if (!(max_memory_mb > 0)) throw Error("features: --max-memory must be > 0 MB");
 }
 
 void QuantiseDescriptors(const cv::Mat& d, bool root_sift, Descriptors* out) {
@@ -95,11 +85,9 @@ double KeypointCoverage(const std::vector<Keypoint>& keypoints, int width, int h
   return static_cast<double>(std::count(hit.begin(), hit.end(), 1)) / hit.size();
 }
 
-FeatureSet ExtractSift(const cv::Mat& image, const SiftOptions& options, double* contrast_threshold_used) {
-  if (image.empty() || image.depth() != CV_8U) throw Error("features: empty or non-8-bit image");
-  FeatureSet out;
-  out.width = image.cols;
-  out.height = image.rows;
+namespace {
+
+cv::Mat ToGrey(const cv::Mat& image) {
   cv::Mat grey;
   if (image.channels() == 1) {
     grey = image;
@@ -108,68 +96,157 @@ FeatureSet ExtractSift(const cv::Mat& image, const SiftOptions& options, double*
   } else {
     cv::cvtColor(image, grey, cv::COLOR_BGRA2GRAY);
   }
-  const int max_dim = std::max(image.cols, image.rows);
-  double scale = 1;  // extraction image = scale * full image
-  if (max_dim > options.max_image_size) {
-    scale = double(options.max_image_size) / max_dim;
+  return grey;
+}
+
+// Keypoints (OpenCV's pixels of the image given) and float descriptors of one SIFT call.
+struct SiftResult {
+  std::vector<cv::KeyPoint> keypoints;
+  cv::Mat descriptors;
+};
+
+SiftResult DetectWhole(const cv::Mat& grey, const SiftOptions& options, double threshold) {
+  auto sift =
+      cv::SIFT::create(options.max_features, options.octave_layers, threshold, options.edge_threshold, 1.6, CV_32F);
+  SiftResult r;
+  if (!options.upright) {
+    sift->detectAndCompute(grey, cv::noArray(), r.keypoints, r.descriptors);
+    return r;
+  }
+  std::vector<cv::KeyPoint> kps;
+  sift->detect(grey, kps);
+  // One keypoint per location/scale with orientation 0 (OpenCV's detector duplicates a keypoint for each
+  // dominant orientation).
+  std::map<std::tuple<float, float, float>, cv::KeyPoint> unique;
+  for (auto k : kps) {
+    k.angle = 0;
+    auto key = std::make_tuple(k.pt.x, k.pt.y, k.size);
+    auto it = unique.find(key);
+    if (it == unique.end() || it->second.response < k.response) unique[key] = k;
+  }
+  for (auto& [key, k] : unique) r.keypoints.push_back(k);
+  sift->compute(grey, r.keypoints, r.descriptors);
+  return r;
+}
+
+// SIFT on each tile's window, keeping the keypoints that lie in its core (shifted to the whole image), in a
+// canonical order (position, size, angle) so that the result does not depend on the tiling's order.
+SiftResult DetectTiled(const cv::Mat& grey, const std::vector<SiftTile>& tiles, const SiftOptions& options,
+                       double threshold) {
+  std::vector<cv::KeyPoint> kps;
+  cv::Mat rows;  // copies: a tile's whole descriptor matrix is freed once its core's rows are taken
+  for (const auto& t : tiles) {
+    // A copy: OpenCV's filters would otherwise read the pixels around a sub-matrix as its border.
+    const cv::Mat window = grey(cv::Rect(t.window.x, t.window.y, t.window.width, t.window.height)).clone();
+    const SiftResult part = DetectWhole(window, options, threshold);
+    for (size_t i = 0; i < part.keypoints.size(); ++i) {
+      cv::KeyPoint k = part.keypoints[i];
+      k.pt.x += static_cast<float>(t.window.x);
+      k.pt.y += static_cast<float>(t.window.y);
+      if (k.pt.x < t.core.x || k.pt.x >= t.core.x + t.core.width || k.pt.y < t.core.y ||
+          k.pt.y >= t.core.y + t.core.height)
+        continue;
+      kps.push_back(k);
+      rows.push_back(part.descriptors.row(static_cast<int>(i)));
+    }
+  }
+  std::vector<int> order(kps.size());
+  for (size_t i = 0; i < order.size(); ++i) order[i] = static_cast<int>(i);
+  auto key = [&](int i) { return std::make_tuple(kps[i].pt.x, kps[i].pt.y, kps[i].size, kps[i].angle); };
+  std::stable_sort(order.begin(), order.end(), [&](int a, int b) { return key(a) < key(b); });
+  SiftResult r;
+  r.descriptors.create(static_cast<int>(order.size()), 128, CV_32F);
+  for (size_t i = 0; i < order.size(); ++i) {
+    r.keypoints.push_back(kps[order[i]]);
+    rows.row(order[i]).copyTo(r.descriptors.row(static_cast<int>(i)));
+  }
+  return r;
+}
+
+// Detection at falling contrast thresholds until the keypoints are many and spread enough (SiftOptions).
+SiftResult DetectAdaptive(const cv::Mat& grey, const std::vector<SiftTile>& tiles, const SiftOptions& options,
+                          double* threshold_used) {
+  double threshold = options.contrast_threshold;
+  for (;;) {
+    SiftResult r =
+        tiles.size() > 1 ? DetectTiled(grey, tiles, options, threshold) : DetectWhole(grey, options, threshold);
+    bool done = options.min_features <= 0 || threshold * 0.5 < options.min_contrast_threshold;
+    if (!done) {
+      std::vector<Keypoint> where(r.keypoints.size());
+      for (size_t i = 0; i < r.keypoints.size(); ++i) where[i] = {r.keypoints[i].pt.x, r.keypoints[i].pt.y, 0, 0};
+      done = static_cast<int>(r.keypoints.size()) >= options.min_features &&
+             KeypointCoverage(where, grey.cols, grey.rows) >= options.min_coverage;
+    }
+    if (done) {
+      *threshold_used = threshold;
+      return r;
+    }
+    threshold *= 0.5;
+  }
+}
+
+// OpenCV's cap keeps ties at the threshold response: enforce it exactly (strongest first, stable).
+void KeepStrongest(int max_features, SiftResult* r) {
+  auto& kps = r->keypoints;
+  if (max_features <= 0 || static_cast<int>(kps.size()) <= max_features) return;
+  std::vector<int> order(kps.size());
+  for (size_t i = 0; i < order.size(); ++i) order[i] = static_cast<int>(i);
+  std::stable_sort(order.begin(), order.end(), [&](int a, int b) { return kps[a].response > kps[b].response; });
+  order.resize(max_features);
+  std::sort(order.begin(), order.end());
+  std::vector<cv::KeyPoint> kept;
+  cv::Mat kept_desc(static_cast<int>(order.size()), r->descriptors.cols, r->descriptors.type());
+  for (size_t i = 0; i < order.size(); ++i) {
+    kept.push_back(kps[order[i]]);
+    r->descriptors.row(order[i]).copyTo(kept_desc.row(static_cast<int>(i)));
+  }
+  kps.swap(kept);
+  r->descriptors = kept_desc;
+}
+
+Eigen::Matrix<uint8_t, 3, 1> ColourAt(const cv::Mat& image, int r, int c) {
+  if (image.channels() == 1) {
+    const uint8_t g = image.at<uint8_t>(r, c);
+    return {g, g, g};
+  }
+  if (image.channels() == 3) {
+    const auto& bgr = image.at<cv::Vec3b>(r, c);
+    return {bgr[2], bgr[1], bgr[0]};
+  }
+  const auto& bgra = image.at<cv::Vec4b>(r, c);
+  return {bgra[2], bgra[1], bgra[0]};
+}
+
+}  // namespace
+
+FeatureSet ExtractSift(const cv::Mat& image, const SiftOptions& options, double* contrast_threshold_used,
+                       const std::vector<SiftTile>& tiles) {
+  if (image.empty() || image.depth() != CV_8U) throw Error("features: empty or non-8-bit image");
+  FeatureSet out;
+  out.width = image.cols;
+  out.height = image.rows;
+  cv::Mat grey = ToGrey(image);
+  int width = image.cols, height = image.rows;
+  ExtractionSize(image.cols, image.rows, options.max_image_size, &width, &height);
+  if (width != image.cols || height != image.rows) {
+    const double scale = double(options.max_image_size) / std::max(image.cols, image.rows);
     cv::Mat small;
     cv::resize(grey, small, cv::Size(), scale, scale, cv::INTER_AREA);
     grey = small;
     // INTER_AREA may round the size; use the exact ratio per axis for coordinates below.
   }
   const double sx = double(grey.cols) / image.cols, sy = double(grey.rows) / image.rows;
+  for (const auto& t : tiles)
+    if (t.window.x < 0 || t.window.y < 0 || t.window.x + t.window.width > grey.cols ||
+        t.window.y + t.window.height > grey.rows)
+      throw Error("features: a SIFT tile lies outside the extraction image");
 
-  std::vector<cv::KeyPoint> kps;
-  cv::Mat desc;
   double threshold = options.contrast_threshold;
-  for (;;) {
-    auto sift =
-        cv::SIFT::create(options.max_features, options.octave_layers, threshold, options.edge_threshold, 1.6, CV_32F);
-    kps.clear();
-    desc = cv::Mat();
-    if (!options.upright) {
-      sift->detectAndCompute(grey, cv::noArray(), kps, desc);
-    } else {
-      sift->detect(grey, kps);
-      // One keypoint per location/scale with orientation 0 (OpenCV's detector duplicates a keypoint for each
-      // dominant orientation).
-      std::map<std::tuple<float, float, float>, cv::KeyPoint> unique;
-      for (auto k : kps) {
-        k.angle = 0;
-        auto key = std::make_tuple(k.pt.x, k.pt.y, k.size);
-        auto it = unique.find(key);
-        if (it == unique.end() || it->second.response < k.response) unique[key] = k;
-      }
-      kps.clear();
-      for (auto& [key, k] : unique) kps.push_back(k);
-      sift->compute(grey, kps, desc);
-    }
-    if (options.min_features <= 0 || threshold * 0.5 < options.min_contrast_threshold) break;
-    std::vector<Keypoint> where(kps.size());
-    for (size_t i = 0; i < kps.size(); ++i) where[i] = {kps[i].pt.x, kps[i].pt.y, 0, 0};
-    if (static_cast<int>(kps.size()) >= options.min_features &&
-        KeypointCoverage(where, grey.cols, grey.rows) >= options.min_coverage)
-      break;
-    threshold *= 0.5;
-  }
+  SiftResult found = DetectAdaptive(grey, tiles, options, &threshold);
   if (contrast_threshold_used) *contrast_threshold_used = threshold;
-  // OpenCV's cap keeps ties at the threshold response: enforce it exactly (strongest first, stable).
-  if (options.max_features > 0 && static_cast<int>(kps.size()) > options.max_features) {
-    std::vector<int> order(kps.size());
-    for (size_t i = 0; i < order.size(); ++i) order[i] = static_cast<int>(i);
-    std::stable_sort(order.begin(), order.end(), [&](int a, int b) { return kps[a].response > kps[b].response; });
-    order.resize(options.max_features);
-    std::sort(order.begin(), order.end());
-    std::vector<cv::KeyPoint> kept;
-    cv::Mat kept_desc(static_cast<int>(order.size()), desc.cols, desc.type());
-    for (size_t i = 0; i < order.size(); ++i) {
-      kept.push_back(kps[order[i]]);
-      desc.row(order[i]).copyTo(kept_desc.row(static_cast<int>(i)));
-    }
-    kps.swap(kept);
-    desc = kept_desc;
-  }
-  QuantiseDescriptors(desc, options.root_sift, &out.descriptors);
+  KeepStrongest(options.max_features, &found);
+  QuantiseDescriptors(found.descriptors, options.root_sift, &out.descriptors);
+  const auto& kps = found.keypoints;
   out.keypoints.resize(kps.size());
   out.colors.resize(kps.size());
   for (size_t i = 0; i < kps.size(); ++i) {
@@ -187,113 +264,9 @@ FeatureSet ExtractSift(const cv::Mat& image, const SiftOptions& options, double*
     o.orientation = static_cast<float>(k.angle * M_PI / 180.0);
     const int c = std::clamp(static_cast<int>(o.x), 0, image.cols - 1);
     const int r = std::clamp(static_cast<int>(o.y), 0, image.rows - 1);
-    if (image.channels() == 1) {
-      const uint8_t g = image.at<uint8_t>(r, c);
-      out.colors[i] = {g, g, g};
-    } else if (image.channels() == 3) {
-      const auto& bgr = image.at<cv::Vec3b>(r, c);
-      out.colors[i] = {bgr[2], bgr[1], bgr[0]};
-    } else {
-      const auto& bgra = image.at<cv::Vec4b>(r, c);
-      out.colors[i] = {bgra[2], bgra[1], bgra[0]};
-    }
+    out.colors[i] = ColourAt(image, r, c);
   }
   return out;
-}
-
-FeaturesStageStats RunFeaturesStage(const core::Workspace& ws, const SiftOptions& options, bool force) {
-  options.Check();
-  const auto start = std::chrono::steady_clock::now();
-  const fs::path frames_dir = ws.frames_dir(), features_dir = ws.features_dir();
-  const auto index = io::ReadFramesIndex(ws.frames_json());
-  core::EnsureDirectory(features_dir);
-  const size_t n = index.frames.size();
-  std::vector<size_t> counts(n, 0);
-  std::vector<int> skipped(n, 0), adapted(n, 0);
-  std::vector<double> thresholds(n, options.contrast_threshold);
-  std::vector<std::string> errors(n);
-
-  // Parallelism is over images; OpenCV's own parallel_for inside SIFT would oversubscribe the cores.
-  const int cv_threads = cv::getNumThreads();
-  cv::setNumThreads(1);
-  core::Progress progress("features", n);
-  tbb::parallel_for(size_t{0}, n, [&](size_t i) {
-    const auto& frame = index.frames[i];
-    const fs::path image_path = frames_dir / frame.name;
-    const fs::path out_path = FeaturePath(features_dir, frame.name);
-    try {
-      std::error_code ec;
-      if (!force && fs::exists(out_path, ec) &&
-          fs::last_write_time(out_path, ec) >= fs::last_write_time(image_path, ec) && !ec) {
-        const FeatureSet done = ReadFeatures(out_path);
-        counts[i] = done.keypoints.size();
-        if (done.contrast_threshold > 0) thresholds[i] = done.contrast_threshold;
-        adapted[i] = thresholds[i] < options.contrast_threshold;
-        skipped[i] = 1;
-      } else {
-        const cv::Mat image = cv::imread(image_path.string(), cv::IMREAD_COLOR);
-        if (image.empty()) throw Error(image_path.string() + ": cannot read image");
-        double used = options.contrast_threshold;
-        auto features = ExtractSift(image, options, &used);
-        adapted[i] = used < options.contrast_threshold;
-        thresholds[i] = used;
-        features.image_name = frame.name;
-        features.contrast_threshold = used;
-        counts[i] = features.keypoints.size();
-        WriteFeatures(features, out_path);
-      }
-    } catch (const std::exception& e) {
-      errors[i] = e.what();
-    }
-    progress.Add();
-  });
-  progress.Finish();
-  cv::setNumThreads(cv_threads);
-  for (const auto& e : errors)
-    if (!e.empty()) throw Error(e);
-
-  FeaturesStageStats stats;
-  stats.images = n;
-  stats.min_keypoints = n ? *std::min_element(counts.begin(), counts.end()) : 0;
-  stats.max_keypoints = n ? *std::max_element(counts.begin(), counts.end()) : 0;
-  for (size_t c : counts) stats.total_keypoints += c;
-  stats.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-  size_t num_skipped = 0;
-  nlohmann::json per_image = nlohmann::json::array();
-  for (size_t i = 0; i < n; ++i) {
-    num_skipped += skipped[i];
-    stats.adapted_images += adapted[i];
-    per_image.push_back({{"name", index.frames[i].name}, {"keypoints", counts[i]}});
-    if (adapted[i]) per_image.back()["contrast_threshold"] = thresholds[i];
-  }
-  // How many images an interrupted earlier run had done is logged, not written: the summary describes the features,
-  // which are the same whether or not the run was resumed.
-  if (num_skipped > 0) spdlog::info("features: {} of {} images were up to date from an earlier run", num_skipped, n);
-  nlohmann::json summary = {{"images", n},
-                            {"total_keypoints", stats.total_keypoints},
-                            {"min_keypoints", stats.min_keypoints},
-                            {"max_keypoints", stats.max_keypoints},
-                            {"adapted_contrast_images", stats.adapted_images},
-                            {"mean_keypoints", n ? double(stats.total_keypoints) / n : 0.0},
-                            {"seconds", stats.seconds},
-                            {"options",
-                             {{"max_features", options.max_features},
-                              {"max_image_size", options.max_image_size},
-                              {"contrast_threshold", options.contrast_threshold},
-                              {"edge_threshold", options.edge_threshold},
-                              {"root_sift", options.root_sift},
-                              {"upright", options.upright},
-                              {"min_features", options.min_features},
-                              {"min_coverage", options.min_coverage},
-                              {"min_contrast_threshold", options.min_contrast_threshold}}},
-                            {"per_image", per_image}};
-  core::WriteJson(features_dir / "features.json", summary);
-  spdlog::info("features: {} images, {} keypoints (min {}, max {}), {:.1f} s{}", n, stats.total_keypoints,
-               stats.min_keypoints, stats.max_keypoints, stats.seconds,
-               stats.adapted_images
-                   ? fmt::format("; contrast threshold lowered on {} weak images", stats.adapted_images)
-                   : std::string());
-  return stats;
 }
 
 }  // namespace fmv3d::features

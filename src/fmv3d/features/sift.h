@@ -12,6 +12,7 @@
 #include <vector>
 
 #include "fmv3d/core/workspace.h"
+#include "fmv3d/features/sift_memory.h"
 #include "fmv3d/features/types.h"
 
 namespace fmv3d::features {
@@ -30,6 +31,9 @@ struct SiftOptions {
   int min_features = 2000;
   double min_coverage = 0.5;
   double min_contrast_threshold = 0.0012;
+  // The stage's budget (`--max-memory`): images run in parallel only while their estimated SIFT working sets fit
+  // it, and an image whose own working set exceeds it is extracted in tiles (sift_memory.h).
+  double max_memory_mb = 2048;
   void Check() const;
 };
 
@@ -40,7 +44,11 @@ double KeypointCoverage(const std::vector<Keypoint>& keypoints, int width, int h
 // the full-size image. Colours are sampled from the image (grey replicated). Deterministic. Single-threaded
 // in OpenCV when called from the stage (parallelism is over images).
 // The contrast threshold finally used goes to `contrast_threshold_used` when given.
-FeatureSet ExtractSift(const cv::Mat& image, const SiftOptions& options, double* contrast_threshold_used = nullptr);
+// With more than one tile (PlanSiftTiles over the extraction image, i.e. after the max_image_size downscale), SIFT
+// runs on each tile's window and keeps the keypoints in its core; the contrast adaptation and the max_features cap
+// then apply to the whole image's keypoints as without tiles. With no tile or one, the image is extracted whole.
+FeatureSet ExtractSift(const cv::Mat& image, const SiftOptions& options, double* contrast_threshold_used = nullptr,
+                       const std::vector<SiftTile>& tiles = {});
 
 // Quantises a float SIFT descriptor row (OpenCV scale, ~0..255) to uint8 as COLMAP does: L2 (or RootSIFT)
 // normalised, times 512, clamped.
@@ -55,11 +63,15 @@ struct FeaturesStageStats {
   size_t images = 0, total_keypoints = 0, min_keypoints = 0, max_keypoints = 0;
   size_t adapted_images = 0;  // images whose contrast threshold was lowered
   double seconds = 0;
+  // Memory (sift_memory.h): the largest per-image estimate, how many images fit the budget at once, and what ran.
+  double max_image_bytes = 0, peak_bytes_in_flight = 0;
+  size_t workers = 0, peak_images_in_flight = 0, tiled_images = 0, max_tiles = 0;
 };
 
 // The `fmv3d features` stage: reads WS/frames/frames.json, writes WS/features/<stem>.feat for every frame
 // (parallel over images), and WS/features/features.json (counts, timing). Skips frames whose .feat is newer
-// than the image unless `force`. Throws fmv3d::Error for a missing workspace or an unreadable image.
+// than the image unless `force`. Images run in parallel within options.max_memory_mb (sift_memory.h); the
+// summary's `memory` block reports the plan. Throws fmv3d::Error for a missing workspace or an unreadable image.
 FeaturesStageStats RunFeaturesStage(const core::Workspace& workspace, const SiftOptions& options, bool force = false);
 
 }  // namespace fmv3d::features

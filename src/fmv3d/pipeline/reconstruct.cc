@@ -49,6 +49,7 @@ void ReconstructOptions::ApplyFastPreset() {
 
 void ReconstructOptions::SetMaxMemory(double mb) {
   if (!(mb > 0)) throw Error("reconstruct: --max-memory must be > 0 MB");
+  sift.max_memory_mb = mb;
   match.max_memory_mb = mb;
   dense.max_memory_mb = mb;
   texture.max_memory_mb = mb;
@@ -79,7 +80,13 @@ std::vector<Stage> ReconstructStages(const ReconstructOptions& o) {
                       return nlohmann::json{{"images", s.images},
                                             {"keypoints", s.total_keypoints},
                                             {"min_keypoints", s.min_keypoints},
-                                            {"max_keypoints", s.max_keypoints}};
+                                            {"max_keypoints", s.max_keypoints},
+                                            {"memory",
+                                             {{"max_memory_mb", o.sift.max_memory_mb},
+                                              {"estimated_image_mb", s.max_image_bytes / 1048576.0},
+                                              {"workers", s.workers},
+                                              {"tiled_images", s.tiled_images},
+                                              {"max_tiles", s.max_tiles}}}};
                     }});
   stages.push_back({"match", [ws] { return std::vector<fs::path>{ws.features_dir() / "features.json"}; },
                     features::MatchesSummaryPath(ws.matches_dir()),

@@ -46,9 +46,9 @@ struct ReconstructOptions {
   // stereo sources); Poisson one octree level coarser than the point density allows; texture colours from the same kind
   // of cover.
   void ApplyFastPreset();
-  // `--max-memory MB`: the budget of every stage that sizes its working window (matching's descriptor cache,
-  // dense's view cache and fusion window, texture's decoded frames); the others' peaks are measured in
-  // bench/results/rel8.md.
+  // `--max-memory MB`: the budget of every stage that sizes its working window (features' images in flight and
+  // tiles, matching's descriptor cache, dense's view cache and fusion window, texture's decoded frames); the others'
+  // peaks are measured in bench/results/rel8.md.
   void SetMaxMemory(double mb);
   // Throws fmv3d::Error naming the bad option (no inputs, missing file, stage options).
   void Check() const;
