@@ -5,7 +5,7 @@
 // level has about one node per octree cell that holds a point, and the coarser levels and the B-spline support
 // around each add a constant factor. So the model is linear in the points and in the occupied cells at the
 // depth:   bytes ≈ bytes_per_point × points + bytes_per_cell × occupied_cells(depth)
-// (constants measured in bench/results/scale11.md; the ~100 MiB every fmv3d process has is not counted). Going one
+// (constants measured in bench/results/scale11.md; the ~105 MiB every fmv3d process has is not counted). Going one
 // depth coarser divides the occupied cells of a surface by ~4, so lowering the depth is the stage's lever; the
 // point term is not reduced (the cloud is the dense stage's output, bounded there).
 #pragma once
@@ -17,9 +17,12 @@
 
 namespace fmv3d::surface {
 
+// Fitted on a 653k-point fused cloud (400-frame town orbit) at depths 7, 8, 9 (16k, 61k, 188k occupied cells;
+// 177, 225, 358 MiB above the process's base): 258 B per point and 1,103 B per cell, rounded up here so the
+// estimate stays above the measurement (by 4–8% there).
 struct PoissonMemoryModel {
-  double bytes_per_point = 400;  // cloud + Open3D copy + k-d tree + solver samples
-  double bytes_per_cell = 2000;  // octree nodes and their solver data per occupied finest cell
+  double bytes_per_point = 280;  // cloud + Open3D copy + k-d tree + solver samples
+  double bytes_per_cell = 1150;  // octree nodes and their solver data per occupied finest cell
 };
 
 // Cells of the depth-`depth` grid over Open3D's reconstruction cube (1.1 × the largest extent of `bounds`,
