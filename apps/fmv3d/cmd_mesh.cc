@@ -41,6 +41,10 @@ void Add(CLI::App& app) {
       ->capture_default_str();
   cmd->add_option("--crop-margin", p.crop_margin, "Crop box enlargement, fraction of the points' diagonal")
       ->capture_default_str();
+  cmd->add_option("--max-memory", p.max_memory_mb,
+                  "MB for Poisson's octree and the point arrays: the depth is lowered until the estimate fits "
+                  "(report/mesh.json \"memory\"; 0: no limit)")
+      ->capture_default_str();
   cmd->add_option("--faces", p.target_faces, "Decimate to about this many faces (0: keep all)")->capture_default_str();
   cmd->add_flag("!--no-normal-estimation", a->opt.estimate_missing_normals,
                 "Fail on a cloud without normals instead of estimating them");

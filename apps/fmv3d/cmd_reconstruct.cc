@@ -36,8 +36,8 @@ void Add(CLI::App& app) {
                 "~8x faster end to end; bench/RESULTS.md has its accuracy)");
   cmd->add_option("--max-memory", a->max_memory_mb,
                   "MB for the working set of the stages that choose a window: features' images in flight and tiles, "
-                  "matching's descriptors, dense's views and fusion maps, texture's decoded frames (the other stages' "
-                  "peaks: bench/RESULTS.md)")
+                  "matching's descriptors, dense's views and fusion maps, mesh's Poisson depth, texture's decoded "
+                  "frames (the other stages' peaks: bench/RESULTS.md)")
       ->capture_default_str();
   cmd->add_flag("--no-report", a->no_report, "Skip report/report.html and its pictures");
   cmd->add_option(

@@ -52,6 +52,7 @@ void ReconstructOptions::SetMaxMemory(double mb) {
   sift.max_memory_mb = mb;
   match.max_memory_mb = mb;
   dense.max_memory_mb = mb;
+  mesh.poisson.max_memory_mb = mb;
   texture.max_memory_mb = mb;
 }
 

@@ -47,8 +47,8 @@ struct ReconstructOptions {
   // of cover.
   void ApplyFastPreset();
   // `--max-memory MB`: the budget of every stage that sizes its working window (features' images in flight and
-  // tiles, matching's descriptor cache, dense's view cache and fusion window, texture's decoded frames); the others'
-  // peaks are measured in bench/results/rel8.md.
+  // tiles, matching's descriptor cache, dense's view cache and fusion window, mesh's Poisson depth, texture's decoded
+  // frames); the others' peaks are measured in bench/results/scale11.md.
   void SetMaxMemory(double mb);
   // Throws fmv3d::Error naming the bad option (no inputs, missing file, stage options).
   void Check() const;

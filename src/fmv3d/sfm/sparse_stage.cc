@@ -7,6 +7,7 @@
 #include <chrono>
 #include <cmath>
 #include <fstream>
+#include <functional>
 #include <set>
 
 #include "fmv3d/core/camera_json.h"
@@ -76,7 +77,9 @@ void LeaveOtherModels(const std::vector<uint32_t>& registered, int min_model_siz
 
 // Images outside the largest model retried against it (relocalise.h); those that register leave the other
 // models, whose shrunken remains are dropped below the mapper's minimum model size.
-nlohmann::json RelocaliseLeftOut(const MapperInput& input, const std::vector<features::FeatureSet>& feature_sets,
+// The feature sets (descriptors included) are read only when there are candidates: the mapper's peak holds none.
+nlohmann::json RelocaliseLeftOut(const MapperInput& input,
+                                 const std::function<const std::vector<features::FeatureSet>&()>& feature_sets,
                                  const SparseStageOptions& stage, MapperResult* result) {
   const auto& options = stage.relocalise;
   if (!options.enabled || result->models.empty()) return {{"enabled", options.enabled}};
@@ -85,12 +88,11 @@ nlohmann::json RelocaliseLeftOut(const MapperInput& input, const std::vector<fea
   std::vector<RelocaliseCandidate> candidates;
   std::map<uint32_t, core::Camera> cameras;
   for (const auto& [id, c] : input.cameras) cameras[id] = c.camera;
-  for (size_t i = 0; i < input.images.size(); ++i) {
-    const auto& im = input.images[i];
-    feats[im.id] = &feature_sets[i];
+  for (const auto& im : input.images)
     if (!model.images.count(im.id) && !im.keypoints.empty()) candidates.push_back({im.id, im.camera_id, im.name});
-  }
   if (candidates.empty()) return {{"enabled", true}, {"candidates", 0}};
+  const std::vector<features::FeatureSet>& sets = feature_sets();
+  for (size_t i = 0; i < input.images.size(); ++i) feats[input.images[i].id] = &sets[i];
   const RelocaliseStats st = RelocaliseImages(&model, candidates, feats, cameras, options.options);
   for (uint32_t id : st.registered) result->left_out.erase(id);
   for (const auto& [id, why] : st.still_failed)
@@ -191,14 +193,30 @@ void SparseStageOptions::Check() const {
 
 namespace {
 
-// What the sparse stage reads from the workspace: the mapper's input, the feature sets (kept for
-// relocalisation) and the operator's tie-point tracks.
+// What the sparse stage reads from the workspace: the mapper's input, the operator's tie-point tracks, and where
+// the feature sets are. The feature sets themselves (128 B of descriptor per keypoint, most of the input) are kept
+// only when the mapper's guided completion reads the descriptors; otherwise each is dropped once its keypoints are
+// copied, and relocalisation reads them again (ReadFeatureSets).
 struct SparseStageInput {
   MapperInput mapper;
-  std::vector<features::FeatureSet> feature_sets;  // per frame, in frames.json order
+  std::vector<features::FeatureSet> feature_sets;  // per frame, in frames.json order; empty unless kept
+  std::vector<fs::path> feature_paths;             // per frame; empty when the frame has no feature file
+  features::ManualMatches manual_matches;          // the tie points' appended keypoints (when manual)
+  std::string manual_source;
   std::vector<TieTrack> tie_tracks;
   bool manual = false;  // the operator's tie points are in use
 };
+
+// Every frame's feature set as the mapper saw it: the file's, with the operator's keypoints appended.
+std::vector<features::FeatureSet> ReadFeatureSets(const SparseStageInput& in) {
+  std::vector<features::FeatureSet> sets(in.feature_paths.size());
+  for (size_t i = 0; i < sets.size(); ++i)
+    if (!in.feature_paths[i].empty()) sets[i] = features::ReadFeatures(in.feature_paths[i]);
+  if (in.manual)
+    for (const auto& [i, ap] : in.manual_matches.appended)
+      features::AppendToFeatureSet(ap, &sets[i], in.manual_source + ": frame " + in.mapper.images[i].name);
+  return sets;
+}
 
 // The cameras of frames.json, with the options' focal prior (which counts as known) when one is given.
 std::map<uint32_t, MapperCamera> SparseCameras(const io::FramesIndex& index, const SparseStageOptions& options) {
@@ -234,8 +252,12 @@ void AddTiePoints(const features::ManualMatches& mm, double weight, const std::s
                   std::vector<size_t>* num_kp) {
   for (const auto& [i, ap] : mm.appended) {
     MapperImage& im = in->mapper.images[i];
-    features::FeatureSet& fs_ = in->feature_sets[i];
-    features::AppendToFeatureSet(ap, &fs_, source + ": frame " + im.name);
+    if (ap.first_index != im.keypoints.size())
+      throw Error(source + ": frame " + im.name + ": " + std::to_string(im.keypoints.size()) +
+                  " automatic keypoints, not " + std::to_string(ap.first_index) +
+                  " (stale matches/manual.json: run `fmv3d match` again)");
+    if (!in->feature_sets.empty())
+      features::AppendToFeatureSet(ap, &in->feature_sets[i], source + ": frame " + im.name);
     if (im.colors.size() == im.keypoints.size()) im.colors.insert(im.colors.end(), ap.colors.begin(), ap.colors.end());
     for (const auto& k : ap.keypoints) im.keypoints.emplace_back(k.x, k.y);
     (*num_kp)[i] = im.keypoints.size();
@@ -262,7 +284,9 @@ SparseStageInput ReadSparseStageInput(const core::Workspace& ws, const SparseSta
   SparseStageInput in;
   in.mapper.cameras = SparseCameras(index, options);
   std::vector<size_t> num_kp;
-  in.feature_sets.resize(index.frames.size());
+  const bool keep_sets = options.mapper.guided_completion;
+  if (keep_sets) in.feature_sets.resize(index.frames.size());
+  in.feature_paths.resize(index.frames.size());
   for (size_t i = 0; i < index.frames.size(); ++i) {
     const auto& fr = index.frames[i];
     MapperImage im;
@@ -271,21 +295,24 @@ SparseStageInput ReadSparseStageInput(const core::Workspace& ws, const SparseSta
     im.name = fr.name;
     const fs::path fp = features::FeaturePath(ws.features_dir(), fr.name);
     if (fs::exists(fp)) {
-      in.feature_sets[i] = features::ReadFeatures(fp);
-      const features::FeatureSet& fs_ = in.feature_sets[i];
+      in.feature_paths[i] = fp;
+      features::FeatureSet fs_ = features::ReadFeatures(fp);
       im.keypoints.reserve(fs_.keypoints.size());
       im.scales.reserve(fs_.keypoints.size());
       for (const auto& k : fs_.keypoints) im.keypoints.emplace_back(k.x, k.y), im.scales.push_back(k.scale);
       if (fs_.colors.size() == fs_.keypoints.size()) im.colors = fs_.colors;
+      if (keep_sets) in.feature_sets[i] = std::move(fs_);
     }
     num_kp.push_back(im.keypoints.size());
     in.mapper.images.push_back(std::move(im));
   }
   const fs::path manual_path = features::ManualMatchesPath(ws.matches_dir());
   in.manual = options.manual.enabled && fs::exists(manual_path);
-  if (in.manual)
-    AddTiePoints(features::ManualMatches::FromJson(core::ReadJson(manual_path), index), options.manual.options.weight,
-                 manual_path.string(), &in, &num_kp);
+  if (in.manual) {
+    in.manual_matches = features::ManualMatches::FromJson(core::ReadJson(manual_path), index);
+    in.manual_source = manual_path.string();
+    AddTiePoints(in.manual_matches, options.manual.options.weight, in.manual_source, &in, &num_kp);
+  }
   const fs::path matches_path = features::MatchesPath(ws.matches_dir());
   in.mapper.pairs = features::ReadMatches(matches_path);
   features::ValidateMatches(in.mapper.pairs, num_kp, matches_path.string());
@@ -429,7 +456,14 @@ nlohmann::json RunSparseStage(const core::Workspace& ws, const SparseStageOption
   const double load_seconds = std::chrono::duration<double>(Clock::now() - start).count();
 
   MapperResult result = RunIncrementalMapper(input, options.mapper);
-  const nlohmann::json relocalisation = RelocaliseLeftOut(input, in.feature_sets, options, &result);
+  std::vector<features::FeatureSet> reread;
+  auto feature_sets = [&]() -> const std::vector<features::FeatureSet>& {
+    if (!in.feature_sets.empty()) return in.feature_sets;
+    if (reread.empty()) reread = ReadFeatureSets(in);
+    return reread;
+  };
+  const nlohmann::json relocalisation = RelocaliseLeftOut(input, feature_sets, options, &result);
+  reread = {};
   nlohmann::json manual_report = {{"used", in.manual}};
   if (in.manual && !result.models.empty()) manual_report = RegisterTiePointFrames(in, options, &result);
 

@@ -61,6 +61,8 @@ void PoissonOptions::Check() const {
   if (!(crop_margin >= 0)) throw Error("poisson: crop margin must be >= 0");
   if (target_faces < 0) throw Error("poisson: target face count must be >= 0");
   if (threads < 0) throw Error("poisson: threads must be >= 0");
+  if (!(memory.bytes_per_point >= 0 && memory.bytes_per_cell >= 0))
+    throw Error("poisson: memory model bytes must be >= 0");
 }
 
 namespace {
@@ -292,6 +294,30 @@ ColoredMesh ToColoredMesh(const O3dMesh& mesh, const open3d::geometry::KDTreeFla
   return out;
 }
 
+// The wanted depth, lowered while the memory model exceeds the budget (poisson_budget.h); st["memory"] says so.
+int DepthWithinBudget(int wanted, size_t points, const open3d::geometry::PointCloud& pc, const Eigen::AlignedBox3d& box,
+                      const PoissonOptions& options, nlohmann::json* st) {
+  const PoissonDepthChoice c = ChoosePoissonDepth(
+      wanted, std::min(wanted, options.min_depth), points, options.max_memory_mb,
+      [&](int d) { return OccupiedCells(pc.points_, box, d); }, options.memory);
+  (*st)["memory"] = {{"max_memory_mb", options.max_memory_mb},
+                     {"depth_wanted", wanted},
+                     {"depth", c.depth},
+                     {"lowered_by_budget", c.lowered},
+                     {"over_budget", c.over_budget},
+                     {"estimated_mb", c.estimated_mb},
+                     {"occupied_cells", c.occupied_cells},
+                     {"bytes_per_point", options.memory.bytes_per_point},
+                     {"bytes_per_cell", options.memory.bytes_per_cell}};
+  if (c.lowered)
+    spdlog::warn("poisson: octree depth {} → {} to fit --max-memory {} MB (estimate {:.0f} MB)", wanted, c.depth,
+                 options.max_memory_mb, c.estimated_mb);
+  if (c.over_budget)
+    spdlog::warn("poisson: {} points at depth {} need an estimated {:.0f} MB, over --max-memory {} MB", points, c.depth,
+                 c.estimated_mb, options.max_memory_mb);
+  return c.depth;
+}
+
 }  // namespace
 
 ColoredMesh ReconstructPoisson(const io::OrientedPointCloud& cloud, const PoissonOptions& options,
@@ -310,7 +336,8 @@ ColoredMesh ReconstructPoisson(const io::OrientedPointCloud& cloud, const Poisso
   const double spacing = SpacingFromTree(tree, pc.points_, 20000);
   Eigen::AlignedBox3d kept_box;  // Open3D's cube is 1.1 × the largest extent of the points it is given
   for (const auto& p : pc.points_) kept_box.extend(p);
-  const int depth = options.depth > 0 ? options.depth : AutomaticDepth(kept_box, spacing, options);
+  const int wanted = options.depth > 0 ? options.depth : AutomaticDepth(kept_box, spacing, options);
+  const int depth = DepthWithinBudget(wanted, cloud.size(), pc, kept_box, options, &st);
   st["points"] = cloud.size();
   st["point_spacing"] = spacing;
   st["depth"] = depth;
