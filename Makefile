@@ -45,7 +45,7 @@ test-release: build
 # Unit tests under AddressSanitizer + UndefinedBehaviorSanitizer (the long end-to-end flights and the browser tests are
 # skipped, and test_e2e is not built). -O1, line tables only (-g1) and the unity build keep the build and the run
 # within CI's time; stack traces still name file and line. GCC, as the product: clang compiles it ~30% faster, but
-# evaluates function arguments in the other order, so tests that draw noise inside a call see other draws and 7
+# evaluates function arguments in the other order, so tests that draw noise inside a call see other draws and 10
 # statistical bounds fail (bench/results/ci11.md).
 $(ASAN_BUILD)/build.ninja: | deps
 	cmake -S . -B $(ASAN_BUILD) -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo -DFMV3D_SANITIZE=ON \
