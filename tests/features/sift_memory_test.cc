@@ -33,6 +33,7 @@ TEST(SiftMemory, GateNeverHoldsMoreThanTheBudget) {
   std::atomic<int> holders{0}, served{0}, violations{0};
   std::atomic<long long> in_flight{0};
   std::vector<std::thread> threads;
+  threads.reserve(6);
   for (int t = 0; t < 6; ++t)
     threads.emplace_back([&, t] {
       std::mt19937 rng(t);
@@ -78,7 +79,7 @@ TEST(SiftMemory, TilesPartitionTheImageAndFitTheBudget) {
   const TilingLimits limits;
   const int w = 3200, h = 2400;
   bool fits = false;
-  const auto whole = PlanSiftTiles(w, h, SiftWindowBytes(w * h) + 10, 10, limits, &fits);
+  const auto whole = PlanSiftTiles(w, h, SiftWindowBytes(static_cast<long long>(w) * h) + 10, 10, limits, &fits);
   ASSERT_EQ(whole.size(), 1u);
   EXPECT_TRUE(fits);
   EXPECT_EQ(whole[0].window, (PixelRect{0, 0, w, h}));
@@ -132,7 +133,7 @@ TEST(SiftMemory, TiledSiftAgreesWithWholeImage) {
   SiftOptions o;
   o.max_features = 4000;
   const TilingLimits limits;
-  const auto tiles = PlanSiftTiles(1600, 1200, SiftWindowBytes(1600 * 1200) / 2.5, 0, limits);
+  const auto tiles = PlanSiftTiles(1600, 1200, SiftWindowBytes(1600LL * 1200) / 2.5, 0, limits);
   ASSERT_GE(tiles.size(), 4u);
   const FeatureSet whole = ExtractSift(img, o);
   const FeatureSet tiled = ExtractSift(img, o, nullptr, tiles);

@@ -54,6 +54,7 @@ Descriptors DescribeAt(const cv::Mat& image, const std::vector<Keypoint>& keypoi
     cv::cvtColor(image, grey, cv::COLOR_BGR2GRAY);
   // The inverse of ExtractSift's conversion (OpenCV's centres at integers and its 0.25 px offset).
   std::vector<cv::KeyPoint> kps;
+  kps.reserve(keypoints.size());
   for (const auto& k : keypoints)
     kps.emplace_back(cv::Point2f(k.x - 0.25f, k.y - 0.25f), std::max(2.0f, 2 * k.scale), 0.0f);
   cv::Mat desc;

@@ -37,8 +37,8 @@ class PointGrid {
 
  private:
   Eigen::Vector3i Cell(const Eigen::Vector3d& p) const {
-    return Eigen::Vector3i(static_cast<int>(std::floor(p.x() / cell_)), static_cast<int>(std::floor(p.y() / cell_)),
-                           static_cast<int>(std::floor(p.z() / cell_)));
+    return {static_cast<int>(std::floor(p.x() / cell_)), static_cast<int>(std::floor(p.y() / cell_)),
+            static_cast<int>(std::floor(p.z() / cell_))};
   }
   static uint64_t Key(const Eigen::Vector3i& c) {
     return (static_cast<uint64_t>(c.x() & 0x1FFFFF) << 42) | (static_cast<uint64_t>(c.y() & 0x1FFFFF) << 21) |
@@ -51,7 +51,7 @@ class PointGrid {
 
 double Quantile(std::vector<double> v, double q) {
   if (v.empty()) return 0;
-  const size_t k = std::min(v.size() - 1, static_cast<size_t>(q * static_cast<double>(v.size() - 1) + 0.5));
+  const size_t k = std::min(v.size() - 1, static_cast<size_t>(std::lround(q * static_cast<double>(v.size() - 1))));
   std::nth_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(k), v.end());
   return v[k];
 }

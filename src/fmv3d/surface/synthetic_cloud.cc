@@ -31,7 +31,7 @@ SyntheticCloud SampleOrientedCloud(const io::TexturedMesh& truth, const core::Re
   std::vector<Eigen::Vector3i> tris;
   for (const auto& f : truth.faces) {
     Eigen::AlignedBox3d box;
-    for (int k = 0; k < 3; ++k) box.extend(truth.vertices[f.v[k]]);
+    for (const int v : f.v) box.extend(truth.vertices[v]);
     if (options.region.isEmpty() || options.region.intersects(box)) tris.emplace_back(f.v[0], f.v[1], f.v[2]);
   }
   if (tris.empty()) throw Error("synthetic cloud: no surface inside the region");
