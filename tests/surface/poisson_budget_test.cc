@@ -48,6 +48,22 @@ TEST(PoissonBudget, EstimateIsLinear) {
   EXPECT_DOUBLE_EQ(EstimatePoissonBytes(20, 6, m), 2 * EstimatePoissonBytes(10, 3, m));
 }
 
+// The default constants are a bound: at or above every mesh-stage peak measured (above the process's base) on the
+// two fitted clouds, bench/results/scale11.md and mem12.md: {points, occupied cells, MiB}.
+TEST(PoissonBudget, DefaultModelCoversTheMeasuredRuns) {
+  struct Run {
+    size_t points, cells;
+    double mib;
+  };
+  const Run runs[] = {{652935, 16271, 177.4},  {652935, 60684, 225.1},  {652935, 188005, 358.1},
+                      {1042315, 16068, 280.9}, {1042315, 65876, 360.7}, {1042315, 274070, 642.7}};
+  for (const Run& r : runs) {
+    const double estimate_mib = EstimatePoissonBytes(r.points, r.cells, PoissonMemoryModel{}) / 1048576.0;
+    EXPECT_GE(estimate_mib, r.mib) << r.points << " points, " << r.cells << " cells";
+    EXPECT_LE(estimate_mib, 1.25 * r.mib) << r.points << " points, " << r.cells << " cells";
+  }
+}
+
 TEST(PoissonBudget, LowersTheDepthUntilTheEstimateFits) {
   const PoissonMemoryModel m{100, 1000};
   std::vector<int> asked;

@@ -17,12 +17,14 @@
 
 namespace fmv3d::surface {
 
-// Fitted on a 653k-point fused cloud (400-frame town orbit) at depths 7, 8, 9 (16k, 61k, 188k occupied cells;
-// 177, 225, 358 MiB above the process's base): 258 B per point and 1,103 B per cell, rounded up here so the
-// estimate stays above the measurement (by 4–8% there).
+// Fitted on two fused clouds at depths 7, 8, 9 (bench/results/mem12.md): 653k points (400-frame town orbit;
+// 16k, 61k, 188k occupied cells; 177, 225, 358 MiB above the process's base) and 1.04M points (2,000-frame town
+// grid; 16k, 66k, 274k cells; 281, 361, 643 MiB). The cell cost differs between them (≈ 1,100 B vs 1,400–1,700 B
+// per cell), so the constants are the smallest that stay at or above all six measurements (0–20% above them),
+// not a least-squares fit: the estimate is a bound.
 struct PoissonMemoryModel {
-  double bytes_per_point = 280;  // cloud + Open3D copy + k-d tree + solver samples
-  double bytes_per_cell = 1150;  // octree nodes and their solver data per occupied finest cell
+  double bytes_per_point = 300;  // cloud + Open3D copy + k-d tree + solver samples
+  double bytes_per_cell = 1350;  // octree nodes and their solver data per occupied finest cell
 };
 
 // Cells of the depth-`depth` grid over Open3D's reconstruction cube (1.1 × the largest extent of `bounds`,
