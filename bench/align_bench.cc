@@ -58,7 +58,7 @@ void BM_ScaledIcp(benchmark::State& state) {
   std::mt19937_64 rng(1);
   std::normal_distribution<double> g(0, 0.005);
   io::OrientedPointCloud b;
-  for (const auto& p : a.positions) b.positions.push_back(truth.Apply(p) + Eigen::Vector3d(g(rng), g(rng), g(rng)));
+  for (const auto& p : a.positions) b.positions.push_back(truth.Apply(p) + Eigen::Vector3d{g(rng), g(rng), g(rng)});
   core::Sim3 off;
   off.s = 1.02;
   off.q = Eigen::AngleAxisd(2 * M_PI / 180, Eigen::Vector3d::UnitZ());

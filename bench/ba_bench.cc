@@ -33,12 +33,12 @@ core::Reconstruction Perturbed(const core::Reconstruction& in) {
   for (const auto& [id, im] : rec.images) box.extend(im.pose.Centre());
   const double s = box.diagonal().norm();
   for (auto& [id, im] : rec.images) {
-    const Eigen::Vector3d w(n(rng), n(rng), n(rng));
+    const Eigen::Vector3d w{n(rng), n(rng), n(rng)};
     im.pose.q = (Eigen::Quaterniond(Eigen::AngleAxisd(1e-3 * w.norm(), w.normalized())) * im.pose.q).normalized();
-    im.pose.t += 1e-3 * s * Eigen::Vector3d(n(rng), n(rng), n(rng));
+    im.pose.t += 1e-3 * s * Eigen::Vector3d{n(rng), n(rng), n(rng)};
   }
   const double px = 1.0 / rec.cameras.begin()->second.f;
-  for (auto& [pid, p] : rec.points) p.xyz += 0.2 * px * p.xyz.norm() * Eigen::Vector3d(n(rng), n(rng), n(rng));
+  for (auto& [pid, p] : rec.points) p.xyz += 0.2 * px * p.xyz.norm() * Eigen::Vector3d{n(rng), n(rng), n(rng)};
   return rec;
 }
 

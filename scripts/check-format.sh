@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # Fails when a tracked C++ file differs from .clang-format's style, listing the files (CI runs it through
-# `make test`). `scripts/check-format.sh --fix` rewrites them in place instead.
+# `make test`), and when a call draws twice from a random engine in its arguments (scripts/check-draw-order.py).
+# `scripts/check-format.sh --fix` rewrites the format in place instead.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 command -v clang-format >/dev/null || { echo "check-format: clang-format is missing (scripts/install-deps.sh installs it)" >&2; exit 1; }
@@ -20,3 +21,5 @@ if [[ ${#bad[@]} -gt 0 ]]; then
   exit 1
 fi
 echo "check-format: ${#files[@]} files follow .clang-format"
+# Random draws in a defined order (docs/architecture.md): the sanitizer build's compiler must see the product's noise.
+scripts/check-draw-order.py "${files[@]}"

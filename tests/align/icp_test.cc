@@ -46,8 +46,8 @@ core::Sim3 RandomSim3(std::mt19937_64& rng) {
   std::normal_distribution<double> g(0, 1);
   core::Sim3 s;
   s.s = std::exp(std::log(0.2) + u(rng) * (std::log(5.0) - std::log(0.2)));  // log-uniform in [0.2, 5]
-  s.q = Eigen::Quaterniond(g(rng), g(rng), g(rng), g(rng)).normalized();     // uniform on SO(3)
-  s.t = Eigen::Vector3d(g(rng), g(rng), g(rng)) * 100;
+  s.q = Eigen::Quaterniond{g(rng), g(rng), g(rng), g(rng)}.normalized();     // uniform on SO(3)
+  s.t = Eigen::Vector3d{g(rng), g(rng), g(rng)} * 100;
   return s;
 }
 
@@ -63,7 +63,7 @@ io::OrientedPointCloud Apply(const core::Sim3& s, const io::OrientedPointCloud& 
   std::mt19937_64 rng(seed);
   std::normal_distribution<double> g(0, noise);
   io::OrientedPointCloud out;
-  for (const auto& p : in.positions) out.positions.push_back(s.Apply(p) + Eigen::Vector3d(g(rng), g(rng), g(rng)));
+  for (const auto& p : in.positions) out.positions.push_back(s.Apply(p) + Eigen::Vector3d{g(rng), g(rng), g(rng)});
   return out;  // no normals: the source's are estimated by PCA, as for a raw scan
 }
 
@@ -108,7 +108,7 @@ TEST(ScaledIcp, PartialOverlapAndOutliersAreTrimmed) {
   std::uniform_real_distribution<double> u(0, 1);
   const size_t outliers = b.size() / 10;
   for (size_t i = 0; i < outliers; ++i)
-    b.positions.push_back(box.min() + box.diagonal().cwiseProduct(Eigen::Vector3d(u(rng), u(rng), u(rng))));
+    b.positions.push_back(box.min() + box.diagonal().cwiseProduct(Eigen::Vector3d{u(rng), u(rng), u(rng)}));
   // Start 5° and 5% off the truth.
   core::Sim3 perturb;
   perturb.s = 1.05;

@@ -110,7 +110,7 @@ TEST(Chessboard, SyntheticViewsRecoverKnownIntrinsics) {
                                Eigen::AngleAxisd(tilt(rng), Eigen::Vector3d::UnitX()) *
                                Eigen::AngleAxisd(tilt(rng), Eigen::Vector3d::UnitY()))
                                   .toRotationMatrix();
-    const Eigen::Vector3d t = Eigen::Vector3d(shift(rng), shift(rng), dist(rng)) - R * centre;
+    const Eigen::Vector3d t = Eigen::Vector3d{shift(rng), shift(rng), dist(rng)} - R * centre;
     const cv::Mat img = renderer.Render(R, t, 100 + k);
     BoardDetection d = DetectChessboard(img, board, "view" + std::to_string(k));
     if (!d.found) continue;  // a view that leaves the image

@@ -34,7 +34,7 @@ TEST(Camera, ProjectionAgreesWithOpenCV) {
     std::vector<cv::Point3d> pts;
     std::vector<Eigen::Vector3d> eig;
     for (int i = 0; i < 50; ++i) {
-      Eigen::Vector3d X(U(rng) * 5, U(rng) * 3, 8 + 4 * U(rng));
+      Eigen::Vector3d X{U(rng) * 5, U(rng) * 3, 8 + 4 * U(rng)};
       pts.emplace_back(X.x(), X.y(), X.z());
       eig.push_back(X);
     }

@@ -153,7 +153,7 @@ TEST(SiftMatch, KeypointsHaveNoCommonOffset) {
     std::vector<Eigen::Vector2d> blobs;
     const int step = static_cast<int>(9 * sigma), border = static_cast<int>(5 * sigma);
     for (int y = border; y < img.rows - border; y += step)
-      for (int x = border; x < img.cols - border; x += step) blobs.emplace_back(x + frac(rng), y + frac(rng));
+      for (int x = border; x < img.cols - border; x += step) blobs.push_back({x + frac(rng), y + frac(rng)});
     for (int r = 0; r < img.rows; ++r)
       for (int c = 0; c < img.cols; ++c) {
         double v = 60;

@@ -16,6 +16,7 @@
 #include "fmv3d/geo/georef_gcp.h"
 #include "fmv3d/sfm/bundle_adjustment.h"
 #include "fmv3d/sfm/synthetic_correspondences.h"
+#include "random_draw.h"
 
 namespace fmv3d::geo {
 namespace {
@@ -91,7 +92,7 @@ std::vector<GroundControlPoint> Click(const Flight& f, double sigma, uint64_t se
       const core::Camera& cam = f.truth.cameras.at(im.camera_id);
       const Eigen::Vector3d xc = im.pose.Transform(X);
       if (xc.z() <= 0) continue;
-      const Eigen::Vector2d p = cam.Project(xc) + Eigen::Vector2d(noise(rng), noise(rng));
+      const Eigen::Vector2d p = cam.Project(xc) + test::DrawLastFirst<2>(noise, rng);
       if (p.x() < 0 || p.y() < 0 || p.x() > cam.width || p.y() > cam.height) continue;
       g.observations.push_back({im.name, p.x(), p.y()});
     }

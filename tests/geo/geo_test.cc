@@ -30,6 +30,7 @@
 #include "fmv3d/synth/telemetry.h"
 #include "fmv3d/telemetry/attitude.h"
 #include "fmv3d/telemetry/klv_st0601_writer.h"
+#include "random_draw.h"
 #include "test_util.h"
 
 namespace fmv3d::geo {
@@ -168,7 +169,7 @@ void MakeGeorefCase(GeorefCase* g, int n, double noise, bool straight, int outli
     io::FrameRecord f;
     f.name = img.name;
     f.frame_index = k;
-    Eigen::Vector3d noisy = c + noise * Eigen::Vector3d(N(rng), N(rng), N(rng));
+    Eigen::Vector3d noisy = c + noise * test::DrawLastFirst<3>(N, rng);
     if (k == outlier) noisy += Eigen::Vector3d(150, -80, 40);
     if (10 * k >= 7 * n) noisy += Eigen::Vector3d(bend, 0, 0);  // the model's last 30% is not where the flight was
     const GeoPoint p = frame.ToGeodetic(noisy);
@@ -192,7 +193,7 @@ void MakeGeorefCase(GeorefCase* g, int n, double noise, bool straight, int outli
     }
     if (frame_centre_noise >= 0) {
       std::normal_distribution<double> Nf(0, frame_centre_noise);
-      const Eigen::Vector3d fc = look_at + Eigen::Vector3d(Nf(rng_att), Nf(rng_att), Nf(rng_att)) + frame_centre_offset;
+      const Eigen::Vector3d fc = look_at + test::DrawLastFirst<3>(Nf, rng_att) + frame_centre_offset;
       const GeoPoint q = frame.ToGeodetic(fc);
       f.telemetry->frame_center_latitude = q.lat;
       f.telemetry->frame_center_longitude = q.lon;
@@ -284,7 +285,7 @@ void ObserveAndBend(GeorefCase* g, int n, double look_at_spread, double bend_m =
       const core::Pose truth = core::Pose::LookAt(g->true_centres[id - 1], CaseLookAt(id - 1, look_at_spread));
       const Eigen::Vector3d xc = truth.Transform(X);
       if (xc.z() <= 0) continue;
-      const Eigen::Vector2d uv = rec.cameras.at(1).Project(xc) + Eigen::Vector2d(N(rng), N(rng));
+      const Eigen::Vector2d uv = rec.cameras.at(1).Project(xc) + test::DrawLastFirst<2>(N, rng);
       if (!rec.cameras.at(1).InImage(uv, 2)) continue;
       pt.track.push_back({static_cast<uint32_t>(id), static_cast<uint32_t>(img.points2d.size())});
       img.points2d.push_back(uv);

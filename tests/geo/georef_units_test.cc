@@ -50,9 +50,9 @@ TEST(RollLevelling, StraightTrackLevelledFromTheGroundExactly) {
   for (int k = 0; k < 20; ++k) dst.emplace_back(-300 + 30.0 * k, -150, 120), src.push_back(inv.Apply(dst.back()));
   std::mt19937_64 rng(1);
   std::uniform_real_distribution<double> u(-200, 200);
-  for (int i = 0; i < 300; ++i) ground.push_back(inv.Apply(Eigen::Vector3d(u(rng), u(rng), 0)));
+  for (int i = 0; i < 300; ++i) ground.push_back(inv.Apply(Eigen::Vector3d{u(rng), u(rng), 0}));
   // 25% of the points on walls: the plane with the most points is still the ground.
-  for (int i = 0; i < 100; ++i) ground.push_back(inv.Apply(Eigen::Vector3d(50, u(rng), 5 + std::abs(u(rng)) / 10)));
+  for (int i = 0; i < 100; ++i) ground.push_back(inv.Apply(Eigen::Vector3d{50, u(rng), 5 + std::abs(u(rng)) / 10}));
   const core::Sim3 rolled = TurnAbout(truth, Eigen::Vector3d::UnitX(), Eigen::Vector3d(0, -150, 120), 7 * kDeg);
   const RollLevelling r = LevelRollFromGround(rolled, src, dst, 0.01, ground);
   EXPECT_EQ(r.source, RollSource::kGroundPlane);

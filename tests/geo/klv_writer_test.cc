@@ -120,7 +120,7 @@ TEST(KlvWriter, AttitudeSplitReproducesTheCameraRotation) {
   std::mt19937 rng(7);
   std::uniform_real_distribution<double> u(-1, 1);
   for (int i = 0; i < 200; ++i) {
-    const Eigen::Matrix3d R = Eigen::Quaterniond(u(rng), u(rng), u(rng), u(rng)).normalized().toRotationMatrix();
+    const Eigen::Matrix3d R = Eigen::Quaterniond{u(rng), u(rng), u(rng), u(rng)}.normalized().toRotationMatrix();
     const double heading = 180 * u(rng) + 180, pitch = 20 * u(rng), roll = 30 * u(rng);
     const auto a = telemetry::St0601FromCameraToEnu(R, heading, pitch, roll);
     EXPECT_TRUE((telemetry::CameraToEnuFromSt0601(a) - R).norm() < 1e-9) << i;

@@ -16,6 +16,7 @@
 #include "fmv3d/io/colmap_model.h"
 #include "fmv3d/io/frames_index.h"
 #include "fmv3d/telemetry/telemetry.h"
+#include "random_draw.h"
 #include "test_util.h"
 
 namespace fmv3d::geo {
@@ -110,7 +111,7 @@ TEST(Georef, EveryTelemetryPacketAgainstTheTrajectory) {
   std::mt19937_64 rng(11);
   std::normal_distribution<double> N(0, 1);
   auto sample = [&](double t) {
-    const GeoPoint p = frame.ToGeodetic(Orbit(t) + 3.0 * Eigen::Vector3d(N(rng), N(rng), N(rng)));
+    const GeoPoint p = frame.ToGeodetic(Orbit(t) + 3.0 * test::DrawLastFirst<3>(N, rng));
     telemetry::TelemetrySample s;
     s.time = t;
     s.source = "ST0601";

@@ -28,7 +28,7 @@ TEST(MeshDistance, MatchesAnalyticCubeDistanceAndSign) {
   std::mt19937 rng(3);
   std::uniform_real_distribution<double> u(-1.0, 2.0);
   for (int i = 0; i < 2000; ++i) {
-    const Eigen::Vector3d p(u(rng), u(rng), u(rng));
+    const Eigen::Vector3d p{u(rng), u(rng), u(rng)};
     const ClosestPoint c = cube.Closest(p);
     ASSERT_NEAR(c.distance, CubeDistance(p), 1e-12) << p.transpose();
     const bool inside = (p.array() > 0).all() && (p.array() < 1).all();

@@ -24,7 +24,7 @@ std::vector<Eigen::Vector3d> Cloud(int n, uint64_t seed) {
   std::mt19937_64 rng(seed);
   std::normal_distribution<double> g(0, 10);
   std::vector<Eigen::Vector3d> p;
-  for (int i = 0; i < n; ++i) p.emplace_back(g(rng), g(rng), g(rng));
+  for (int i = 0; i < n; ++i) p.push_back({g(rng), g(rng), g(rng)});
   return p;
 }
 
@@ -192,7 +192,7 @@ TEST(Similarity, LMedSSigmaFromGaussianNoise) {
   std::mt19937_64 rng(9);
   std::normal_distribution<double> g(0, 0.5);
   std::vector<Eigen::Vector3d> b;
-  for (const auto& x : a) b.push_back(t.Apply(x) + Eigen::Vector3d(g(rng), g(rng), g(rng)));
+  for (const auto& x : a) b.push_back(t.Apply(x) + Eigen::Vector3d{g(rng), g(rng), g(rng)});
   const SimilarityLMedS r = EstimateSimilarityLMedS(a, b, {});
   EXPECT_NEAR(r.sigma, 0.5, 0.05);
   EXPECT_NEAR(r.sim.s, t.s, 0.01);

@@ -31,11 +31,13 @@ cv::Mat RandomTexture(int width, int height, unsigned seed) {
   acc.convertTo(img, CV_8UC3, 255.0 / 1.35, -40);
   std::uniform_int_distribution<int> ux(0, width - 1), uy(0, height - 1), ur(4, 40), uc(0, 255);
   for (int i = 0; i < width * height / 1500; ++i) {
-    const cv::Scalar col(uc(rng), uc(rng), uc(rng));
+    const int b = uc(rng), g = uc(rng), r = uc(rng);  // one draw per declarator: in order on every compiler
+    const cv::Scalar col(b, g, r);
+    const int x = ux(rng), y = uy(rng), size = ur(rng);
     if (i % 2)
-      cv::rectangle(img, cv::Rect(ux(rng), uy(rng), ur(rng), ur(rng)), col, cv::FILLED);
+      cv::rectangle(img, cv::Rect(x, y, size, ur(rng)), col, cv::FILLED);
     else
-      cv::circle(img, cv::Point(ux(rng), uy(rng)), ur(rng) / 2, col, cv::FILLED, cv::LINE_AA);
+      cv::circle(img, cv::Point(x, y), size / 2, col, cv::FILLED, cv::LINE_AA);
   }
   return img;
 }

@@ -28,9 +28,9 @@ core::Reconstruction RandomModel() {
     im.id = i;
     im.camera_id = 1 + i % 2;
     im.name = "flight-00000" + std::to_string(i) + ".png";
-    im.pose = core::Pose::LookAt(Eigen::Vector3d(U(rng), U(rng), 10 + U(rng)) * 10, Eigen::Vector3d::Zero());
+    im.pose = core::Pose::LookAt(Eigen::Vector3d{U(rng), U(rng), 10 + U(rng)} * 10, Eigen::Vector3d::Zero());
     for (int k = 0; k < 7; ++k) {
-      im.points2d.emplace_back(640 + 600 * U(rng), 360 + 300 * U(rng));
+      im.points2d.push_back({640 + 600 * U(rng), 360 + 300 * U(rng)});
       im.point3d_ids.push_back(core::kNoPoint3D);
     }
     rec.images[i] = im;
@@ -38,7 +38,7 @@ core::Reconstruction RandomModel() {
   for (uint64_t p = 1; p <= 7; ++p) {
     core::Point3D pt;
     pt.id = p;
-    pt.xyz = Eigen::Vector3d(U(rng), U(rng), U(rng)) * 50;
+    pt.xyz = Eigen::Vector3d{U(rng), U(rng), U(rng)} * 50;
     pt.rgb << p * 30, 255 - p, 7;
     pt.error = 0.1 * p;
     for (uint32_t i = 1; i <= 5; i += 2) {

@@ -62,7 +62,7 @@ std::vector<FocalScanPair> OrbitPairs(const Eigen::Vector3d& target, double step
   std::normal_distribution<double> noise(0, 0.5);
   std::vector<Eigen::Vector3d> points;
   points.reserve(600);
-  for (int i = 0; i < 600; ++i) points.emplace_back(ux(rng), ux(rng), uz(rng));
+  for (int i = 0; i < 600; ++i) points.push_back({ux(rng), ux(rng), uz(rng)});
   const double w = cam.width, h = cam.height;
   std::vector<FocalScanPair> pairs;
   for (int k = 0; k < 5; ++k) {
@@ -76,8 +76,8 @@ std::vector<FocalScanPair> OrbitPairs(const Eigen::Vector3d& target, double step
       const Eigen::Vector2d u1 = cam.Project(c1), u2 = cam.Project(c2);
       if (u1.x() < 0 || u1.x() > w || u1.y() < 0 || u1.y() > h || u2.x() < 0 || u2.x() > w || u2.y() < 0 || u2.y() > h)
         continue;
-      pair.uv1.push_back(u1 + Eigen::Vector2d(noise(rng), noise(rng)));
-      pair.uv2.push_back(u2 + Eigen::Vector2d(noise(rng), noise(rng)));
+      pair.uv1.push_back(u1 + Eigen::Vector2d{noise(rng), noise(rng)});
+      pair.uv2.push_back(u2 + Eigen::Vector2d{noise(rng), noise(rng)});
     }
     pairs.push_back(std::move(pair));
   }

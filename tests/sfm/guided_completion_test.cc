@@ -51,7 +51,7 @@ struct Scene {
       p.xyz = X[k];
       std::normal_distribution<double> px(0, kNoisePx);
       for (uint32_t id : {1u, 2u}) {
-        const Eigen::Vector2d noise(px(rng), px(rng));
+        const Eigen::Vector2d noise{px(rng), px(rng)};
         p.track.push_back({id, AddKeypoint(id, Projection(id, k) + noise, Noisy(k))});
         rec.images[id].point3d_ids.back() = p.id;
       }
@@ -82,13 +82,21 @@ struct Scene {
     return d;
   }
   uint32_t AddKeypoint(uint32_t id, const Eigen::Vector2d& uv, const std::array<uint8_t, 128>& d) {
+    AddKeypoints(id, {uv}, {d});
+    return static_cast<uint32_t>(rec.images[id].points2d.size() - 1);
+  }
+  // One resize for many keypoints: a resize per keypoint copies the whole matrix each time (quadratic).
+  void AddKeypoints(uint32_t id, const std::vector<Eigen::Vector2d>& uv,
+                    const std::vector<std::array<uint8_t, 128>>& d) {
     core::Image& im = rec.images[id];
-    im.points2d.push_back(uv);
-    im.point3d_ids.push_back(core::kNoPoint3D);
     features::Descriptors& D = desc[id];
-    D.conservativeResize(D.rows() + 1, 128);
-    for (int c = 0; c < 128; ++c) D(D.rows() - 1, c) = d[c];
-    return static_cast<uint32_t>(im.points2d.size() - 1);
+    const Eigen::Index first = D.rows();
+    D.conservativeResize(first + static_cast<Eigen::Index>(uv.size()), 128);
+    for (size_t i = 0; i < uv.size(); ++i) {
+      im.points2d.push_back(uv[i]);
+      im.point3d_ids.push_back(core::kNoPoint3D);
+      for (int c = 0; c < 128; ++c) D(first + static_cast<Eigen::Index>(i), c) = d[i][c];
+    }
   }
   // The offset at `fraction` of the boundary of point k's search region in image id (keypoints without scales,
   // default search mass), in direction `angle`.
@@ -119,15 +127,20 @@ struct Scene {
 // where the decoy searches (half an image away from each projection) look. Their descriptors are drawn like the
 // points' own, so the bound is measured against keypoints as alike as any chance keypoint can be.
 void AddChanceKeypoints(Scene* s) {
-  for (uint32_t id : {3u, 4u})
+  for (uint32_t id : {3u, 4u}) {
+    std::vector<Eigen::Vector2d> uv;
+    std::vector<std::array<uint8_t, 128>> desc;
     for (int y = 2; y < 800; y += 5)
       for (int x = 2; x < 1000; x += 5)
         if (x < 250 || x > 750 || y < 150 || y > 650) {
           std::array<uint8_t, 128> d;
           std::uniform_int_distribution<int> value(0, 60);
           for (auto& v : d) v = static_cast<uint8_t>(value(s->rng));
-          s->AddKeypoint(id, Eigen::Vector2d(x, y), d);
+          uv.emplace_back(x, y);
+          desc.push_back(d);
         }
+    s->AddKeypoints(id, uv, desc);
+  }
 }
 
 GuidedCompletionOptions SmallSceneOptions() {
@@ -306,7 +319,7 @@ TEST(GuidedCompletion, LargerKeypointsAreNoisier) {
     for (size_t k = 0; k < im.points2d.size(); ++k) {
       const bool large = k >= im.points2d.size() / 2;
       scales[id].push_back(large ? 8.0f : 1.2f);
-      im.points2d[k] = s.Projection(id, static_cast<int>(k)) + (large ? 0.5 : 0.05) * Eigen::Vector2d(px(rng), px(rng));
+      im.points2d[k] = s.Projection(id, static_cast<int>(k)) + (large ? 0.5 : 0.05) * Eigen::Vector2d{px(rng), px(rng)};
     }
   }
   const KeypointScales by_image = {{1, &scales[1]}, {2, &scales[2]}};

@@ -213,7 +213,7 @@ core::Reconstruction GridFlight(double tilt_deg) {
   for (uint64_t pid = 1; pid <= 80; ++pid) {
     core::Point3D p;
     p.id = pid;
-    p.xyz = Eigen::Vector3d(2 + 4 * u(rng), 1 + 3 * u(rng), 2 * u(rng));
+    p.xyz = Eigen::Vector3d{2 + 4 * u(rng), 1 + 3 * u(rng), 2 * u(rng)};
     for (auto& [id, im] : rec.images) {
       const Eigen::Vector2d uv = cam.Project(im.pose.Transform(p.xyz));
       if (uv.x() < 0 || uv.y() < 0 || uv.x() > cam.width || uv.y() > cam.height) continue;

@@ -56,7 +56,7 @@ World MakeWorld(bool shared_descriptors, uint64_t seed = 3) {
       Eigen::Matrix3d Rwc;  // camera x east, y south, z down
       Rwc << 1, 0, 0, 0, -1, 0, 0, 0, -1;
       const Eigen::Matrix3d jitter =
-          Eigen::AngleAxisd(0.01 * u(rng), Eigen::Vector3d(u(rng), u(rng), 1).normalized()).toRotationMatrix();
+          Eigen::AngleAxisd{0.01 * u(rng), Eigen::Vector3d{u(rng), u(rng), 1}.normalized()}.toRotationMatrix();
       w.poses.push_back(core::Pose::FromRotationAndCentre(jitter * Rwc.transpose(), centre));
     }
   const int num_points = 6000;
@@ -76,7 +76,7 @@ World MakeWorld(bool shared_descriptors, uint64_t seed = 3) {
     for (int i = 0; i < num_points; ++i) {
       const Eigen::Vector3d xc = w.poses[c].Transform(w.X[i]);
       if (xc.z() <= 0) continue;
-      const Eigen::Vector2d uv = w.camera.Project(xc) + Eigen::Vector2d(g(rng), g(rng));
+      const Eigen::Vector2d uv = w.camera.Project(xc) + Eigen::Vector2d{g(rng), g(rng)};
       if (!w.camera.InImage(uv, 2)) continue;
       f.keypoints.push_back({static_cast<float>(uv.x()), static_cast<float>(uv.y()), 2, 0});
       rows.push_back(Perturb(w.point_desc[i], rng, 4));

@@ -19,7 +19,7 @@ void AddBuilding(io::OrientedPointCloud* c, const Eigen::Vector3d& lo, const Eig
                  std::mt19937_64& rng) {
   std::normal_distribution<double> noise(0, 0.1 * spacing);
   auto add = [&](const Eigen::Vector3d& p, const Eigen::Vector3f& n) {
-    c->positions.push_back(p + Eigen::Vector3d(noise(rng), noise(rng), noise(rng)));
+    c->positions.push_back(p + Eigen::Vector3d{noise(rng), noise(rng), noise(rng)});
     c->normals.push_back(n);
   };
   for (double x = lo.x(); x <= hi.x(); x += spacing)
@@ -78,8 +78,8 @@ TEST(MeshCleanup, KeepsTerrainAndEverySeparateBuildingDropsOutlierBlobs) {
   for (const Eigen::Vector3d c :
        {Eigen::Vector3d(0, -20, 15), Eigen::Vector3d(20, 30, 25), Eigen::Vector3d(-10, 25, 30)})
     for (int i = 0; i < 12; ++i) {
-      cloud.positions.push_back(c + Eigen::Vector3d(g(rng), g(rng), g(rng)));
-      cloud.normals.push_back(Eigen::Vector3d(g(rng), g(rng), 1).normalized().cast<float>());
+      cloud.positions.push_back(c + Eigen::Vector3d{g(rng), g(rng), g(rng)});
+      cloud.normals.push_back(Eigen::Vector3d{g(rng), g(rng), 1}.normalized().cast<float>());
     }
 
   nlohmann::json stats;
@@ -151,7 +151,7 @@ TEST(MeshCleanup, WatertightKeepsTheSurfaceClosed) {
   std::normal_distribution<double> g(0, 1);
   io::OrientedPointCloud cloud;
   for (int i = 0; i < 15000; ++i) {
-    Eigen::Vector3d d(g(rng), g(rng), g(rng));
+    Eigen::Vector3d d{g(rng), g(rng), g(rng)};
     d.normalize();
     // A hemisphere's worth of dense points and a sparser far side: still one closed object.
     if (d.z() < 0 && i % 3 != 0) continue;

@@ -98,7 +98,7 @@ io::OrientedPointCloud Sphere(int n) {
   std::normal_distribution<double> g(0, 1);
   io::OrientedPointCloud c;
   for (int i = 0; i < n; ++i) {
-    const Eigen::Vector3d d = Eigen::Vector3d(g(rng), g(rng), g(rng)).normalized();
+    const Eigen::Vector3d d = Eigen::Vector3d{g(rng), g(rng), g(rng)}.normalized();
     c.positions.push_back(d);
     c.normals.push_back(d.cast<float>());
   }

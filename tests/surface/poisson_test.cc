@@ -21,8 +21,8 @@ io::OrientedPointCloud Sphere(int n, double r, double noise, uint64_t seed) {
   std::normal_distribution<double> g(0, 1);
   io::OrientedPointCloud c;
   for (int i = 0; i < n; ++i) {
-    const Eigen::Vector3d d = Eigen::Vector3d(g(rng), g(rng), g(rng)).normalized();
-    c.positions.push_back(r * d + noise * Eigen::Vector3d(g(rng), g(rng), g(rng)));
+    const Eigen::Vector3d d = Eigen::Vector3d{g(rng), g(rng), g(rng)}.normalized();
+    c.positions.push_back(r * d + noise * Eigen::Vector3d{g(rng), g(rng), g(rng)});
     c.normals.push_back(d.cast<float>());
     c.colors.push_back(d.z() > 0 ? io::Rgb8(200, 40, 40) : io::Rgb8(40, 40, 200));
   }
@@ -85,7 +85,7 @@ TEST(Poisson, OpenPlaneIsTrimmedToThePoints) {
   std::normal_distribution<double> g(0, 0.01);
   io::OrientedPointCloud cloud;
   for (int i = 0; i < 30000; ++i) {
-    cloud.positions.emplace_back(u(rng), u(rng), g(rng));
+    cloud.positions.push_back({u(rng), u(rng), g(rng)});
     cloud.normals.emplace_back(0, 0, 1);
   }
   nlohmann::json stats;

@@ -55,11 +55,11 @@ int main(int argc, char** argv) {
         auto& im = rec.images.at(e.image_id);
         Eigen::Vector2d uv = c.Project(im.pose.Transform(p.xyz));
         if (corr)
-          uv += Eigen::Vector2d(cu, cv) * 0.8 + Eigen::Vector2d(g(rng), g(rng)) * 0.6;
+          uv += Eigen::Vector2d(cu, cv) * 0.8 + Eigen::Vector2d{g(rng), g(rng)} * 0.6;
         else if (shuf || keep)
           uv += res[ri++];
         else
-          uv += Eigen::Vector2d(g(rng), g(rng));
+          uv += Eigen::Vector2d{g(rng), g(rng)};
         im.points2d[e.point2d_idx] = uv;
       }
     }

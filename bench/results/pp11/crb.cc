@@ -103,7 +103,7 @@ void Idealise(core::Reconstruction* r, double sigma, uint64_t seed) {
     for (const auto& e : p.track) {
       auto& im = r->images.at(e.image_id);
       im.points2d[e.point2d_idx] =
-          r->cameras.at(im.camera_id).Project(im.pose.Transform(p.xyz)) + Eigen::Vector2d(g(rng), g(rng));
+          r->cameras.at(im.camera_id).Project(im.pose.Transform(p.xyz)) + Eigen::Vector2d{g(rng), g(rng)};
     }
 }
 

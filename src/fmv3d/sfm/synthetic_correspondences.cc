@@ -65,8 +65,10 @@ std::vector<core::Pose> MakeScenePoses(const SyntheticSceneOptions& o, SceneRand
       // Two draws the pose does not use (a look-ahead target), kept so that a seed keeps giving the same scene.
       r->gauss(r->rng);
       r->gauss(r->rng);
-      poses[c] = core::Pose::LookAt(centre, Eigen::Vector3d(x + 0.5 * r->gauss(r->rng), y + 0.5 * r->gauss(r->rng), 0),
-                                    Eigen::Vector3d::UnitY());
+      // Each vector's components drawn last first, one per statement: the scenes every seed has always given.
+      const double target_y = y + 0.5 * r->gauss(r->rng);
+      const double target_x = x + 0.5 * r->gauss(r->rng);
+      poses[c] = core::Pose::LookAt(centre, Eigen::Vector3d(target_x, target_y, 0), Eigen::Vector3d::UnitY());
     }
   }
   return poses;
@@ -90,12 +92,16 @@ MapperImage ObserveScene(const SyntheticSceneOptions& o, const core::Camera& cam
     if (pts.N[i].dot(pose.Centre() - pts.X[i]) <= 0.1 * (pose.Centre() - pts.X[i]).norm()) continue;
     const Eigen::Vector2d uv = cam.Project(xc);
     if (!cam.InImage(uv, 2)) continue;
-    kps.push_back(uv + o.noise_px * Eigen::Vector2d(r->gauss(r->rng), r->gauss(r->rng)));
+    const double noise_v = r->gauss(r->rng);
+    const double noise_u = r->gauss(r->rng);
+    kps.push_back(uv + o.noise_px * Eigen::Vector2d(noise_u, noise_v));
     pt.push_back(i);
   }
   const int clutter = static_cast<int>(o.clutter_ratio * kps.size());
   for (int k = 0; k < clutter; ++k) {
-    kps.emplace_back(o.width * r->uni(r->rng), o.height * r->uni(r->rng));
+    const double v = o.height * r->uni(r->rng);
+    const double u = o.width * r->uni(r->rng);
+    kps.emplace_back(u, v);
     pt.push_back(-1);
   }
   std::vector<uint32_t> perm(kps.size());

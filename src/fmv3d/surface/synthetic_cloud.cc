@@ -87,10 +87,10 @@ SyntheticCloud SampleOrientedCloud(const io::TexturedMesh& truth, const core::Re
     out.seen_surface.push_back(samples[i]);
     Eigen::Vector3d p = samples[i];
     Eigen::Vector3d normal = surface.Normal(faces[i]);
-    if (options.position_noise > 0) p += options.position_noise * Eigen::Vector3d(gauss(rng), gauss(rng), gauss(rng));
-    if (tilt > 0) normal = (normal + tilt * Eigen::Vector3d(gauss(rng), gauss(rng), gauss(rng))).normalized();
+    if (options.position_noise > 0) p += options.position_noise * Eigen::Vector3d{gauss(rng), gauss(rng), gauss(rng)};
+    if (tilt > 0) normal = (normal + tilt * Eigen::Vector3d{gauss(rng), gauss(rng), gauss(rng)}).normalized();
     if (options.outlier_share > 0 && (uniform(rng) + 1) / 2 < options.outlier_share) {
-      const Eigen::Vector3d dir = Eigen::Vector3d(gauss(rng), gauss(rng), gauss(rng)).normalized();
+      const Eigen::Vector3d dir = Eigen::Vector3d{gauss(rng), gauss(rng), gauss(rng)}.normalized();
       p += options.outlier_range * uniform(rng) * dir;
     }
     out.cloud.positions.push_back(p);
