@@ -186,6 +186,7 @@ TEST(Chessboard, NotEnoughBoardsAndBadSpecs) {
   const BoardSpec board = BoardSpec::Parse("9x6", 0.025);
   const cv::Mat blank(240, 320, CV_8UC3, cv::Scalar(128, 128, 128));
   std::vector<BoardDetection> d;
+  d.reserve(4);
   for (int i = 0; i < 4; ++i) d.push_back(DetectChessboard(blank, board, "blank" + std::to_string(i)));
   for (const auto& x : d) EXPECT_FALSE(x.found);
   try {

@@ -294,6 +294,7 @@ TEST(Pairs, LoopClosureFindsTheReturnOfAnOrbit) {
     frames.push_back(ExtractSift(world(cv::Rect(pos, 0, 360, 240)).clone(), so));
   }
   std::vector<const Descriptors*> d;
+  d.reserve(frames.size());
   for (const auto& f : frames) d.push_back(&f.descriptors);
   // 128 words: the default. 16 words: every word occurs in every frame (plain idf would be 0 everywhere).
   for (int vocabulary : {128, 16}) {

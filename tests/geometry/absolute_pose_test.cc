@@ -117,6 +117,7 @@ TEST(Triangulation, ExactOnNoiseFreeDataAndBoundedWithNoise) {
   EXPECT_LT((Y - X).norm(), 0.02);  // 1 px at 6.5 m with a 4 m baseline: millimetres to a centimetre
   EXPECT_TRUE(HasPositiveDepth(poses[0], Y));
   std::vector<Eigen::Vector3d> centres;
+  centres.reserve(poses.size());
   for (const auto& p : poses) centres.push_back(p.Centre());
   EXPECT_GT(MaxTriangulationAngle(centres, X), 30 * kDeg);
   EXPECT_NEAR(TriangulationAngle(Eigen::Vector3d(-1, 0, 0), Eigen::Vector3d(1, 0, 0), Eigen::Vector3d(0, 1, 0)),

@@ -10,10 +10,11 @@ namespace {
 // Unit cube with outward counter-clockwise faces.
 MeshDistance Cube() {
   std::vector<Eigen::Vector3d> v;
+  v.reserve(8);
   for (int i = 0; i < 8; ++i) v.emplace_back(i & 1, (i >> 1) & 1, (i >> 2) & 1);
   std::vector<Eigen::Vector3i> t = {{0, 2, 1}, {1, 2, 3}, {4, 5, 6}, {5, 7, 6}, {0, 1, 4}, {1, 5, 4},
                                     {2, 6, 3}, {3, 6, 7}, {0, 4, 2}, {2, 4, 6}, {1, 3, 5}, {3, 7, 5}};
-  return MeshDistance(v, t);
+  return {v, t};
 }
 
 double CubeDistance(const Eigen::Vector3d& p) {

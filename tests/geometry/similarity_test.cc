@@ -24,8 +24,16 @@ std::vector<Eigen::Vector3d> Cloud(int n, uint64_t seed) {
   std::mt19937_64 rng(seed);
   std::normal_distribution<double> g(0, 10);
   std::vector<Eigen::Vector3d> p;
+  p.reserve(static_cast<size_t>(n));
   for (int i = 0; i < n; ++i) p.push_back({g(rng), g(rng), g(rng)});
   return p;
+}
+
+std::vector<Eigen::Vector3d> Apply(const core::Sim3& t, const std::vector<Eigen::Vector3d>& a) {
+  std::vector<Eigen::Vector3d> b;
+  b.reserve(a.size());
+  for (const auto& x : a) b.push_back(t.Apply(x));
+  return b;
 }
 
 TEST(Stats, MedianQuantileMeanRms) {
@@ -116,8 +124,7 @@ TEST(RobustEstimator, ExhaustiveThenRandomDistinctSamples) {
 TEST(Similarity, WeightedAndRigid) {
   const core::Sim3 t = Truth();
   const auto a = Cloud(20, 1);
-  std::vector<Eigen::Vector3d> b;
-  for (const auto& x : a) b.push_back(t.Apply(x));
+  std::vector<Eigen::Vector3d> b = Apply(t, a);
   core::Sim3 est;
   ASSERT_TRUE(EstimateSimilarity(a, b, &est));
   EXPECT_NEAR(est.s, t.s, 1e-12 * t.s);
@@ -133,8 +140,7 @@ TEST(Similarity, WeightedAndRigid) {
   // Rigid: scale 1 on a rigidly moved set.
   core::Sim3 rigid = t;
   rigid.s = 1;
-  std::vector<Eigen::Vector3d> c;
-  for (const auto& x : a) c.push_back(rigid.Apply(x));
+  const std::vector<Eigen::Vector3d> c = Apply(rigid, a);
   ASSERT_TRUE(EstimateSimilarity(a, c, {}, false, &est));
   EXPECT_EQ(est.s, 1.0);
   EXPECT_LT((est.t - rigid.t).norm(), 1e-9);
@@ -159,8 +165,7 @@ TEST(Similarity, AlongALineAndCollinearity) {
 TEST(Similarity, ScaleShiftUnderAHeldRotation) {
   const core::Sim3 t = Truth();
   const auto a = Cloud(8, 2);
-  std::vector<Eigen::Vector3d> b;
-  for (const auto& x : a) b.push_back(t.Apply(x));
+  std::vector<Eigen::Vector3d> b = Apply(t, a);
   ScaleShift ss;
   ASSERT_TRUE(EstimateScaleShift(t.q.toRotationMatrix(), a, b, std::vector<double>(a.size(), 4.0), &ss));
   EXPECT_NEAR(ss.scale, t.s, 1e-12);
@@ -173,9 +178,8 @@ TEST(Similarity, ScaleShiftUnderAHeldRotation) {
 TEST(Similarity, LMedSWithOutliersIsExact) {
   const core::Sim3 t = Truth();
   const auto a = Cloud(40, 3);
-  std::vector<Eigen::Vector3d> b;
-  for (const auto& x : a) b.push_back(t.Apply(x));
-  for (int i = 0; i < 15; ++i) b[2 * i] += Eigen::Vector3d(30 + i, -20, 10);  // 37.5% gross outliers
+  std::vector<Eigen::Vector3d> b = Apply(t, a);
+  for (size_t i = 0; i < 15; ++i) b[2 * i] += Eigen::Vector3d(30.0 + double(i), -20, 10);  // 37.5% gross outliers
   SimilarityLMedSOptions o;
   const SimilarityLMedS r = EstimateSimilarityLMedS(a, b, o);
   EXPECT_FALSE(r.along_line);
@@ -192,6 +196,7 @@ TEST(Similarity, LMedSSigmaFromGaussianNoise) {
   std::mt19937_64 rng(9);
   std::normal_distribution<double> g(0, 0.5);
   std::vector<Eigen::Vector3d> b;
+  b.reserve(a.size());
   for (const auto& x : a) b.push_back(t.Apply(x) + Eigen::Vector3d{g(rng), g(rng), g(rng)});
   const SimilarityLMedS r = EstimateSimilarityLMedS(a, b, {});
   EXPECT_NEAR(r.sigma, 0.5, 0.05);

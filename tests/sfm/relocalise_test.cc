@@ -123,7 +123,7 @@ core::Reconstruction MakeModel(const World& w, const std::set<uint32_t>& left_ou
   for (const auto& [p, track] : tracks) {
     if (track.size() < 2) continue;
     core::Point3D pt;
-    pt.id = static_cast<uint64_t>(p + 1);
+    pt.id = static_cast<uint64_t>(p) + 1;
     pt.xyz = w.X[p];
     pt.track = track;
     for (const auto& el : track) rec.images.at(el.image_id).point3d_ids[el.point2d_idx] = static_cast<int64_t>(pt.id);

@@ -75,7 +75,7 @@ TEST(MeshCleanup, KeepsTerrainAndEverySeparateBuildingDropsOutlierBlobs) {
     building_points.emplace_back(cloud.positions.begin() + static_cast<std::ptrdiff_t>(before), cloud.positions.end());
   }
   std::normal_distribution<double> g(0, 0.15);
-  for (const Eigen::Vector3d c :
+  for (const Eigen::Vector3d& c :
        {Eigen::Vector3d(0, -20, 15), Eigen::Vector3d(20, 30, 25), Eigen::Vector3d(-10, 25, 30)})
     for (int i = 0; i < 12; ++i) {
       cloud.positions.push_back(c + Eigen::Vector3d{g(rng), g(rng), g(rng)});
@@ -91,7 +91,7 @@ TEST(MeshCleanup, KeepsTerrainAndEverySeparateBuildingDropsOutlierBlobs) {
     EXPECT_GT(CoveredShare(mesh, building_points[b], 3 * s), 0.95) << "building " << b;
   // Nothing left near the outlier clusters.
   const geometry::MeshDistance md(mesh.vertices, mesh.triangles);
-  for (const Eigen::Vector3d c :
+  for (const Eigen::Vector3d& c :
        {Eigen::Vector3d(0, -20, 15), Eigen::Vector3d(20, 30, 25), Eigen::Vector3d(-10, 25, 30)})
     EXPECT_GT(md.Closest(c).distance, 1.0);
 }
