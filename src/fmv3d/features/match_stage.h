@@ -56,7 +56,12 @@ struct MatchStageStats {
   size_t descriptor_cache_capacity = 0;                  // images the memory budget holds at once
   size_t peak_cached_images = 0;
   size_t descriptor_loads = 0;  // feature files read for matching (more than `images` when some were evicted)
+  size_t peak_pairs_held = 0;   // pair results held at once between matching and writing: <= MatchPairsInFlight()
 };
+
+// Pair results the match stage holds at most (matched but not yet written, since a pair before them is not done):
+// a few per thread, whatever the pair count.
+size_t MatchPairsInFlight();
 
 MatchStageStats RunMatchStage(const core::Workspace& workspace, const MatchStageOptions& options);
 
