@@ -2,6 +2,9 @@
 // Reads WS/frames/frames.json and WS/features/*.feat; writes WS/matches/matches.bin (all verified pairs,
 // see feature_io.h) and WS/matches/matches.json (pairs tried / verified, inlier counts per pair, timing), and
 // WS/matches/automatic.* (every pair's automatic result, read back by the next run where its inputs are unchanged).
+// Memory: the pairs are written in pair order as they are verified (MatchPairsInFlight() results held at once), the
+// last run's results are read back pair by pair, and matches.bin is written from automatic.bin pair by pair with
+// the operator's edits, so the stage holds the descriptor window, per-pair summaries and a few pairs' inliers.
 //
 // Calibrated vs uncalibrated: E is estimated with each camera's prior intrinsics from frames.json. When the
 // prior is trusted (recorded and not a guess), a pair whose E explains ≥ 95% of the F inliers is
