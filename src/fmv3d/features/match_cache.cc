@@ -113,14 +113,4 @@ void AutomaticMatchesWriter::Finish() {
                                             {"pairs", std::move(rows_)}});
 }
 
-void WriteAutomaticMatches(const fs::path& dir, const std::string& options_key,
-                           const std::vector<std::string>& frame_keys, const std::vector<ImagePair>& pairs,
-                           const std::vector<VerifiedPair>& results, const std::vector<char>& verified) {
-  if (pairs.size() != results.size() || pairs.size() != verified.size())
-    throw Error("match: one result per pair expected");
-  AutomaticMatchesWriter w(dir, options_key, frame_keys);
-  for (size_t k = 0; k < pairs.size(); ++k) w.Add(pairs[k], results[k], verified[k] != 0);
-  w.Finish();
-}
-
 }  // namespace fmv3d::features

@@ -76,9 +76,4 @@ class AutomaticMatchesWriter {
   nlohmann::json rows_ = nlohmann::json::array();
 };
 
-// The whole-vector form: `results[k]` of `pairs[k]`, `verified[k]`.
-void WriteAutomaticMatches(const std::filesystem::path& matches_dir, const std::string& options_key,
-                           const std::vector<std::string>& frame_keys, const std::vector<ImagePair>& pairs,
-                           const std::vector<VerifiedPair>& results, const std::vector<char>& verified);
-
 }  // namespace fmv3d::features
