@@ -191,5 +191,65 @@ TEST(FeatureIo, MatchesRoundTripAndValidation) {
   EXPECT_NE(ErrorOf([&] { ReadMatches(path); }).find("not an fmv3d match file"), std::string::npos);
 }
 
+std::string FileBytes(const std::filesystem::path& p) {
+  std::ifstream in(p, std::ios::binary);
+  return {std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
+}
+
+// The match file written pair by pair has the bytes of the one written from the whole vector, and read pair by
+// pair gives what ReadMatches gives, with the same errors on a broken file.
+TEST(FeatureIo, MatchesStreamedEqualMatchesWrittenWhole) {
+  test::TempDir dir;
+  std::vector<VerifiedPair> pairs(5);
+  for (uint32_t i = 0; i < pairs.size(); ++i) {
+    auto& p = pairs[i];
+    p.image_id1 = i + 1;
+    p.image_id2 = 2 * i + 2;
+    p.F = Eigen::Matrix3d::Random();
+    p.R = Eigen::Matrix3d::Random();
+    p.t = Eigen::Vector3d::Random();
+    p.num_putative = 50 + i;
+    p.geometry = static_cast<PairGeometry>(i % 4);
+    for (uint32_t k = 0; k < 7 * i; ++k) p.inliers.push_back({k, k + i});
+  }
+  const auto whole = dir / "whole.bin", streamed = dir / "streamed.bin";
+  WriteMatches(pairs, whole);
+  {
+    MatchFileWriter w(streamed);
+    for (const auto& p : pairs) w.Add(p);
+    EXPECT_FALSE(std::filesystem::exists(streamed));  // only once finished
+    w.Finish();
+    EXPECT_EQ(w.count(), pairs.size());
+  }
+  EXPECT_EQ(FileBytes(streamed), FileBytes(whole));
+  EXPECT_EQ(std::distance(std::filesystem::directory_iterator(dir.path()), std::filesystem::directory_iterator()), 2);
+
+  MatchFileReader r(whole);
+  const auto all = ReadMatches(whole);
+  ASSERT_EQ(r.size(), all.size());
+  for (size_t k = all.size(); k-- > 0;) {  // any order
+    EXPECT_EQ(r.ids(k), std::make_pair(all[k].image_id1, all[k].image_id2));
+    const VerifiedPair p = r.Read(k);
+    EXPECT_EQ(p.F, all[k].F);
+    EXPECT_EQ(p.t, all[k].t);
+    EXPECT_EQ(p.geometry, all[k].geometry);
+    EXPECT_EQ(p.num_putative, all[k].num_putative);
+    ASSERT_EQ(p.inliers.size(), all[k].inliers.size());
+    for (size_t m = 0; m < p.inliers.size(); ++m) EXPECT_EQ(p.inliers[m].idx2, all[k].inliers[m].idx2);
+  }
+
+  {
+    MatchFileWriter unfinished(dir / "unfinished.bin");
+    unfinished.Add(pairs[0]);
+  }
+  EXPECT_EQ(std::distance(std::filesystem::directory_iterator(dir.path()), std::filesystem::directory_iterator()), 2);
+  for (const uintmax_t cut : {9, 600}) {
+    Truncate(whole, std::filesystem::file_size(whole) - cut);
+    const std::string error = ErrorOf([&] { ReadMatches(whole); });
+    EXPECT_NE(error.find("truncated"), std::string::npos) << error;
+    EXPECT_EQ(ErrorOf([&] { MatchFileReader{whole}; }), error);
+  }
+}
+
 }  // namespace
 }  // namespace fmv3d::features

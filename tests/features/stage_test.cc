@@ -10,7 +10,9 @@
 #include <opencv2/imgproc.hpp>
 
 #include "fmv3d/core/files.h"
+#include "fmv3d/core/threading.h"
 #include "fmv3d/features/feature_io.h"
+#include "fmv3d/features/match_stage.h"
 #include "fmv3d/features/matcher.h"
 #include "fmv3d/features/sift.h"
 #include "fmv3d/geometry/two_view.h"
@@ -216,6 +218,47 @@ TEST(Stage, MatchRerunReusesOnlyUnchangedPairs) {
   index.cameras[0].camera.f = 600;
   io::WriteFramesIndex(index, ws / "frames" / "frames.json");
   EXPECT_EQ(run(" --min-inliers 16").first, 0);
+}
+
+std::string FileBytes(const fs::path& p) {
+  std::ifstream in(p, std::ios::binary);
+  return {std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
+}
+
+// The match stage writes each pair's result once the pairs before it are written: it holds a few results per
+// thread whatever the pair count, and its matches.bin is the one written whole from the verified pairs, whether
+// they are matched or read back from the last run pair by pair.
+TEST(Stage, MatchHoldsABoundedNumberOfPairResults) {
+  test::TempDir tmp;
+  const fs::path ws = tmp / "ws";
+  MakeWorkspace(ws, 9);
+  const auto r = test::RunCli("-q features '" + ws.string() + "' --max-features 300");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  core::SetNumThreads(2);
+  MatchStageOptions options;
+  options.pairs.mode = PairMode::kExhaustive;
+  const MatchStageStats first = RunMatchStage(ws, options);
+  EXPECT_EQ(first.pairs_tried, 36u);
+  EXPECT_GT(first.pairs_tried, 3 * MatchPairsInFlight());
+  EXPECT_GE(first.peak_pairs_held, 1u);
+  EXPECT_LE(first.peak_pairs_held, MatchPairsInFlight());
+
+  const auto automatic = ReadMatches(ws / "matches" / "automatic.bin");
+  const auto rows = core::ReadJson(ws / "matches" / "automatic.json").at("pairs");
+  ASSERT_EQ(rows.size(), automatic.size());
+  std::vector<VerifiedPair> verified;
+  for (size_t k = 0; k < rows.size(); ++k)
+    if (rows[k].at(2).get<int>() == 1) verified.push_back(automatic[k]);
+  EXPECT_EQ(verified.size(), first.pairs_verified);
+  EXPECT_GT(verified.size(), 8u);
+  WriteMatches(verified, tmp / "whole.bin");
+  const std::string streamed = FileBytes(MatchesPath(ws / "matches"));
+  EXPECT_EQ(streamed, FileBytes(tmp / "whole.bin"));
+
+  const MatchStageStats again = RunMatchStage(ws, options);
+  EXPECT_EQ(again.pairs_reused, 36u);
+  EXPECT_LE(again.peak_pairs_held, MatchPairsInFlight());
+  EXPECT_EQ(FileBytes(MatchesPath(ws / "matches")), streamed);
 }
 
 // Strecha ground truth: K (3 rows), distortion row, R camera-to-world (3 rows), C, size.

@@ -1,8 +1,11 @@
 #include "fmv3d/features/feature_io.h"
 
+#include <unistd.h>
+
 #include <cstring>
 #include <fstream>
 #include <iterator>
+#include <memory>
 
 #include "fmv3d/core/error.h"
 #include "fmv3d/core/files.h"
@@ -101,6 +104,149 @@ class Reader {
   size_t pos_ = 0;
 };
 
+// Reader's checks over an open file, for files read piece by piece instead of whole.
+class StreamReader {
+ public:
+  explicit StreamReader(const fs::path& path) : path_(path), in_(path, std::ios::binary) {
+    if (!in_) throw Error(path.string() + ": cannot open (missing file?)");
+    in_.seekg(0, std::ios::end);
+    size_ = static_cast<uint64_t>(in_.tellg());
+    in_.seekg(0);
+  }
+  uint64_t Remaining() const { return size_ - pos_; }
+  uint64_t position() const { return pos_; }
+  void Seek(uint64_t pos) {
+    in_.clear();
+    in_.seekg(static_cast<std::streamoff>(pos));
+    pos_ = pos;
+  }
+  void Bytes(void* p, size_t n, const char* what) {
+    Check(n, what);
+    in_.read(static_cast<char*>(p), static_cast<std::streamsize>(n));
+    if (!in_) throw Error(path_.string() + ": cannot read");
+    pos_ += n;
+  }
+  void Skip(size_t n, const char* what) {
+    Check(n, what);
+    Seek(pos_ + n);
+  }
+  template <typename T>
+  T Get(const char* what) {
+    T v;
+    Bytes(&v, sizeof(T), what);
+    return v;
+  }
+  Eigen::Matrix3d Mat(const char* what) {
+    double v[9];
+    Bytes(v, sizeof v, what);
+    Eigen::Matrix3d m;
+    for (int r = 0; r < 3; ++r)
+      for (int c = 0; c < 3; ++c) m(r, c) = v[3 * r + c];
+    return m;
+  }
+  void Magic(const char (&magic)[8], const char* kind) {
+    char m[8];
+    if (Remaining() < 8) throw Error(path_.string() + ": too short to be " + kind);
+    Bytes(m, 8, "magic");
+    if (std::memcmp(m, magic, 8) != 0) throw Error(path_.string() + ": not " + kind + " (wrong magic)");
+  }
+  void End(const char (&end)[8]) {
+    char m[8];
+    Bytes(m, 8, "end marker");
+    if (std::memcmp(m, end, 8) != 0) throw Error(path_.string() + ": corrupt file (bad end marker)");
+    if (Remaining() != 0) throw Error(path_.string() + ": corrupt file (trailing bytes after end marker)");
+  }
+  void CheckFits(uint64_t count, uint64_t bytes_each, const char* what) {
+    if (bytes_each > 0 && count > Remaining() / bytes_each)
+      throw Error(path_.string() + ": truncated or corrupt file (" + std::to_string(count) + " " + what +
+                  " do not fit in the remaining " + std::to_string(Remaining()) + " bytes)");
+  }
+
+ private:
+  void Check(uint64_t n, const char* what) const {
+    if (n > Remaining())
+      throw Error(path_.string() + ": truncated file (" + what + " needs " + std::to_string(n) + " bytes, " +
+                  std::to_string(Remaining()) + " left)");
+  }
+  fs::path path_;
+  std::ifstream in_;
+  uint64_t size_ = 0, pos_ = 0;
+};
+
+void PutPair(Writer* w, const VerifiedPair& p) {
+  w->Put<uint32_t>(p.image_id1);
+  w->Put<uint32_t>(p.image_id2);
+  w->Put<uint8_t>(static_cast<uint8_t>(p.geometry));
+  w->Put<uint8_t>(p.has_pose ? 1 : 0);
+  w->Put<uint32_t>(p.num_putative);
+  w->Put<uint32_t>(p.num_inliers_F);
+  w->Put<uint32_t>(p.num_inliers_E);
+  w->Put<uint32_t>(p.num_inliers_H);
+  w->Mat(p.F);
+  w->Mat(p.E);
+  w->Mat(p.H);
+  w->Mat(p.R);
+  for (int i = 0; i < 3; ++i) w->Put<double>(p.t[i]);
+  w->Put<double>(p.median_triangulation_angle_deg);
+  w->Put<uint32_t>(static_cast<uint32_t>(p.inliers.size()));
+  for (const auto& m : p.inliers) {
+    w->Put<uint32_t>(m.idx1);
+    w->Put<uint32_t>(m.idx2);
+  }
+}
+
+// The match file's header up to the pair count; returns the count, checked against the file's size.
+template <typename R>
+uint32_t GetMatchHeader(R* r, const fs::path& path) {
+  r->Magic(kMatMagic, "an fmv3d match file");
+  const auto version = r->template Get<uint32_t>("version");
+  if (version != kMatchFileVersion)
+    throw Error(path.string() + ": match file version " + std::to_string(version) + " not supported (expected " +
+                std::to_string(kMatchFileVersion) + "; re-run `fmv3d match`)");
+  const uint32_t num_pairs = r->template Get<uint32_t>("pair count");
+  constexpr uint64_t kPairHeader = 4 * 2 + 2 + 4 * 4 + 8 * (9 * 4 + 3 + 1) + 4;
+  r->CheckFits(num_pairs, kPairHeader, "pairs");
+  return num_pairs;
+}
+
+// One pair; its inliers are skipped (not kept) unless `inliers`.
+template <typename R>
+VerifiedPair GetPair(R* r, const fs::path& path, bool inliers) {
+  VerifiedPair p;
+  p.image_id1 = r->template Get<uint32_t>("pair");
+  p.image_id2 = r->template Get<uint32_t>("pair");
+  const auto geometry = r->template Get<uint8_t>("pair");
+  if (geometry > static_cast<uint8_t>(PairGeometry::kPlanarOrRotation))
+    throw Error(path.string() + ": corrupt file (pair geometry code " + std::to_string(geometry) + ")");
+  p.geometry = static_cast<PairGeometry>(geometry);
+  p.has_pose = r->template Get<uint8_t>("pair") != 0;
+  p.num_putative = r->template Get<uint32_t>("pair");
+  p.num_inliers_F = r->template Get<uint32_t>("pair");
+  p.num_inliers_E = r->template Get<uint32_t>("pair");
+  p.num_inliers_H = r->template Get<uint32_t>("pair");
+  p.F = r->Mat("pair");
+  p.E = r->Mat("pair");
+  p.H = r->Mat("pair");
+  p.R = r->Mat("pair");
+  for (int i = 0; i < 3; ++i) p.t[i] = r->template Get<double>("pair");
+  p.median_triangulation_angle_deg = r->template Get<double>("pair");
+  const uint32_t m = r->template Get<uint32_t>("inlier count");
+  r->CheckFits(m, 8, "inlier matches");
+  if (inliers) {
+    p.inliers.resize(m);
+    for (auto& fm : p.inliers) {
+      fm.idx1 = r->template Get<uint32_t>("inlier");
+      fm.idx2 = r->template Get<uint32_t>("inlier");
+    }
+  } else {
+    r->Skip(size_t{m} * 8, "inlier matches");
+  }
+  if (p.image_id1 == 0 || p.image_id1 >= p.image_id2)
+    throw Error(path.string() + ": corrupt file (pair " + std::to_string(p.image_id1) + "-" +
+                std::to_string(p.image_id2) + " violates 0 < image_id1 < image_id2)");
+  return p;
+}
+
 }  // namespace
 
 void WriteFeatures(const FeatureSet& f, const fs::path& path) {
@@ -178,73 +324,87 @@ void WriteMatches(const std::vector<VerifiedPair>& pairs, const fs::path& path) 
   w.Bytes(kMatMagic, 8);
   w.Put<uint32_t>(kMatchFileVersion);
   w.Put<uint32_t>(static_cast<uint32_t>(pairs.size()));
-  for (const auto& p : pairs) {
-    w.Put<uint32_t>(p.image_id1);
-    w.Put<uint32_t>(p.image_id2);
-    w.Put<uint8_t>(static_cast<uint8_t>(p.geometry));
-    w.Put<uint8_t>(p.has_pose ? 1 : 0);
-    w.Put<uint32_t>(p.num_putative);
-    w.Put<uint32_t>(p.num_inliers_F);
-    w.Put<uint32_t>(p.num_inliers_E);
-    w.Put<uint32_t>(p.num_inliers_H);
-    w.Mat(p.F);
-    w.Mat(p.E);
-    w.Mat(p.H);
-    w.Mat(p.R);
-    for (int i = 0; i < 3; ++i) w.Put<double>(p.t[i]);
-    w.Put<double>(p.median_triangulation_angle_deg);
-    w.Put<uint32_t>(static_cast<uint32_t>(p.inliers.size()));
-    for (const auto& m : p.inliers) {
-      w.Put<uint32_t>(m.idx1);
-      w.Put<uint32_t>(m.idx2);
-    }
-  }
+  for (const auto& p : pairs) PutPair(&w, p);
   w.Bytes(kMatEnd, 8);
   w.Save(path);
 }
 
 std::vector<VerifiedPair> ReadMatches(const fs::path& path) {
   Reader r(path);
-  r.Magic(kMatMagic, "an fmv3d match file");
-  const auto version = r.Get<uint32_t>("version");
-  if (version != kMatchFileVersion)
-    throw Error(path.string() + ": match file version " + std::to_string(version) + " not supported (expected " +
-                std::to_string(kMatchFileVersion) + "; re-run `fmv3d match`)");
-  const uint32_t num_pairs = r.Get<uint32_t>("pair count");
-  constexpr uint64_t kPairHeader = 4 * 2 + 2 + 4 * 4 + 8 * (9 * 4 + 3 + 1) + 4;
-  r.CheckFits(num_pairs, kPairHeader, "pairs");
-  std::vector<VerifiedPair> pairs(num_pairs);
-  for (auto& p : pairs) {
-    p.image_id1 = r.Get<uint32_t>("pair");
-    p.image_id2 = r.Get<uint32_t>("pair");
-    const auto geometry = r.Get<uint8_t>("pair");
-    if (geometry > static_cast<uint8_t>(PairGeometry::kPlanarOrRotation))
-      throw Error(path.string() + ": corrupt file (pair geometry code " + std::to_string(geometry) + ")");
-    p.geometry = static_cast<PairGeometry>(geometry);
-    p.has_pose = r.Get<uint8_t>("pair") != 0;
-    p.num_putative = r.Get<uint32_t>("pair");
-    p.num_inliers_F = r.Get<uint32_t>("pair");
-    p.num_inliers_E = r.Get<uint32_t>("pair");
-    p.num_inliers_H = r.Get<uint32_t>("pair");
-    p.F = r.Mat("pair");
-    p.E = r.Mat("pair");
-    p.H = r.Mat("pair");
-    p.R = r.Mat("pair");
-    for (int i = 0; i < 3; ++i) p.t[i] = r.Get<double>("pair");
-    p.median_triangulation_angle_deg = r.Get<double>("pair");
-    const uint32_t m = r.Get<uint32_t>("inlier count");
-    r.CheckFits(m, 8, "inlier matches");
-    p.inliers.resize(m);
-    for (auto& fm : p.inliers) {
-      fm.idx1 = r.Get<uint32_t>("inlier");
-      fm.idx2 = r.Get<uint32_t>("inlier");
-    }
-    if (p.image_id1 == 0 || p.image_id1 >= p.image_id2)
-      throw Error(path.string() + ": corrupt file (pair " + std::to_string(p.image_id1) + "-" +
-                  std::to_string(p.image_id2) + " violates 0 < image_id1 < image_id2)");
-  }
+  std::vector<VerifiedPair> pairs(GetMatchHeader(&r, path));
+  for (auto& p : pairs) p = GetPair(&r, path, /*inliers=*/true);
   r.End(kMatEnd);
   return pairs;
+}
+
+MatchFileWriter::MatchFileWriter(fs::path path)
+    : path_(std::move(path)),
+      part_(path_.parent_path() /
+            ("." + path_.stem().string() + ".part" + std::to_string(getpid()) + path_.extension().string())),
+      out_(part_, std::ios::binary) {
+  if (!out_) throw Error(path_.string() + ": cannot write");
+  Writer w;
+  w.Bytes(kMatMagic, 8);
+  w.Put<uint32_t>(kMatchFileVersion);
+  w.Put<uint32_t>(0);  // the pair count, set by Finish
+  Flush(w.buf_);
+}
+
+MatchFileWriter::~MatchFileWriter() {
+  if (finished_) return;
+  out_.close();
+  std::error_code ec;
+  fs::remove(part_, ec);
+}
+
+void MatchFileWriter::Add(const VerifiedPair& pair) {
+  Writer w;
+  PutPair(&w, pair);
+  Flush(w.buf_);
+  ++count_;
+}
+
+void MatchFileWriter::Finish() {
+  Writer w;
+  w.Bytes(kMatEnd, 8);
+  Flush(w.buf_);
+  const auto count = static_cast<uint32_t>(count_);
+  out_.seekp(12);
+  out_.write(reinterpret_cast<const char*>(&count), sizeof count);
+  out_.close();
+  if (!out_) throw Error(path_.string() + ": cannot write");
+  core::WriteAtomically(path_, [&](const fs::path& tmp) { fs::rename(part_, tmp); });
+  finished_ = true;
+}
+
+void MatchFileWriter::Flush(const std::vector<char>& bytes) {
+  out_.write(bytes.data(), static_cast<std::streamsize>(bytes.size()));
+  if (!out_) throw Error(path_.string() + ": cannot write");
+}
+
+struct MatchFileReader::Impl {
+  explicit Impl(const fs::path& p) : path(p), in(p) {}
+  fs::path path;
+  StreamReader in;
+};
+
+MatchFileReader::MatchFileReader(const fs::path& path) : impl_(std::make_unique<Impl>(path)) {
+  const uint32_t num_pairs = GetMatchHeader(&impl_->in, path);
+  offsets_.reserve(num_pairs);
+  ids_.reserve(num_pairs);
+  for (uint32_t k = 0; k < num_pairs; ++k) {
+    offsets_.push_back(impl_->in.position());
+    const VerifiedPair p = GetPair(&impl_->in, path, /*inliers=*/false);
+    ids_.emplace_back(p.image_id1, p.image_id2);
+  }
+  impl_->in.End(kMatEnd);
+}
+
+MatchFileReader::~MatchFileReader() = default;
+
+VerifiedPair MatchFileReader::Read(size_t k) {
+  impl_->in.Seek(offsets_.at(k));
+  return GetPair(&impl_->in, impl_->path, /*inliers=*/true);
 }
 
 fs::path FeaturePath(const fs::path& features_dir, const std::string& frame_name) {

@@ -20,6 +20,8 @@
 #pragma once
 
 #include <filesystem>
+#include <fstream>
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -38,6 +40,44 @@ FeatureSet ReadFeatures(const std::filesystem::path& path, bool descriptors = tr
 
 void WriteMatches(const std::vector<VerifiedPair>& pairs, const std::filesystem::path& path);
 std::vector<VerifiedPair> ReadMatches(const std::filesystem::path& path);
+
+// A match file written pair by pair, as WriteMatches writes it, holding none of them: into a temporary beside
+// `path` that Finish moves there atomically (a writer destroyed unfinished leaves `path` as it was).
+class MatchFileWriter {
+ public:
+  explicit MatchFileWriter(std::filesystem::path path);
+  ~MatchFileWriter();
+  MatchFileWriter(const MatchFileWriter&) = delete;
+  MatchFileWriter& operator=(const MatchFileWriter&) = delete;
+  void Add(const VerifiedPair& pair);
+  void Finish();
+  size_t count() const { return count_; }
+
+ private:
+  void Flush(const std::vector<char>& bytes);
+  std::filesystem::path path_, part_;
+  std::ofstream out_;
+  size_t count_ = 0;
+  bool finished_ = false;
+};
+
+// A match file read pair by pair: the constructor checks the whole file as ReadMatches does (throwing the same
+// errors) and notes where each pair starts, so that only the pair read is held (12 bytes per pair besides).
+class MatchFileReader {
+ public:
+  explicit MatchFileReader(const std::filesystem::path& path);
+  ~MatchFileReader();
+  size_t size() const { return offsets_.size(); }
+  // Pair k's 1-based image ids, without reading it.
+  std::pair<uint32_t, uint32_t> ids(size_t k) const { return ids_.at(k); }
+  VerifiedPair Read(size_t k);
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+  std::vector<uint64_t> offsets_;
+  std::vector<std::pair<uint32_t, uint32_t>> ids_;
+};
 
 // features/<frame-stem>.feat for a frame named e.g. "clip-000012.png".
 std::filesystem::path FeaturePath(const std::filesystem::path& features_dir, const std::string& frame_name);

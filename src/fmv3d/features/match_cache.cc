@@ -15,12 +15,13 @@ namespace fs = std::filesystem;
 namespace {
 
 fs::path AutomaticJsonPath(const fs::path& dir) { return dir / "automatic.json"; }
-fs::path AutomaticBinPath(const fs::path& dir) { return dir / "automatic.bin"; }
 
 }  // namespace
 
-const AutomaticMatches::Result* AutomaticMatches::Find(const ImagePair& p, const std::string& options,
-                                                       const std::vector<std::string>& frames) const {
+fs::path AutomaticBinPath(const fs::path& dir) { return dir / "automatic.bin"; }
+
+const AutomaticMatches::Entry* AutomaticMatches::Find(const ImagePair& p, const std::string& options,
+                                                      const std::vector<std::string>& frames) const {
   if (options != options_key || p.second >= frames.size() || p.second >= frame_keys.size()) return nullptr;
   if (frame_keys[p.first] != frames[p.first] || frame_keys[p.second] != frames[p.second]) return nullptr;
   const auto it = pairs.find(p);
@@ -71,16 +72,16 @@ AutomaticMatches ReadAutomaticMatches(const fs::path& dir) {
     if (j.at("format").get<std::string>() != "fmv3d-automatic-matches" ||
         j.at("version").get<int>() != kAutomaticMatchesVersion)
       return m;
-    std::vector<VerifiedPair> results = ReadMatches(AutomaticBinPath(dir));
+    m.bin = std::make_unique<MatchFileReader>(AutomaticBinPath(dir));
     const auto& rows = j.at("pairs");
-    if (rows.size() != results.size()) throw Error("automatic.json and automatic.bin disagree on the pair count");
+    if (rows.size() != m.bin->size()) throw Error("automatic.json and automatic.bin disagree on the pair count");
     m.options_key = j.at("options").get<std::string>();
     m.frame_keys = j.at("frames").get<std::vector<std::string>>();
     for (size_t k = 0; k < rows.size(); ++k) {
       const ImagePair p{rows[k].at(0).get<uint32_t>(), rows[k].at(1).get<uint32_t>()};
-      if (results[k].image_id1 != p.first + 1 || results[k].image_id2 != p.second + 1)
+      if (m.bin->ids(k) != std::make_pair(p.first + 1, p.second + 1))
         throw Error("automatic.json and automatic.bin disagree on pair " + std::to_string(k));
-      m.pairs[p] = {std::move(results[k]), rows[k].at(2).get<int>() != 0};
+      m.pairs[p] = {k, rows[k].at(2).get<int>() != 0};
     }
   } catch (const std::exception& e) {
     spdlog::warn("match: {} not used ({}): every pair is matched again", AutomaticJsonPath(dir).string(), e.what());
@@ -89,21 +90,27 @@ AutomaticMatches ReadAutomaticMatches(const fs::path& dir) {
   return m;
 }
 
-void WriteAutomaticMatches(const fs::path& dir, const std::string& options_key,
-                           const std::vector<std::string>& frame_keys, const std::vector<ImagePair>& pairs,
-                           const std::vector<VerifiedPair>& results, const std::vector<char>& verified) {
-  if (pairs.size() != results.size() || pairs.size() != verified.size())
-    throw Error("match: one result per pair expected");
-  nlohmann::json rows = nlohmann::json::array();
-  for (size_t k = 0; k < pairs.size(); ++k) rows.push_back({pairs[k].first, pairs[k].second, verified[k] ? 1 : 0});
+AutomaticMatchesWriter::AutomaticMatchesWriter(fs::path dir, std::string options_key,
+                                               std::vector<std::string> frame_keys)
+    : dir_(std::move(dir)),
+      options_key_(std::move(options_key)),
+      frame_keys_(std::move(frame_keys)),
+      bin_((core::EnsureDirectory(dir_), AutomaticBinPath(dir_))) {}
+
+void AutomaticMatchesWriter::Add(const ImagePair& pair, const VerifiedPair& result, bool verified) {
+  rows_.push_back({pair.first, pair.second, verified ? 1 : 0});
+  bin_.Add(result);
+}
+
+void AutomaticMatchesWriter::Finish() {
   // The json names the bin's pairs: removed first, written last, so a run killed in between leaves no stale pair.
-  fs::remove(AutomaticJsonPath(dir));
-  WriteMatches(results, AutomaticBinPath(dir));
-  core::WriteJson(AutomaticJsonPath(dir), {{"format", "fmv3d-automatic-matches"},
-                                           {"version", kAutomaticMatchesVersion},
-                                           {"options", options_key},
-                                           {"frames", frame_keys},
-                                           {"pairs", std::move(rows)}});
+  fs::remove(AutomaticJsonPath(dir_));
+  bin_.Finish();
+  core::WriteJson(AutomaticJsonPath(dir_), {{"format", "fmv3d-automatic-matches"},
+                                            {"version", kAutomaticMatchesVersion},
+                                            {"options", options_key_},
+                                            {"frames", frame_keys_},
+                                            {"pairs", std::move(rows_)}});
 }
 
 }  // namespace fmv3d::features

@@ -16,9 +16,12 @@
 
 #include <filesystem>
 #include <map>
+#include <memory>
+#include <nlohmann/json.hpp>
 #include <string>
 #include <vector>
 
+#include "fmv3d/features/feature_io.h"
 #include "fmv3d/features/matcher.h"
 #include "fmv3d/features/pairs.h"
 #include "fmv3d/features/types.h"
@@ -28,17 +31,21 @@ namespace fmv3d::features {
 
 inline constexpr int kAutomaticMatchesVersion = 1;
 
+// The last run's results, read pair by pair from automatic.bin: only where each pair lies is held.
 struct AutomaticMatches {
   std::string options_key;
   std::vector<std::string> frame_keys;  // per frame, in frames.json order
-  struct Result {
-    VerifiedPair pair;
+  struct Entry {
+    size_t index = 0;  // in automatic.bin
     bool verified = false;
   };
-  std::map<ImagePair, Result> pairs;
+  std::map<ImagePair, Entry> pairs;
+  std::unique_ptr<MatchFileReader> bin;
 
-  // The recorded result of pair (i, j) when the current keys match the recorded ones, else nullptr.
-  const Result* Find(const ImagePair& p, const std::string& options, const std::vector<std::string>& frames) const;
+  // The recorded entry of pair (i, j) when the current keys match the recorded ones, else nullptr.
+  const Entry* Find(const ImagePair& p, const std::string& options, const std::vector<std::string>& frames) const;
+  // The pair's result (one thread at a time).
+  VerifiedPair Read(const Entry& e) const { return bin->Read(e.index); }
 };
 
 // What a pair's automatic result depends on besides the two frames: the options and the program's version.
@@ -47,11 +54,26 @@ std::string OptionsKey(const MatchOptions& match, const geometry::TwoViewOptions
 // A frame's key: its feature file's size and 64-bit FNV-1a hash, and `camera` (its prior, serialised).
 std::string FrameKey(const std::filesystem::path& feature_file, const std::string& camera);
 
+std::filesystem::path AutomaticBinPath(const std::filesystem::path& matches_dir);
+
 // Empty (no pairs) when the files are missing, of another version or unreadable: nothing is reused then.
 AutomaticMatches ReadAutomaticMatches(const std::filesystem::path& matches_dir);
-// Every tried pair's result (`results[k]` of `pairs[k]`, `verified[k]`), with the keys it was computed under.
-void WriteAutomaticMatches(const std::filesystem::path& matches_dir, const std::string& options_key,
-                           const std::vector<std::string>& frame_keys, const std::vector<ImagePair>& pairs,
-                           const std::vector<VerifiedPair>& results, const std::vector<char>& verified);
+
+// Every tried pair's result, added in pair order as it comes, with the keys it was computed under; the files are
+// replaced by Finish (the previous ones stay readable until then).
+class AutomaticMatchesWriter {
+ public:
+  AutomaticMatchesWriter(std::filesystem::path matches_dir, std::string options_key,
+                         std::vector<std::string> frame_keys);
+  void Add(const ImagePair& pair, const VerifiedPair& result, bool verified);
+  void Finish();
+
+ private:
+  std::filesystem::path dir_;
+  std::string options_key_;
+  std::vector<std::string> frame_keys_;
+  MatchFileWriter bin_;
+  nlohmann::json rows_ = nlohmann::json::array();
+};
 
 }  // namespace fmv3d::features

@@ -2,11 +2,14 @@
 
 #include <spdlog/spdlog.h>
 #include <tbb/parallel_for.h>
+#include <tbb/parallel_pipeline.h>
 
 #include <algorithm>
 #include <atomic>
 #include <chrono>
 #include <functional>
+#include <map>
+#include <memory>
 #include <mutex>
 #include <opencv2/imgcodecs.hpp>
 #include <set>
@@ -250,97 +253,192 @@ VerifiedPair MatchPair(const LoadedFeatures& in, DescriptorCache* cache, uint32_
   return vp;
 }
 
-// Every pair matched and verified in parallel over pairs (OpenCV's own threads stay off meanwhile). Returns the
-// verified pairs in pair order; `per_pair` gets one summary row per pair tried.
 // The keys a pair's automatic result is computed under (match_cache.h).
 struct ResultKeys {
   std::string options;
   std::vector<std::string> frames;
 };
 
-// Pairs whose automatic result `previous` holds for the same keys (match_cache.h) are read back, the others
-// matched; every pair's result is written to `matches_dir` for the next run.
-std::vector<VerifiedPair> MatchAndVerify(const LoadedFeatures& in, const DescriptorLoader& load,
-                                         const std::vector<ImagePair>& pairs, const MatchStageOptions& options,
-                                         const AutomaticMatches& previous, const ResultKeys& keys,
-                                         const fs::path& matches_dir, MatchStageStats* stats, nlohmann::json* per_pair,
-                                         size_t* total_inliers) {
-  std::vector<VerifiedPair> results(pairs.size());
-  std::vector<char> verified(pairs.size(), 0);
-  std::vector<size_t> todo;
-  std::vector<ImagePair> todo_pairs;
-  for (size_t k = 0; k < pairs.size(); ++k) {
-    if (const auto* r = previous.Find(pairs[k], keys.options, keys.frames)) {
-      results[k] = r->pair;
-      verified[k] = r->verified;
-    } else {
-      todo.push_back(k);
-      todo_pairs.push_back(pairs[k]);
-    }
-  }
-  stats->pairs_reused = pairs.size() - todo.size();
-  if (stats->pairs_reused > 0)
-    spdlog::info("match: {} of {} pairs unchanged since the last run: not matched again", stats->pairs_reused,
-                 pairs.size());
-  const int cv_threads = cv::getNumThreads();
-  cv::setNumThreads(1);
-  size_t keypoints = 0;
-  for (const auto& f : in.features) keypoints += f.keypoints.size();
-  const double per_image =
-      kBytesPerKeypoint * std::max(1.0, double(keypoints) / std::max<size_t>(1, in.features.size()));
-  const size_t capacity =
-      std::max<size_t>(2 * core::NumThreads() + 2, static_cast<size_t>(options.max_memory_mb * 1048576.0 / per_image));
-  DescriptorCache cache([&load](uint32_t i) { return load(i); }, in.features.size(), todo_pairs, capacity);
-  std::atomic<int64_t> ns_match{0}, ns_verify{0};
-  core::Progress progress("match", todo.size());
-  tbb::parallel_for(tbb::blocked_range<size_t>(0, todo.size(), 1), [&](const tbb::blocked_range<size_t>& range) {
-    for (size_t t = range.begin(); t != range.end(); ++t) {
-      const size_t k = todo[t];
-      bool ok = false;
-      results[k] = MatchPair(in, &cache, pairs[k].first, pairs[k].second, options, &ok, &ns_match, &ns_verify);
-      verified[k] = ok;
-      progress.Add();
-    }
-  });
-  progress.Finish();
-  cv::setNumThreads(cv_threads);
-  core::EnsureDirectory(matches_dir);
-  WriteAutomaticMatches(matches_dir, keys.options, keys.frames, pairs, results, verified);
-  stats->cpu_seconds_match = ns_match * 1e-9;
-  stats->cpu_seconds_verify = ns_verify * 1e-9;
-  stats->descriptor_cache_capacity = cache.capacity();
-  stats->descriptor_loads = cache.loads();
-  stats->peak_cached_images = cache.peak();
+// One pair's result on its way from matching to the files.
+struct PairInFlight {
+  VerifiedPair vp;
+  bool verified = false;
+};
 
-  std::vector<VerifiedPair> kept;
-  *per_pair = nlohmann::json::array();
-  *total_inliers = 0;
-  for (size_t k = 0; k < pairs.size(); ++k) {
-    const auto& vp = results[k];
-    per_pair->push_back({{"image1", vp.image_id1},
+// Takes the pairs' results in pair order as they come: writes them to automatic.* and keeps only their summary
+// rows and which of them were verified.
+class ResultSink {
+ public:
+  ResultSink(const fs::path& matches_dir, const ResultKeys& keys, MatchStageStats* stats)
+      : automatic_(matches_dir, keys.options, keys.frames), stats_(stats) {}
+  void Add(const ImagePair& pair, const VerifiedPair& vp, bool verified) {
+    automatic_.Add(pair, vp, verified);
+    per_pair_.push_back({{"image1", vp.image_id1},
                          {"image2", vp.image_id2},
                          {"putative", vp.num_putative},
                          {"inliers_F", vp.num_inliers_F},
                          {"inliers_E", vp.num_inliers_E},
                          {"inliers_H", vp.num_inliers_H},
                          {"inliers", vp.inliers.size()},
-                         {"geometry", verified[k] ? GeometryName(vp.geometry) : "rejected"},
+                         {"geometry", verified ? GeometryName(vp.geometry) : "rejected"},
                          {"median_triangulation_angle_deg", vp.median_triangulation_angle_deg}});
-    if (!verified[k]) continue;
-    *total_inliers += vp.inliers.size();
-    stats->calibrated += vp.geometry == PairGeometry::kCalibrated;
-    stats->uncalibrated += vp.geometry == PairGeometry::kUncalibrated;
-    stats->planar_or_rotation += vp.geometry == PairGeometry::kPlanarOrRotation;
-    kept.push_back(std::move(results[k]));
+    if (verified) {
+      verified_.push_back(added_);
+      total_inliers_ += vp.inliers.size();
+      stats_->calibrated += vp.geometry == PairGeometry::kCalibrated;
+      stats_->uncalibrated += vp.geometry == PairGeometry::kUncalibrated;
+      stats_->planar_or_rotation += vp.geometry == PairGeometry::kPlanarOrRotation;
+    }
+    ++added_;
   }
-  return kept;
+  void Finish() { automatic_.Finish(); }
+  // The verified pairs' positions in automatic.bin, in pair order.
+  std::vector<size_t> TakeVerified() { return std::move(verified_); }
+  nlohmann::json TakePerPair() { return std::move(per_pair_); }
+  size_t total_inliers() const { return total_inliers_; }
+
+ private:
+  AutomaticMatchesWriter automatic_;
+  MatchStageStats* stats_;
+  nlohmann::json per_pair_ = nlohmann::json::array();
+  std::vector<size_t> verified_;
+  size_t added_ = 0, total_inliers_ = 0;
+};
+
+// Descriptor images the memory budget holds at once.
+size_t DescriptorCapacity(const LoadedFeatures& in, const MatchStageOptions& options) {
+  size_t keypoints = 0;
+  for (const auto& f : in.features) keypoints += f.keypoints.size();
+  const double per_image =
+      kBytesPerKeypoint * std::max(1.0, double(keypoints) / std::max<size_t>(1, in.features.size()));
+  return std::max<size_t>(2 * core::NumThreads() + 2,
+                          static_cast<size_t>(options.max_memory_mb * 1048576.0 / per_image));
 }
 
-// The operator's tie points, keypoints and deleted matches, applied to `kept` (and `features`, which gain the
-// clicked keypoints). Returns the summary for matches.json.
+// Every pair matched and verified in parallel, written in pair order by `sink` as soon as the pairs before it are:
+// at most MatchPairsInFlight() results are held at once, whatever the pair count. Pairs whose automatic result
+// `previous` holds for the same keys (match_cache.h) are read back instead of matched.
+void MatchAndVerify(const LoadedFeatures& in, const DescriptorLoader& load, const std::vector<ImagePair>& pairs,
+                    const MatchStageOptions& options, const AutomaticMatches& previous, const ResultKeys& keys,
+                    ResultSink* sink, MatchStageStats* stats) {
+  std::vector<const AutomaticMatches::Entry*> reuse(pairs.size());
+  std::vector<ImagePair> todo_pairs;
+  for (size_t k = 0; k < pairs.size(); ++k) {
+    reuse[k] = previous.Find(pairs[k], keys.options, keys.frames);
+    if (!reuse[k]) todo_pairs.push_back(pairs[k]);
+  }
+  stats->pairs_reused = pairs.size() - todo_pairs.size();
+  if (stats->pairs_reused > 0)
+    spdlog::info("match: {} of {} pairs unchanged since the last run: not matched again", stats->pairs_reused,
+                 pairs.size());
+  const int cv_threads = cv::getNumThreads();
+  cv::setNumThreads(1);
+  DescriptorCache cache([&load](uint32_t i) { return load(i); }, in.features.size(), todo_pairs,
+                        DescriptorCapacity(in, options));
+  std::atomic<int64_t> ns_match{0}, ns_verify{0};
+  core::Progress progress("match", todo_pairs.size());
+  // Pair k lives in slot k % tokens: the pairs in flight are consecutive (written in order), at most `tokens`.
+  const size_t tokens = MatchPairsInFlight();
+  std::vector<PairInFlight> slots(tokens);
+  std::atomic<size_t> held{0};
+  size_t next = 0, peak = 0;
+  auto take_next = [&](tbb::flow_control& fc) -> size_t {
+    if (next == pairs.size()) {
+      fc.stop();
+      return 0;
+    }
+    peak = std::max(peak, ++held);
+    return next++;
+  };
+  auto match = [&](size_t k) {
+    PairInFlight& p = slots[k % tokens];
+    if (!reuse[k]) {
+      const auto [i, j] = pairs[k];
+      p.vp = MatchPair(in, &cache, i, j, options, &p.verified, &ns_match, &ns_verify);
+      progress.Add();
+    }
+    return k;
+  };
+  auto write = [&](size_t k) {
+    PairInFlight& p = slots[k % tokens];
+    if (reuse[k]) {
+      p.vp = previous.Read(*reuse[k]);
+      p.verified = reuse[k]->verified;
+    }
+    sink->Add(pairs[k], p.vp, p.verified);
+    p = PairInFlight{};
+    --held;
+  };
+  tbb::parallel_pipeline(tokens, tbb::make_filter<void, size_t>(tbb::filter_mode::serial_in_order, take_next) &
+                                     tbb::make_filter<size_t, size_t>(tbb::filter_mode::parallel, match) &
+                                     tbb::make_filter<size_t, void>(tbb::filter_mode::serial_in_order, write));
+  progress.Finish();
+  cv::setNumThreads(cv_threads);
+  sink->Finish();
+  stats->cpu_seconds_match = ns_match * 1e-9;
+  stats->cpu_seconds_verify = ns_verify * 1e-9;
+  stats->descriptor_cache_capacity = cache.capacity();
+  stats->descriptor_loads = cache.loads();
+  stats->peak_cached_images = cache.peak();
+  stats->peak_pairs_held = peak;
+}
+
+// The operator's changes to the verified pairs: the pairs touching the frames the operator named, as edited (absent
+// when left with no match), and the pairs the tie points add.
+struct OperatorEdits {
+  bool used = false;
+  std::set<uint32_t> frames;                                     // 0-based
+  std::map<std::pair<uint32_t, uint32_t>, VerifiedPair> edited;  // by 1-based image ids
+  std::vector<VerifiedPair> added;
+  bool Touches(const std::pair<uint32_t, uint32_t>& ids) const {
+    return frames.count(ids.first - 1) > 0 || frames.count(ids.second - 1) > 0;
+  }
+};
+
+// The frames whose pairs tie points, keypoints and deleted matches change (ApplyManualMatches reads and edits only
+// pairs with one of these frames).
+std::set<uint32_t> NamedFrames(const io::TiePoints& t, const io::FramesIndex& index) {
+  std::set<std::string> names;
+  for (const auto& tp : t.tie_points)
+    for (const auto& o : tp.observations) names.insert(o.frame);
+  for (const auto& kp : t.keypoints) names.insert(kp.point.frame);
+  for (const auto& d : t.deleted_matches) {
+    names.insert(d.frame1);
+    names.insert(d.frame2);
+  }
+  std::set<uint32_t> frames;
+  for (size_t i = 0; i < index.frames.size(); ++i)
+    if (names.count(index.frames[i].name)) frames.insert(static_cast<uint32_t>(i));
+  return frames;
+}
+
+// ApplyManualMatches on the verified pairs it touches, read from automatic.bin.
+void EditTouchedPairs(const io::TiePoints& tie_points, const io::FramesIndex& index,
+                      const std::vector<FeatureSet>& features, const MatchStageOptions& options,
+                      MatchFileReader* automatic, const std::vector<size_t>& verified, ManualMatches* manual,
+                      OperatorEdits* edits) {
+  std::vector<VerifiedPair> touched;
+  for (size_t k : verified)
+    if (edits->Touches(automatic->ids(k))) touched.push_back(automatic->Read(k));
+  std::set<std::pair<uint32_t, uint32_t>> before;
+  for (const auto& vp : touched) before.emplace(vp.image_id1, vp.image_id2);
+  ApplyManualMatches(tie_points, index, features, options.manual, manual, &touched);
+  for (auto& vp : touched) {
+    const std::pair<uint32_t, uint32_t> ids{vp.image_id1, vp.image_id2};
+    if (before.count(ids))
+      edits->edited.emplace(ids, std::move(vp));
+    else
+      edits->added.push_back(std::move(vp));
+  }
+}
+
+// The operator's tie points, keypoints and deleted matches, applied to the verified pairs (`verified`: their
+// positions in `automatic`) and to `features`, which gain the clicked keypoints. Returns the summary for
+// matches.json (its "pairs_added" is set once matches.bin is written).
 nlohmann::json ApplyOperatorInput(const core::Workspace& ws, const io::FramesIndex& index, const DescriptorLoader& load,
                                   const MatchStageOptions& options, std::vector<FeatureSet>* features,
-                                  std::vector<VerifiedPair>* kept) {
+                                  MatchFileReader* automatic, const std::vector<size_t>& verified,
+                                  OperatorEdits* edits) {
   const fs::path tiepoints_path = options.tiepoints_file.value_or(ws.manual_dir() / "tiepoints.json");
   const fs::path manual_path = ManualMatchesPath(ws.matches_dir());
   if (!options.tiepoints_file && !(options.use_tiepoints && fs::exists(tiepoints_path))) {
@@ -367,17 +465,20 @@ nlohmann::json ApplyOperatorInput(const core::Workspace& ws, const io::FramesInd
   std::set<uint32_t> involved;
   for (size_t i = 0; i < n; ++i)
     if (clicked.count(index.frames[i].name)) involved.insert(static_cast<uint32_t>(i));
-  for (const auto& vp : *kept)
-    if (involved.count(vp.image_id1 - 1) || involved.count(vp.image_id2 - 1)) {
-      involved.insert(vp.image_id1 - 1);
-      involved.insert(vp.image_id2 - 1);
+  for (size_t k : verified) {
+    const auto [id1, id2] = automatic->ids(k);
+    if (involved.count(id1 - 1) || involved.count(id2 - 1)) {
+      involved.insert(id1 - 1);
+      involved.insert(id2 - 1);
     }
+  }
   for (uint32_t i : involved)
     if ((*features)[i].descriptors.rows() != static_cast<Eigen::Index>((*features)[i].keypoints.size()))
       (*features)[i].descriptors = load(i);
   ManualMatches manual = AppendManualKeypoints(tie_points, index, images, features, options.manual);
-  const size_t pairs_before = kept->size();
-  ApplyManualMatches(tie_points, index, *features, options.manual, &manual, kept);
+  edits->used = true;
+  edits->frames = NamedFrames(tie_points, index);
+  EditTouchedPairs(tie_points, index, *features, options, automatic, verified, &manual, edits);
   const nlohmann::json manual_json = manual.ToJson(index);
   core::WriteJson(manual_path, manual_json);
   for (const auto& d : manual.disagreeing)
@@ -392,9 +493,29 @@ nlohmann::json ApplyOperatorInput(const core::Workspace& ws, const io::FramesInd
           {"keypoint_matches_found", manual.keypoints_matched},
           {"deleted_matches_removed", manual.deleted},
           {"deleted_matches_not_found", manual.deleted_not_found},
-          {"pairs_added", kept->size() > pairs_before ? kept->size() - pairs_before : 0},
+          {"pairs_added", 0},
           {"max_epipolar_px", options.manual.max_epipolar_px},
           {"disagreeing", manual_json["disagreeing"]}};
+}
+
+// matches.bin: the verified pairs of `automatic` in pair order, pair by pair, with the operator's edits in their
+// place (a pair left with no match dropped) and the pairs the operator added last. Returns the pair count.
+size_t WriteFinalMatches(MatchFileReader* automatic, const std::vector<size_t>& verified, const OperatorEdits& edits,
+                         const fs::path& path) {
+  MatchFileWriter out(path);
+  for (size_t k : verified) {
+    const auto ids = automatic->ids(k);
+    if (edits.used && edits.Touches(ids)) {
+      const auto it = edits.edited.find(ids);
+      if (it != edits.edited.end()) out.Add(it->second);
+      continue;
+    }
+    const VerifiedPair vp = automatic->Read(k);
+    if (!(edits.used && vp.inliers.empty())) out.Add(vp);
+  }
+  for (const auto& vp : edits.added) out.Add(vp);
+  out.Finish();
+  return out.count();
 }
 
 nlohmann::json SummaryJson(const MatchStageStats& stats, PairMode mode, const MatchStageOptions& options,
@@ -437,6 +558,8 @@ nlohmann::json SummaryJson(const MatchStageStats& stats, PairMode mode, const Ma
 
 }  // namespace
 
+size_t MatchPairsInFlight() { return 4 * static_cast<size_t>(core::NumThreads()); }
+
 MatchStageStats RunMatchStage(const core::Workspace& ws, const MatchStageOptions& options) {
   options.Check();
   const auto t_start = Clock::now();
@@ -459,21 +582,23 @@ MatchStageStats RunMatchStage(const core::Workspace& ws, const MatchStageOptions
                    ? ", " + std::to_string(stats.loop_closure_pairs) + " loop-closure candidates"
                    : std::string());
 
-  nlohmann::json per_pair;
-  size_t total_inliers = 0;
   const ResultKeys keys{OptionsKey(options.match, options.verify), FrameKeys(ws, index, in)};
-  std::vector<VerifiedPair> kept;
+  ResultSink sink(ws.matches_dir(), keys, &stats);
   {
     const AutomaticMatches previous = options.reuse ? ReadAutomaticMatches(ws.matches_dir()) : AutomaticMatches{};
-    kept =
-        MatchAndVerify(in, load, pairs, options, previous, keys, ws.matches_dir(), &stats, &per_pair, &total_inliers);
+    MatchAndVerify(in, load, pairs, options, previous, keys, &sink, &stats);
   }
-  nlohmann::json manual_summary = ApplyOperatorInput(ws, index, load, options, &in.features, &kept);
-  stats.pairs_verified = kept.size();
-  WriteMatches(kept, MatchesPath(ws.matches_dir()));
+  const std::vector<size_t> verified = sink.TakeVerified();
+  MatchFileReader automatic(AutomaticBinPath(ws.matches_dir()));
+  OperatorEdits edits;
+  nlohmann::json manual_summary =
+      ApplyOperatorInput(ws, index, load, options, &in.features, &automatic, verified, &edits);
+  stats.pairs_verified = WriteFinalMatches(&automatic, verified, edits, MatchesPath(ws.matches_dir()));
+  if (edits.used && stats.pairs_verified > verified.size())
+    manual_summary["pairs_added"] = stats.pairs_verified - verified.size();
   stats.seconds_total = Since(t_start);
-  core::WriteJson(MatchesSummaryPath(ws.matches_dir()),
-                  SummaryJson(stats, mode, options, total_inliers, std::move(manual_summary), std::move(per_pair)));
+  core::WriteJson(MatchesSummaryPath(ws.matches_dir()), SummaryJson(stats, mode, options, sink.total_inliers(),
+                                                                    std::move(manual_summary), sink.TakePerPair()));
   spdlog::info(
       "match: {} / {} pairs verified ({} calibrated, {} uncalibrated, {} planar/rotation), {:.1f} s "
       "(matching {:.1f} s, verification {:.1f} s CPU)",

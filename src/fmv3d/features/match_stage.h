@@ -2,6 +2,9 @@
 // Reads WS/frames/frames.json and WS/features/*.feat; writes WS/matches/matches.bin (all verified pairs,
 // see feature_io.h) and WS/matches/matches.json (pairs tried / verified, inlier counts per pair, timing), and
 // WS/matches/automatic.* (every pair's automatic result, read back by the next run where its inputs are unchanged).
+// Memory: the pairs are written in pair order as they are verified (MatchPairsInFlight() results held at once), the
+// last run's results are read back pair by pair, and matches.bin is written from automatic.bin pair by pair with
+// the operator's edits, so the stage holds the descriptor window, per-pair summaries and a few pairs' inliers.
 //
 // Calibrated vs uncalibrated: E is estimated with each camera's prior intrinsics from frames.json. When the
 // prior is trusted (recorded and not a guess), a pair whose E explains ≥ 95% of the F inliers is
@@ -56,7 +59,12 @@ struct MatchStageStats {
   size_t descriptor_cache_capacity = 0;                  // images the memory budget holds at once
   size_t peak_cached_images = 0;
   size_t descriptor_loads = 0;  // feature files read for matching (more than `images` when some were evicted)
+  size_t peak_pairs_held = 0;   // pair results held at once between matching and writing: <= MatchPairsInFlight()
 };
+
+// Pair results the match stage holds at most (matched but not yet written, since a pair before them is not done):
+// a few per thread, whatever the pair count.
+size_t MatchPairsInFlight();
 
 MatchStageStats RunMatchStage(const core::Workspace& workspace, const MatchStageOptions& options);
 
