@@ -339,8 +339,10 @@ std::vector<VerifiedPair> ReadMatches(const fs::path& path) {
 
 MatchFileWriter::MatchFileWriter(fs::path path)
     : path_(std::move(path)),
+      // Named as core::WriteAtomically's temporaries, so a run killed mid-stream leaves nothing that the next run's
+      // RemoveStaleTemporaries does not clear.
       part_(path_.parent_path() /
-            ("." + path_.stem().string() + ".part" + std::to_string(getpid()) + path_.extension().string())),
+            ("." + path_.stem().string() + ".tmp" + std::to_string(getpid()) + ".part" + path_.extension().string())),
       out_(part_, std::ios::binary) {
   if (!out_) throw Error(path_.string() + ": cannot write");
   Writer w;

@@ -105,8 +105,9 @@ CompletenessResult Completeness(const std::vector<Eigen::Vector3d>& pts, const g
       const Eigen::Vector3d view_dir = (im.pose.Centre() - samples[i]).normalized();
       if (region_mesh.Normal(faces[i]).dot(view_dir) <= 0) return;  // back side of the face
       const Eigen::Vector2d uv = cam.Project(xc);
-      const int u = static_cast<int>(std::floor(uv.x())), v = static_cast<int>(std::floor(uv.y()));
-      if (u < 0 || v < 0 || u >= cam.width || v >= cam.height) return;
+      // Compared as doubles first: a point far outside the view projects beyond int's range.
+      if (!(uv.x() >= 0 && uv.y() >= 0 && uv.x() < cam.width && uv.y() < cam.height)) return;
+      const int u = static_cast<int>(uv.x()), v = static_cast<int>(uv.y());
       const float d = depth.at<float>(v, u);
       // Tolerance: the pixel footprint on a slanted surface plus a share of the length.
       const double tol = 0.01 * characteristic_length + 3 * xc.z() / cam.f;

@@ -197,8 +197,9 @@ void FuseMaps(FusionWindow& window, const FusionOptions& opt, double p_floor, Fu
           Eigen::Vector2d uv;
           double z;
           if (!nb->geom.Project(X, &uv, &z)) continue;
-          const int u = static_cast<int>(std::floor(uv.x())), v = static_cast<int>(std::floor(uv.y()));
-          if (u < 0 || v < 0 || u >= nb->depth.cols || v >= nb->depth.rows) continue;
+          // Compared as doubles first: a point far outside the view projects beyond int's range.
+          if (!(uv.x() >= 0 && uv.y() >= 0 && uv.x() < nb->depth.cols && uv.y() < nb->depth.rows)) continue;
+          const int u = static_cast<int>(uv.x()), v = static_cast<int>(uv.y());
           const float dj = nb->depth.at<float>(v, u);
           if (!(dj > 0)) continue;
           const double rel = (dj - z) / z;

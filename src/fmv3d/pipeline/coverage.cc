@@ -114,8 +114,9 @@ ViewCoverage ComputeViewCoverage(const cv::Mat& frame, const core::Camera& camer
         const Eigen::Vector3d x = R * cloud->positions[i] + pose.t;
         if (!(x.z() > 0)) continue;
         const Eigen::Vector2d uv = camera.Project(x);
-        const int u = static_cast<int>(std::floor(uv.x())), v = static_cast<int>(std::floor(uv.y()));
-        if (u < 0 || v < 0 || u >= w || v >= h) continue;
+        // Compared as doubles first: a point far outside the view projects beyond int's range.
+        if (!(uv.x() >= 0 && uv.y() >= 0 && uv.x() < w && uv.y() < h)) continue;
+        const int u = static_cast<int>(uv.x()), v = static_cast<int>(uv.y());
         if (!mesh_depth.empty()) {  // hidden behind the mesh
           const float d = mesh_depth.at<float>(v, u);
           if (d > 0 && x.z() > 1.05 * d + 2 * point_spacing) continue;
