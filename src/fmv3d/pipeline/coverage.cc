@@ -54,7 +54,7 @@ cv::Mat SkyMask(const cv::Mat& bgr, double max_gradient, double min_brightness) 
   cv::Mat candidate(bgr.size(), CV_8U);
   for (int y = 0; y < bgr.rows; ++y)
     for (int x = 0; x < bgr.cols; ++x) {
-      const cv::Vec3b c = bgr.at<cv::Vec3b>(y, x);
+      const cv::Vec3b& c = bgr.at<cv::Vec3b>(y, x);
       const bool ok = mag.at<float>(y, x) <= max_gradient && blurred.at<float>(y, x) >= min_brightness &&
                       static_cast<int>(c[0]) >= static_cast<int>(c[2]) - 16;
       candidate.at<uint8_t>(y, x) = ok ? 1 : 0;
