@@ -6,6 +6,7 @@
 #include <random>
 
 #include "fmv3d/core/error.h"
+#include "fmv3d/core/files.h"
 #include "test_util.h"
 
 namespace fmv3d::features {
@@ -191,11 +192,6 @@ TEST(FeatureIo, MatchesRoundTripAndValidation) {
   EXPECT_NE(ErrorOf([&] { ReadMatches(path); }).find("not an fmv3d match file"), std::string::npos);
 }
 
-std::string FileBytes(const std::filesystem::path& p) {
-  std::ifstream in(p, std::ios::binary);
-  return {std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
-}
-
 // The match file written pair by pair has the bytes of the one written from the whole vector, and read pair by
 // pair gives what ReadMatches gives, with the same errors on a broken file.
 TEST(FeatureIo, MatchesStreamedEqualMatchesWrittenWhole) {
@@ -221,7 +217,7 @@ TEST(FeatureIo, MatchesStreamedEqualMatchesWrittenWhole) {
     w.Finish();
     EXPECT_EQ(w.count(), pairs.size());
   }
-  EXPECT_EQ(FileBytes(streamed), FileBytes(whole));
+  EXPECT_EQ(core::ReadTextFile(streamed), core::ReadTextFile(whole));
   EXPECT_EQ(std::distance(std::filesystem::directory_iterator(dir.path()), std::filesystem::directory_iterator()), 2);
 
   MatchFileReader r(whole);

@@ -220,11 +220,6 @@ TEST(Stage, MatchRerunReusesOnlyUnchangedPairs) {
   EXPECT_EQ(run(" --min-inliers 16").first, 0);
 }
 
-std::string FileBytes(const fs::path& p) {
-  std::ifstream in(p, std::ios::binary);
-  return {std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
-}
-
 // The match stage writes each pair's result once the pairs before it are written: it holds a few results per
 // thread whatever the pair count, and its matches.bin is the one written whole from the verified pairs, whether
 // they are matched or read back from the last run pair by pair.
@@ -252,13 +247,13 @@ TEST(Stage, MatchHoldsABoundedNumberOfPairResults) {
   EXPECT_EQ(verified.size(), first.pairs_verified);
   EXPECT_GT(verified.size(), 8u);
   WriteMatches(verified, tmp / "whole.bin");
-  const std::string streamed = FileBytes(MatchesPath(ws / "matches"));
-  EXPECT_EQ(streamed, FileBytes(tmp / "whole.bin"));
+  const std::string streamed = core::ReadTextFile(MatchesPath(ws / "matches"));
+  EXPECT_EQ(streamed, core::ReadTextFile(tmp / "whole.bin"));
 
   const MatchStageStats again = RunMatchStage(ws, options);
   EXPECT_EQ(again.pairs_reused, 36u);
   EXPECT_LE(again.peak_pairs_held, MatchPairsInFlight());
-  EXPECT_EQ(FileBytes(MatchesPath(ws / "matches")), streamed);
+  EXPECT_EQ(core::ReadTextFile(MatchesPath(ws / "matches")), streamed);
 }
 
 // Strecha ground truth: K (3 rows), distortion row, R camera-to-world (3 rows), C, size.
