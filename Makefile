@@ -44,11 +44,11 @@ test-release: build
 
 # Unit tests under AddressSanitizer + UndefinedBehaviorSanitizer (the long end-to-end flights and the browser tests are
 # skipped, and test_e2e is not built). -O1, line tables only (-g1) and the unity build keep the build and the run
-# within CI's time; stack traces still name file and line. GCC, as the product, for now: clang instruments it for
-# less than half the CPU (GCC's UBSan alone costs ×2.7), and the tests now draw noise in a defined order, but clang's
-# build has not yet passed the whole suite (bench/results/ci12.md).
+# within CI's time; stack traces still name file and line. Built with clang, not the product's GCC: it instruments
+# the tree for less than half of GCC's CPU (GCC's UBSan alone costs ×2.7), and its UBSan also checks float-to-int
+# overflow, which GCC's does not (bench/results/ci12.md, RESULTS.md "Tests and CI").
 $(ASAN_BUILD)/build.ninja: | deps
-	cmake -S . -B $(ASAN_BUILD) -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo -DFMV3D_SANITIZE=ON \
+	CC=clang CXX=clang++ cmake -S . -B $(ASAN_BUILD) -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo -DFMV3D_SANITIZE=ON \
 	  -DFMV3D_UNITY=$(UNITY) -DFMV3D_PCH=OFF \
 	  -DCMAKE_CXX_FLAGS_RELWITHDEBINFO="-O1 -g1 -DNDEBUG" -DCMAKE_C_FLAGS_RELWITHDEBINFO="-O1 -g1 -DNDEBUG"
 
@@ -98,7 +98,6 @@ test-tsan: deps $(TSAN_BUILD)/build.ninja
 # made in $(FUZZ_BUILD) from ../shared/data and a small flight our own writers produce; prints executions and
 # coverage per target. Crashing inputs go to tests/fuzz/regressions/<target>/ once fixed (replayed by `make test`).
 $(FUZZ_BUILD)/build.ninja: | deps
-	@FMV3D_WITH_FUZZ=1 scripts/install-deps.sh
 	CC=clang CXX=clang++ cmake -S . -B $(FUZZ_BUILD) -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo \
 	  -DCMAKE_CXX_FLAGS_RELWITHDEBINFO="-O1 -g" -DFMV3D_FUZZ=ON -DFMV3D_BUILD_TESTS=OFF -DFMV3D_BUILD_BENCH=OFF \
 	  -DFMV3D_FUZZ_PREBUILT=$(abspath $(BUILD))

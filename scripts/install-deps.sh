@@ -13,11 +13,10 @@ PACKAGES=(
   ffmpeg
   chromium
   clang-format clang-tidy
+  clang libclang-rt-14-dev  # the sanitizer build (make test-asan) and make fuzz: clang with its runtimes and libFuzzer
 )
 # Optional yardstick for bench/ only (COLMAP 3.8, CPU); never needed to build or test.
 if [[ "${FMV3D_WITH_COLMAP:-0}" == "1" ]]; then PACKAGES+=(colmap); fi
-# `make fuzz` only: clang with libFuzzer and the sanitizer runtimes.
-if [[ "${FMV3D_WITH_FUZZ:-0}" == "1" ]]; then PACKAGES+=(clang libclang-rt-14-dev); fi
 # `make test-tsan` only: LLVM's OpenMP runtime and its Archer tool (scripts/tsan-runtime.sh), dpkg-dev to unpack
 # oneTBB's source package; `bench/memory.sh` plots with gnuplot when present.
 if [[ "${FMV3D_WITH_TSAN:-0}" == "1" ]]; then PACKAGES+=(libomp5-14 libomp-14-dev dpkg-dev); fi
