@@ -73,6 +73,11 @@ void Add(CLI::App& app) {
       ->check(CLI::Range(0.0, 180.0));
   cmd->add_flag("--fix-focal", m.fix_known_focal,
                 "Keep a known focal (calibration, sensor database, EXIF, --focal/--hfov) fixed in BA");
+  cmd->add_option("--max-memory", a->opt.max_memory_mb,
+                  "Memory budget, MB: a warning before mapping when the model's bound exceeds it (the stage holds "
+                  "every observation for bundle adjustment)")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
   cmd->add_option("--focal-scan-pairs", m.focal_scan_pairs, "Guessed focal: pairs the focal scan uses")
       ->capture_default_str();
   cmd->add_option("--seed", m.seed, "Random seed")->capture_default_str();

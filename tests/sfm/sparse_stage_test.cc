@@ -88,6 +88,15 @@ TEST(SparseStage, WritesModelPlyAndReport) {
             focal["corner_displacement_1sigma_px"].get<double>() > posterior["weak_above_corner_px"].get<double>());
   EXPECT_EQ(posterior["warnings"].size(), focal["weakly_determined"].get<bool>() ? 1u : 0u);
   EXPECT_LE(EvaluateSparse(rec, scene.truth).centre_rmse_fraction, 0.001);
+  // The memory section: the bound known before mapping covers the estimate from the model's observations.
+  const auto& memory = json["memory"];
+  size_t observations = 0;
+  for (const auto& [id, p] : rec.points) observations += p.track.size();
+  EXPECT_EQ(memory["observations"].get<size_t>(), observations);
+  EXPECT_GE(memory["matched_keypoints"].get<size_t>(), observations);
+  EXPECT_GE(memory["bound_mb"].get<double>(), memory["estimated_mb"].get<double>());
+  EXPECT_GT(memory["estimated_mb"].get<double>(), 0);
+  EXPECT_TRUE(memory["within_budget"].get<bool>());
 
   // The CLI evaluation against the truth written as a COLMAP model.
   io::WriteColmapText(scene.truth, dir / "truth");
@@ -96,6 +105,12 @@ TEST(SparseStage, WritesModelPlyAndReport) {
   EXPECT_NE(r.out.find("median relative rotation error"), std::string::npos);
   const auto ev = core::ReadJson(dir / "report" / "sparse_eval.json");
   EXPECT_LT(ev["centre_rmse_percent_of_extent"].get<double>(), 0.1);
+
+  // A budget below the bound: the stage still runs, and says so before mapping and in the report.
+  const auto small = test::RunCli("sparse " + dir.path().string() + " --max-memory 0.01");
+  EXPECT_EQ(small.exit_code, 0) << small.err;
+  EXPECT_NE(small.err.find("above --max-memory 0.01 MB"), std::string::npos) << small.err;
+  EXPECT_FALSE(core::ReadJson(dir / "report" / "sparse.json")["memory"]["within_budget"].get<bool>());
 }
 
 TEST(SparseStage, MissingInputsAreUserErrors) {

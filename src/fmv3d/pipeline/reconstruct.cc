@@ -51,6 +51,7 @@ void ReconstructOptions::SetMaxMemory(double mb) {
   if (!(mb > 0)) throw Error("reconstruct: --max-memory must be > 0 MB");
   sift.max_memory_mb = mb;
   match.max_memory_mb = mb;
+  sparse.max_memory_mb = mb;
   dense.max_memory_mb = mb;
   mesh.poisson.max_memory_mb = mb;
   texture.max_memory_mb = mb;

@@ -20,6 +20,7 @@
 #include "fmv3d/io/frames_index.h"
 #include "fmv3d/sfm/mapper_report.h"
 #include "fmv3d/sfm/relocalise.h"
+#include "fmv3d/sfm/sparse_memory.h"
 
 namespace fmv3d::sfm {
 
@@ -189,6 +190,7 @@ void SparseStageOptions::Check() const {
   if (focal_px < 0) throw Error("sparse: --focal must be > 0 pixels");
   if (hfov_deg < 0 || hfov_deg >= 180) throw Error("sparse: --hfov must be in (0, 180) degrees");
   if (focal_px > 0 && hfov_deg > 0) throw Error("sparse: give --focal or --hfov, not both");
+  if (!(max_memory_mb > 0)) throw Error("sparse: --max-memory must be > 0 MB");
 }
 
 namespace {
@@ -445,6 +447,30 @@ nlohmann::json SparseReport(const MapperInput& input, const MapperResult& result
   return report;
 }
 
+SparseMemoryCounts CountInputs(const MapperInput& input) {
+  std::vector<size_t> keypoints;
+  keypoints.reserve(input.images.size());
+  for (const auto& im : input.images) keypoints.push_back(im.keypoints.size());
+  return CountSparseMemoryInputs(keypoints, input.pairs);
+}
+
+// The bound known before mapping and the estimate from the observations the models hold (sparse_memory.h).
+nlohmann::json MemoryReport(const SparseMemoryCounts& c, const std::vector<core::Reconstruction>& models,
+                            double budget_mb) {
+  size_t observations = 0;
+  for (const auto& model : models)
+    for (const auto& [id, point] : model.points) observations += point.track.size();
+  const double bound_mb = SparseMemoryBoundMb(c);
+  return {{"max_memory_mb", budget_mb},
+          {"bound_mb", bound_mb},
+          {"estimated_mb", EstimateSparseMemoryMb(observations, c.keypoints, c.correspondences)},
+          {"within_budget", bound_mb <= budget_mb},
+          {"keypoints", c.keypoints},
+          {"matched_keypoints", c.matched_keypoints},
+          {"correspondences", c.correspondences},
+          {"observations", observations}};
+}
+
 }  // namespace
 
 nlohmann::json RunSparseStage(const core::Workspace& ws, const SparseStageOptions& options) {
@@ -454,6 +480,14 @@ nlohmann::json RunSparseStage(const core::Workspace& ws, const SparseStageOption
   const SparseStageInput in = ReadSparseStageInput(ws, options);
   const MapperInput& input = in.mapper;
   const double load_seconds = std::chrono::duration<double>(Clock::now() - start).count();
+  const SparseMemoryCounts memory_counts = CountInputs(input);
+  const double bound_mb = SparseMemoryBoundMb(memory_counts);
+  if (bound_mb > options.max_memory_mb)
+    spdlog::warn(
+        "sparse: the model may need up to {:.0f} MB ({} matched keypoints, {} correspondences), above --max-memory "
+        "{:g} MB; bundle adjustment holds every observation at once: fewer features per image or fewer keyframes "
+        "lower it",
+        bound_mb, memory_counts.matched_keypoints, memory_counts.correspondences, options.max_memory_mb);
 
   MapperResult result = RunIncrementalMapper(input, options.mapper);
   std::vector<features::FeatureSet> reread;
@@ -472,6 +506,7 @@ nlohmann::json RunSparseStage(const core::Workspace& ws, const SparseStageOption
   nlohmann::json report = SparseReport(input, result);
   report["relocalisation"] = relocalisation;
   report["manual"] = manual_report;
+  report["memory"] = MemoryReport(memory_counts, result.models, options.max_memory_mb);
   report["seconds"] = {{"load", load_seconds},
                        {"mapping", result.stats.seconds.total},
                        {"write", std::chrono::duration<double>(Clock::now() - write_start).count()},

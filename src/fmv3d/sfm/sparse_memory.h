@@ -1,0 +1,49 @@
+// Memory of the sparse stage, stated before the mapper runs and after it.
+//
+// Bundle adjustment needs every observation of the model at once, so the stage's peak grows with the model rather
+// than with a window the stage could choose: the Ceres problem and its Jacobian (≈ 170–186 B per observation), the
+// Schur eliminator, the nested-model copies of the points; the correspondence graph and the image arrays (≈ 80 B per
+// keypoint, with the keypoints themselves); the verified pairs' inlier lists (8 B per correspondence, held twice
+// more in the graph). Fitted as a bound on heaptrack and peak-RSS measurements (bench/results/scale11.md, mem12.md):
+//   bytes ≤ 700 × observations + 350 × keypoints + 40 × correspondences   (the process's ~105 MiB base not counted)
+// Before mapping the observations are not known; each keypoint that takes part in a verified correspondence can be
+// at most one observation, so their count bounds them. The stage cannot trade this memory for time the way the
+// windowed stages do; what lowers it is fewer features per image (`features --max-features`) or fewer keyframes.
+#pragma once
+
+#include <cstddef>
+#include <vector>
+
+namespace fmv3d::features {
+struct VerifiedPair;
+}
+
+namespace fmv3d::sfm {
+
+struct SparseMemoryModel {
+  double bytes_per_observation = 700;
+  double bytes_per_keypoint = 350;
+  double bytes_per_correspondence = 40;
+};
+
+struct SparseMemoryCounts {
+  size_t keypoints = 0;          // every keypoint of every image (tie points included)
+  size_t matched_keypoints = 0;  // those in at least one verified correspondence: a bound on the observations
+  size_t correspondences = 0;    // inliers over all verified pairs
+};
+
+// `keypoints_per_image[i]` is image id i + 1's keypoint count (pairs use 1-based ids). Pair indices outside their
+// image are ignored here (the match reader refuses them).
+SparseMemoryCounts CountSparseMemoryInputs(const std::vector<size_t>& keypoints_per_image,
+                                           const std::vector<features::VerifiedPair>& pairs);
+
+// The model's MiB for `observations` observations (MiB = 2^20 bytes, as the other stages' budgets).
+double EstimateSparseMemoryMb(size_t observations, size_t keypoints, size_t correspondences,
+                              const SparseMemoryModel& model = {});
+
+// The bound before mapping: every matched keypoint taken as an observation.
+inline double SparseMemoryBoundMb(const SparseMemoryCounts& c, const SparseMemoryModel& model = {}) {
+  return EstimateSparseMemoryMb(c.matched_keypoints, c.keypoints, c.correspondences, model);
+}
+
+}  // namespace fmv3d::sfm
