@@ -74,8 +74,8 @@ void Add(CLI::App& app) {
   cmd->add_flag("--fix-focal", m.fix_known_focal,
                 "Keep a known focal (calibration, sensor database, EXIF, --focal/--hfov) fixed in BA");
   cmd->add_option("--max-memory", a->opt.max_memory_mb,
-                  "Memory budget, MB: a warning before mapping when the model's bound exceeds it (the stage holds "
-                  "every observation for bundle adjustment)")
+                  "Memory budget, MB: when the model's bound exceeds it, each image's least connected matched "
+                  "keypoints are left out of mapping until it fits (bundle adjustment holds every observation)")
       ->check(CLI::PositiveNumber)
       ->capture_default_str();
   cmd->add_option("--focal-scan-pairs", m.focal_scan_pairs, "Guessed focal: pairs the focal scan uses")

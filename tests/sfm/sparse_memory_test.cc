@@ -3,6 +3,8 @@
 
 #include <gtest/gtest.h>
 
+#include <map>
+
 #include "fmv3d/features/types.h"
 
 namespace fmv3d::sfm {
@@ -35,6 +37,80 @@ TEST(SparseMemory, BoundTakesEveryMatchedKeypointAsAnObservation) {
   // 700 × 600k + 350 × 1M + 40 × 3M bytes = 890 MB.
   EXPECT_NEAR(SparseMemoryBoundMb(c), 890e6 / 1048576.0, 1e-9);
   EXPECT_LT(EstimateSparseMemoryMb(400000, c.keypoints, c.correspondences), SparseMemoryBoundMb(c));
+}
+
+// Three images of 10 keypoints; keypoint k of each image is matched in the pairs (1,2), (2,3), (1,3) when k < 6, and
+// only in (1,2) when k ≥ 6: the first six make three-view tracks, the rest two-view ones.
+std::vector<features::VerifiedPair> TriangleOfPairs() {
+  std::vector<features::VerifiedPair> pairs = {MemoryTestPair(1, 2, {}), MemoryTestPair(2, 3, {}),
+                                               MemoryTestPair(1, 3, {})};
+  for (uint32_t k = 0; k < 10; ++k) {
+    pairs[0].inliers.push_back({k, k});
+    if (k < 6) {
+      pairs[1].inliers.push_back({k, k});
+      pairs[2].inliers.push_back({k, k});
+    }
+  }
+  for (auto& p : pairs) p.num_inliers_F = p.num_inliers_H = static_cast<uint32_t>(p.inliers.size());
+  return pairs;
+}
+
+TEST(SparseMemory, ThinningKeepsTheMostConnectedKeypointsWithinTheBudget) {
+  const std::vector<size_t> keypoints = {10, 10, 10};
+  // One byte per unit, so the bound is matched keypoints + correspondences + 0 × keypoints, in MiB.
+  SparseMemoryModel model;
+  model.bytes_per_observation = 1048576;
+  model.bytes_per_keypoint = 0;
+  model.bytes_per_correspondence = 1048576;
+  std::vector<features::VerifiedPair> pairs = TriangleOfPairs();
+  // Untouched: 26 matched keypoints (10 + 10 + 6), 22 correspondences, bound 48.
+  const SparseThinning none = ThinToMemoryBudget(keypoints, {}, 100, &pairs, model);
+  EXPECT_FALSE(none.thinned);
+  EXPECT_TRUE(none.fits);
+  EXPECT_EQ(none.before.matched_keypoints, 26u);
+  EXPECT_EQ(none.before.correspondences, 22u);
+  EXPECT_EQ(pairs[0].inliers.size(), 10u);
+
+  // A budget of 40: each image keeps the same share of its matched keypoints, most connected first. 8 of 10 in
+  // images 1 and 2 and 5 of 6 in image 3 give 21 matched + 18 correspondences = 39; one more keypoint each in
+  // images 1 and 2 would give 42.
+  const SparseThinning t = ThinToMemoryBudget(keypoints, {}, 40, &pairs, model);
+  EXPECT_TRUE(t.thinned);
+  EXPECT_TRUE(t.fits);
+  EXPECT_DOUBLE_EQ(t.bound_after_mb, 39);
+  EXPECT_EQ(t.after.correspondences, 18u);
+  EXPECT_EQ(t.after.matched_keypoints, 21u);
+  ASSERT_EQ(pairs[0].inliers.size(), 8u);
+  EXPECT_EQ(pairs[0].inliers.back().idx1, 7u);  // the six three-view keypoints first, then the lowest indices
+  EXPECT_EQ(pairs[0].num_inliers_F, 8u);        // geometry counts scaled with the inliers
+  EXPECT_EQ(pairs[1].inliers.size(), 5u);
+  EXPECT_EQ(pairs[2].inliers.size(), 5u);
+  EXPECT_LT(t.keep_fraction, 1.0);
+}
+
+TEST(SparseMemory, TiePointsAreAlwaysKeptAndAnUnreachableBudgetChangesNothing) {
+  const std::vector<size_t> keypoints = {10, 10, 10};
+  SparseMemoryModel model;
+  model.bytes_per_observation = 1048576;
+  model.bytes_per_keypoint = 0;
+  model.bytes_per_correspondence = 1048576;
+  // Keypoints 8 and 9 of images 1 and 2 are the operator's tie points (two-view, the least connected).
+  const std::map<uint32_t, uint32_t> manual_from = {{1, 8}, {2, 8}};
+  std::vector<features::VerifiedPair> pairs = TriangleOfPairs();
+  const SparseThinning t = ThinToMemoryBudget(keypoints, manual_from, 40, &pairs, model);
+  ASSERT_TRUE(t.thinned);
+  EXPECT_LE(t.bound_after_mb, 40);
+  size_t ties = 0;
+  for (const auto& m : pairs[0].inliers) ties += m.idx1 >= 8;
+  EXPECT_EQ(ties, 2u);
+
+  // Only the keypoints' own term is above the budget: no fraction fits, so nothing is dropped.
+  model.bytes_per_keypoint = 1048576;  // 30 MiB before any match
+  pairs = TriangleOfPairs();
+  const SparseThinning u = ThinToMemoryBudget(keypoints, {}, 31, &pairs, model);
+  EXPECT_FALSE(u.thinned);
+  EXPECT_FALSE(u.fits);
+  EXPECT_EQ(pairs[0].inliers.size(), 10u);
 }
 
 }  // namespace

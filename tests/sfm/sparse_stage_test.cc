@@ -111,6 +111,21 @@ TEST(SparseStage, WritesModelPlyAndReport) {
   EXPECT_EQ(small.exit_code, 0) << small.err;
   EXPECT_NE(small.err.find("above --max-memory 0.01 MB"), std::string::npos) << small.err;
   EXPECT_FALSE(core::ReadJson(dir / "report" / "sparse.json")["memory"]["within_budget"].get<bool>());
+
+  // A budget halfway between the keypoints' own term and the bound: mapped with each image's most connected
+  // matched keypoints, within the budget, every image still registered.
+  const double keypoints_mb = 350.0 * memory["keypoints"].get<double>() / 1048576.0;
+  const double budget = 0.5 * (keypoints_mb + memory["bound_mb"].get<double>());
+  const auto thin = test::RunCli("sparse " + dir.path().string() + " --max-memory " + std::to_string(budget));
+  EXPECT_EQ(thin.exit_code, 0) << thin.err;
+  EXPECT_NE(thin.err.find("most connected matched keypoints"), std::string::npos) << thin.err;
+  const auto thin_json = core::ReadJson(dir / "report" / "sparse.json");
+  const auto& thin_memory = thin_json["memory"];
+  EXPECT_TRUE(thin_memory["within_budget"].get<bool>());
+  EXPECT_LE(thin_memory["bound_mb"].get<double>(), budget);
+  EXPECT_LT(thin_memory["thinning"]["keep_fraction"].get<double>(), 1.0);
+  EXPECT_LT(thin_memory["correspondences"].get<size_t>(), memory["correspondences"].get<size_t>());
+  EXPECT_EQ(thin_json["registered_images"], 10);
 }
 
 TEST(SparseStage, MissingInputsAreUserErrors) {

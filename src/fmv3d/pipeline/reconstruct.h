@@ -48,7 +48,7 @@ struct ReconstructOptions {
   void ApplyFastPreset();
   // `--max-memory MB`: the budget of every stage that sizes its working window (features' images in flight and
   // tiles, matching's descriptor cache, dense's view cache and fusion window, mesh's Poisson depth, texture's decoded
-  // frames); sparse, which holds its whole model, warns before mapping when its bound exceeds it
+  // frames); sparse, which holds its whole model, maps fewer observations when its bound exceeds it
   // (sfm/sparse_memory.h); the peaks are measured in bench/results/scale11.md.
   void SetMaxMemory(double mb);
   // Throws fmv3d::Error naming the bad option (no inputs, missing file, stage options).

@@ -1,8 +1,49 @@
 #include "fmv3d/sfm/sparse_memory.h"
 
+#include <algorithm>
+#include <cmath>
+
 #include "fmv3d/features/types.h"
 
 namespace fmv3d::sfm {
+namespace {
+
+using Masks = std::vector<std::vector<bool>>;
+
+bool InImage(const std::vector<size_t>& keypoints_per_image, uint32_t image_id, uint32_t index) {
+  return image_id >= 1 && image_id <= keypoints_per_image.size() && index < keypoints_per_image[image_id - 1];
+}
+
+// The counts the pairs would give with only the correspondences whose two keypoints `keep` marks.
+SparseMemoryCounts CountKept(const std::vector<size_t>& keypoints_per_image,
+                             const std::vector<features::VerifiedPair>& pairs, const Masks& keep) {
+  SparseMemoryCounts c;
+  Masks matched(keypoints_per_image.size());
+  for (size_t i = 0; i < keypoints_per_image.size(); ++i) {
+    c.keypoints += keypoints_per_image[i];
+    matched[i].assign(keypoints_per_image[i], false);
+  }
+  auto mark = [&](uint32_t image_id, uint32_t index) {
+    std::vector<bool>& seen = matched[image_id - 1];
+    if (!seen[index]) {
+      seen[index] = true;
+      ++c.matched_keypoints;
+    }
+  };
+  for (const auto& pair : pairs)
+    for (const auto& m : pair.inliers) {
+      if (!InImage(keypoints_per_image, pair.image_id1, m.idx1) ||
+          !InImage(keypoints_per_image, pair.image_id2, m.idx2) || !keep[pair.image_id1 - 1][m.idx1] ||
+          !keep[pair.image_id2 - 1][m.idx2])
+        continue;
+      ++c.correspondences;
+      mark(pair.image_id1, m.idx1);
+      mark(pair.image_id2, m.idx2);
+    }
+  return c;
+}
+
+}  // namespace
 
 SparseMemoryCounts CountSparseMemoryInputs(const std::vector<size_t>& keypoints_per_image,
                                            const std::vector<features::VerifiedPair>& pairs) {
@@ -28,6 +69,85 @@ SparseMemoryCounts CountSparseMemoryInputs(const std::vector<size_t>& keypoints_
     }
   }
   return c;
+}
+
+SparseThinning ThinToMemoryBudget(const std::vector<size_t>& keypoints_per_image,
+                                  const std::map<uint32_t, uint32_t>& manual_from, double budget_mb,
+                                  std::vector<features::VerifiedPair>* pairs, const SparseMemoryModel& model,
+                                  double min_keep_fraction) {
+  SparseThinning t;
+  t.before = t.after = CountSparseMemoryInputs(keypoints_per_image, *pairs);
+  t.bound_before_mb = t.bound_after_mb = SparseMemoryBoundMb(t.before, model);
+  if (t.bound_before_mb <= budget_mb) return t;
+
+  // Each image's matched automatic keypoints, most connected first.
+  const size_t n = keypoints_per_image.size();
+  std::vector<std::vector<uint32_t>> degree(n);
+  for (size_t i = 0; i < n; ++i) degree[i].assign(keypoints_per_image[i], 0);
+  for (const auto& pair : *pairs)
+    for (const auto& m : pair.inliers) {
+      if (!InImage(keypoints_per_image, pair.image_id1, m.idx1) ||
+          !InImage(keypoints_per_image, pair.image_id2, m.idx2))
+        continue;
+      ++degree[pair.image_id1 - 1][m.idx1];
+      ++degree[pair.image_id2 - 1][m.idx2];
+    }
+  auto first_manual = [&](size_t i) {
+    const auto it = manual_from.find(static_cast<uint32_t>(i + 1));
+    return it == manual_from.end() ? keypoints_per_image[i] : std::min<size_t>(it->second, keypoints_per_image[i]);
+  };
+  std::vector<std::vector<uint32_t>> ranked(n);
+  for (size_t i = 0; i < n; ++i) {
+    for (uint32_t k = 0; k < first_manual(i); ++k)
+      if (degree[i][k] > 0) ranked[i].push_back(k);
+    std::stable_sort(ranked[i].begin(), ranked[i].end(),
+                     [&](uint32_t a, uint32_t b) { return degree[i][a] > degree[i][b]; });
+  }
+  auto select = [&](double fraction) {
+    Masks keep(n);
+    for (size_t i = 0; i < n; ++i) {
+      keep[i].assign(keypoints_per_image[i], false);
+      for (size_t k = first_manual(i); k < keypoints_per_image[i]; ++k) keep[i][k] = true;
+      const auto count = static_cast<size_t>(std::ceil(fraction * static_cast<double>(ranked[i].size())));
+      for (size_t r = 0; r < count; ++r) keep[i][ranked[i][r]] = true;
+    }
+    return keep;
+  };
+  auto bound = [&](double fraction) {
+    return SparseMemoryBoundMb(CountKept(keypoints_per_image, *pairs, select(fraction)), model);
+  };
+  if (bound(min_keep_fraction) > budget_mb) {
+    t.fits = false;
+    return t;
+  }
+  double lo = min_keep_fraction, hi = 1;  // lo fits, hi does not
+  for (int it = 0; it < 12; ++it) {
+    const double mid = 0.5 * (lo + hi);
+    (bound(mid) <= budget_mb ? lo : hi) = mid;
+  }
+  const Masks keep = select(lo);
+  for (auto& pair : *pairs) {
+    auto& in = pair.inliers;
+    const size_t original = in.size();
+    in.erase(std::remove_if(in.begin(), in.end(),
+                            [&](const features::FeatureMatch& m) {
+                              return !InImage(keypoints_per_image, pair.image_id1, m.idx1) ||
+                                     !InImage(keypoints_per_image, pair.image_id2, m.idx2) ||
+                                     !keep[pair.image_id1 - 1][m.idx1] || !keep[pair.image_id2 - 1][m.idx2];
+                            }),
+             in.end());
+    // The geometry counts keep their ratios to the inliers (the initial pair's homography test reads them).
+    if (original > 0 && in.size() < original) {
+      const double ratio = static_cast<double>(in.size()) / static_cast<double>(original);
+      for (uint32_t* count : {&pair.num_inliers_F, &pair.num_inliers_E, &pair.num_inliers_H})
+        *count = static_cast<uint32_t>(std::lround(ratio * *count));
+    }
+  }
+  t.after = CountSparseMemoryInputs(keypoints_per_image, *pairs);
+  t.bound_after_mb = SparseMemoryBoundMb(t.after, model);
+  t.keep_fraction = lo;
+  t.thinned = true;
+  return t;
 }
 
 double EstimateSparseMemoryMb(size_t observations, size_t keypoints, size_t correspondences,

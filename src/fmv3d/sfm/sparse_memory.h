@@ -8,10 +8,14 @@
 //   bytes ≤ 700 × observations + 350 × keypoints + 40 × correspondences   (the process's ~105 MiB base not counted)
 // Before mapping the observations are not known; each keypoint that takes part in a verified correspondence can be
 // at most one observation, so their count bounds them. The stage cannot trade this memory for time the way the
-// windowed stages do; what lowers it is fewer features per image (`features --max-features`) or fewer keyframes.
+// windowed stages do; it keeps within a budget by mapping fewer observations: ThinToMemoryBudget keeps each image's
+// most connected matched keypoints (those that make long tracks, which tie the cameras together) and drops the
+// correspondences of the rest, the operator's tie points always kept.
 #pragma once
 
 #include <cstddef>
+#include <cstdint>
+#include <map>
 #include <vector>
 
 namespace fmv3d::features {
@@ -45,5 +49,24 @@ double EstimateSparseMemoryMb(size_t observations, size_t keypoints, size_t corr
 inline double SparseMemoryBoundMb(const SparseMemoryCounts& c, const SparseMemoryModel& model = {}) {
   return EstimateSparseMemoryMb(c.matched_keypoints, c.keypoints, c.correspondences, model);
 }
+
+struct SparseThinning {
+  SparseMemoryCounts before, after;
+  double bound_before_mb = 0, bound_after_mb = 0;
+  double keep_fraction = 1;  // of each image's matched automatic keypoints, the most connected first
+  bool thinned = false;
+  bool fits = true;  // the bound (after thinning, if any) is within the budget
+};
+
+// Keeps the bound within `budget_mb` by dropping the correspondences of each image's least connected matched
+// keypoints (fewest correspondences first; ties by index, so the result is deterministic): the largest keep
+// fraction in [min_keep_fraction, 1] that fits, found by bisection. Keypoints at or after `manual_from[image id]`
+// (the operator's tie points) are always kept. When even `min_keep_fraction` does not fit (the keypoints' own term
+// is too large), `pairs` is left unchanged and `fits` is false: thinning further would cost the model without
+// meeting the budget.
+SparseThinning ThinToMemoryBudget(const std::vector<size_t>& keypoints_per_image,
+                                  const std::map<uint32_t, uint32_t>& manual_from, double budget_mb,
+                                  std::vector<features::VerifiedPair>* pairs, const SparseMemoryModel& model = {},
+                                  double min_keep_fraction = 0.2);
 
 }  // namespace fmv3d::sfm

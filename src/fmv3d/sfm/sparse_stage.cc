@@ -447,28 +447,35 @@ nlohmann::json SparseReport(const MapperInput& input, const MapperResult& result
   return report;
 }
 
-SparseMemoryCounts CountInputs(const MapperInput& input) {
+std::vector<size_t> KeypointCounts(const MapperInput& input) {
   std::vector<size_t> keypoints;
   keypoints.reserve(input.images.size());
   for (const auto& im : input.images) keypoints.push_back(im.keypoints.size());
-  return CountSparseMemoryInputs(keypoints, input.pairs);
+  return keypoints;
 }
 
-// The bound known before mapping and the estimate from the observations the models hold (sparse_memory.h).
-nlohmann::json MemoryReport(const SparseMemoryCounts& c, const std::vector<core::Reconstruction>& models,
+// The bound known before mapping (after thinning, if the budget needed it) and the estimate from the observations
+// the models hold (sparse_memory.h).
+nlohmann::json MemoryReport(const SparseThinning& t, const std::vector<core::Reconstruction>& models,
                             double budget_mb) {
   size_t observations = 0;
   for (const auto& model : models)
     for (const auto& [id, point] : model.points) observations += point.track.size();
-  const double bound_mb = SparseMemoryBoundMb(c);
-  return {{"max_memory_mb", budget_mb},
-          {"bound_mb", bound_mb},
-          {"estimated_mb", EstimateSparseMemoryMb(observations, c.keypoints, c.correspondences)},
-          {"within_budget", bound_mb <= budget_mb},
-          {"keypoints", c.keypoints},
-          {"matched_keypoints", c.matched_keypoints},
-          {"correspondences", c.correspondences},
-          {"observations", observations}};
+  nlohmann::json j = {
+      {"max_memory_mb", budget_mb},
+      {"bound_mb", t.bound_after_mb},
+      {"estimated_mb", EstimateSparseMemoryMb(observations, t.after.keypoints, t.after.correspondences)},
+      {"within_budget", t.fits},
+      {"keypoints", t.after.keypoints},
+      {"matched_keypoints", t.after.matched_keypoints},
+      {"correspondences", t.after.correspondences},
+      {"observations", observations}};
+  if (t.thinned)
+    j["thinning"] = {{"keep_fraction", t.keep_fraction},
+                     {"bound_before_mb", t.bound_before_mb},
+                     {"matched_keypoints_before", t.before.matched_keypoints},
+                     {"correspondences_before", t.before.correspondences}};
+  return j;
 }
 
 }  // namespace
@@ -477,17 +484,24 @@ nlohmann::json RunSparseStage(const core::Workspace& ws, const SparseStageOption
   options.Check();
   using Clock = std::chrono::steady_clock;
   const auto start = Clock::now();
-  const SparseStageInput in = ReadSparseStageInput(ws, options);
-  const MapperInput& input = in.mapper;
+  SparseStageInput in = ReadSparseStageInput(ws, options);
+  MapperInput& input = in.mapper;
   const double load_seconds = std::chrono::duration<double>(Clock::now() - start).count();
-  const SparseMemoryCounts memory_counts = CountInputs(input);
-  const double bound_mb = SparseMemoryBoundMb(memory_counts);
-  if (bound_mb > options.max_memory_mb)
+  const SparseThinning thinning =
+      ThinToMemoryBudget(KeypointCounts(input), input.manual_from, options.max_memory_mb, &input.pairs);
+  if (thinning.thinned)
+    spdlog::warn(
+        "sparse: the model could need {:.0f} MB, above --max-memory {:g} MB: mapping with the {:.0f}% most connected "
+        "matched keypoints of each image ({} of {} correspondences; bound now {:.0f} MB)",
+        thinning.bound_before_mb, options.max_memory_mb, 100 * thinning.keep_fraction, thinning.after.correspondences,
+        thinning.before.correspondences, thinning.bound_after_mb);
+  else if (!thinning.fits)
     spdlog::warn(
         "sparse: the model may need up to {:.0f} MB ({} matched keypoints, {} correspondences), above --max-memory "
-        "{:g} MB; bundle adjustment holds every observation at once: fewer features per image or fewer keyframes "
-        "lower it",
-        bound_mb, memory_counts.matched_keypoints, memory_counts.correspondences, options.max_memory_mb);
+        "{:g} MB even with a fifth of its matches; bundle adjustment holds every observation at once: fewer features "
+        "per image or fewer keyframes lower it",
+        thinning.bound_before_mb, thinning.before.matched_keypoints, thinning.before.correspondences,
+        options.max_memory_mb);
 
   MapperResult result = RunIncrementalMapper(input, options.mapper);
   std::vector<features::FeatureSet> reread;
@@ -506,7 +520,7 @@ nlohmann::json RunSparseStage(const core::Workspace& ws, const SparseStageOption
   nlohmann::json report = SparseReport(input, result);
   report["relocalisation"] = relocalisation;
   report["manual"] = manual_report;
-  report["memory"] = MemoryReport(memory_counts, result.models, options.max_memory_mb);
+  report["memory"] = MemoryReport(thinning, result.models, options.max_memory_mb);
   report["seconds"] = {{"load", load_seconds},
                        {"mapping", result.stats.seconds.total},
                        {"write", std::chrono::duration<double>(Clock::now() - write_start).count()},

@@ -35,9 +35,9 @@ struct SparseStageOptions {
   // field of view): focal in pixels, or the horizontal FOV in degrees (f = w / 2 / tan(hfov / 2)). 0 = unset.
   // Such a prior counts as known (no scan); with mapper.fix_known_focal it also stays fixed in BA.
   double focal_px = 0, hfov_deg = 0;
-  // `--max-memory MB`: the stage holds its whole model (sparse_memory.h), so the budget is not a window it sizes;
-  // the bound from the matches is compared with it before mapping, a warning says when it may be exceeded, and
-  // report/sparse.json's "memory" states both.
+  // `--max-memory MB`: the stage holds its whole model (sparse_memory.h), so the budget is not a window it sizes:
+  // when the bound from the matches exceeds it, each image's least connected matched keypoints are left out of
+  // mapping until it fits (a warning says so, or that it cannot fit), and report/sparse.json's "memory" states it.
   double max_memory_mb = 2048;
   void Check() const;
 };
