@@ -74,8 +74,9 @@ void Add(CLI::App& app) {
   cmd->add_flag("--fix-focal", m.fix_known_focal,
                 "Keep a known focal (calibration, sensor database, EXIF, --focal/--hfov) fixed in BA");
   cmd->add_option("--max-memory", a->opt.max_memory_mb,
-                  "Memory budget, MB: when the model's bound exceeds it, each image's least connected matched "
-                  "keypoints are left out of mapping until it fits (bundle adjustment holds every observation)")
+                  "Memory budget, MB: when the model's bound exceeds it, part of each image's matched keypoints "
+                  "(the least connected, spread over the image) is left out of mapping until it fits (bundle "
+                  "adjustment holds every observation)")
       ->check(CLI::PositiveNumber)
       ->capture_default_str();
   cmd->add_option("--focal-scan-pairs", m.focal_scan_pairs, "Guessed focal: pairs the focal scan uses")

@@ -55,8 +55,24 @@ std::vector<features::VerifiedPair> TriangleOfPairs() {
   return pairs;
 }
 
+// Images whose keypoints lie at the positions given, or all at one point (one grid cell).
+std::vector<MapperImage> ImagesAt(const std::vector<std::vector<Eigen::Vector2d>>& positions) {
+  std::vector<MapperImage> images(positions.size());
+  for (size_t i = 0; i < positions.size(); ++i) {
+    images[i].id = static_cast<uint32_t>(i + 1);
+    images[i].keypoints = positions[i];
+  }
+  return images;
+}
+
+std::vector<MapperImage> ImagesInOneCell(const std::vector<size_t>& counts) {
+  std::vector<std::vector<Eigen::Vector2d>> positions;
+  for (size_t c : counts) positions.emplace_back(c, Eigen::Vector2d(50, 50));
+  return ImagesAt(positions);
+}
+
 TEST(SparseMemory, ThinningKeepsTheMostConnectedKeypointsWithinTheBudget) {
-  const std::vector<size_t> keypoints = {10, 10, 10};
+  const std::vector<MapperImage> keypoints = ImagesInOneCell({10, 10, 10});
   // One byte per unit, so the bound is matched keypoints + correspondences + 0 × keypoints, in MiB.
   SparseMemoryModel model;
   model.bytes_per_observation = 1048576;
@@ -89,7 +105,7 @@ TEST(SparseMemory, ThinningKeepsTheMostConnectedKeypointsWithinTheBudget) {
 }
 
 TEST(SparseMemory, TiePointsAreAlwaysKeptAndAnUnreachableBudgetChangesNothing) {
-  const std::vector<size_t> keypoints = {10, 10, 10};
+  const std::vector<MapperImage> keypoints = ImagesInOneCell({10, 10, 10});
   SparseMemoryModel model;
   model.bytes_per_observation = 1048576;
   model.bytes_per_keypoint = 0;
@@ -111,6 +127,40 @@ TEST(SparseMemory, TiePointsAreAlwaysKeptAndAnUnreachableBudgetChangesNothing) {
   EXPECT_FALSE(u.thinned);
   EXPECT_FALSE(u.fits);
   EXPECT_EQ(pairs[0].inliers.size(), 10u);
+}
+
+// Images 1 and 2: keypoints 0–4 on the left (x = 10), matched in all three pairs; 5–9 on the right (x = 900),
+// matched in (1, 2) only. Ranking by connection alone would keep the left side only; the grid keeps both.
+TEST(SparseMemory, ThinningKeepsKeypointsAcrossTheImage) {
+  std::vector<std::vector<Eigen::Vector2d>> positions(3);
+  for (int k = 0; k < 10; ++k) {
+    const Eigen::Vector2d at(k < 5 ? 10 : 900, 100 + 10 * (k % 5));
+    positions[0].push_back(at);
+    positions[1].push_back(at);
+    if (k < 5) positions[2].push_back(at);
+  }
+  std::vector<features::VerifiedPair> pairs = {MemoryTestPair(1, 2, {}), MemoryTestPair(1, 3, {}),
+                                               MemoryTestPair(2, 3, {})};
+  for (uint32_t k = 0; k < 10; ++k) {
+    pairs[0].inliers.push_back({k, k});
+    if (k < 5) {
+      pairs[1].inliers.push_back({k, k});
+      pairs[2].inliers.push_back({k, k});
+    }
+  }
+  SparseMemoryModel model;
+  model.bytes_per_observation = 1048576;
+  model.bytes_per_keypoint = 0;
+  model.bytes_per_correspondence = 1048576;
+  // Before: 25 matched + 20 correspondences. Keeping 6 of 10 in images 1 and 2 (3 a side) and 3 of 5 in image 3
+  // gives 15 + 12 = 27; one more in images 1 and 2 and image 3's fourth give 33.
+  const SparseThinning t = ThinToMemoryBudget(ImagesAt(positions), {}, 30, &pairs, model);
+  ASSERT_TRUE(t.thinned);
+  EXPECT_DOUBLE_EQ(t.bound_after_mb, 27);
+  size_t left = 0, right = 0;
+  for (const auto& m : pairs[0].inliers) (m.idx1 < 5 ? left : right) += 1;
+  EXPECT_EQ(left, 3u);
+  EXPECT_EQ(right, 3u);
 }
 
 }  // namespace

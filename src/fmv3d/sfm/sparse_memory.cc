@@ -1,5 +1,6 @@
 #include "fmv3d/sfm/sparse_memory.h"
 
+#include <Eigen/Geometry>
 #include <algorithm>
 #include <cmath>
 
@@ -71,16 +72,20 @@ SparseMemoryCounts CountSparseMemoryInputs(const std::vector<size_t>& keypoints_
   return c;
 }
 
-SparseThinning ThinToMemoryBudget(const std::vector<size_t>& keypoints_per_image,
+SparseThinning ThinToMemoryBudget(const std::vector<MapperImage>& images,
                                   const std::map<uint32_t, uint32_t>& manual_from, double budget_mb,
                                   std::vector<features::VerifiedPair>* pairs, const SparseMemoryModel& model,
                                   double min_keep_fraction) {
+  std::vector<size_t> keypoints_per_image;
+  keypoints_per_image.reserve(images.size());
+  for (const auto& im : images) keypoints_per_image.push_back(im.keypoints.size());
   SparseThinning t;
   t.before = t.after = CountSparseMemoryInputs(keypoints_per_image, *pairs);
   t.bound_before_mb = t.bound_after_mb = SparseMemoryBoundMb(t.before, model);
   if (t.bound_before_mb <= budget_mb) return t;
 
-  // Each image's matched automatic keypoints, most connected first.
+  // Each image's matched automatic keypoints in the order they are kept: round robin over the grid cells, each
+  // cell's most connected first.
   const size_t n = keypoints_per_image.size();
   std::vector<std::vector<uint32_t>> degree(n);
   for (size_t i = 0; i < n; ++i) degree[i].assign(keypoints_per_image[i], 0);
@@ -96,12 +101,32 @@ SparseThinning ThinToMemoryBudget(const std::vector<size_t>& keypoints_per_image
     const auto it = manual_from.find(static_cast<uint32_t>(i + 1));
     return it == manual_from.end() ? keypoints_per_image[i] : std::min<size_t>(it->second, keypoints_per_image[i]);
   };
+  constexpr int kGrid = 8;
   std::vector<std::vector<uint32_t>> ranked(n);
   for (size_t i = 0; i < n; ++i) {
+    const auto& kp = images[i].keypoints;
+    std::vector<uint32_t> matched;
+    Eigen::AlignedBox2d extent;
     for (uint32_t k = 0; k < first_manual(i); ++k)
-      if (degree[i][k] > 0) ranked[i].push_back(k);
-    std::stable_sort(ranked[i].begin(), ranked[i].end(),
+      if (degree[i][k] > 0) {
+        matched.push_back(k);
+        extent.extend(kp[k]);
+      }
+    std::stable_sort(matched.begin(), matched.end(),
                      [&](uint32_t a, uint32_t b) { return degree[i][a] > degree[i][b]; });
+    if (matched.empty()) continue;
+    const Eigen::Vector2d size = extent.sizes().cwiseMax(1e-9);
+    std::vector<std::vector<uint32_t>> cells(kGrid * kGrid);
+    for (uint32_t k : matched) {
+      const Eigen::Vector2d u = (kp[k] - extent.min()).cwiseQuotient(size) * kGrid;
+      const int cx = std::clamp(static_cast<int>(u.x()), 0, kGrid - 1);
+      const int cy = std::clamp(static_cast<int>(u.y()), 0, kGrid - 1);
+      cells[cy * kGrid + cx].push_back(k);
+    }
+    ranked[i].reserve(matched.size());
+    for (size_t r = 0; ranked[i].size() < matched.size(); ++r)
+      for (const auto& cell : cells)
+        if (r < cell.size()) ranked[i].push_back(cell[r]);
   }
   auto select = [&](double fraction) {
     Masks keep(n);

@@ -9,8 +9,8 @@
 // Before mapping the observations are not known; each keypoint that takes part in a verified correspondence can be
 // at most one observation, so their count bounds them. The stage cannot trade this memory for time the way the
 // windowed stages do; it keeps within a budget by mapping fewer observations: ThinToMemoryBudget keeps each image's
-// most connected matched keypoints (those that make long tracks, which tie the cameras together) and drops the
-// correspondences of the rest, the operator's tie points always kept.
+// most connected matched keypoints (those that make long tracks, which tie the cameras together), spread over the
+// image, and drops the correspondences of the rest, the operator's tie points always kept.
 #pragma once
 
 #include <cstddef>
@@ -18,9 +18,7 @@
 #include <map>
 #include <vector>
 
-namespace fmv3d::features {
-struct VerifiedPair;
-}
+#include "fmv3d/sfm/incremental_mapper.h"
 
 namespace fmv3d::sfm {
 
@@ -58,13 +56,14 @@ struct SparseThinning {
   bool fits = true;  // the bound (after thinning, if any) is within the budget
 };
 
-// Keeps the bound within `budget_mb` by dropping the correspondences of each image's least connected matched
-// keypoints (fewest correspondences first; ties by index, so the result is deterministic): the largest keep
-// fraction in [min_keep_fraction, 1] that fits, found by bisection. Keypoints at or after `manual_from[image id]`
-// (the operator's tie points) are always kept. When even `min_keep_fraction` does not fit (the keypoints' own term
-// is too large), `pairs` is left unchanged and `fits` is false: thinning further would cost the model without
-// meeting the budget.
-SparseThinning ThinToMemoryBudget(const std::vector<size_t>& keypoints_per_image,
+// Keeps the bound within `budget_mb` by dropping the correspondences of part of each image's matched keypoints:
+// each image keeps the same share of them, spread over an 8 × 8 grid of its keypoints' extent (so the pairs'
+// geometry keeps its field of view) and the most connected first within a cell (fewest correspondences dropped
+// first; ties by index, so the result is deterministic). The largest share in [min_keep_fraction, 1] that fits is
+// found by bisection. Keypoints at or after `manual_from[image id]` (the operator's tie points) are always kept.
+// When even `min_keep_fraction` does not fit (the keypoints' own term is too large), `pairs` is left unchanged and
+// `fits` is false: thinning further would cost the model without meeting the budget.
+SparseThinning ThinToMemoryBudget(const std::vector<MapperImage>& images,
                                   const std::map<uint32_t, uint32_t>& manual_from, double budget_mb,
                                   std::vector<features::VerifiedPair>* pairs, const SparseMemoryModel& model = {},
                                   double min_keep_fraction = 0.2);

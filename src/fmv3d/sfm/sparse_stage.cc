@@ -447,13 +447,6 @@ nlohmann::json SparseReport(const MapperInput& input, const MapperResult& result
   return report;
 }
 
-std::vector<size_t> KeypointCounts(const MapperInput& input) {
-  std::vector<size_t> keypoints;
-  keypoints.reserve(input.images.size());
-  for (const auto& im : input.images) keypoints.push_back(im.keypoints.size());
-  return keypoints;
-}
-
 // The bound known before mapping (after thinning, if the budget needed it) and the estimate from the observations
 // the models hold (sparse_memory.h).
 nlohmann::json MemoryReport(const SparseThinning& t, const std::vector<core::Reconstruction>& models,
@@ -488,11 +481,12 @@ nlohmann::json RunSparseStage(const core::Workspace& ws, const SparseStageOption
   MapperInput& input = in.mapper;
   const double load_seconds = std::chrono::duration<double>(Clock::now() - start).count();
   const SparseThinning thinning =
-      ThinToMemoryBudget(KeypointCounts(input), input.manual_from, options.max_memory_mb, &input.pairs);
+      ThinToMemoryBudget(input.images, input.manual_from, options.max_memory_mb, &input.pairs);
   if (thinning.thinned)
     spdlog::warn(
-        "sparse: the model could need {:.0f} MB, above --max-memory {:g} MB: mapping with the {:.0f}% most connected "
-        "matched keypoints of each image ({} of {} correspondences; bound now {:.0f} MB)",
+        "sparse: the model could need {:.0f} MB, above --max-memory {:g} MB: mapping with {:.0f}% of each image's "
+        "matched "
+        "keypoints, the most connected spread over the image ({} of {} correspondences; bound now {:.0f} MB)",
         thinning.bound_before_mb, options.max_memory_mb, 100 * thinning.keep_fraction, thinning.after.correspondences,
         thinning.before.correspondences, thinning.bound_after_mb);
   else if (!thinning.fits)

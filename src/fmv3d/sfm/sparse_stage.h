@@ -36,8 +36,9 @@ struct SparseStageOptions {
   // Such a prior counts as known (no scan); with mapper.fix_known_focal it also stays fixed in BA.
   double focal_px = 0, hfov_deg = 0;
   // `--max-memory MB`: the stage holds its whole model (sparse_memory.h), so the budget is not a window it sizes:
-  // when the bound from the matches exceeds it, each image's least connected matched keypoints are left out of
-  // mapping until it fits (a warning says so, or that it cannot fit), and report/sparse.json's "memory" states it.
+  // when the bound from the matches exceeds it, part of each image's matched keypoints (the least connected,
+  // spread over the image) is left out of mapping until it fits (a warning says so, or that it cannot fit), and
+  // report/sparse.json's "memory" states it.
   double max_memory_mb = 2048;
   void Check() const;
 };
