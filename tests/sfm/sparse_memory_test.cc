@@ -55,6 +55,15 @@ std::vector<features::VerifiedPair> TriangleOfPairs() {
   return pairs;
 }
 
+// A model in which each matched keypoint and each correspondence costs 1 MiB and keypoints nothing: bounds in units.
+SparseMemoryModel OneMiBPerUnit() {
+  SparseMemoryModel model;
+  model.bytes_per_observation = 1048576;
+  model.bytes_per_keypoint = 0;
+  model.bytes_per_correspondence = 1048576;
+  return model;
+}
+
 // Images whose keypoints lie at the positions given, or all at one point (one grid cell).
 std::vector<MapperImage> ImagesAt(const std::vector<std::vector<Eigen::Vector2d>>& positions) {
   std::vector<MapperImage> images(positions.size());
@@ -73,11 +82,7 @@ std::vector<MapperImage> ImagesInOneCell(const std::vector<size_t>& counts) {
 
 TEST(SparseMemory, ThinningKeepsTheMostConnectedKeypointsWithinTheBudget) {
   const std::vector<MapperImage> keypoints = ImagesInOneCell({10, 10, 10});
-  // One byte per unit, so the bound is matched keypoints + correspondences + 0 × keypoints, in MiB.
-  SparseMemoryModel model;
-  model.bytes_per_observation = 1048576;
-  model.bytes_per_keypoint = 0;
-  model.bytes_per_correspondence = 1048576;
+  SparseMemoryModel model = OneMiBPerUnit();
   std::vector<features::VerifiedPair> pairs = TriangleOfPairs();
   // Untouched: 26 matched keypoints (10 + 10 + 6), 22 correspondences, bound 48.
   const SparseThinning none = ThinToMemoryBudget(keypoints, {}, 100, &pairs, model);
@@ -106,10 +111,7 @@ TEST(SparseMemory, ThinningKeepsTheMostConnectedKeypointsWithinTheBudget) {
 
 TEST(SparseMemory, TiePointsAreAlwaysKeptAndAnUnreachableBudgetChangesNothing) {
   const std::vector<MapperImage> keypoints = ImagesInOneCell({10, 10, 10});
-  SparseMemoryModel model;
-  model.bytes_per_observation = 1048576;
-  model.bytes_per_keypoint = 0;
-  model.bytes_per_correspondence = 1048576;
+  SparseMemoryModel model = OneMiBPerUnit();
   // Keypoints 8 and 9 of images 1 and 2 are the operator's tie points (two-view, the least connected).
   const std::map<uint32_t, uint32_t> manual_from = {{1, 8}, {2, 8}};
   std::vector<features::VerifiedPair> pairs = TriangleOfPairs();
@@ -148,10 +150,7 @@ TEST(SparseMemory, ThinningKeepsKeypointsAcrossTheImage) {
       pairs[2].inliers.push_back({k, k});
     }
   }
-  SparseMemoryModel model;
-  model.bytes_per_observation = 1048576;
-  model.bytes_per_keypoint = 0;
-  model.bytes_per_correspondence = 1048576;
+  SparseMemoryModel model = OneMiBPerUnit();
   // Before: 25 matched + 20 correspondences. Keeping 6 of 10 in images 1 and 2 (3 a side) and 3 of 5 in image 3
   // gives 15 + 12 = 27; one more in images 1 and 2 and image 3's fourth give 33.
   const SparseThinning t = ThinToMemoryBudget(ImagesAt(positions), {}, 30, &pairs, model);
