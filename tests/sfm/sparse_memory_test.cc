@@ -75,8 +75,8 @@ std::vector<MapperImage> ImagesAt(const std::vector<std::vector<Eigen::Vector2d>
 }
 
 std::vector<MapperImage> ImagesInOneCell(const std::vector<size_t>& counts) {
-  std::vector<std::vector<Eigen::Vector2d>> positions;
-  for (size_t c : counts) positions.emplace_back(c, Eigen::Vector2d(50, 50));
+  std::vector<std::vector<Eigen::Vector2d>> positions(counts.size());
+  for (size_t i = 0; i < counts.size(); ++i) positions[i].assign(counts[i], Eigen::Vector2d(50, 50));
   return ImagesAt(positions);
 }
 

@@ -116,7 +116,7 @@ SparseThinning ThinToMemoryBudget(const std::vector<MapperImage>& images,
                      [&](uint32_t a, uint32_t b) { return degree[i][a] > degree[i][b]; });
     if (matched.empty()) continue;
     const Eigen::Vector2d size = extent.sizes().cwiseMax(1e-9);
-    std::vector<std::vector<uint32_t>> cells(kGrid * kGrid);
+    std::vector<std::vector<uint32_t>> cells(static_cast<size_t>(kGrid) * kGrid);
     for (uint32_t k : matched) {
       const Eigen::Vector2d u = (kp[k] - extent.min()).cwiseQuotient(size) * kGrid;
       const int cx = std::clamp(static_cast<int>(u.x()), 0, kGrid - 1);
