@@ -14,6 +14,8 @@ const char* FocalDecisionName(FocalDecisionKind kind) {
       return "plateau";
     case FocalDecisionKind::kMinimum:
       return "minimum";
+    case FocalDecisionKind::kRestart:
+      return "restart";
     case FocalDecisionKind::kNone:
       break;
   }

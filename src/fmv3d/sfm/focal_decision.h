@@ -15,8 +15,9 @@ enum class FocalDecisionKind {
   kUndetermined,  // a flat curve: the shortest candidate held as a lower bound until the final test
   kPlateau,       // a supported knee: a lower bound, held until the final test
   kMinimum,       // a minimum: a start that bundle adjustment refines
+  kRestart,       // a second mapping, started at the focal the first one refined to (no scan)
 };
-// "known", "distorted", "undetermined", "plateau", "minimum" (kNone: "none").
+// "known", "distorted", "undetermined", "plateau", "minimum", "restart" (kNone: "none").
 const char* FocalDecisionName(FocalDecisionKind kind);
 
 struct DollyZoomDecision {
@@ -26,6 +27,18 @@ struct DollyZoomDecision {
   double shortest_factor = 1;  // the shortest focal tried / start
   bool released = false;       // the focal was freed to bundle adjustment from here
   double seconds = 0;
+};
+
+// A guessed focal that the first mapping moved far from where it started: the model grew under a wrong focal
+// (early poses and points fitted to it), so the images were mapped again from the refined focal.
+struct FocalRestart {
+  double first_start_px = 0;  // where the first mapping's focal started (the scans' choice)
+  double first_final_px = 0;  // where its adjustments took it: the second mapping's start
+  double change = 0;          // |final / start − 1|
+  size_t first_images = 0;    // the first mapping's largest model
+  double first_reprojection_px = 0;
+  bool kept = false;  // the second mapping was kept (it registers at least as many images)
+  double seconds = 0;  // the second mapping
 };
 
 struct FocalDecision {
@@ -42,6 +55,7 @@ struct FocalDecision {
   size_t candidates = 0;
   double seconds = 0, division_seconds = 0;
   std::optional<DollyZoomDecision> dolly_zoom;
+  std::optional<FocalRestart> restart;  // set on the kept model's decision when the images were mapped twice
 };
 
 }  // namespace fmv3d::sfm

@@ -3,6 +3,7 @@
 #include <spdlog/spdlog.h>
 
 #include <algorithm>
+#include <cmath>
 #include <map>
 #include <numeric>
 #include <set>
@@ -34,6 +35,7 @@ void MapperOptions::Check() const {
   if (!(guided_completion_false_accept_rate > 0 && guided_completion_false_accept_rate < 1))
     throw Error("mapper: guided_completion_false_accept_rate must be in (0, 1)");
   if (!(self_calibration_min_delta_chi2 >= 0)) throw Error("mapper: self_calibration_min_delta_chi2 must be ≥ 0");
+  if (!(focal_restart_min_change >= 0)) throw Error("mapper: focal_restart_min_change must be ≥ 0");
   if (!(weak_intrinsic_corner_px > 0)) throw Error("mapper: weak_intrinsic_corner_px must be > 0");
 }
 
@@ -52,12 +54,12 @@ TrackSummary SummariseTracks(const MapperInput& input, const std::map<uint32_t, 
   return t;
 }
 
-}  // namespace
-
-MapperResult RunIncrementalMapper(const MapperInput& input, const MapperOptions& options) {
+// One mapping of every image: models grown until the pool is used up. focal_start: cameras started at that focal
+// (ModelBuilder::StartFocalAt).
+MapperResult MapOnce(const MapperInput& input, const MapperOptions& options,
+                     const std::map<uint32_t, double>& focal_start) {
   using mapper::Clock;
   using mapper::Seconds;
-  options.Check();
   const auto start = Clock::now();
   MapperResult result;
   std::map<uint32_t, const MapperImage*> images;
@@ -97,6 +99,7 @@ MapperResult RunIncrementalMapper(const MapperInput& input, const MapperOptions&
   while (static_cast<int>(pool.size()) >= options.min_model_size &&
          static_cast<int>(result.models.size()) < options.max_models) {
     mapper::ModelBuilder builder(input, images, graph, options, pool, &timings);
+    builder.StartFocalAt(focal_start);
     if (!builder.Initialize()) break;
     builder.Grow();
     relocalised += builder.num_relocalised();
@@ -156,6 +159,67 @@ MapperResult RunIncrementalMapper(const MapperInput& input, const MapperOptions&
   st.seconds = timings;
   st.seconds.total = Seconds(start);
   return result;
+}
+
+// The largest model's guessed cameras whose focal its adjustments moved by more than min_change from where the
+// mapping started it: camera id → the refined focal; *restart gets the largest move. Empty when the focal was
+// stated, or found with a wide lens's distortion (that start is the scan's lens as well as its focal).
+std::map<uint32_t, double> FocalsToRestartFrom(const MapperInput& input, const MapperResult& r, double min_change,
+                                               FocalRestart* restart) {
+  if (r.models.empty() || r.focal_decision.empty()) return {};
+  const FocalDecision& d = r.focal_decision[0];
+  if (d.kind != FocalDecisionKind::kMinimum && d.kind != FocalDecisionKind::kUndetermined &&
+      d.kind != FocalDecisionKind::kPlateau)
+    return {};
+  if (!(d.guess_px > 0)) return {};
+  // The scans scale every guessed camera of the model alike (ModelBuilder::TryInitialPair).
+  const double scale = (d.dolly_zoom ? d.dolly_zoom->focal_px : d.two_view_focal_px) / d.guess_px;
+  std::map<uint32_t, double> out;
+  for (const auto& [cid, cam] : r.models[0].cameras) {
+    const auto it = input.cameras.find(cid);
+    if (it == input.cameras.end() || it->second.focal_known) continue;
+    const double start = scale * it->second.camera.f;
+    const double moved = std::abs(cam.f / start - 1);
+    if (moved > restart->change) {
+      restart->change = moved;
+      restart->first_start_px = start;
+      restart->first_final_px = cam.f;
+    }
+    out[cid] = cam.f;
+  }
+  if (restart->change <= min_change) return {};
+  return out;
+}
+
+}  // namespace
+
+MapperResult RunIncrementalMapper(const MapperInput& input, const MapperOptions& options) {
+  options.Check();
+  const auto start = mapper::Clock::now();
+  MapperResult first = MapOnce(input, options, {});
+  if (!(options.focal_restart_min_change > 0)) return first;
+  FocalRestart restart;
+  const std::map<uint32_t, double> focal =
+      FocalsToRestartFrom(input, first, options.focal_restart_min_change, &restart);
+  if (focal.empty()) return first;
+  const core::Reconstruction& m = first.models[0];
+  restart.first_images = m.images.size();
+  restart.first_reprojection_px = m.MeanReprojectionError();
+  spdlog::info("mapper: the focal moved {:.1f}% from its start ({:.1f} → {:.1f} px) while the model grew: mapping again "
+               "from {:.1f} px",
+               100 * restart.change, restart.first_start_px, restart.first_final_px, restart.first_final_px);
+  const auto second_start = mapper::Clock::now();
+  MapperResult second = MapOnce(input, options, focal);
+  restart.seconds = mapper::Seconds(second_start);
+  const size_t second_images = second.models.empty() ? 0 : second.models[0].images.size();
+  restart.kept = second_images >= restart.first_images;
+  MapperResult& kept = restart.kept ? second : first;
+  spdlog::info("mapper: second mapping {} images (first {}), focal {:.1f} px: {} kept", second_images,
+               restart.first_images, second.models.empty() ? 0.0 : second.models[0].cameras.begin()->second.f,
+               restart.kept ? "second" : "first");
+  kept.focal_decision[0].restart = restart;
+  kept.stats.seconds.total = mapper::Seconds(start);
+  return kept;
 }
 
 }  // namespace fmv3d::sfm

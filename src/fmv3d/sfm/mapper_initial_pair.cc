@@ -32,6 +32,18 @@ void ModelBuilder::ChooseFocal(const std::vector<InitialPairCandidate>& cands) {
     narrow_field_ = narrow(mc.camera.f);
     return;
   }
+  if (const auto it = focal_start_.find(cid); it != focal_start_.end()) {
+    init_focal_scale_ = it->second / mc.camera.f;
+    focal_fixed_ = focal_from_plateau_ = false;
+    narrow_field_ = narrow(it->second);
+    focal_decision_ = FocalDecision{};
+    focal_decision_.kind = FocalDecisionKind::kRestart;
+    focal_decision_.guess_px = mc.camera.f;
+    focal_decision_.two_view_focal_px = it->second;
+    spdlog::info("focal: mapping again from the first mapping's refined focal, {:.1f} px ({:.2f} x the guess)",
+                 it->second, init_focal_scale_);
+    return;
+  }
   std::vector<FocalScanPair> pairs;
   for (size_t i = 0; i < cands.size() && static_cast<int>(pairs.size()) < opt_.focal_scan_pairs; ++i) {
     const auto& pr = *cands[i].pair;

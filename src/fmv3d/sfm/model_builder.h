@@ -76,6 +76,9 @@ class ModelBuilder {
     filter_.min_angle_deg = opt_.filter_min_angle_deg;
   }
 
+  // Starts these cameras at the given focal (camera id → px) instead of scanning for one, the focal free from the
+  // start: a second mapping from the focal an earlier one refined to (incremental_mapper.cc).
+  void StartFocalAt(std::map<uint32_t, double> focal_px) { focal_start_ = std::move(focal_px); }
   bool Initialize();
   void Grow();
   core::Reconstruction& rec() { return rec_; }
@@ -167,6 +170,7 @@ class ModelBuilder {
   double init_focal_scale_ = 1;
   std::optional<std::pair<double, double>> init_distortion_;  // k1, k2 of a wide lens found by the focal scan
   FocalDecision focal_decision_;
+  std::map<uint32_t, double> focal_start_;  // StartFocalAt
   std::vector<GuidedCompletionPass> guided_completion_;                // one entry per pass
   std::vector<std::pair<uint64_t, core::TrackElement>> guided_added_;  // the last completion's additions
   // Focal held through growth: a trusted prior the user wants kept, or a telephoto scan's lower bound (then

@@ -376,6 +376,8 @@ nlohmann::json ToJson(const FocalDecision& d) {
   nlohmann::json j;  // null: no decision recorded
   if (d.kind == FocalDecisionKind::kKnown) {
     j = {{"decision", FocalDecisionName(d.kind)}, {"focal_px", d.known_focal_px}};
+  } else if (d.kind == FocalDecisionKind::kRestart) {
+    j = {{"decision", FocalDecisionName(d.kind)}, {"guess_px", d.guess_px}, {"focal_px", d.two_view_focal_px}};
   } else if (d.kind != FocalDecisionKind::kNone) {
     j = {{"guess_px", d.guess_px},
          {"pairs", d.pairs},
@@ -395,6 +397,14 @@ nlohmann::json ToJson(const FocalDecision& d) {
     j["dolly_zoom"] = {{"images", z->images},     {"factor", z->factor},
                        {"focal_px", z->focal_px}, {"shortest_factor", z->shortest_factor},
                        {"released", z->released}, {"seconds", z->seconds}};
+  if (const auto& r = d.restart)
+    j["restart"] = {{"first_start_px", r->first_start_px},
+                    {"first_final_px", r->first_final_px},
+                    {"change", r->change},
+                    {"first_images", r->first_images},
+                    {"first_reprojection_px", r->first_reprojection_px},
+                    {"kept", r->kept ? "second" : "first"},
+                    {"seconds", r->seconds}};
   return j;
 }
 
