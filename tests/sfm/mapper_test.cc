@@ -79,7 +79,7 @@ TEST(IncrementalMapper, FocalFarFromItsStartMapsAgainFromTheRefinedFocal) {
   EXPECT_EQ(d.kind, FocalDecisionKind::kRestart);
   ASSERT_TRUE(d.restart.has_value());
   EXPECT_TRUE(d.restart->kept);
-  EXPECT_GT(d.restart->change, 0.05);
+  EXPECT_GT(d.restart->change, MapperOptions{}.focal_restart_min_change);
   EXPECT_EQ(d.restart->first_images, single.result.models[0].images.size());
   EXPECT_NEAR(d.restart->first_final_px, single.result.models[0].cameras.begin()->second.f, 1e-6);
   EXPECT_EQ(twice.result.models[0].images.size(), scene.input.images.size());

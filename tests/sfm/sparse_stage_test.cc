@@ -77,6 +77,10 @@ TEST(SparseStage, WritesModelPlyAndReport) {
   EXPECT_GT(std::filesystem::file_size(dir / "sparse" / "sparse.ply"), rec.points.size() * 15);
   const auto json = core::ReadJson(dir / "report" / "sparse.json");
   EXPECT_EQ(json["registered_images"], 10);
+  // The scan bounds this short orbit's focal from below only; the first mapping moves it ~27%: mapped again.
+  EXPECT_EQ(json["focal_decision"]["decision"], "restart");
+  EXPECT_EQ(json["focal_decision"]["restart"]["kept"], "second");
+  EXPECT_GT(json["focal_decision"]["restart"]["change"].get<double>(), 0.1);
   // The final model's posterior of each free intrinsic, with the weak flag the operator sees (the focal of
   // 10 images of 0.5 px keypoints: about 4 px, 3 px at the image corner: weak).
   ASSERT_EQ(json["intrinsics_posterior"].size(), 1u);

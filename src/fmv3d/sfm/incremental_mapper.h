@@ -133,10 +133,10 @@ struct MapperOptions {
   int focal_scan_pairs = 5;
   // A guessed focal that the first mapping's adjustments moved by more than this share from its start is taken as
   // the start of a second mapping (the first grew its early poses and points under the wrong focal); the second
-  // is kept unless it registers fewer images. 0: never. On a 24-frame 480x270 orbit of one building the scan's
-  // lower bound (288 px, truth 416) ended 0.23% off with cameras up to 0.22% of the extent off (section in
-  // bench/RESULTS.md "Hand tools").
-  double focal_restart_min_change = 0.05;
+  // is kept unless it registers fewer images. 0: never. Moves of 27–44% (a scan's lower bound on short orbits)
+  // gave cameras 2–10× closer to the truth the second time; fountain-P11 and Herz-Jesus-P8 move 5.8% and map to
+  // the same figures twice, so they are mapped once (bench/RESULTS.md, "Self-calibration").
+  double focal_restart_min_change = 0.1;
   int focal_dolly_min_images = 15;       // telephoto: multi-view focal scan once the model has this many images
   double focal_dolly_max_factor = 64;    // ... over the two-view lower bound times 1 .. this (steps of √2)
   bool fix_known_focal = false;          // a trusted prior (calibration, telemetry, --focal) stays fixed in BA
