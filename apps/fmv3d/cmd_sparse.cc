@@ -35,6 +35,11 @@ void Add(CLI::App& app) {
   cmd->add_option("--self-cal-delta-chi2", m.self_calibration_min_delta_chi2,
                   "Self-calibration tests: fixed chi-square gain needed to free a parameter (0: BIC's k ln n)")
       ->capture_default_str();
+  cmd->add_option("--focal-restart", m.focal_restart_min_change,
+                  "A guessed focal that mapping moves by more than this share maps the images again from the refined "
+                  "focal (0: never)")
+      ->capture_default_str()
+      ->check(CLI::Range(0.0, 10.0));
   cmd->add_flag("--self-cal-aspect", m.self_calibrate_aspect,
                 "Also test freeing the pixel aspect (fx/fy) by the nested-model test, after the principal point");
   cmd->add_flag("!--keep-two-view-tracks", m.tri_ignore_two_view_tracks,
