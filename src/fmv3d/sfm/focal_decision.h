@@ -37,7 +37,7 @@ struct FocalRestart {
   double change = 0;          // |final / start − 1|
   size_t first_images = 0;    // the first mapping's largest model
   double first_reprojection_px = 0;
-  bool kept = false;  // the second mapping was kept (it registers at least as many images)
+  bool kept = false;   // the second mapping was kept (it registers at least as many images)
   double seconds = 0;  // the second mapping
 };
 

@@ -205,9 +205,10 @@ MapperResult RunIncrementalMapper(const MapperInput& input, const MapperOptions&
   const core::Reconstruction& m = first.models[0];
   restart.first_images = m.images.size();
   restart.first_reprojection_px = m.MeanReprojectionError();
-  spdlog::info("mapper: the focal moved {:.1f}% from its start ({:.1f} → {:.1f} px) while the model grew: mapping again "
-               "from {:.1f} px",
-               100 * restart.change, restart.first_start_px, restart.first_final_px, restart.first_final_px);
+  spdlog::info(
+      "mapper: the focal moved {:.1f}% from its start ({:.1f} → {:.1f} px) while the model grew: mapping again "
+      "from {:.1f} px",
+      100 * restart.change, restart.first_start_px, restart.first_final_px, restart.first_final_px);
   const auto second_start = mapper::Clock::now();
   MapperResult second = MapOnce(input, options, focal);
   restart.seconds = mapper::Seconds(second_start);

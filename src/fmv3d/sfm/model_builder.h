@@ -170,7 +170,7 @@ class ModelBuilder {
   double init_focal_scale_ = 1;
   std::optional<std::pair<double, double>> init_distortion_;  // k1, k2 of a wide lens found by the focal scan
   FocalDecision focal_decision_;
-  std::map<uint32_t, double> focal_start_;  // StartFocalAt
+  std::map<uint32_t, double> focal_start_;                             // StartFocalAt
   std::vector<GuidedCompletionPass> guided_completion_;                // one entry per pass
   std::vector<std::pair<uint64_t, core::TrackElement>> guided_added_;  // the last completion's additions
   // Focal held through growth: a trusted prior the user wants kept, or a telephoto scan's lower bound (then
