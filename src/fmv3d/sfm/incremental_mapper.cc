@@ -219,7 +219,16 @@ MapperResult RunIncrementalMapper(const MapperInput& input, const MapperOptions&
                restart.first_images, second.models.empty() ? 0.0 : second.models[0].cameras.begin()->second.f,
                restart.kept ? "second" : "first");
   kept.focal_decision[0].restart = restart;
-  kept.stats.seconds.total = mapper::Seconds(start);
+  // The report's per-part seconds cover both mappings, as its total does.
+  const MapperTimings& other = restart.kept ? first.stats.seconds : second.stats.seconds;
+  MapperTimings& t = kept.stats.seconds;
+  t.init += other.init;
+  t.registration += other.registration;
+  t.triangulation += other.triangulation;
+  t.local_ba += other.local_ba;
+  t.global_ba += other.global_ba;
+  t.filtering += other.filtering;
+  t.total = mapper::Seconds(start);
   return kept;
 }
 
