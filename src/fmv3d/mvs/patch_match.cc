@@ -43,6 +43,24 @@ inline V4f Load4(const float* p) {
 inline V4f Splat(float f) { return V4f{f, f, f, f}; }
 inline float Sum4(V4f v) { return (v[0] + v[1]) + (v[2] + v[3]); }
 
+// The 3 × 3 algebra of the cost, written out on the coefficients: clang's sanitizer build leaves Eigen's
+// expression templates there as out-of-line calls (a quarter of the dense tests' time under ASan). Each sum keeps
+// the order of Eigen's unrolled reduction, a0 + (a1 + a2), so results are bit-identical to the Eigen form.
+inline Eigen::Vector3f Mul(const Eigen::Matrix3f& M, const Eigen::Vector3f& v) {
+  const float* m = M.data();  // column-major
+  const float x = v[0], y = v[1], z = v[2];
+  return {m[0] * x + (m[3] * y + m[6] * z), m[1] * x + (m[4] * y + m[7] * z), m[2] * x + (m[5] * y + m[8] * z)};
+}
+// Mᵀ v
+inline Eigen::Vector3f MulTransposed(const Eigen::Matrix3f& M, const Eigen::Vector3f& v) {
+  const float* m = M.data();
+  const float x = v[0], y = v[1], z = v[2];
+  return {m[0] * x + (m[1] * y + m[2] * z), m[3] * x + (m[4] * y + m[5] * z), m[6] * x + (m[7] * y + m[8] * z)};
+}
+inline float Dot(const Eigen::Vector3f& a, const Eigen::Vector3f& b) {
+  return a[0] * b[0] + (a[1] * b[1] + a[2] * b[2]);
+}
+
 // Counter-based random numbers: a pixel's draws depend only on (seed, pixel, round), so results do not depend
 // on thread scheduling.
 struct Rng {
@@ -126,7 +144,7 @@ class Solver {
   std::vector<Eigen::Vector3f> normal_;
 
   Eigen::Vector3f Ray(int x, int y) const {
-    return L_.Kinv * Eigen::Vector3f(static_cast<float>(x) + 0.5f, static_cast<float>(y) + 0.5f, 1.f);
+    return Mul(L_.Kinv, Eigen::Vector3f(static_cast<float>(x) + 0.5f, static_cast<float>(y) + 0.5f, 1.f));
   }
 
   Eigen::Vector3f RandomNormal(Rng& rng, const Eigen::Vector3f& ray) const {
@@ -185,7 +203,7 @@ class Solver {
   // and accumulated 4 lanes at a time.
   float Ncc(const RefPatch& rp, int x, int y, const Eigen::Matrix3f& H, const Source& s) const {
     const float u0 = static_cast<float>(x - radius_) + 0.5f, v0 = static_cast<float>(y - radius_) + 0.5f;
-    const Eigen::Vector3f o = H * Eigen::Vector3f(u0, v0, 1.f);
+    const Eigen::Vector3f o = Mul(H, Eigen::Vector3f(u0, v0, 1.f));
     const V4f ox = Splat(o.x() - 0.5f * o.z()), oy = Splat(o.y() - 0.5f * o.z()), oz = Splat(o.z());
     const V4f hx0 = Splat(H(0, 0) - 0.5f * H(2, 0)), hy0 = Splat(H(1, 0) - 0.5f * H(2, 0)), hz0 = Splat(H(2, 0));
     const V4f hx1 = Splat(H(0, 1) - 0.5f * H(2, 1)), hy1 = Splat(H(1, 1) - 0.5f * H(2, 1)), hz1 = Splat(H(2, 1));
@@ -257,18 +275,19 @@ class Solver {
   // Forward–backward reprojection error (pixels) of the reference point X through source s's depth map.
   float ReprojectionError(int x, int y, const Eigen::Vector3f& X, const Source& s) const {
     const float maxe = static_cast<float>(opt_.geom_max_error_px);
-    const Eigen::Vector3f xs = s.R * X + s.t;
+    const Eigen::Vector3f xs = Mul(s.R, X) + s.t;
     if (!(xs.z() > 0)) return maxe;
-    const Eigen::Vector3f q = s.map_K * xs;
+    const Eigen::Vector3f q = Mul(s.map_K, xs);
     const float qx = q.x() / q.z(), qy = q.y() / q.z();
     const int ix = static_cast<int>(std::floor(qx)), iy = static_cast<int>(std::floor(qy));
     if (ix < 0 || iy < 0 || ix >= s.map->width() || iy >= s.map->height()) return maxe;
     const float zs = s.map->depth.at<float>(iy, ix);
     if (!(zs > 0)) return maxe;
-    const Eigen::Vector3f xs2 = zs * (s.map_Kinv * Eigen::Vector3f(qx, qy, 1.f));
-    const Eigen::Vector3f xr = s.R.transpose() * (xs2 - s.t);
+    // (zs K⁻¹) q, as Eigen evaluates zs (K⁻¹ q).
+    const Eigen::Vector3f xs2 = Mul(zs * s.map_Kinv, Eigen::Vector3f(qx, qy, 1.f));
+    const Eigen::Vector3f xr = MulTransposed(s.R, xs2 - s.t);
     if (!(xr.z() > 0)) return maxe;
-    const Eigen::Vector3f pr = L_.K * xr;
+    const Eigen::Vector3f pr = Mul(L_.K, xr);
     const float ex = pr.x() / pr.z() - (static_cast<float>(x) + 0.5f);
     const float ey = pr.y() / pr.z() - (static_cast<float>(y) + 0.5f);
     return std::min(std::sqrt(ex * ex + ey * ey), maxe);
@@ -286,9 +305,9 @@ class Solver {
     PMC(g_cost_calls);
     if (!(d >= dmin_ && d <= dmax_)) return kMaxCost + 1;
     const Eigen::Vector3f X = d * Ray(x, y);
-    const float c = n.dot(X);
-    if (!(c < 0)) return kMaxCost + 1;  // plane seen from behind
-    const Eigen::RowVector3f nKinv = n.transpose() * L_.Kinv / c;
+    const float c = Dot(n, X);
+    if (!(c < 0)) return kMaxCost + 1;                            // plane seen from behind
+    const Eigen::Vector3f nKinv = MulTransposed(L_.Kinv, n) / c;  // (nᵀ K⁻¹ / c)ᵀ
     float costs[16], totals[16];
     const int ns = static_cast<int>(std::min<size_t>(L_.sources.size(), 16));
     const int k = std::max(1, std::min(opt_.top_k, ns));
@@ -311,7 +330,9 @@ class Solver {
     int order[16];
     for (int i = 0; i < ns; ++i) {
       const Source& s = L_.sources[i];
-      const Eigen::Matrix3f H = s.A + s.b * nKinv;
+      Eigen::Matrix3f H;  // A + b nKinvᵀ
+      for (int col = 0; col < 3; ++col)
+        for (int row = 0; row < 3; ++row) H.data()[3 * col + row] = s.A.data()[3 * col + row] + s.b[row] * nKinv[col];
       costs[i] = Ncc(rp, x, y, H, s);
       PMC(g_ncc_calls);
       totals[i] += costs[i];
