@@ -33,8 +33,8 @@ namespace {
 constexpr float kMaxCost = 2.0f;
 constexpr int kMaxSamples = 64;  // (2·radius/step + 1)² for the allowed options, rounded up to kLanes
 constexpr int kLanes = 4;        // the NCC works on groups of 4 samples (SSE2 width; GCC/Clang vector types)
-typedef float V4f __attribute__((vector_size(16)));
-typedef int V4i __attribute__((vector_size(16)));
+using V4f = float __attribute__((vector_size(16)));
+using V4i = int __attribute__((vector_size(16)));
 inline V4f Load4(const float* p) {
   V4f v;
   __builtin_memcpy(&v, p, sizeof v);
@@ -128,8 +128,9 @@ class Solver {
     n_padded_ = (n_samples_ + kLanes - 1) / kLanes * kLanes;
     for (int k = 0; k < kMaxSamples; ++k) {
       const int kk = k < n_samples_ ? k : 0;
-      off_x_[k] = static_cast<float>((kk % side_) * opt.window_step);
-      off_y_[k] = static_cast<float>((kk / side_) * opt.window_step);
+      const int row = kk / side_, col = kk % side_;  // the window's sample grid, row-major
+      off_x_[k] = static_cast<float>(col * opt.window_step);
+      off_y_[k] = static_cast<float>(row * opt.window_step);
     }
     const size_t n = static_cast<size_t>(L_.w) * L_.h;
     depth_.assign(n, 0);
