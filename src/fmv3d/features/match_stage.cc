@@ -8,11 +8,9 @@
 #include <atomic>
 #include <chrono>
 #include <functional>
-#include <map>
 #include <memory>
 #include <mutex>
-#include <opencv2/imgcodecs.hpp>
-#include <set>
+#include <opencv2/core.hpp>
 
 #include "fmv3d/core/camera_json.h"
 #include "fmv3d/core/error.h"
@@ -25,7 +23,6 @@
 #include "fmv3d/features/operator_edits.h"
 #include "fmv3d/features/spatial_pairs.h"
 #include "fmv3d/io/frames_index.h"
-#include "fmv3d/io/tiepoints.h"
 
 namespace fmv3d::features {
 namespace fs = std::filesystem;

@@ -1,6 +1,5 @@
 #include "fmv3d/sfm/sparse_stage.h"
 
-#include <fmt/format.h>
 #include <spdlog/spdlog.h>
 
 #include <algorithm>
