@@ -110,18 +110,26 @@ run_other() {
   "$here/build/bench/render_bench" || true
 }
 
-# Mesh and texture, the whole-scene coverage rows (evaluate-dense: seen surface, completeness, per-view coverage).
+# Mesh and texture, the whole-scene coverage rows (evaluate-dense: seen surface, completeness, per-view coverage),
+# for each flight kind of issue 22: orbits, a nadir grid, a straight pass, and an oblique clip toward a far horizon
+# (an MP4, so reconstruct picks its keyframes). COVERAGE_ROWS=name,name runs some rows only.
 run_coverage() {
-  local d=$1 name args
+  local d=$1 name args in
   while IFS='|' read -r name args; do
+    [[ -z ${COVERAGE_ROWS:-} || ,$COVERAGE_ROWS, == *,$name,* ]] || continue
     # shellcheck disable=SC2086
     "$FMV3D" -q synth $args -o "$d/S_$name"
-    timed "$FMV3D" reconstruct "$d/S_$name/frames" -o "$d/W_$name" --until mesh
+    in=$d/S_$name/frames
+    [[ -f $d/S_$name/flight.mp4 ]] && in=$d/S_$name/flight.mp4
+    timed "$FMV3D" reconstruct "$in" -o "$d/W_$name" --until mesh
     "$FMV3D" evaluate-dense "$d/W_$name" --truth "$d/S_$name"
     "$FMV3D" evaluate-dense "$d/W_$name" --truth "$d/S_$name" --mesh "$d/W_$name/mesh/poisson.ply"
   done <<'FLIGHTS'
 town_orbit|--scene town --path orbit --frames 36 --size 960x540
 terrain_orbit_s1|--scene terrain --path orbit --frames 30 --size 960x540 --seed 1
+terrain_grid|--scene terrain --path grid --frames 40 --size 960x540 --seed 1
+town_pass|--scene town --path pass --frames 40 --size 960x540 --seed 1
+terrain_oblique_clip|--scene terrain --path oblique --frames 300 --fps 10 --size 960x540 --format mp4 --seed 1
 FLIGHTS
 }
 

@@ -1,3 +1,8 @@
+// One file (~510 lines) by design: BundleProblem owns the flat parameter and cost arrays every residual block points
+// into, and the order in which it adds them (reprojection, pose priors, point priors, gauge) is what keeps a
+// single-threaded solve repeatable; split across files its members would have to share that state through a
+// header. The reprojection cost is geometry/reprojection_error.h, the priors ba_priors.h, the covariance
+// intrinsics_covariance.cc.
 #include "fmv3d/sfm/bundle_adjustment.h"
 
 #include <ceres/autodiff_cost_function.h>
