@@ -37,7 +37,9 @@ nlohmann::json SparseEvaluation::ToJson() const {
            "mean over cameras of each camera's absolute rotation error (after the similarity), in its own axes: "
            "x = pitch (image rows), y = yaw (columns), z = roll"},
           {"alignment",
-           {{"scale", alignment.s},
+           {{"from",
+             alignment_from == AlignmentSource::kCentres ? "camera centres" : "camera centres and viewing directions"},
+            {"scale", alignment.s},
             {"q_wxyz", {alignment.q.w(), alignment.q.x(), alignment.q.y(), alignment.q.z()}},
             {"t", {alignment.t.x(), alignment.t.y(), alignment.t.z()}}}}};
 }
@@ -71,6 +73,37 @@ double LensResidualPx(const core::Camera& estimate, const core::Camera& truth) {
   return worst;
 }
 
+core::Sim3 AlignToTruth(const std::vector<Eigen::Vector3d>& ce, const std::vector<Eigen::Vector3d>& ct,
+                        const std::vector<core::Pose>& pe, const std::vector<core::Pose>& pt, double extent,
+                        AlignmentSource* from) {
+  core::Sim3 by_centres;
+  const bool centres_ok = geometry::EstimateSimilarity(ce, ct, &by_centres);
+  *from = AlignmentSource::kCentres;
+  if (centres_ok && geometry::Collinearity(ct) >= kCollinearTrack) return by_centres;
+  // Each camera adds the point one extent ahead along its optical axis, at our scale (from the centres' fit, or
+  // from their spreads when they lie exactly on a line).
+  double scale = by_centres.s;
+  if (!centres_ok) {
+    Eigen::Vector3d me = Eigen::Vector3d::Zero(), mt = Eigen::Vector3d::Zero();
+    for (size_t i = 0; i < ce.size(); ++i) me += ce[i], mt += ct[i];
+    me /= static_cast<double>(ce.size()), mt /= static_cast<double>(ct.size());
+    double se = 0, st = 0;
+    for (size_t i = 0; i < ce.size(); ++i) se += (ce[i] - me).squaredNorm(), st += (ct[i] - mt).squaredNorm();
+    if (!(se > 0) || !(st > 0)) throw Error("evaluate: camera centres are identical; cannot align");
+    scale = std::sqrt(st / se);
+  }
+  std::vector<Eigen::Vector3d> src = ce, dst = ct;
+  for (size_t i = 0; i < ce.size(); ++i) {
+    src.push_back(ce[i] + extent / scale * pe[i].ViewDirection());
+    dst.push_back(ct[i] + extent * pt[i].ViewDirection());
+  }
+  core::Sim3 sim;
+  if (!geometry::EstimateSimilarity(src, dst, &sim))
+    throw Error("evaluate: camera centres and viewing directions are degenerate; cannot align");
+  *from = AlignmentSource::kCentresAndViewDirections;
+  return sim;
+}
+
 SparseEvaluation EvaluateSparse(const core::Reconstruction& estimate, const core::Reconstruction& truth) {
   SparseEvaluation ev;
   ev.num_truth_images = static_cast<int>(truth.images.size());
@@ -90,12 +123,12 @@ SparseEvaluation EvaluateSparse(const core::Reconstruction& estimate, const core
   if (ce.size() < 3)
     throw Error("evaluate: only " + std::to_string(ce.size()) +
                 " registered images match ground-truth images by name (need ≥ 3)");
-  if (!geometry::EstimateSimilarity(ce, ct, &ev.alignment))
-    throw Error("evaluate: camera centres are degenerate (collinear or identical); cannot align");
-  double sum = 0;
   for (size_t i = 0; i < ce.size(); ++i) {
     for (size_t j = i + 1; j < ct.size(); ++j) ev.extent = std::max(ev.extent, (ct[i] - ct[j]).norm());
   }
+  ev.median_rotation_error_deg = MedianRelativeRotationErrorDeg(pe, pt);
+  ev.alignment = AlignToTruth(ce, ct, pe, pt, ev.extent, &ev.alignment_from);
+  double sum = 0;
   for (size_t i = 0; i < ce.size(); ++i) {
     const double e = (ev.alignment.Apply(ce[i]) - ct[i]).norm();
     sum += e * e;
@@ -104,7 +137,6 @@ SparseEvaluation EvaluateSparse(const core::Reconstruction& estimate, const core
   ev.centre_rmse = std::sqrt(sum / ce.size());
   ev.centre_rmse_fraction = ev.extent > 0 ? ev.centre_rmse / ev.extent : 0;
   ev.max_centre_error_fraction = ev.extent > 0 ? ev.max_centre_error_fraction / ev.extent : 0;
-  ev.median_rotation_error_deg = MedianRelativeRotationErrorDeg(pe, pt);
   // A rotation error every camera shares in its own axes (e.g. all pitched alike) does not show in the relative
   // errors above, yet it moves the surface the views triangulate (on an orbit: up or down).
   Eigen::Vector3d sys = Eigen::Vector3d::Zero();

@@ -1,5 +1,6 @@
 // Accuracy of a reconstruction against ground truth, measured the way ANCHORS.md reports COLMAP:
-//  - similarity (Umeyama) alignment of our camera centres to the true ones, images matched by name;
+//  - similarity (Umeyama) alignment of our camera centres to the true ones, images matched by name (with their
+//    viewing directions on a straight track: AlignmentSource);
 //  - centre RMSE after alignment, as a fraction of the true cameras' extent, where the extent is the LARGEST
 //    PAIRWISE DISTANCE between true camera centres (the set's diameter);
 //  - median over all image pairs of the angle of R_rel_est · R_rel_trueᵀ, with R_rel = R_j R_iᵀ (gauge-free);
@@ -18,6 +19,14 @@
 
 namespace fmv3d::sfm {
 
+// What the similarity to the truth was fitted on. Centres on a straight track (a pass, an oblique clip) fix scale
+// and translation but hardly the rotation about the track: only their jitter across it does, and a rotation of a
+// tenth of a degree moves far ground by metres. When the true centres' cross-track spread is under a tenth of the
+// along-track one (geometry::Collinearity), each camera's viewing direction takes part as well; orbits and grids
+// keep the centres-only fit, as ANCHORS.md measures COLMAP.
+enum class AlignmentSource { kCentres, kCentresAndViewDirections };
+inline constexpr double kCollinearTrack = 0.1;
+
 struct SparseEvaluation {
   int num_truth_images = 0;
   int num_matched = 0;              // our images found in the truth by name
@@ -33,6 +42,7 @@ struct SparseEvaluation {
   double lens_residual_corner_px = 0;   // worst over matched cameras: LensResidualPx
   Eigen::Vector3d systematic_rotation_deg = Eigen::Vector3d::Zero();  // see ToJson
   core::Sim3 alignment;                                               // ours → truth
+  AlignmentSource alignment_from = AlignmentSource::kCentres;
   nlohmann::json ToJson() const;
 };
 
@@ -41,6 +51,12 @@ struct SparseEvaluation {
 // p minus where its own pinhole (same f, s_u, u0, v0, no distortion) puts the ray p sees. Focal and principal point
 // errors are not part of it (evaluated on their own above); the cameras must have the same size.
 double LensResidualPx(const core::Camera& estimate, const core::Camera& truth);
+
+// The similarity taking our centres ce (poses pe) to the true ones ct (pt), matched by index; extent in truth
+// units (see AlignmentSource). Throws on identical centres.
+core::Sim3 AlignToTruth(const std::vector<Eigen::Vector3d>& ce, const std::vector<Eigen::Vector3d>& ct,
+                        const std::vector<core::Pose>& pe, const std::vector<core::Pose>& pt, double extent,
+                        AlignmentSource* from);
 
 // Throws fmv3d::Error when fewer than 3 images can be matched by name (no alignment possible).
 SparseEvaluation EvaluateSparse(const core::Reconstruction& estimate, const core::Reconstruction& truth);
