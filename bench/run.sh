@@ -105,7 +105,10 @@ FLIGHTS
 run_other() {
   local d=$1
   "$FMV3D" calibrate --board 9x6 --square 0.025 "$DATA/calib/opencv-chessboard" -o "$d/cam.json"
-  "$here/build/bench/decode_bench" || true
+  local video=${FMV3D_DECODE_BENCH_VIDEO:-/tmp/fmv3d-decode-bench-1080p.mp4}
+  [[ -f $video ]] || ffmpeg -loglevel error -f lavfi -i testsrc2=size=1920x1080:rate=30 -t 600 -c:v libx264 \
+    -preset ultrafast -pix_fmt yuv420p "$video"
+  FMV3D_DECODE_BENCH_VIDEO=$video "$here/build/bench/decode_bench" || true
   "$here/build/bench/match_bench" || true
   "$here/build/bench/render_bench" || true
 }
