@@ -44,11 +44,11 @@ void Cli(const std::string& args) {
 std::string Flight(const fs::path& root, const std::string& name, const std::string& synth_args) {
   const std::string synth = (root / ("synth_" + name)).string(), ws = (root / name).string();
   if (fs::exists(root / name / "sparse" / "images.txt")) return "";
-  std::string synth_command = "-q synth --scene building ";
+  std::string synth_command = "-q synth --scene building ", frames_command = "-q frames ";
   synth_command.append(synth_args).append(" -o ").append(synth);
-  for (const std::string& args :
-       {synth_command, "-q frames " + synth + "/frames -o " + ws, "-q features --max-features 3000 " + ws,
-        "-q match --pairs sequential --overlap 5 " + ws, "-q sparse " + ws}) {
+  frames_command.append(synth).append("/frames -o ").append(ws);
+  for (const std::string& args : {synth_command, frames_command, "-q features --max-features 3000 " + ws,
+                                  "-q match --pairs sequential --overlap 5 " + ws, "-q sparse " + ws}) {
     const auto r = RunCli(args);
     if (r.exit_code != 0) return "fmv3d " + args + "\n" + r.err;
   }
