@@ -238,8 +238,9 @@ TEST(Evaluation, StraightTrackIsAlignedWithTheViewingDirections) {
     for (uint32_t k = 0; k < 30; ++k) {
       core::Image im;
       im.id = k + 1, im.camera_id = 1, im.name = "f" + std::to_string(k) + ".png";
-      const Eigen::Vector3d c(-140 + 280.0 * k / 29, with_jitter ? jitter(rng) : 0,
-                              56 + (with_jitter ? jitter(rng) : 0));
+      const double across = with_jitter ? jitter(rng) : 0;
+      const double up = with_jitter ? jitter(rng) : 0;
+      const Eigen::Vector3d c(-140 + 280.0 * k / 29, across, 56 + up);
       im.pose = core::Pose::LookAt(c, c + Eigen::Vector3d(0, std::cos(0.21), -std::sin(0.21)));
       truth.images[im.id] = im;
     }
@@ -253,7 +254,9 @@ TEST(Evaluation, StraightTrackIsAlignedWithTheViewingDirections) {
     const core::Reconstruction truth = track(with_jitter);
     core::Reconstruction est = truth;
     for (auto& [id, im] : est.images) {
-      const Eigen::Vector3d c = im.pose.Centre() + Eigen::Vector3d(noise(rng), noise(rng), noise(rng));
+      Eigen::Vector3d offset;
+      for (int a = 0; a < 3; ++a) offset[a] = noise(rng);
+      const Eigen::Vector3d c = im.pose.Centre() + offset;
       im.pose = core::Pose::FromRotationAndCentre(im.pose.R(), c);
     }
     est.Transform(sim);
