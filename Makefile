@@ -34,8 +34,8 @@ demo: build
 # the Release product; every unit test and fuzz regression replay runs under ASan + UBSan (test-asan), so the
 # Release build skips the unit-test binaries. `make test-release` runs every test on the Release build.
 # The sanitizer build runs at the lowest CPU priority beside the product's build and tests: it takes only the
-# cycles they leave idle (link steps, the browser tests' waits; the e2e + browser suite uses ~1.6 of 2 cores),
-# so they keep their pace and the sanitizer build is mostly done when they end. Its log: $(ASAN_BUILD)/build.log.
+# cycles they leave idle (link steps, the last browser test running alone), so they keep their pace; about 2% of
+# `make test` (bench/RESULTS.md, Tests and CI). Its log: $(ASAN_BUILD)/build.log.
 test: deps $(BUILD)/build.ninja $(ASAN_BUILD)/build.ninja
 	@echo "test: building $(ASAN_BUILD) in the background (nice 19), log in $(ASAN_BUILD)/build.log"
 	@nice -n 19 cmake --build $(ASAN_BUILD) -j $(JOBS) > $(ASAN_BUILD)/build.log 2>&1 & asan=$$!; \

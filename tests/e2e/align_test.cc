@@ -176,7 +176,7 @@ TEST(E2eAlign, TwoSyntheticFlightsOfOneScene) {
             << " / " << complete_b << ", union " << median_union << " / " << complete_union << ", recomputed "
             << median_ab << " / " << complete_ab << "\n";
   // Measured: A 0.166% / 40.1%, B 0.126% / 13.4%, union 0.154% / 40.9%, recomputed 0.158% / 42.3%. At 240 px the
-  // recomputed median sits 2.7–3.0% above the union's in every run so far (align is not bit-reproducible), so the
+  // recomputed median sits 2.7–3.0% above the union's on the machines measured (runs differ between them), so the
   // bound is 6% of the union's median: it fails when recomputing loses accuracy, not on the run-to-run spread.
   // Half a point of completeness likewise. (Full-size figures: bench/align_bench.)
   EXPECT_LE(median_ab, 1.06 * median_union);

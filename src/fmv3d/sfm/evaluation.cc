@@ -80,18 +80,11 @@ core::Sim3 AlignToTruth(const std::vector<Eigen::Vector3d>& ce, const std::vecto
   const bool centres_ok = geometry::EstimateSimilarity(ce, ct, &by_centres);
   *from = AlignmentSource::kCentres;
   if (centres_ok && geometry::Collinearity(ct) >= kCollinearTrack) return by_centres;
-  // Each camera adds the point one extent ahead along its optical axis, at our scale (from the centres' fit, or
-  // from their spreads when they lie exactly on a line).
-  double scale = by_centres.s;
-  if (!centres_ok) {
-    Eigen::Vector3d me = Eigen::Vector3d::Zero(), mt = Eigen::Vector3d::Zero();
-    for (size_t i = 0; i < ce.size(); ++i) me += ce[i], mt += ct[i];
-    me /= static_cast<double>(ce.size()), mt /= static_cast<double>(ct.size());
-    double se = 0, st = 0;
-    for (size_t i = 0; i < ce.size(); ++i) se += (ce[i] - me).squaredNorm(), st += (ct[i] - mt).squaredNorm();
-    if (!(se > 0) || !(st > 0)) throw Error("evaluate: camera centres are identical; cannot align");
-    scale = std::sqrt(st / se);
-  }
+  // Each camera adds the point one extent ahead along its optical axis, at our scale: the centres' fit gives it, or
+  // on an exact line the fit along that line.
+  if (!centres_ok && !geometry::EstimateSimilarityAlongLine(ce, ct, &by_centres))
+    throw Error("evaluate: camera centres have no spread, or none that matches the truth's; cannot align");
+  const double scale = by_centres.s;
   std::vector<Eigen::Vector3d> src = ce, dst = ct;
   for (size_t i = 0; i < ce.size(); ++i) {
     src.push_back(ce[i] + extent / scale * pe[i].ViewDirection());
@@ -126,7 +119,6 @@ SparseEvaluation EvaluateSparse(const core::Reconstruction& estimate, const core
   for (size_t i = 0; i < ce.size(); ++i) {
     for (size_t j = i + 1; j < ct.size(); ++j) ev.extent = std::max(ev.extent, (ct[i] - ct[j]).norm());
   }
-  ev.median_rotation_error_deg = MedianRelativeRotationErrorDeg(pe, pt);
   ev.alignment = AlignToTruth(ce, ct, pe, pt, ev.extent, &ev.alignment_from);
   double sum = 0;
   for (size_t i = 0; i < ce.size(); ++i) {
@@ -137,6 +129,7 @@ SparseEvaluation EvaluateSparse(const core::Reconstruction& estimate, const core
   ev.centre_rmse = std::sqrt(sum / ce.size());
   ev.centre_rmse_fraction = ev.extent > 0 ? ev.centre_rmse / ev.extent : 0;
   ev.max_centre_error_fraction = ev.extent > 0 ? ev.max_centre_error_fraction / ev.extent : 0;
+  ev.median_rotation_error_deg = MedianRelativeRotationErrorDeg(pe, pt);
   // A rotation error every camera shares in its own axes (e.g. all pitched alike) does not show in the relative
   // errors above, yet it moves the surface the views triangulate (on an orbit: up or down).
   Eigen::Vector3d sys = Eigen::Vector3d::Zero();

@@ -53,7 +53,7 @@ struct SparseEvaluation {
 double LensResidualPx(const core::Camera& estimate, const core::Camera& truth);
 
 // The similarity taking our centres ce (poses pe) to the true ones ct (pt), matched by index; extent in truth
-// units (see AlignmentSource). Throws on identical centres.
+// units (see AlignmentSource). Throws when the centres have no spread.
 core::Sim3 AlignToTruth(const std::vector<Eigen::Vector3d>& ce, const std::vector<Eigen::Vector3d>& ct,
                         const std::vector<core::Pose>& pe, const std::vector<core::Pose>& pt, double extent,
                         AlignmentSource* from);
