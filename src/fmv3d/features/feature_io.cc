@@ -87,8 +87,8 @@ class CheckedReader {
  protected:
   void CheckAvailable(uint64_t n, const char* what) {
     if (n > self().Remaining())
-      throw Error(self().path().string() + ": truncated file (" + what + " needs " + std::to_string(n) +
-                  " bytes, " + std::to_string(self().Remaining()) + " left)");
+      throw Error(self().path().string() + ": truncated file (" + what + " needs " + std::to_string(n) + " bytes, " +
+                  std::to_string(self().Remaining()) + " left)");
   }
 
  private:
