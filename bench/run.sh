@@ -86,20 +86,26 @@ run_align() {
   FMV3D_ALIGN_BENCH_DIR=$1/align "$here/build/bench/align_bench" --benchmark_filter=TwoFlights
   "$here/build/tests/test_e2e" --gtest_filter='E2eAlign*'
 }
+# GEO_ROWS=name,name runs some rows only (as COVERAGE_ROWS for coverage).
 run_geo() {
   local d=$1 name args
   while IFS='|' read -r name args; do
+    [[ -z ${GEO_ROWS:-} || ,$GEO_ROWS, == *,$name,* ]] || continue
     # shellcheck disable=SC2086
-    "$FMV3D" -q synth --klv --seed 1 $args -o "$d/$name/S"
+    "$FMV3D" -q synth --klv $args -o "$d/$name/S"
     timed "$FMV3D" reconstruct "$d/$name/S/flight.ts" -o "$d/$name/F"
     "$FMV3D" evaluate-geo "$d/$name/F" --truth "$d/$name/S"
     if command -v colmap >/dev/null; then "$here/bench/compare_colmap_georef.sh" "$d/$name/F" "$d/$name/S" || true; fi
   done <<'FLIGHTS'
-defaults|
-grid|--path grid
-pass|--path pass
-town|--scene town
-terrain|--scene terrain
+defaults|--seed 1
+grid|--path grid --seed 1
+pass|--path pass --seed 1
+town|--scene town --seed 1
+town_s2|--scene town --seed 2
+terrain|--scene terrain --seed 1
+terrain_s2|--scene terrain --seed 2
+utm32|--seed 3 --geo-origin 46.5,8.0,1500
+telephoto|--path pass --radius 600 --altitude 350 --focal 2500 --frames 300 --fps 30 --size 640x360 --seed 3
 FLIGHTS
 }
 run_other() {

@@ -852,6 +852,64 @@ TEST(Dsm, MeshRasterisedToHighestSurfaceInUtm) {
   EXPECT_EQ(oj["width"].get<int>(), grid.width);
 }
 
+// A mesh checked against its points: ground at 100 m (4 points per cell, ±5 cm), a roof block at 110 m, a
+// Poisson membrane sloping down from the roof's edge over ground the points measured, a blob floating over
+// measured ground, a dip, far land whose points state a large σ, and a patch with no points.
+TEST(Dsm, MeshHeightsTheirPointsContradictAreReplaced) {
+  GridSpec grid;
+  grid.min_e = 0, grid.max_n = 40, grid.gsd = 1, grid.width = 40, grid.height = 40;
+  cv::Mat mesh(40, 40, CV_32F, cv::Scalar(100.0f));
+  std::vector<Eigen::Vector3d> points;
+  std::vector<float> sigma;
+  const auto roof = [](int r, int c) { return r >= 10 && r < 20 && c >= 10 && c < 20; };
+  const auto far = [](int r, int c) { return r < 5 && c >= 30 && c < 35; };
+  const auto blob = [](int r, int c) { return r >= 30 && r < 33 && c >= 30 && c < 33; };
+  const auto empty = [](int r, int c) { return r >= 35 && c < 5; };
+  for (int r = 0; r < 40; ++r)
+    for (int c = 0; c < 40; ++c) {
+      if (empty(r, c)) continue;
+      for (int k = 0; k < 4; ++k) {
+        const double e = c + 0.25 + 0.5 * (k % 2), n = 40 - (r + 0.25 + 0.5 * (k / 2));
+        const double wobble = 0.05 * std::sin(7.0 * (r * 40 + c) + k);
+        points.emplace_back(e, n, (roof(r, c) ? 110.0 : 100.0) + wobble);
+        sigma.push_back(far(r, c) ? 5.0f : 0.1f);
+      }
+      if (blob(r, c)) {  // the outlier points the blob was fitted to
+        points.emplace_back(c + 0.5, 40 - (r + 0.5), 108.0);
+        sigma.push_back(0.1f);
+      }
+      if (roof(r, c)) mesh.at<float>(r, c) = 110;
+      if (blob(r, c) || empty(r, c)) mesh.at<float>(r, c) = 108;
+      if (far(r, c)) mesh.at<float>(r, c) = 103;
+    }
+  for (int r = 10; r < 20; ++r) mesh.at<float>(r, 20) = 107, mesh.at<float>(r, 21) = 104, mesh.at<float>(r, 22) = 102;
+  mesh.at<float>(25, 5) = 95;
+  mesh.at<float>(0, 0) = std::numeric_limits<float>::quiet_NaN();
+
+  MeshCheckStats st;
+  const cv::Mat h = CheckMeshHeights(mesh, points, sigma, grid, {}, &st);
+  EXPECT_TRUE(std::isnan(h.at<float>(0, 0)));
+  for (int r = 10; r < 20; ++r) {
+    EXPECT_EQ(h.at<float>(r, 10), 110.0f) << r;  // the roof, its edges included
+    EXPECT_EQ(h.at<float>(r, 19), 110.0f) << r;
+    if (r == 10 || r == 19)  // the roof is under a quarter of the window: replaced
+      EXPECT_NEAR(h.at<float>(r, 20), 100.0f, 0.06) << r;
+    else  // a third of the window is roof: one cell of membrane stays
+      EXPECT_EQ(h.at<float>(r, 20), 107.0f) << r;
+    EXPECT_NEAR(h.at<float>(r, 21), 100.0f, 0.06) << r;
+    EXPECT_NEAR(h.at<float>(r, 22), 100.0f, 0.06) << r;
+  }
+  for (int r = 30; r < 33; ++r)
+    for (int c = 30; c < 33; ++c) EXPECT_NEAR(h.at<float>(r, c), 100.0f, 0.06) << r << "," << c;
+  EXPECT_NEAR(h.at<float>(25, 5), 100.0f, 0.06);
+  EXPECT_EQ(h.at<float>(2, 32), 103.0f);  // within the far land's stated σ
+  EXPECT_EQ(h.at<float>(38, 2), 108.0f);  // no points to judge by
+  EXPECT_EQ(h.at<float>(5, 5), 100.0f);   // agreeing ground untouched
+  EXPECT_EQ(st.replaced_above, 31u);      // 2 + 10 + 10 membrane cells, 9 blob cells
+  EXPECT_EQ(st.replaced_below, 1u);
+  EXPECT_THROW(CheckMeshHeights(mesh, points, std::vector<float>(3, 1.0f), grid, {}, &st), Error);
+}
+
 TEST(Dsm, OrthoFromTexturedMesh) {
   test::TempDir dir("ortho");
   MakeDsmWorkspace(dir, core::Sim3());

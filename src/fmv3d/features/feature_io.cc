@@ -44,7 +44,59 @@ class Writer {
   std::vector<char> buf_;
 };
 
-class Reader {
+// The checks every reader of our binary formats makes, whatever holds the bytes: Derived supplies
+// Bytes(p, n, what), Remaining() and path(); counts, magic and end markers are checked the same way for both.
+template <typename Derived>
+class CheckedReader {
+ public:
+  template <typename T>
+  T Get(const char* what) {
+    T v;
+    self().Bytes(&v, sizeof(T), what);
+    return v;
+  }
+  Eigen::Matrix3d Mat(const char* what) {
+    double v[9];
+    self().Bytes(v, sizeof v, what);
+    Eigen::Matrix3d m;
+    for (int r = 0; r < 3; ++r)
+      for (int c = 0; c < 3; ++c) m(r, c) = v[3 * r + c];
+    return m;
+  }
+  void Magic(const char (&magic)[8], const char* kind) {
+    char m[8];
+    if (self().Remaining() < 8) throw Error(self().path().string() + ": too short to be " + kind);
+    self().Bytes(m, 8, "magic");
+    if (std::memcmp(m, magic, 8) != 0) throw Error(self().path().string() + ": not " + kind + " (wrong magic)");
+  }
+  void End(const char (&end)[8]) {
+    char m[8];
+    self().Bytes(m, 8, "end marker");
+    if (std::memcmp(m, end, 8) != 0) throw Error(self().path().string() + ": corrupt file (bad end marker)");
+    if (self().Remaining() != 0)
+      throw Error(self().path().string() + ": corrupt file (trailing bytes after end marker)");
+  }
+  // Fails early with a clear message when a count cannot fit in the rest of the file (instead of trying to
+  // allocate gigabytes for a corrupt count).
+  void CheckFits(uint64_t count, uint64_t bytes_each, const char* what) {
+    if (bytes_each > 0 && count > self().Remaining() / bytes_each)
+      throw Error(self().path().string() + ": truncated or corrupt file (" + std::to_string(count) + " " + what +
+                  " do not fit in the remaining " + std::to_string(self().Remaining()) + " bytes)");
+  }
+
+ protected:
+  void CheckAvailable(uint64_t n, const char* what) {
+    if (n > self().Remaining())
+      throw Error(self().path().string() + ": truncated file (" + what + " needs " + std::to_string(n) + " bytes, " +
+                  std::to_string(self().Remaining()) + " left)");
+  }
+
+ private:
+  Derived& self() { return static_cast<Derived&>(*this); }
+};
+
+// A whole file in memory.
+class Reader : public CheckedReader<Reader> {
  public:
   explicit Reader(const fs::path& path) : path_(path) {
     std::ifstream in(path, std::ios::binary);
@@ -53,48 +105,13 @@ class Reader {
   }
   size_t Remaining() const { return buf_.size() - pos_; }
   void Bytes(void* p, size_t n, const char* what) {
-    if (n > Remaining())
-      throw Error(path_.string() + ": truncated file (" + what + " needs " + std::to_string(n) + " bytes, " +
-                  std::to_string(Remaining()) + " left)");
+    CheckAvailable(n, what);
     std::memcpy(p, buf_.data() + pos_, n);
     pos_ += n;
   }
   void Skip(size_t n, const char* what) {
-    if (n > Remaining())
-      throw Error(path_.string() + ": truncated file (" + what + " needs " + std::to_string(n) + " bytes, " +
-                  std::to_string(Remaining()) + " left)");
+    CheckAvailable(n, what);
     pos_ += n;
-  }
-  template <typename T>
-  T Get(const char* what) {
-    T v;
-    Bytes(&v, sizeof(T), what);
-    return v;
-  }
-  Eigen::Matrix3d Mat(const char* what) {
-    Eigen::Matrix3d m;
-    for (int r = 0; r < 3; ++r)
-      for (int c = 0; c < 3; ++c) m(r, c) = Get<double>(what);
-    return m;
-  }
-  void Magic(const char (&magic)[8], const char* kind) {
-    char m[8];
-    if (Remaining() < 8) throw Error(path_.string() + ": too short to be " + kind);
-    Bytes(m, 8, "magic");
-    if (std::memcmp(m, magic, 8) != 0) throw Error(path_.string() + ": not " + kind + " (wrong magic)");
-  }
-  void End(const char (&end)[8]) {
-    char m[8];
-    Bytes(m, 8, "end marker");
-    if (std::memcmp(m, end, 8) != 0) throw Error(path_.string() + ": corrupt file (bad end marker)");
-    if (Remaining() != 0) throw Error(path_.string() + ": corrupt file (trailing bytes after end marker)");
-  }
-  // Fails early with a clear message when a count cannot fit in the rest of the file (instead of trying to
-  // allocate gigabytes for a corrupt count).
-  void CheckFits(uint64_t count, uint64_t bytes_each, const char* what) {
-    if (bytes_each > 0 && count > Remaining() / bytes_each)
-      throw Error(path_.string() + ": truncated or corrupt file (" + std::to_string(count) + " " + what +
-                  " do not fit in the remaining " + std::to_string(Remaining()) + " bytes)");
   }
   const fs::path& path() const { return path_; }
 
@@ -104,8 +121,8 @@ class Reader {
   size_t pos_ = 0;
 };
 
-// Reader's checks over an open file, for files read piece by piece instead of whole.
-class StreamReader {
+// An open file read piece by piece instead of whole.
+class StreamReader : public CheckedReader<StreamReader> {
  public:
   explicit StreamReader(const fs::path& path) : path_(path), in_(path, std::ios::binary) {
     if (!in_) throw Error(path.string() + ": cannot open (missing file?)");
@@ -121,53 +138,18 @@ class StreamReader {
     pos_ = pos;
   }
   void Bytes(void* p, size_t n, const char* what) {
-    Check(n, what);
+    CheckAvailable(n, what);
     in_.read(static_cast<char*>(p), static_cast<std::streamsize>(n));
     if (!in_) throw Error(path_.string() + ": cannot read");
     pos_ += n;
   }
   void Skip(size_t n, const char* what) {
-    Check(n, what);
+    CheckAvailable(n, what);
     Seek(pos_ + n);
   }
-  template <typename T>
-  T Get(const char* what) {
-    T v;
-    Bytes(&v, sizeof(T), what);
-    return v;
-  }
-  Eigen::Matrix3d Mat(const char* what) {
-    double v[9];
-    Bytes(v, sizeof v, what);
-    Eigen::Matrix3d m;
-    for (int r = 0; r < 3; ++r)
-      for (int c = 0; c < 3; ++c) m(r, c) = v[3 * r + c];
-    return m;
-  }
-  void Magic(const char (&magic)[8], const char* kind) {
-    char m[8];
-    if (Remaining() < 8) throw Error(path_.string() + ": too short to be " + kind);
-    Bytes(m, 8, "magic");
-    if (std::memcmp(m, magic, 8) != 0) throw Error(path_.string() + ": not " + kind + " (wrong magic)");
-  }
-  void End(const char (&end)[8]) {
-    char m[8];
-    Bytes(m, 8, "end marker");
-    if (std::memcmp(m, end, 8) != 0) throw Error(path_.string() + ": corrupt file (bad end marker)");
-    if (Remaining() != 0) throw Error(path_.string() + ": corrupt file (trailing bytes after end marker)");
-  }
-  void CheckFits(uint64_t count, uint64_t bytes_each, const char* what) {
-    if (bytes_each > 0 && count > Remaining() / bytes_each)
-      throw Error(path_.string() + ": truncated or corrupt file (" + std::to_string(count) + " " + what +
-                  " do not fit in the remaining " + std::to_string(Remaining()) + " bytes)");
-  }
+  const fs::path& path() const { return path_; }
 
  private:
-  void Check(uint64_t n, const char* what) const {
-    if (n > Remaining())
-      throw Error(path_.string() + ": truncated file (" + what + " needs " + std::to_string(n) + " bytes, " +
-                  std::to_string(Remaining()) + " left)");
-  }
   fs::path path_;
   std::ifstream in_;
   uint64_t size_ = 0, pos_ = 0;

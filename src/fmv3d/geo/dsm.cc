@@ -161,6 +161,52 @@ cv::Mat RasteriseDsm(const UtmSurface& s, const GridSpec& grid) {
   return h;
 }
 
+cv::Mat CheckMeshHeights(const cv::Mat& mesh_h, const std::vector<Eigen::Vector3d>& points,
+                         const std::vector<float>& sigma, const GridSpec& grid, const MeshCheckOptions& o,
+                         MeshCheckStats* stats) {
+  if (o.window < 0 || o.min_points < 1) throw Error("dsm: mesh check needs window >= 0 and min_points >= 1");
+  if (!sigma.empty() && sigma.size() != points.size()) throw Error("dsm: one sigma per point expected");
+  *stats = {};
+  // Points binned by cell (index row * width + col), heights and σ side by side.
+  std::vector<std::pair<int64_t, size_t>> binned;
+  binned.reserve(points.size());
+  for (size_t i = 0; i < points.size(); ++i) {
+    const double fc = std::floor(grid.Col(points[i].x())), fr = std::floor(grid.Row(points[i].y()));
+    if (fr >= 0 && fc >= 0 && fr < grid.height && fc < grid.width)
+      binned.emplace_back(static_cast<int64_t>(fr) * grid.width + static_cast<int64_t>(fc), i);
+  }
+  std::sort(binned.begin(), binned.end());
+  std::vector<size_t> first(static_cast<size_t>(grid.width) * grid.height + 1, 0);
+  for (const auto& [cell, i] : binned) ++first[cell + 1];
+  for (size_t k = 1; k < first.size(); ++k) first[k] += first[k - 1];
+
+  cv::Mat out = mesh_h.clone();
+  std::vector<double> hs, ss;
+  for (int r = 0; r < mesh_h.rows; ++r)
+    for (int c = 0; c < mesh_h.cols; ++c) {
+      const float m = mesh_h.at<float>(r, c);
+      if (!std::isfinite(m)) continue;
+      hs.clear(), ss.clear();
+      for (int rr = std::max(0, r - o.window); rr <= std::min(grid.height - 1, r + o.window); ++rr)
+        for (int cc = std::max(0, c - o.window); cc <= std::min(grid.width - 1, c + o.window); ++cc) {
+          const size_t cell = static_cast<size_t>(rr) * grid.width + cc;
+          for (size_t k = first[cell]; k < first[cell + 1]; ++k) {
+            hs.push_back(points[binned[k].second].z());
+            if (!sigma.empty()) ss.push_back(sigma[binned[k].second]);
+          }
+        }
+      if (hs.size() < o.min_points) continue;
+      ++stats->checked;
+      const double q25 = core::Quantile(hs, 0.25), q75 = core::Quantile(hs, 0.75);
+      const double tol = std::max(grid.gsd, ss.empty() ? 0.0 : core::Median(ss));
+      if (m > q75 + tol || m < q25 - tol) {
+        ++(m > q75 + tol ? stats->replaced_above : stats->replaced_below);
+        out.at<float>(r, c) = static_cast<float>(core::Median(hs));
+      }
+    }
+  return out;
+}
+
 nlohmann::json RunDsmStage(const core::Workspace& ws, const DsmOptions& o) {
   o.Check();
   const Georef g = ReadGeoref(ws);
@@ -188,7 +234,23 @@ nlohmann::json RunDsmStage(const core::Workspace& ws, const DsmOptions& o) {
   spdlog::info("dsm: {} ({} {}), {}x{} cells of {:.3f} m", s.source, s.vertices.size(),
                s.triangles.empty() ? "points" : fmt::format("vertices, {} triangles", s.triangles.size()), grid.width,
                grid.height, gsd);
-  const cv::Mat h = RasteriseDsm(s, grid);
+  cv::Mat h = RasteriseDsm(s, grid);
+  // The points: what a mesh is checked against, and the LAS (points, not mesh vertices: dense, else sparse).
+  UtmSurface pts;
+  MeshCheckStats mesh_check;
+  if (s.triangles.empty()) {
+    pts = s;
+  } else {
+    io::OrientedPointCloud cloud = LoadPoints(ws, &pts.source);
+    pts.vertices = std::move(cloud.positions);
+    pts.colors = std::move(cloud.colors);
+    ToUtm(g, &pts.vertices);
+    std::vector<float> sigma_m = std::move(cloud.sigma);
+    for (float& v : sigma_m) v = static_cast<float>(v * g.sparse_to_enu.s);
+    h = CheckMeshHeights(h, pts.vertices, sigma_m, grid, {}, &mesh_check);
+    spdlog::info("dsm: mesh checked against {} points in {} cells: {} above and {} below what they allow, replaced",
+                 pts.vertices.size(), mesh_check.checked, mesh_check.replaced_above, mesh_check.replaced_below);
+  }
   const fs::path dir = ws.geo_dir();
   core::EnsureDirectory(dir);
   WriteHeightGeoTiff(dir / "dsm.tif", grid, h);
@@ -250,17 +312,12 @@ nlohmann::json RunDsmStage(const core::Workspace& ws, const DsmOptions& o) {
   const GeoPoint centre =
       frame.UtmToGeodetic({grid.min_e + 0.5 * grid.width * gsd, grid.max_n - 0.5 * grid.height * gsd, 0});
   j["centre_wgs84"] = {{"lat", centre.lat}, {"lon", centre.lon}};
+  if (!s.triangles.empty())
+    j["mesh_check"] = {{"points", pts.source},
+                       {"cells_checked", mesh_check.checked},
+                       {"replaced_above", mesh_check.replaced_above},
+                       {"replaced_below", mesh_check.replaced_below}};
   if (o.write_las) {
-    // The LAS holds points, not mesh vertices: the dense cloud, else the sparse one.
-    UtmSurface pts;
-    if (s.triangles.empty()) {
-      pts = s;
-    } else {
-      io::OrientedPointCloud cloud = LoadPoints(ws, &pts.source);
-      pts.vertices = std::move(cloud.positions);
-      pts.colors = std::move(cloud.colors);
-      ToUtm(g, &pts.vertices);
-    }
     WriteLas(dir / "points.las", pts.vertices, pts.colors, UtmWkt(g.utm, /*wkt1=*/true));
     j["las_points"] = pts.vertices.size();
     j["las_source"] = pts.source;

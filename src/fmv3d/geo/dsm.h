@@ -5,7 +5,8 @@
 // georef.json); heights keep georef.json's vertical datum.
 //
 // dsm:   WS/geo/dsm.tif        Float32 GeoTIFF, highest surface per cell (points: their median height per
-//                              cell, see RasteriseDsm), nodata (-9999) where unseen
+//                              cell, see RasteriseDsm; a mesh checked against the dense points, see
+//                              CheckMeshHeights), nodata (-9999) where unseen
 //        WS/geo/hillshade.png  for viewing
 //        WS/geo/points.las     LAS 1.4 with the UTM CRS: the dense points, else the sparse points
 //        WS/geo/dsm.json       grid, source, counts
@@ -54,6 +55,28 @@ UtmSurface LoadUtmSurface(const core::Workspace& workspace, const Georef& georef
 cv::Mat RasteriseDsm(const UtmSurface& surface, const GridSpec& grid);
 // See the header comment.
 double ChooseGsd(const UtmSurface& surface);
+
+// A mesh's heights checked against the points it was made from. Poisson closes what the cameras did not see
+// with a smooth membrane (beside walls a nadir flight does not see, behind occluders) and can fit blobs to
+// clusters of outlier points; the highest surface of such a mesh stands above ground the cameras measured.
+// Each cell's mesh height is compared with the heights of the points within `window` cells around it: when
+// at least `min_points` are there and the mesh lies outside [q25 − tol, q75 + tol] of their heights (tol: the
+// larger of their median stated σ and one cell size), the cell takes their median. The quartiles let a few
+// points of a blob or a wall not decide; a surface that the points there support (a roof edge, steep ground,
+// far land with a large σ) keeps the mesh's height. Cells without enough points keep the mesh's height.
+struct MeshCheckOptions {
+  int window = 1;         // cells on each side of the checked one
+  size_t min_points = 6;  // points in the window needed to overrule the mesh
+};
+struct MeshCheckStats {
+  size_t checked = 0;         // cells with a mesh height and enough points
+  size_t replaced_above = 0;  // mesh above what the points allow
+  size_t replaced_below = 0;  // mesh below what the points allow
+};
+// `points` in UTM (E, N, h); `sigma` empty or one stated σ in metres per point.
+cv::Mat CheckMeshHeights(const cv::Mat& mesh_heights, const std::vector<Eigen::Vector3d>& points,
+                         const std::vector<float>& sigma, const GridSpec& grid, const MeshCheckOptions& options,
+                         MeshCheckStats* stats);
 
 nlohmann::json RunDsmStage(const core::Workspace& workspace, const DsmOptions& options = {});
 nlohmann::json RunOrthoStage(const core::Workspace& workspace);
