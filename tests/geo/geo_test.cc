@@ -908,9 +908,10 @@ TEST(Dsm, MeshHeightsTheirPointsContradictAreReplaced) {
   EXPECT_EQ(h.at<float>(2, 32), 103.0f);  // within the far land's stated σ
   EXPECT_EQ(h.at<float>(38, 2), 108.0f);  // no points to judge by
   EXPECT_EQ(h.at<float>(5, 5), 100.0f);   // agreeing ground untouched
-  // 2 + 10 + 10 membrane cells, 9 blob cells, and the far patch's two bottom corners, where its points are
-  // under half of the window and the median σ is the near ground's.
-  EXPECT_EQ(st.replaced_above, 33u);
+  // 2 + 10 + 10 membrane cells, 9 blob cells, the far patch's two bottom corners (its points under half of the
+  // window: the median σ is the near ground's), and the 9 rim cells of the patch without points, whose windows
+  // reach measured ground.
+  EXPECT_EQ(st.replaced_above, 42u);
   EXPECT_EQ(st.replaced_below, 1u);
   EXPECT_THROW(CheckMeshHeights(mesh, points, std::vector<float>(3, 1.0f), grid, {}, &st), Error);
 }
