@@ -8,6 +8,7 @@
 #include <algorithm>
 #include <cmath>
 #include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
 #include <unordered_set>
 
 #include "fmv3d/core/error.h"
@@ -180,12 +181,31 @@ cv::Mat CheckMeshHeights(const cv::Mat& mesh_h, const std::vector<Eigen::Vector3
   for (const auto& [cell, i] : binned) ++first[cell + 1];
   for (size_t k = 1; k < first.size(); ++k) first[k] += first[k - 1];
 
+  // Points per cell summed over rectangles (an integral image) for the gap test.
+  cv::Mat count(grid.height, grid.width, CV_32S, cv::Scalar(0)), sums;
+  for (int r = 0; r < grid.height; ++r)
+    for (int c = 0; c < grid.width; ++c) {
+      const size_t cell = static_cast<size_t>(r) * grid.width + c;
+      count.at<int>(r, c) = static_cast<int>(first[cell + 1] - first[cell]);
+    }
+  cv::integral(count, sums, CV_64F);
+  auto points_within = [&](int r, int c, int w) {
+    const int r0 = std::max(0, r - w), r1 = std::min(grid.height, r + w + 1);
+    const int c0 = std::max(0, c - w), c1 = std::min(grid.width, c + w + 1);
+    return sums.at<double>(r1, c1) - sums.at<double>(r0, c1) - sums.at<double>(r1, c0) + sums.at<double>(r0, c0);
+  };
+
   cv::Mat out = mesh_h.clone();
   std::vector<double> hs, ss;
   for (int r = 0; r < mesh_h.rows; ++r)
     for (int c = 0; c < mesh_h.cols; ++c) {
       const float m = mesh_h.at<float>(r, c);
       if (!std::isfinite(m)) continue;
+      if (o.max_gap >= 0 && points_within(r, c, o.max_gap) == 0) {
+        out.at<float>(r, c) = std::numeric_limits<float>::quiet_NaN();
+        ++stats->unmeasured;
+        continue;
+      }
       hs.clear(), ss.clear();
       for (int rr = std::max(0, r - o.window); rr <= std::min(grid.height - 1, r + o.window); ++rr)
         for (int cc = std::max(0, c - o.window); cc <= std::min(grid.width - 1, c + o.window); ++cc) {
@@ -248,8 +268,11 @@ nlohmann::json RunDsmStage(const core::Workspace& ws, const DsmOptions& o) {
     std::vector<float> sigma_m = std::move(cloud.sigma);
     for (float& v : sigma_m) v = static_cast<float>(v * g.sparse_to_enu.s);
     h = CheckMeshHeights(h, pts.vertices, sigma_m, grid, {}, &mesh_check);
-    spdlog::info("dsm: mesh checked against {} points in {} cells: {} above and {} below what they allow, replaced",
-                 pts.vertices.size(), mesh_check.checked, mesh_check.replaced_above, mesh_check.replaced_below);
+    spdlog::info(
+        "dsm: mesh checked against {} points in {} cells: {} above and {} below what they allow, replaced; {} "
+        "with no point within {} cells left without data",
+        pts.vertices.size(), mesh_check.checked, mesh_check.replaced_above, mesh_check.replaced_below,
+        mesh_check.unmeasured, MeshCheckOptions{}.max_gap);
   }
   const fs::path dir = ws.geo_dir();
   core::EnsureDirectory(dir);
@@ -316,7 +339,8 @@ nlohmann::json RunDsmStage(const core::Workspace& ws, const DsmOptions& o) {
     j["mesh_check"] = {{"points", pts.source},
                        {"cells_checked", mesh_check.checked},
                        {"replaced_above", mesh_check.replaced_above},
-                       {"replaced_below", mesh_check.replaced_below}};
+                       {"replaced_below", mesh_check.replaced_below},
+                       {"unmeasured_left_without_data", mesh_check.unmeasured}};
   if (o.write_las) {
     WriteLas(dir / "points.las", pts.vertices, pts.colors, UtmWkt(g.utm, /*wkt1=*/true));
     j["las_points"] = pts.vertices.size();

@@ -64,14 +64,18 @@ double ChooseGsd(const UtmSurface& surface);
 // larger of their median stated σ and one cell size), the cell takes their median. The quartiles let a few
 // points of a blob or a wall not decide; a surface that the points there support (a roof edge, steep ground,
 // far land with a large σ) keeps the mesh's height. Cells without enough points keep the mesh's height.
+// A cell with no point within `max_gap` cells is left without data: there the mesh is Poisson's guess over
+// ground no camera measured (beside the walls of a nadir flight, behind occluders), not a measurement.
 struct MeshCheckOptions {
   int window = 1;         // cells on each side of the checked one
   size_t min_points = 6;  // points in the window needed to overrule the mesh
+  int max_gap = 3;        // cells; < 0: keep the mesh everywhere
 };
 struct MeshCheckStats {
   size_t checked = 0;         // cells with a mesh height and enough points
   size_t replaced_above = 0;  // mesh above what the points allow
   size_t replaced_below = 0;  // mesh below what the points allow
+  size_t unmeasured = 0;      // cells left without data: no point within max_gap
 };
 // `points` in UTM (E, N, h); `sigma` empty or one stated σ in metres per point.
 cv::Mat CheckMeshHeights(const cv::Mat& mesh_heights, const std::vector<Eigen::Vector3d>& points,
