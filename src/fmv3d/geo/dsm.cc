@@ -182,11 +182,11 @@ cv::Mat CheckMeshHeights(const cv::Mat& mesh_h, const std::vector<Eigen::Vector3
   for (size_t k = 1; k < first.size(); ++k) first[k] += first[k - 1];
 
   // Points per cell summed over rectangles (an integral image) for the gap test.
-  cv::Mat count(grid.height, grid.width, CV_32S, cv::Scalar(0)), sums;
+  cv::Mat count(grid.height, grid.width, CV_64F, cv::Scalar(0)), sums;
   for (int r = 0; r < grid.height; ++r)
     for (int c = 0; c < grid.width; ++c) {
       const size_t cell = static_cast<size_t>(r) * grid.width + c;
-      count.at<int>(r, c) = static_cast<int>(first[cell + 1] - first[cell]);
+      count.at<double>(r, c) = static_cast<double>(first[cell + 1] - first[cell]);
     }
   cv::integral(count, sums, CV_64F);
   auto points_within = [&](int r, int c, int w) {
