@@ -907,10 +907,10 @@ TEST(Dsm, MeshHeightsTheirPointsContradictAreReplaced) {
   EXPECT_NEAR(h.at<float>(25, 5), 100.0f, 0.06);
   EXPECT_EQ(h.at<float>(2, 32), 103.0f);  // within the far land's stated σ
   EXPECT_EQ(h.at<float>(38, 2), 108.0f);  // no points to judge by, but some within max_gap: kept
-  for (int r = 38; r < 40; ++r)            // no point within max_gap (3 cells): left without data
+  for (int r = 38; r < 40; ++r)           // no point within max_gap (3 cells): left without data
     for (int c = 0; c < 2; ++c) EXPECT_TRUE(std::isnan(h.at<float>(r, c))) << r << "," << c;
   EXPECT_EQ(st.unmeasured, 4u);
-  EXPECT_EQ(h.at<float>(5, 5), 100.0f);   // agreeing ground untouched
+  EXPECT_EQ(h.at<float>(5, 5), 100.0f);  // agreeing ground untouched
   // 2 + 10 + 10 membrane cells, 9 blob cells, the far patch's two bottom corners (its points under half of the
   // window: the median σ is the near ground's), and the 9 rim cells of the patch without points, whose windows
   // reach measured ground.

@@ -258,6 +258,7 @@ nlohmann::json RunDsmStage(const core::Workspace& ws, const DsmOptions& o) {
   // The points: what a mesh is checked against, and the LAS (points, not mesh vertices: dense, else sparse).
   UtmSurface pts;
   MeshCheckStats mesh_check;
+  bool checked = false;
   if (s.triangles.empty()) {
     pts = s;
   } else {
@@ -267,12 +268,16 @@ nlohmann::json RunDsmStage(const core::Workspace& ws, const DsmOptions& o) {
     ToUtm(g, &pts.vertices);
     std::vector<float> sigma_m = std::move(cloud.sigma);
     for (float& v : sigma_m) v = static_cast<float>(v * g.sparse_to_enu.s);
-    h = CheckMeshHeights(h, pts.vertices, sigma_m, grid, {}, &mesh_check);
-    spdlog::info(
-        "dsm: mesh checked against {} points in {} cells: {} above and {} below what they allow, replaced; {} "
-        "with no point within {} cells left without data",
-        pts.vertices.size(), mesh_check.checked, mesh_check.replaced_above, mesh_check.replaced_below,
-        mesh_check.unmeasured, MeshCheckOptions{}.max_gap);
+    // Only the dense cloud the mesh was made from can judge it: sparse points are too far apart.
+    checked = pts.source == (ws.dense_dir() / "fused.ply").string();
+    if (checked) {
+      h = CheckMeshHeights(h, pts.vertices, sigma_m, grid, {}, &mesh_check);
+      spdlog::info(
+          "dsm: mesh checked against {} points in {} cells: {} above and {} below what they allow, replaced; {} "
+          "with no point within {} cells left without data",
+          pts.vertices.size(), mesh_check.checked, mesh_check.replaced_above, mesh_check.replaced_below,
+          mesh_check.unmeasured, MeshCheckOptions{}.max_gap);
+    }
   }
   const fs::path dir = ws.geo_dir();
   core::EnsureDirectory(dir);
@@ -335,7 +340,7 @@ nlohmann::json RunDsmStage(const core::Workspace& ws, const DsmOptions& o) {
   const GeoPoint centre =
       frame.UtmToGeodetic({grid.min_e + 0.5 * grid.width * gsd, grid.max_n - 0.5 * grid.height * gsd, 0});
   j["centre_wgs84"] = {{"lat", centre.lat}, {"lon", centre.lon}};
-  if (!s.triangles.empty())
+  if (checked)
     j["mesh_check"] = {{"points", pts.source},
                        {"cells_checked", mesh_check.checked},
                        {"replaced_above", mesh_check.replaced_above},
