@@ -10,6 +10,7 @@
 #include "fmv3d/core/error.h"
 #include "fmv3d/core/files.h"
 #include "fmv3d/io/colmap_model.h"
+#include "fmv3d/surface/free_space.h"
 
 namespace fmv3d::surface {
 
@@ -76,7 +77,21 @@ nlohmann::json RunMeshStage(const core::Workspace& workspace, const MeshStageOpt
     report["normals"] = "estimated";
   }
   nlohmann::json stats;
-  const ColoredMesh mesh = ReconstructPoisson(cloud, options.poisson, &stats);
+  ColoredMesh mesh = ReconstructPoisson(cloud, options.poisson, &stats);
+  // Pieces the cameras see through (free_space.h): needs the points' visibility and the cameras.
+  if (cloud.has_visibility() && fs::exists(workspace.sparse_dir() / "images.txt")) {
+    const core::Reconstruction rec = io::ReadColmapText(workspace.sparse_dir());
+    std::map<uint32_t, FreeSpaceView> views;
+    for (const auto& [id, im] : rec.images) views[id] = {rec.cameras.at(im.camera_id), im.pose};
+    const FreeSpaceStats fs_stats = DropPiecesInFreeSpace(&mesh, cloud, views);
+    report["free_space"] = {{"pieces", fs_stats.pieces},
+                            {"tested", fs_stats.tested},
+                            {"dropped", fs_stats.dropped},
+                            {"faces_dropped", fs_stats.faces_dropped}};
+    spdlog::info("mesh: {} of {} pieces seen through by the cameras dropped ({} faces)", fs_stats.dropped,
+                 fs_stats.pieces, fs_stats.faces_dropped);
+    if (mesh.empty()) throw Error(ws + ": every mesh piece was seen through by the cameras");
+  }
   const fs::path mesh_dir = workspace.mesh_dir(), report_dir = workspace.report_dir();
   core::EnsureDirectory(mesh_dir);
   core::EnsureDirectory(report_dir);
