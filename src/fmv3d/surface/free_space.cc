@@ -6,42 +6,10 @@
 #include <numeric>
 
 #include "fmv3d/core/error.h"
+#include "fmv3d/surface/mesh_cleanup.h"
 
 namespace fmv3d::surface {
 namespace {
-
-int Find(std::vector<int>& parent, int i) {
-  while (parent[i] != i) {
-    parent[i] = parent[parent[i]];
-    i = parent[i];
-  }
-  return i;
-}
-
-// Piece index per vertex (-1: in no triangle) and the area of each piece.
-std::vector<int> Pieces(const ColoredMesh& mesh, std::vector<double>* area) {
-  std::vector<int> parent(mesh.vertices.size());
-  std::iota(parent.begin(), parent.end(), 0);
-  for (const auto& f : mesh.triangles) {
-    const int a = Find(parent, f[0]);
-    parent[Find(parent, f[1])] = a;
-    parent[Find(parent, f[2])] = a;
-  }
-  std::vector<int> root_index(mesh.vertices.size(), -1), piece_of(mesh.vertices.size(), -1);
-  area->clear();
-  for (const auto& f : mesh.triangles) {
-    const int r = Find(parent, f[0]);
-    if (root_index[r] < 0) {
-      root_index[r] = static_cast<int>(area->size());
-      area->push_back(0);
-    }
-    const int p = root_index[r];
-    const auto& v = mesh.vertices;
-    (*area)[p] += 0.5 * (v[f[1]] - v[f[0]]).cross(v[f[2]] - v[f[0]]).norm();
-    for (int k = 0; k < 3; ++k) piece_of[f[k]] = p;
-  }
-  return piece_of;
-}
 
 // The nearest tested piece per footprint cell of one camera.
 struct Footprint {
@@ -72,8 +40,9 @@ FreeSpaceStats DropPiecesInFreeSpace(ColoredMesh* mesh, const io::OrientedPointC
   mesh->Validate();
   if (!cloud.has_visibility()) throw Error("free space: the point cloud has no visibility lists");
   FreeSpaceStats st;
-  std::vector<double> area;
-  const std::vector<int> piece_of = Pieces(*mesh, &area);
+  const MeshPieces pieces = FindPieces(mesh->vertices, mesh->triangles);
+  const std::vector<double>& area = pieces.area;
+  const std::vector<int> piece_of = pieces.VertexPieces(mesh->triangles, mesh->vertices.size());
   st.pieces = area.size();
   if (area.size() < 2) return st;
   const int largest = static_cast<int>(std::max_element(area.begin(), area.end()) - area.begin());

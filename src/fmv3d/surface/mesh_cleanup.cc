@@ -58,15 +58,7 @@ const char* ToString(ComponentDecision d) {
 
 const char* ToString(SurfaceKind k) { return k == SurfaceKind::kOpen ? "open" : "watertight"; }
 
-ComponentSelection SelectComponents(const std::vector<Eigen::Vector3d>& vertices,
-                                    const std::vector<Eigen::Vector3i>& triangles,
-                                    const std::vector<Eigen::Vector3d>& points, double cell, double spacing,
-                                    const ComponentOptions& options, size_t max_points) {
-  options.Check();
-  if (!(cell > 0) || !(spacing > 0)) throw Error("mesh components: cell and spacing must be positive");
-  ComponentSelection out;
-  if (triangles.empty()) return out;
-  // Union–find over vertices joined by the triangles.
+MeshPieces FindPieces(const std::vector<Eigen::Vector3d>& vertices, const std::vector<Eigen::Vector3i>& triangles) {
   std::vector<int> parent(vertices.size());
   std::iota(parent.begin(), parent.end(), 0);
   for (const auto& f : triangles) {
@@ -78,22 +70,48 @@ ComponentSelection SelectComponents(const std::vector<Eigen::Vector3d>& vertices
     parent[Find(parent, f[1])] = a;
     parent[Find(parent, f[2])] = a;
   }
-  std::vector<int> root_index(vertices.size(), -1), vertex_component(vertices.size(), -1);
-  out.face_component.resize(triangles.size());
+  MeshPieces out;
+  std::vector<int> root_index(vertices.size(), -1);
+  out.face_piece.resize(triangles.size());
   for (size_t i = 0; i < triangles.size(); ++i) {
     const auto& f = triangles[i];
     const int r = Find(parent, f[0]);
     if (root_index[r] < 0) {
-      root_index[r] = static_cast<int>(out.components.size());
-      out.components.emplace_back();
+      root_index[r] = static_cast<int>(out.faces.size());
+      out.faces.push_back(0);
+      out.area.push_back(0);
     }
     const int c = root_index[r];
-    out.face_component[i] = c;
-    MeshComponent& mc = out.components[c];
-    ++mc.faces;
-    mc.area += 0.5 * (vertices[f[1]] - vertices[f[0]]).cross(vertices[f[2]] - vertices[f[0]]).norm();
-    for (int k = 0; k < 3; ++k) vertex_component[f[k]] = c;
+    out.face_piece[i] = c;
+    ++out.faces[c];
+    out.area[c] += 0.5 * (vertices[f[1]] - vertices[f[0]]).cross(vertices[f[2]] - vertices[f[0]]).norm();
   }
+  return out;
+}
+
+std::vector<int> MeshPieces::VertexPieces(const std::vector<Eigen::Vector3i>& triangles, size_t num_vertices) const {
+  std::vector<int> out(num_vertices, -1);
+  for (size_t i = 0; i < triangles.size(); ++i)
+    for (int k = 0; k < 3; ++k) out[triangles[i][k]] = face_piece[i];
+  return out;
+}
+
+ComponentSelection SelectComponents(const std::vector<Eigen::Vector3d>& vertices,
+                                    const std::vector<Eigen::Vector3i>& triangles,
+                                    const std::vector<Eigen::Vector3d>& points, double cell, double spacing,
+                                    const ComponentOptions& options, size_t max_points) {
+  options.Check();
+  if (!(cell > 0) || !(spacing > 0)) throw Error("mesh components: cell and spacing must be positive");
+  ComponentSelection out;
+  if (triangles.empty()) return out;
+  const MeshPieces pieces = FindPieces(vertices, triangles);
+  out.face_component = pieces.face_piece;
+  out.components.resize(pieces.faces.size());
+  for (size_t c = 0; c < pieces.faces.size(); ++c) {
+    out.components[c].faces = pieces.faces[c];
+    out.components[c].area = pieces.area[c];
+  }
+  const std::vector<int> vertex_component = pieces.VertexPieces(triangles, vertices.size());
 
   // Support: every (sub-sampled) point votes for the piece of its nearest vertex.
   if (!points.empty()) {

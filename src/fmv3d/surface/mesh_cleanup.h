@@ -51,6 +51,17 @@ struct ComponentSelection {
   size_t kept_faces() const;
 };
 
+// Connected pieces of a mesh (triangles sharing a vertex), numbered in order of their first triangle. Throws
+// fmv3d::Error when a triangle indexes a vertex out of range.
+struct MeshPieces {
+  std::vector<int> face_piece;  // per triangle
+  std::vector<size_t> faces;    // per piece
+  std::vector<double> area;     // per piece
+  // Per vertex its piece, -1 for a vertex in no triangle.
+  std::vector<int> VertexPieces(const std::vector<Eigen::Vector3i>& triangles, size_t num_vertices) const;
+};
+MeshPieces FindPieces(const std::vector<Eigen::Vector3d>& vertices, const std::vector<Eigen::Vector3i>& triangles);
+
 // Connected pieces (triangles sharing a vertex) of the mesh and the decision on each. `cell` is the octree
 // cell width, `spacing` the points' median spacing (both > 0). Points are subsampled evenly to at most
 // `max_points` for the support count (the counts are scaled back). Pure: no mesh is modified.
