@@ -872,7 +872,7 @@ TEST(Dsm, MeshHeightsTheirPointsContradictAreReplaced) {
         continue;
       }
       for (int k = 0; k < 4; ++k) {
-        const double e = c + 0.25 + 0.5 * (k % 2), n = 40 - (r + 0.25 + 0.5 * (k / 2));
+        const double e = c + 0.25 + 0.5 * (k % 2), n = 40 - (r + 0.25 + (k >= 2 ? 0.5 : 0.0));
         const double wobble = 0.05 * std::sin(7.0 * (r * 40 + c) + k);
         points.emplace_back(e, n, (roof(r, c) ? 110.0 : 100.0) + wobble);
         sigma.push_back(far(r, c) ? 5.0f : 0.1f);

@@ -81,7 +81,7 @@ Scene MakeScene() {
 
 TEST(FreeSpace, BlobOverMeasuredGroundIsDroppedRoofIsKept) {
   Scene s = MakeScene();
-  const size_t blob_faces = 2 * 8 * 8;
+  const size_t blob_faces = size_t{2} * 8 * 8;
   const size_t faces = s.mesh.triangles.size();
   const FreeSpaceStats st = DropPiecesInFreeSpace(&s.mesh, s.cloud, s.views);
   EXPECT_EQ(st.pieces, 3u);

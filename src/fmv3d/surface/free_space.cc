@@ -55,8 +55,9 @@ FreeSpaceStats DropPiecesInFreeSpace(ColoredMesh* mesh, const io::OrientedPointC
 
   std::vector<double> through(area.size(), 0), on(area.size(), 0);
   Footprint fp;
-  for (const auto& [id, view] : views) {
-    const auto seen = seen_by.find(id);
+  for (const auto& entry : views) {
+    const FreeSpaceView& view = entry.second;  // named, not a structured binding: the lambda below captures it
+    const auto seen = seen_by.find(entry.first);
     if (seen == seen_by.end()) continue;
     fp.width = std::max(1, static_cast<int>(std::lround(view.camera.width * o.footprint_scale)));
     fp.height = std::max(1, static_cast<int>(std::lround(view.camera.height * o.footprint_scale)));
