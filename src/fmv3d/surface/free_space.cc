@@ -48,6 +48,9 @@ FreeSpaceStats DropPiecesInFreeSpace(ColoredMesh* mesh, const io::OrientedPointC
   const int largest = static_cast<int>(std::max_element(area.begin(), area.end()) - area.begin());
   st.tested = area.size() - 1;
 
+  std::vector<uint32_t> tested;  // the vertices drawn into the footprints: those of every piece but the largest
+  for (size_t v = 0; v < piece_of.size(); ++v)
+    if (piece_of[v] >= 0 && piece_of[v] != largest) tested.push_back(static_cast<uint32_t>(v));
   std::map<uint32_t, std::vector<uint32_t>> seen_by;  // camera → the points it saw
   for (size_t i = 0; i < cloud.size(); ++i)
     for (uint32_t id : cloud.visibility[i])
@@ -73,13 +76,12 @@ FreeSpaceStats DropPiecesInFreeSpace(ColoredMesh* mesh, const io::OrientedPointC
       return true;
     };
     bool any = false;
-    for (size_t v = 0; v < mesh->vertices.size(); ++v) {
-      const int p = piece_of[v];
+    for (uint32_t v : tested) {
       int x, y;
       double z;
-      if (p < 0 || p == largest || !cell_of(mesh->vertices[v], &x, &y, &z)) continue;
+      if (!cell_of(mesh->vertices[v], &x, &y, &z)) continue;
       const size_t i = static_cast<size_t>(y) * fp.width + x;
-      if (z < fp.depth[i]) fp.depth[i] = static_cast<float>(z), fp.piece[i] = p, any = true;
+      if (z < fp.depth[i]) fp.depth[i] = static_cast<float>(z), fp.piece[i] = piece_of[v], any = true;
     }
     if (!any) continue;
     for (uint32_t i : seen->second) {
