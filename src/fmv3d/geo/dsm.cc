@@ -168,7 +168,7 @@ cv::Mat CheckMeshHeights(const cv::Mat& mesh_h, const std::vector<Eigen::Vector3
   if (o.window < 0 || o.min_points < 1) throw Error("dsm: mesh check needs window >= 0 and min_points >= 1");
   if (!sigma.empty() && sigma.size() != points.size()) throw Error("dsm: one sigma per point expected");
   *stats = {};
-  // Points binned by cell (index row * width + col), heights and σ side by side.
+  // Point indices sorted by cell (row * width + col); first[cell] .. first[cell + 1] are that cell's.
   std::vector<std::pair<int64_t, size_t>> binned;
   binned.reserve(points.size());
   for (size_t i = 0; i < points.size(); ++i) {
