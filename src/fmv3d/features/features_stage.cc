@@ -88,14 +88,14 @@ void ExtractFrame(const fs::path& image_path, const fs::path& out_path, const st
   gate->Release(held);
 }
 
+// The plan only: how many images were in flight at the peak depends on thread timing and on how many were up to
+// date from an interrupted run, so it is logged, not written (a resumed run writes the same summary).
 nlohmann::json MemoryJson(const SiftOptions& options, const FeaturesStageStats& s) {
   return {{"max_memory_mb", options.max_memory_mb},
           {"estimated_image_mb", s.max_image_bytes / 1048576.0},
           {"workers", s.workers},
           {"tiled_images", s.tiled_images},
-          {"max_tiles", s.max_tiles},
-          {"peak_images_in_flight", s.peak_images_in_flight},
-          {"peak_estimated_mb_in_flight", s.peak_bytes_in_flight / 1048576.0}};
+          {"max_tiles", s.max_tiles}};
 }
 
 nlohmann::json SummaryJson(const SiftOptions& options, const FeaturesStageStats& stats, nlohmann::json per_image) {
@@ -205,8 +205,9 @@ FeaturesStageStats RunFeaturesStage(const core::Workspace& ws, const SiftOptions
                stats.adapted_images
                    ? fmt::format("; contrast threshold lowered on {} weak images", stats.adapted_images)
                    : std::string());
-  spdlog::info("features: memory budget {:.0f} MB, ≤ {:.0f} MB per image, {} at once{}", options.max_memory_mb,
-               stats.max_image_bytes / 1048576.0, stats.workers,
+  spdlog::info("features: memory budget {:.0f} MB, ≤ {:.0f} MB per image, {} at once (peak {}, {:.0f} MB){}",
+               options.max_memory_mb, stats.max_image_bytes / 1048576.0, stats.workers, stats.peak_images_in_flight,
+               stats.peak_bytes_in_flight / 1048576.0,
                stats.tiled_images ? fmt::format(", {} images in up to {} tiles", stats.tiled_images, stats.max_tiles)
                                   : std::string());
   return stats;
