@@ -48,6 +48,10 @@ void Add(CLI::App& app) {
       ->capture_default_str();
   cmd->add_option("--edge-jump", o.fusion.edge_depth_jump, "Fusion: relative depth step of an occluding edge")
       ->capture_default_str();
+  cmd->add_option("--sparse-tolerance", o.fusion.sparse_tolerance,
+                  "Fusion: drop a map's pieces whose depth the view's own sparse points contradict, beyond this "
+                  "relative depth (periodic texture matched one period off; 0: off)")
+      ->capture_default_str();
   cmd->add_option("--max-uncertainty", o.fusion.max_relative_uncertainty,
                   "Fusion: drop points whose expected error along the normal (from their consistent views' "
                   "distance, grazing angle, spread of directions and image texture) exceeds this multiple of the "

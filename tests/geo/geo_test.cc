@@ -906,15 +906,21 @@ TEST(Dsm, MeshHeightsTheirPointsContradictAreReplaced) {
     for (int c = 30; c < 33; ++c) EXPECT_NEAR(h.at<float>(r, c), 100.0f, 0.06) << r << "," << c;
   EXPECT_NEAR(h.at<float>(25, 5), 100.0f, 0.06);
   EXPECT_EQ(h.at<float>(2, 32), 103.0f);  // within the far land's stated σ
-  EXPECT_EQ(h.at<float>(38, 2), 108.0f);  // no points to judge by, but some within max_gap: kept
-  for (int r = 38; r < 40; ++r)           // no point within max_gap (3 cells): left without data
-    for (int c = 0; c < 2; ++c) EXPECT_TRUE(std::isnan(h.at<float>(r, c))) << r << "," << c;
+  // The patch without points: where any point lies within max_gap (3 cells), the mesh stands above all of
+  // them (a roof carried over unseen ground) and takes their median; beyond, it is left without data.
+  for (int r = 35; r < 40; ++r)
+    for (int c = 0; c < 5; ++c) {
+      if (r >= 38 && c < 2)
+        EXPECT_TRUE(std::isnan(h.at<float>(r, c))) << r << "," << c;
+      else
+        EXPECT_NEAR(h.at<float>(r, c), 100.0f, 0.06) << r << "," << c;
+    }
   EXPECT_EQ(st.unmeasured, 4u);
   EXPECT_EQ(h.at<float>(5, 5), 100.0f);  // agreeing ground untouched
   // 2 + 10 + 10 membrane cells, 9 blob cells, the far patch's two bottom corners (its points under half of the
-  // window: the median σ is the near ground's), and the 9 rim cells of the patch without points, whose windows
-  // reach measured ground.
-  EXPECT_EQ(st.replaced_above, 42u);
+  // window: the median σ is the near ground's), the 9 rim cells of the patch without points, whose windows
+  // reach measured ground, and its 12 other cells with a point within max_gap.
+  EXPECT_EQ(st.replaced_above, 54u);
   EXPECT_EQ(st.replaced_below, 1u);
   EXPECT_THROW(CheckMeshHeights(mesh, points, std::vector<float>(3, 1.0f), grid, {}, &st), Error);
 }

@@ -494,5 +494,95 @@ TEST(Fusion, UncertaintyOptionIsChecked) {
   EXPECT_THROW(o.Check(), Error);
 }
 
+// Sparse-point contradiction (fusion.h): a map piece locked one period off on periodic texture is dropped by the
+// sparse points the view observed there; a roof with its own points, far land with none and a piece only two
+// points contradict are kept.
+TEST(SparseContradictionMask, DropsThePieceItsSparsePointsContradict) {
+  cv::Mat depth(60, 90, CV_32F, cv::Scalar(100.0f));
+  for (int y = 0; y < 60; ++y)  // the ground slopes away gently (0.1% per row): one piece
+    for (int x = 0; x < 90; ++x) depth.at<float>(y, x) = 100.0f * (1 + 0.001f * y);
+  depth(cv::Rect(5, 5, 20, 20)).setTo(130.0f);    // aliased: 30% too deep
+  depth(cv::Rect(40, 5, 20, 20)).setTo(70.0f);    // a roof
+  depth(cv::Rect(65, 30, 20, 20)).setTo(400.0f);  // far land, no sparse point reaches it
+  depth(cv::Rect(5, 35, 20, 20)).setTo(150.0f);   // only two points say otherwise
+  depth(cv::Rect(0, 58, 90, 2)).setTo(0.0f);      // no depth
+  std::vector<Eigen::Vector3d> uvz;
+  for (int y = 2; y < 60; y += 4)
+    for (int x = 2; x < 90; x += 4) {
+      const bool roof = x >= 40 && x < 60 && y >= 5 && y < 25, far = x >= 65 && x < 85 && y >= 30 && y < 50;
+      const bool weak = x >= 5 && x < 25 && y >= 35 && y < 55;
+      if (far || weak) continue;
+      uvz.emplace_back(x + 0.5, y + 0.5, roof ? 70.2 : 100.0 * (1 + 0.001 * y));  // the aliased patch's are ground
+    }
+  uvz.emplace_back(10.5, 40.5, 100.0);
+  uvz.emplace_back(20.5, 50.5, 100.0);
+  uvz.emplace_back(15.5, 45.5, 151.0);  // one agrees with the weakly contradicted piece
+  uvz.emplace_back(-3, 10, 100.0);      // outside the map: ignored
+  size_t pieces = 0;
+  const cv::Mat mask = SparseContradictionMask(depth, uvz, 0.05, 0.05, 3, &pieces);
+  EXPECT_EQ(pieces, 1u);
+  EXPECT_EQ(cv::countNonZero(mask), 400);
+  EXPECT_EQ(mask.at<uint8_t>(15, 15), 255);
+  EXPECT_EQ(mask.at<uint8_t>(15, 50), 0);
+  EXPECT_EQ(mask.at<uint8_t>(40, 75), 0);
+  EXPECT_EQ(mask.at<uint8_t>(45, 15), 0);
+  EXPECT_EQ(mask.at<uint8_t>(30, 30), 0);
+  // Without sparse points nothing is dropped.
+  EXPECT_EQ(cv::countNonZero(SparseContradictionMask(depth, {}, 0.05, 0.05, 3)), 0);
+}
+
+// Five nadir views whose maps all hold the same aliased patch 5 m under the ground: fused without the test it
+// becomes a multi-view consistent underground surface; with the views' sparse points (on the true ground) it is
+// gone and the ground around it is kept.
+TEST(Fusion, SparsePointsDropAnAliasedPatchEveryViewAgreesOn) {
+  const double offsets[5][2] = {{0, 0}, {1.5, 1.5}, {-1.5, 1.5}, {1.5, -1.5}, {-1.5, -1.5}};
+  const auto aliased = [](const Eigen::Vector3d& g) { return std::abs(g.x()) <= 1.5 && std::abs(g.y()) <= 1.5; };
+  std::vector<Eigen::Vector3d> ground_points;
+  for (double x = -3.9; x <= 3.9; x += 0.3)
+    for (double y = -3.9; y <= 3.9; y += 0.3) ground_points.emplace_back(x, y, 0);
+  std::map<uint32_t, FusionView> views;
+  for (uint32_t id = 1; id <= 5; ++id) {
+    const ViewGeometry g = NadirView(id, offsets[id - 1][0], offsets[id - 1][1]);
+    DepthMap map;
+    map.depth.create(g.height, g.width, CV_32F);
+    map.normal.create(g.height, g.width, CV_32FC3);
+    map.cost = cv::Mat::zeros(g.height, g.width, CV_32F);
+    const Eigen::Vector3d c = g.Centre();
+    for (int y = 0; y < g.height; ++y)
+      for (int x = 0; x < g.width; ++x) {
+        const Eigen::Vector3d ray = g.R.transpose() * g.K.inverse() * Eigen::Vector3d(x + 0.5, y + 0.5, 1);
+        const Eigen::Vector3d on_ground = c + ray * (-c.z() / ray.z());
+        const double z = aliased(on_ground) ? -5.0 : 0.0;
+        map.depth.at<float>(y, x) = static_cast<float>((g.R * (c + ray * ((z - c.z()) / ray.z())) + g.t).z());
+        const Eigen::Vector3d n = g.R * Eigen::Vector3d::UnitZ();
+        map.normal.at<cv::Vec3f>(y, x) = cv::Vec3f(n.x(), n.y(), n.z());
+      }
+    std::vector<uint32_t> nbs;
+    for (uint32_t j = 1; j <= 5; ++j)
+      if (j != id) nbs.push_back(j);
+    FusionView v = MakeFusionView(g, map, cv::Mat::zeros(g.height, g.width, CV_8UC3), nbs);
+    v.sparse = ground_points;
+    views.emplace(id, std::move(v));
+  }
+  FusionOptions opt;
+  opt.write_sigma = false;
+  opt.max_relative_uncertainty = 0;
+  const auto count = [](const io::OrientedPointCloud& cloud, bool below) {
+    return std::count_if(cloud.positions.begin(), cloud.positions.end(),
+                         [below](const Eigen::Vector3d& p) { return below ? p.z() < -1 : std::abs(p.z()) < 0.1; });
+  };
+  opt.sparse_tolerance = 0;
+  const auto plain = FuseDepthMaps(views, opt);
+  EXPECT_GT(count(plain, true), 100);
+  opt.sparse_tolerance = 0.05;
+  FusionStats st;
+  const auto checked = FuseDepthMaps(views, opt, &st);
+  EXPECT_EQ(count(checked, true), 0);
+  EXPECT_EQ(st.sparse_pieces, 5u);
+  EXPECT_GT(count(checked, false), count(plain, false) * 9 / 10);
+  opt.sparse_min_votes = 0;
+  EXPECT_THROW(opt.Check(), Error);
+}
+
 }  // namespace
 }  // namespace fmv3d::mvs

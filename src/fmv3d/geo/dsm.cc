@@ -165,7 +165,8 @@ cv::Mat RasteriseDsm(const UtmSurface& s, const GridSpec& grid) {
 cv::Mat CheckMeshHeights(const cv::Mat& mesh_h, const std::vector<Eigen::Vector3d>& points,
                          const std::vector<float>& sigma, const GridSpec& grid, const MeshCheckOptions& o,
                          MeshCheckStats* stats) {
-  if (o.window < 0 || o.min_points < 1) throw Error("dsm: mesh check needs window >= 0 and min_points >= 1");
+  if (o.window < 0 || o.min_points < 1 || o.min_points_near < 1)
+    throw Error("dsm: mesh check needs window >= 0, min_points >= 1 and min_points_near >= 1");
   if (!sigma.empty() && sigma.size() != points.size()) throw Error("dsm: one sigma per point expected");
   *stats = {};
   // Point indices sorted by cell (row * width + col); first[cell] .. first[cell + 1] are that cell's.
@@ -197,6 +198,18 @@ cv::Mat CheckMeshHeights(const cv::Mat& mesh_h, const std::vector<Eigen::Vector3
 
   cv::Mat out = mesh_h.clone();
   std::vector<double> hs, ss;
+  // The heights (and stated σ) of the points within w cells of (r, c), into hs and ss.
+  auto gather = [&](int r, int c, int w) {
+    hs.clear(), ss.clear();
+    for (int rr = std::max(0, r - w); rr <= std::min(grid.height - 1, r + w); ++rr)
+      for (int cc = std::max(0, c - w); cc <= std::min(grid.width - 1, c + w); ++cc) {
+        const size_t cell = static_cast<size_t>(rr) * grid.width + cc;
+        for (size_t k = first[cell]; k < first[cell + 1]; ++k) {
+          hs.push_back(points[binned[k].second].z());
+          if (!sigma.empty()) ss.push_back(sigma[binned[k].second]);
+        }
+      }
+  };
   for (int r = 0; r < mesh_h.rows; ++r)
     for (int c = 0; c < mesh_h.cols; ++c) {
       const float m = mesh_h.at<float>(r, c);
@@ -206,16 +219,20 @@ cv::Mat CheckMeshHeights(const cv::Mat& mesh_h, const std::vector<Eigen::Vector3
         ++stats->unmeasured;
         continue;
       }
-      hs.clear(), ss.clear();
-      for (int rr = std::max(0, r - o.window); rr <= std::min(grid.height - 1, r + o.window); ++rr)
-        for (int cc = std::max(0, c - o.window); cc <= std::min(grid.width - 1, c + o.window); ++cc) {
-          const size_t cell = static_cast<size_t>(rr) * grid.width + cc;
-          for (size_t k = first[cell]; k < first[cell + 1]; ++k) {
-            hs.push_back(points[binned[k].second].z());
-            if (!sigma.empty()) ss.push_back(sigma[binned[k].second]);
-          }
+      gather(r, c, o.window);
+      if (hs.size() < o.min_points) {
+        // Few points under the cell: the mesh is still overruled where it stands above every point near it.
+        if (o.max_gap <= o.window) continue;
+        gather(r, c, o.max_gap);
+        if (hs.size() < o.min_points_near) continue;
+        ++stats->checked;
+        const double tol = std::max(grid.gsd, ss.empty() ? 0.0 : core::Median(ss));
+        if (m > *std::max_element(hs.begin(), hs.end()) + tol) {
+          ++stats->replaced_above;
+          out.at<float>(r, c) = static_cast<float>(core::Median(hs));
         }
-      if (hs.size() < o.min_points) continue;
+        continue;
+      }
       ++stats->checked;
       const double q25 = core::Quantile(hs, 0.25), q75 = core::Quantile(hs, 0.75);
       const double tol = std::max(grid.gsd, ss.empty() ? 0.0 : core::Median(ss));

@@ -63,13 +63,17 @@ double ChooseGsd(const UtmSurface& surface);
 // at least `min_points` are there and the mesh lies outside [q25 − tol, q75 + tol] of their heights (tol: the
 // larger of their median stated σ and one cell size), the cell takes their median. The quartiles let a few
 // points of a blob or a wall not decide; a surface that the points there support (a roof edge, steep ground,
-// far land with a large σ) keeps the mesh's height. Cells without enough points keep the mesh's height.
+// far land with a large σ) keeps the mesh's height. A cell with fewer points than that is still overruled
+// where its mesh stands above every one of the points within `max_gap` cells (at least `min_points_near`) by
+// more than tol: a roof that Poisson carried past a wall over the gap of unseen ground at its foot, which no
+// point supports. Other cells without enough points keep the mesh's height.
 // A cell with no point within `max_gap` cells is left without data: there the mesh is Poisson's guess over
 // ground no camera measured (beside the walls of a nadir flight, behind occluders), not a measurement.
 struct MeshCheckOptions {
-  int window = 1;         // cells on each side of the checked one
-  size_t min_points = 6;  // points in the window needed to overrule the mesh
-  int max_gap = 3;        // cells; < 0: keep the mesh everywhere
+  int window = 1;              // cells on each side of the checked one
+  size_t min_points = 6;       // points in the window needed to overrule the mesh
+  int max_gap = 3;             // cells; < 0: keep the mesh everywhere
+  size_t min_points_near = 3;  // points within max_gap that overrule a mesh standing above all of them
 };
 struct MeshCheckStats {
   size_t checked = 0;         // cells with a mesh height and enough points

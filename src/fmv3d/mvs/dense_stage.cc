@@ -198,6 +198,7 @@ class DenseRunner {
       const auto view = cache_.Get(id);
       FusionView fv = MakeFusionView(plan_.geoms.at(id), map, view->color,
                                      std::vector<uint32_t>(links[id].begin(), links[id].end()));
+      if (auto it = seeds_.find(id); it != seeds_.end()) fv.sparse = it->second;
       if (options_.fusion.max_relative_uncertainty > 0)
         fv.texture = TexturePrecisionMap(view->color, options_.patch_match.window_radius);
       return fv;
@@ -280,6 +281,9 @@ nlohmann::json DenseReport(const core::Reconstruction& rec, const ViewPlan& plan
         {"rejected_visibility", fstats.rejected_visibility},
         {"edge_pixels_removed", fstats.edge_pixels},
         {"edge_erosion_px", options.fusion.edge_erosion_px},
+        {"sparse_contradicted_pieces", fstats.sparse_pieces},
+        {"sparse_contradicted_pixels", fstats.sparse_pixels},
+        {"sparse_tolerance", options.fusion.sparse_tolerance},
         {"rejected_uncertainty", fstats.rejected_uncertainty},
         {"max_relative_uncertainty", options.fusion.max_relative_uncertainty},
         {"median_normal_sigma_per_footprint", fstats.median_uncertainty},

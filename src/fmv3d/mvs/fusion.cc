@@ -32,6 +32,8 @@ void FusionOptions::Check() const {
   if (!(sigma_coverage > 0)) throw Error("fusion: sigma_coverage must be positive");
   if (!(texture_floor_quantile >= 0 && texture_floor_quantile < 1))
     throw Error("fusion: texture_floor_quantile must be in [0, 1)");
+  if (!(sparse_tolerance >= 0 && sparse_tolerance < 1)) throw Error("fusion: sparse_tolerance must be in [0, 1)");
+  if (sparse_min_votes < 1) throw Error("fusion: sparse_min_votes must be at least 1");
 }
 
 double NormalUncertainty(const Eigen::Vector3d& X, const Eigen::Vector3d& n,
@@ -110,6 +112,57 @@ cv::Mat OccludingEdgeMask(const cv::Mat& depth, int radius_px, double depth_jump
     for (int x = 0; x < depth.cols; ++x)
       if (d[x] > 0 && f[x] > k * d[x]) m[x] = 255;
   }
+  return mask;
+}
+
+cv::Mat SparseContradictionMask(const cv::Mat& depth, const std::vector<Eigen::Vector3d>& uvz, double depth_jump,
+                                double tolerance, int min_votes, size_t* pieces) {
+  CV_Assert(depth.type() == CV_32F);
+  cv::Mat mask = cv::Mat::zeros(depth.size(), CV_8U);
+  if (pieces) *pieces = 0;
+  if (uvz.empty()) return mask;
+  // Pieces by flood fill (4-neighbours, depth continuous within depth_jump); label 0 = no depth.
+  cv::Mat label = cv::Mat::zeros(depth.size(), CV_32S);
+  int count = 0;
+  std::vector<cv::Point> stack;
+  const auto joined = [depth_jump](float a, float b) { return std::abs(a - b) <= depth_jump * std::min(a, b); };
+  for (int y = 0; y < depth.rows; ++y)
+    for (int x = 0; x < depth.cols; ++x) {
+      if (!(depth.at<float>(y, x) > 0) || label.at<int>(y, x) != 0) continue;
+      label.at<int>(y, x) = ++count;
+      stack.assign(1, cv::Point(x, y));
+      while (!stack.empty()) {
+        const cv::Point p = stack.back();
+        stack.pop_back();
+        const float d = depth.at<float>(p);
+        for (const cv::Point q :
+             {cv::Point(p.x + 1, p.y), cv::Point(p.x - 1, p.y), cv::Point(p.x, p.y + 1), cv::Point(p.x, p.y - 1)}) {
+          if (q.x < 0 || q.y < 0 || q.x >= depth.cols || q.y >= depth.rows || label.at<int>(q) != 0) continue;
+          const float e = depth.at<float>(q);
+          if (e > 0 && joined(d, e)) {
+            label.at<int>(q) = count;
+            stack.push_back(q);
+          }
+        }
+      }
+    }
+  std::vector<int> agree(count + 1, 0), disagree(count + 1, 0);
+  for (const auto& s : uvz) {
+    const double u = std::floor(s.x()), v = std::floor(s.y());
+    if (!(s.z() > 0) || u < 0 || v < 0 || u >= depth.cols || v >= depth.rows) continue;
+    const cv::Point p(static_cast<int>(u), static_cast<int>(v));
+    const int l = label.at<int>(p);
+    if (l == 0) continue;
+    (std::abs(depth.at<float>(p) - s.z()) <= tolerance * s.z() ? agree : disagree)[l]++;
+  }
+  std::vector<uint8_t> drop(count + 1, 0);
+  for (int l = 1; l <= count; ++l) {
+    drop[l] = disagree[l] >= min_votes && disagree[l] > agree[l];
+    if (pieces) *pieces += drop[l];
+  }
+  for (int y = 0; y < depth.rows; ++y)
+    for (int x = 0; x < depth.cols; ++x)
+      if (drop[label.at<int>(y, x)]) mask.at<uint8_t>(y, x) = 255;
   return mask;
 }
 

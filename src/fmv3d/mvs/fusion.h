@@ -17,6 +17,17 @@
 // neighbouring views fatten the same way. The same edge is kept from the views where it is not an occluding
 // contour (both sides of a convex corner visible), so little true surface is lost.
 //
+// Then every map loses its pieces that the view's own sparse points contradict (sparse_tolerance > 0). A piece is
+// a connected region of the map whose neighbouring depths differ by at most edge_depth_jump (relative); a sparse
+// point the view observed (its SfM track: the view saw that feature, at that pixel, at that depth) votes for the
+// piece under its projection, agreeing when the map's depth there is within sparse_tolerance of its own. A piece
+// with at least sparse_min_votes disagreeing points and more disagreeing than agreeing ones is dropped. This is
+// PatchMatch's failure on periodic texture (crop rows, tiles, facade grids): a region locked one period off in
+// every source, multi-view consistent because its neighbouring views alias the same way — on a nadir flight, a
+// patch of field tens of metres under the ground whose conflicts with the true ground then reject the true
+// points instead. The verified tracks are what decides there: the pieces the sparse points do not reach (far
+// field, untextured roofs) are untouched, and a true surface's piece holds its own agreeing points.
+//
 // A fused point is the mean of the consistent views' points; the pixels it used are marked so that the same
 // surface is not emitted again from another view. Deterministic (views in id order).
 //
@@ -79,6 +90,8 @@ struct FusionOptions {
   bool write_sigma = true;               // compute and write each point's stated σ (above)
   double sigma_coverage = 3;             // stated σ = this × the measured per-point standard deviation
   double texture_floor_quantile = 0.5;   // p's matching floor: this quantile of p over the maps (0 = none)
+  double sparse_tolerance = 0.05;        // 0 = off; relative depth within which a sparse point agrees (above)
+  int sparse_min_votes = 3;              // disagreeing sparse points that can drop a map's piece
   void Check() const;
 };
 
@@ -91,6 +104,7 @@ struct FusionView {
   cv::Mat color;                     // CV_8UC3 BGR, at the map's size
   cv::Mat texture;                   // CV_16F, TexturePrecisionMap of the colour (empty: every pixel counts as 1 pixel)
   std::vector<uint32_t> neighbours;  // image ids to check
+  std::vector<Eigen::Vector3d> sparse;  // world points of the sparse model this view observed (its tracks)
 };
 
 // Converts a depth map (camera-frame normals) to the compact form.
@@ -102,6 +116,8 @@ struct FusionStats {
   size_t rejected_support = 0;      // too few consistent views
   size_t rejected_visibility = 0;   // free-space conflicts
   size_t edge_pixels = 0;           // pixels removed on the foreground side of depth discontinuities
+  size_t sparse_pieces = 0;         // map pieces dropped because the view's sparse points contradict them
+  size_t sparse_pixels = 0;         // their pixels
   size_t rejected_uncertainty = 0;  // fused points dropped by the uncertainty filter
   double median_uncertainty = 0;    // median σ_n / footprint of the fused points before that filter (pixels, up to p)
   double max_uncertainty = 0;       // the threshold applied to σ_n / footprint (0 when the filter is off)
@@ -113,6 +129,12 @@ struct FusionStats {
 // The mask (CV_8U, 255 = drop) of a depth map's pixels on the foreground side of its discontinuities (see
 // above). Pixels without depth (0) are neither foreground nor background.
 cv::Mat OccludingEdgeMask(const cv::Mat& depth, int radius_px, double depth_jump);
+
+// The mask (CV_8U, 255 = drop) of the pieces of a depth map that the sparse points contradict (see above):
+// `uvz` holds each sparse point's pixel (x, y) and camera-frame depth in this map. `pieces` (optional) receives
+// how many pieces were dropped.
+cv::Mat SparseContradictionMask(const cv::Mat& depth, const std::vector<Eigen::Vector3d>& uvz, double depth_jump,
+                                double tolerance, int min_votes, size_t* pieces = nullptr);
 
 // σ_n of a point X with unit normal n seen by the given views (see above), with each view's pixel precision
 // p_i (empty: 1 pixel each); infinity when the views do not constrain it (fewer than two distinct directions).

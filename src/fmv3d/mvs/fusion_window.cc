@@ -24,14 +24,32 @@ FusionWindow::FusionWindow(std::vector<uint32_t> ids, std::function<FusionView(u
 
 bool FusionWindow::Contains(uint32_t id) const { return std::binary_search(ids_.begin(), ids_.end(), id); }
 
-std::shared_ptr<FusionWindow::Slot> FusionWindow::Load(uint32_t id, size_t* edge_pixels) {
+std::shared_ptr<FusionWindow::Slot> FusionWindow::Load(uint32_t id, FusionStats* st) {
   auto slot = std::make_shared<Slot>();
   slot->view = load_(id);
   ++loads_;
   FusionView& v = slot->view;
+  // The pieces the view's own sparse points contradict go first: the erosion below would split them.
+  if (options_.sparse_tolerance > 0 && !v.sparse.empty()) {
+    std::vector<Eigen::Vector3d> uvz;
+    uvz.reserve(v.sparse.size());
+    for (const auto& X : v.sparse) {
+      Eigen::Vector2d uv;
+      double z = 0;
+      if (v.geom.Project(X, &uv, &z)) uvz.emplace_back(uv.x(), uv.y(), z);
+    }
+    size_t pieces = 0;
+    const cv::Mat mask = SparseContradictionMask(v.depth, uvz, options_.edge_depth_jump, options_.sparse_tolerance,
+                                                 options_.sparse_min_votes, &pieces);
+    if (st) {
+      st->sparse_pieces += pieces;
+      st->sparse_pixels += static_cast<size_t>(cv::countNonZero(mask));
+    }
+    v.depth.setTo(0, mask);
+  }
   if (options_.edge_erosion_px > 0) {
     const cv::Mat mask = OccludingEdgeMask(v.depth, options_.edge_erosion_px, options_.edge_depth_jump);
-    if (edge_pixels) *edge_pixels += static_cast<size_t>(cv::countNonZero(mask));
+    if (st) st->edge_pixels += static_cast<size_t>(cv::countNonZero(mask));
     v.depth.setTo(0, mask);
   }
   if (auto it = spilled_used_.find(id); it != spilled_used_.end()) {
@@ -84,7 +102,7 @@ void FusionWindow::Survey(FusionStats* st, bool texture_samples) {
     if (auto it = resident_.find(id); it != resident_.end()) {
       slot = it->second.second;  // a survey runs once, before any view is loaded: kept for safety
     } else {
-      slot = Load(id, &st->edge_pixels);
+      slot = Load(id, st);
       resident_.emplace(id, std::make_pair(uint64_t{0}, slot));
     }
     resident_[id].first = ++clock_;

@@ -39,7 +39,8 @@ class FusionWindow {
   FusionWindow(std::vector<uint32_t> ids, std::function<FusionView(uint32_t)> load, size_t capacity,
                const FusionOptions& options);
 
-  // One pass over every view (in id order): erodes each map's occluding edges (counted in st->edge_pixels) and,
+  // One pass over every view (in id order): drops the pieces its sparse points contradict and erodes its
+  // occluding edges (counted in st: sparse_pieces, sparse_pixels, edge_pixels) and,
   // when `texture_samples`, histograms the texture precision at every 4th pixel with a depth (for Quantile).
   void Survey(FusionStats* st, bool texture_samples);
   // The q-quantile of the surveyed texture precision samples (the value std::nth_element would give at
@@ -58,7 +59,7 @@ class FusionWindow {
   size_t spilled_mask_bytes() const;                       // compressed masks of the evicted views
 
  private:
-  std::shared_ptr<Slot> Load(uint32_t id, size_t* edge_pixels);
+  std::shared_ptr<Slot> Load(uint32_t id, FusionStats* st);  // st: counts of the survey pass (else nullptr)
   void Evict();
 
   std::vector<uint32_t> ids_;
