@@ -506,20 +506,21 @@ TEST(SparseContradictionMask, DropsThePieceItsSparsePointsContradict) {
   depth(cv::Rect(65, 30, 20, 20)).setTo(400.0f);  // far land, no sparse point reaches it
   depth(cv::Rect(5, 35, 20, 20)).setTo(150.0f);   // only two points say otherwise
   depth(cv::Rect(0, 58, 90, 2)).setTo(0.0f);      // no depth
-  std::vector<Eigen::Vector3d> uvz;
+  std::vector<SparseDepth> uvz;
+  const auto add = [&uvz](double u, double v, double z) { uvz.push_back({u, v, z, 0.05}); };
   for (int y = 2; y < 60; y += 4)
     for (int x = 2; x < 90; x += 4) {
       const bool roof = x >= 40 && x < 60 && y >= 5 && y < 25, far = x >= 65 && x < 85 && y >= 30 && y < 50;
       const bool weak = x >= 5 && x < 25 && y >= 35 && y < 55;
       if (far || weak) continue;
-      uvz.emplace_back(x + 0.5, y + 0.5, roof ? 70.2 : 100.0 * (1 + 0.001 * y));  // the aliased patch's are ground
+      add(x + 0.5, y + 0.5, roof ? 70.2 : 100.0 * (1 + 0.001 * y));  // the aliased patch's are ground
     }
-  uvz.emplace_back(10.5, 40.5, 100.0);
-  uvz.emplace_back(20.5, 50.5, 100.0);
-  uvz.emplace_back(15.5, 45.5, 151.0);  // one agrees with the weakly contradicted piece
-  uvz.emplace_back(-3, 10, 100.0);      // outside the map: ignored
+  add(10.5, 40.5, 100.0);
+  add(20.5, 50.5, 100.0);
+  add(15.5, 45.5, 151.0);  // one agrees with the weakly contradicted piece
+  add(-3, 10, 100.0);      // outside the map: ignored
   size_t pieces = 0;
-  const cv::Mat mask = SparseContradictionMask(depth, uvz, 0.05, 0.05, 3, &pieces);
+  const cv::Mat mask = SparseContradictionMask(depth, uvz, 0.05, 3, &pieces);
   EXPECT_EQ(pieces, 1u);
   EXPECT_EQ(cv::countNonZero(mask), 400);
   EXPECT_EQ(mask.at<uint8_t>(15, 15), 255);
@@ -528,7 +529,29 @@ TEST(SparseContradictionMask, DropsThePieceItsSparsePointsContradict) {
   EXPECT_EQ(mask.at<uint8_t>(45, 15), 0);
   EXPECT_EQ(mask.at<uint8_t>(30, 30), 0);
   // Without sparse points nothing is dropped.
-  EXPECT_EQ(cv::countNonZero(SparseContradictionMask(depth, {}, 0.05, 0.05, 3)), 0);
+  EXPECT_EQ(cv::countNonZero(SparseContradictionMask(depth, {}, 0.05, 3)), 0);
+  // Points whose own depth is uncertain (triangulated from a short baseline) do not overrule the map: the
+  // aliased patch's points with 0.2° of parallax agree within 3 / (f · sin α) (f 200: 4.3, i.e. 430%).
+  for (auto& s : uvz)
+    if (s.u >= 5 && s.u < 25 && s.v >= 5 && s.v < 25) s.tolerance = 4.3;
+  EXPECT_EQ(cv::countNonZero(SparseContradictionMask(depth, uvz, 0.05, 3)), 0);
+}
+
+TEST(SparseContradictionMask, ToleranceGrowsAsTheTrackNarrows) {
+  ViewGeometry g;
+  g.width = g.height = 100;
+  g.K << 500, 0, 50, 0, 500, 50, 0, 0, 1;
+  const double pi = std::acos(-1.0);
+  const auto d = SparseDepthsIn(g,
+                                {{Eigen::Vector3d(0, 0, 10), 30 * pi / 180},
+                                 {Eigen::Vector3d(1, 0, 100), 0.5 * pi / 180},
+                                 {Eigen::Vector3d(0, 0, -5), 0.5}},
+                                0.05);
+  ASSERT_EQ(d.size(), 2u);                                                   // the point behind the camera is left out
+  EXPECT_DOUBLE_EQ(d[0].tolerance, 0.05);                                    // 3 / (500 · 0.5) = 1.2%: the floor
+  EXPECT_NEAR(d[1].tolerance, 3 / (500 * std::sin(0.5 * pi / 180)), 1e-12);  // 68.8%
+  EXPECT_NEAR(d[1].u, 55, 1e-9);
+  EXPECT_NEAR(d[1].depth, 100, 1e-9);
 }
 
 // Five nadir views whose maps all hold the same aliased patch 5 m under the ground: fused without the test it
@@ -537,9 +560,9 @@ TEST(SparseContradictionMask, DropsThePieceItsSparsePointsContradict) {
 TEST(Fusion, SparsePointsDropAnAliasedPatchEveryViewAgreesOn) {
   const double offsets[5][2] = {{0, 0}, {1.5, 1.5}, {-1.5, 1.5}, {1.5, -1.5}, {-1.5, -1.5}};
   const auto aliased = [](const Eigen::Vector3d& g) { return std::abs(g.x()) <= 1.5 && std::abs(g.y()) <= 1.5; };
-  std::vector<Eigen::Vector3d> ground_points;
+  std::vector<SparseObservation> ground_points;  // seen from across the five views: 17° of parallax
   for (double x = -3.9; x <= 3.9; x += 0.3)
-    for (double y = -3.9; y <= 3.9; y += 0.3) ground_points.emplace_back(x, y, 0);
+    for (double y = -3.9; y <= 3.9; y += 0.3) ground_points.push_back({Eigen::Vector3d(x, y, 0), 0.3});
   std::map<uint32_t, FusionView> views;
   for (uint32_t id = 1; id <= 5; ++id) {
     const ViewGeometry g = NadirView(id, offsets[id - 1][0], offsets[id - 1][1]);

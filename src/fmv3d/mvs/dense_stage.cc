@@ -97,8 +97,19 @@ class DenseRunner {
         options_(options),
         cache_(rec, plan.geoms, frames_dir,
                static_cast<size_t>(std::max(options.cache_views, options.max_sources + 2))) {
-    for (const auto& [pid, p] : rec.points)
+    for (const auto& [pid, p] : rec.points) {
       for (const auto& te : p.track) seeds_[te.image_id].push_back(p.xyz);
+      // The widest angle between the track's rays: how well the point's depth is known (fusion.h).
+      std::vector<Eigen::Vector3d> rays;
+      for (const auto& te : p.track)
+        if (auto it = rec.images.find(te.image_id); it != rec.images.end())
+          rays.push_back((p.xyz - it->second.pose.Centre()).normalized());
+      double widest = 0;
+      for (size_t a = 0; a < rays.size(); ++a)
+        for (size_t b = a + 1; b < rays.size(); ++b)
+          widest = std::max(widest, std::acos(std::clamp(rays[a].dot(rays[b]), -1.0, 1.0)));
+      for (const auto& te : p.track) observed_[te.image_id].push_back({p.xyz, widest});
+    }
   }
 
   fs::path MapPath(uint32_t id, const char* suffix) const {
@@ -198,7 +209,7 @@ class DenseRunner {
       const auto view = cache_.Get(id);
       FusionView fv = MakeFusionView(plan_.geoms.at(id), map, view->color,
                                      std::vector<uint32_t>(links[id].begin(), links[id].end()));
-      if (auto it = seeds_.find(id); it != seeds_.end()) fv.sparse = it->second;
+      if (auto it = observed_.find(id); it != observed_.end()) fv.sparse = it->second;
       if (options_.fusion.max_relative_uncertainty > 0)
         fv.texture = TexturePrecisionMap(view->color, options_.patch_match.window_radius);
       return fv;
@@ -243,7 +254,8 @@ class DenseRunner {
   const fs::path maps_dir_;
   const DenseStageOptions& options_;
   ViewCache cache_;
-  std::map<uint32_t, std::vector<Eigen::Vector3d>> seeds_;  // sparse points seen by each view
+  std::map<uint32_t, std::vector<Eigen::Vector3d>> seeds_;       // sparse points seen by each view
+  std::map<uint32_t, std::vector<SparseObservation>> observed_;  // the same with their parallax (fusion's check)
 };
 
 struct DenseTimings {

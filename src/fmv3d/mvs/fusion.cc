@@ -115,12 +115,27 @@ cv::Mat OccludingEdgeMask(const cv::Mat& depth, int radius_px, double depth_jump
   return mask;
 }
 
-cv::Mat SparseContradictionMask(const cv::Mat& depth, const std::vector<Eigen::Vector3d>& uvz, double depth_jump,
-                                double tolerance, int min_votes, size_t* pieces) {
+std::vector<SparseDepth> SparseDepthsIn(const ViewGeometry& geom, const std::vector<SparseObservation>& sparse,
+                                        double min_tolerance) {
+  std::vector<SparseDepth> out;
+  out.reserve(sparse.size());
+  const double f = geom.K(0, 0);
+  for (const auto& p : sparse) {
+    Eigen::Vector2d uv;
+    double z = 0;
+    if (!geom.Project(p.xyz, &uv, &z)) continue;
+    const double per_pixel = 1 / (f * std::max(std::sin(p.parallax_rad), 1e-6));
+    out.push_back({uv.x(), uv.y(), z, std::max(min_tolerance, 3 * per_pixel)});
+  }
+  return out;
+}
+
+cv::Mat SparseContradictionMask(const cv::Mat& depth, const std::vector<SparseDepth>& sparse, double depth_jump,
+                                int min_votes, size_t* pieces) {
   CV_Assert(depth.type() == CV_32F);
   cv::Mat mask = cv::Mat::zeros(depth.size(), CV_8U);
   if (pieces) *pieces = 0;
-  if (uvz.empty()) return mask;
+  if (sparse.empty()) return mask;
   // Pieces by flood fill (4-neighbours, depth continuous within depth_jump); label 0 = no depth.
   cv::Mat label = cv::Mat::zeros(depth.size(), CV_32S);
   int count = 0;
@@ -147,13 +162,13 @@ cv::Mat SparseContradictionMask(const cv::Mat& depth, const std::vector<Eigen::V
       }
     }
   std::vector<int> agree(count + 1, 0), disagree(count + 1, 0);
-  for (const auto& s : uvz) {
-    const double u = std::floor(s.x()), v = std::floor(s.y());
-    if (!(s.z() > 0) || u < 0 || v < 0 || u >= depth.cols || v >= depth.rows) continue;
+  for (const auto& s : sparse) {
+    const double u = std::floor(s.u), v = std::floor(s.v);
+    if (!(s.depth > 0) || u < 0 || v < 0 || u >= depth.cols || v >= depth.rows) continue;
     const cv::Point p(static_cast<int>(u), static_cast<int>(v));
     const int l = label.at<int>(p);
     if (l == 0) continue;
-    (std::abs(depth.at<float>(p) - s.z()) <= tolerance * s.z() ? agree : disagree)[l]++;
+    (std::abs(depth.at<float>(p) - s.depth) <= s.tolerance * s.depth ? agree : disagree)[l]++;
   }
   std::vector<uint8_t> drop(count + 1, 0);
   for (int l = 1; l <= count; ++l) {

@@ -20,13 +20,15 @@
 // Then every map loses its pieces that the view's own sparse points contradict (sparse_tolerance > 0). A piece is
 // a connected region of the map whose neighbouring depths differ by at most edge_depth_jump (relative); a sparse
 // point the view observed (its SfM track: the view saw that feature, at that pixel, at that depth) votes for the
-// piece under its projection, agreeing when the map's depth there is within sparse_tolerance of its own. A piece
-// with at least sparse_min_votes disagreeing points and more disagreeing than agreeing ones is dropped. This is
-// PatchMatch's failure on periodic texture (crop rows, tiles, facade grids): a region locked one period off in
-// every source, multi-view consistent because its neighbouring views alias the same way — on a nadir flight, a
-// patch of field tens of metres under the ground whose conflicts with the true ground then reject the true
-// points instead. The verified tracks are what decides there: the pieces the sparse points do not reach (far
-// field, untextured roofs) are untouched, and a true surface's piece holds its own agreeing points.
+// piece under its projection, agreeing when the map's depth there is within its tolerance of its own: the larger
+// of sparse_tolerance and three times its own relative depth uncertainty, 1 / (f · sin α) per pixel of the view
+// (α the widest angle between its track's rays), so that a far point triangulated from a short baseline does not
+// overrule the map. A piece with at least sparse_min_votes disagreeing points and more disagreeing than agreeing
+// ones is dropped. This is PatchMatch's failure on periodic texture (crop rows, tiles, facade grids): a region
+// locked one period off in every source, multi-view consistent because its neighbouring views alias the same
+// way — on a nadir flight, a patch of field tens of metres under the ground whose conflicts with the true ground
+// then reject the true points instead. The verified tracks decide there; the pieces they do not reach (far field,
+// untextured roofs) are untouched, and a true surface's piece holds its own agreeing points.
 //
 // A fused point is the mean of the consistent views' points; the pixels it used are marked so that the same
 // surface is not emitted again from another view. Deterministic (views in id order).
@@ -95,6 +97,12 @@ struct FusionOptions {
   void Check() const;
 };
 
+// A sparse point a view observed: its position and the widest angle between its track's rays (radians).
+struct SparseObservation {
+  Eigen::Vector3d xyz = Eigen::Vector3d::Zero();
+  double parallax_rad = 0;
+};
+
 // One view's map in compact form (~13 bytes per pixel with the texture map and the used mask; fusion holds a
 // bounded window of them, fusion_window.h).
 struct FusionView {
@@ -104,7 +112,7 @@ struct FusionView {
   cv::Mat color;                     // CV_8UC3 BGR, at the map's size
   cv::Mat texture;                   // CV_16F, TexturePrecisionMap of the colour (empty: every pixel counts as 1 pixel)
   std::vector<uint32_t> neighbours;  // image ids to check
-  std::vector<Eigen::Vector3d> sparse;  // world points of the sparse model this view observed (its tracks)
+  std::vector<SparseObservation> sparse;  // the sparse points this view observed (its tracks)
 };
 
 // Converts a depth map (camera-frame normals) to the compact form.
@@ -130,11 +138,18 @@ struct FusionStats {
 // above). Pixels without depth (0) are neither foreground nor background.
 cv::Mat OccludingEdgeMask(const cv::Mat& depth, int radius_px, double depth_jump);
 
-// The mask (CV_8U, 255 = drop) of the pieces of a depth map that the sparse points contradict (see above):
-// `uvz` holds each sparse point's pixel (x, y) and camera-frame depth in this map. `pieces` (optional) receives
-// how many pieces were dropped.
-cv::Mat SparseContradictionMask(const cv::Mat& depth, const std::vector<Eigen::Vector3d>& uvz, double depth_jump,
-                                double tolerance, int min_votes, size_t* pieces = nullptr);
+// A sparse point in one map: its pixel, its camera-frame depth and the relative depth within which it agrees.
+struct SparseDepth {
+  double u = 0, v = 0, depth = 0, tolerance = 0;
+};
+// The same, for a view: the points that project into it in front of it, with the tolerance described above.
+std::vector<SparseDepth> SparseDepthsIn(const ViewGeometry& geom, const std::vector<SparseObservation>& sparse,
+                                        double min_tolerance);
+
+// The mask (CV_8U, 255 = drop) of the pieces of a depth map that the sparse points contradict (see above).
+// `pieces` (optional) receives how many pieces were dropped.
+cv::Mat SparseContradictionMask(const cv::Mat& depth, const std::vector<SparseDepth>& sparse, double depth_jump,
+                                int min_votes, size_t* pieces = nullptr);
 
 // σ_n of a point X with unit normal n seen by the given views (see above), with each view's pixel precision
 // p_i (empty: 1 pixel each); infinity when the views do not constrain it (fewer than two distinct directions).

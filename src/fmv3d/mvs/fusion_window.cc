@@ -31,16 +31,9 @@ std::shared_ptr<FusionWindow::Slot> FusionWindow::Load(uint32_t id, FusionStats*
   FusionView& v = slot->view;
   // The pieces the view's own sparse points contradict go first: the erosion below would split them.
   if (options_.sparse_tolerance > 0 && !v.sparse.empty()) {
-    std::vector<Eigen::Vector3d> uvz;
-    uvz.reserve(v.sparse.size());
-    for (const auto& X : v.sparse) {
-      Eigen::Vector2d uv;
-      double z = 0;
-      if (v.geom.Project(X, &uv, &z)) uvz.emplace_back(uv.x(), uv.y(), z);
-    }
     size_t pieces = 0;
-    const cv::Mat mask = SparseContradictionMask(v.depth, uvz, options_.edge_depth_jump, options_.sparse_tolerance,
-                                                 options_.sparse_min_votes, &pieces);
+    const cv::Mat mask = SparseContradictionMask(v.depth, SparseDepthsIn(v.geom, v.sparse, options_.sparse_tolerance),
+                                                 options_.edge_depth_jump, options_.sparse_min_votes, &pieces);
     if (st) {
       st->sparse_pieces += pieces;
       st->sparse_pixels += static_cast<size_t>(cv::countNonZero(mask));
