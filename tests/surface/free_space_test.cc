@@ -99,6 +99,33 @@ TEST(FreeSpace, BlobOverMeasuredGroundIsDroppedRoofIsKept) {
   s.mesh.Validate();
 }
 
+// The blob aliased alike in all nine views while one camera measured the ground around and behind it: its own
+// pairs outnumber the ground's about six to one (share 0.15), and it is still seen through.
+TEST(FreeSpace, BlobFromMoreViewsThanTheGroundBehindItIsDropped) {
+  Scene s = MakeScene();
+  size_t thinned = 0;
+  for (size_t i = 0; i < s.cloud.size(); ++i) {
+    const Eigen::Vector3d& p = s.cloud.positions[i];
+    if (p.z() < 1 && std::abs(p.x()) <= 3 && std::abs(p.y()) <= 3 && s.cloud.visibility[i].size() > 2) {
+      s.cloud.visibility[i] = {5};
+      ++thinned;
+    }
+  }
+  EXPECT_GT(thinned, 3000u);
+  const FreeSpaceStats st = DropPiecesInFreeSpace(&s.mesh, s.cloud, s.views);
+  EXPECT_EQ(st.dropped, 1u);
+  EXPECT_EQ(st.faces_dropped, size_t{2} * 8 * 8);
+  // At the old share of a quarter it stood.
+  Scene again = MakeScene();
+  for (size_t i = 0; i < again.cloud.size(); ++i) {
+    const Eigen::Vector3d& p = again.cloud.positions[i];
+    if (p.z() < 1 && std::abs(p.x()) <= 3 && std::abs(p.y()) <= 3) again.cloud.visibility[i] = {5};
+  }
+  FreeSpaceOptions quarter;
+  quarter.max_through_share = 0.25;
+  EXPECT_EQ(DropPiecesInFreeSpace(&again.mesh, again.cloud, again.views, quarter).dropped, 0u);
+}
+
 TEST(FreeSpace, NothingDroppedWithoutTheCamerasOrWithOnePiece) {
   Scene s = MakeScene();
   const size_t faces = s.mesh.triangles.size();

@@ -1,5 +1,7 @@
 #include "fmv3d/surface/free_space.h"
 
+#include <spdlog/spdlog.h>
+
 #include <algorithm>
 #include <cmath>
 #include <limits>
@@ -99,9 +101,13 @@ FreeSpaceStats DropPiecesInFreeSpace(ColoredMesh* mesh, const io::OrientedPointC
   }
 
   std::vector<bool> drop(area.size(), false);
-  for (size_t p = 0; p < area.size(); ++p)
-    if (static_cast<int>(p) != largest && through[p] > o.max_through_share * (through[p] + on[p]))
-      drop[p] = true, ++st.dropped;
+  for (size_t p = 0; p < area.size(); ++p) {
+    if (static_cast<int>(p) == largest) continue;
+    drop[p] = through[p] >= o.min_through_pairs && through[p] > o.max_through_share * (through[p] + on[p]);
+    st.dropped += drop[p];
+    spdlog::debug("free space: piece {} (area {:.4g}): {:.0f} pairs through, {:.0f} on{}", p, area[p], through[p],
+                  on[p], drop[p] ? ": dropped" : "");
+  }
   if (st.dropped == 0) return st;
 
   ColoredMesh kept;
