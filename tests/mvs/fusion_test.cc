@@ -8,6 +8,7 @@
 #include <algorithm>
 #include <cmath>
 #include <filesystem>
+#include <functional>
 #include <limits>
 #include <map>
 #include <opencv2/imgproc.hpp>
@@ -34,9 +35,10 @@ ViewGeometry NadirView(uint32_t id, double cx, double cy) {
   return g;
 }
 
-// Depth map of a square plate (|x|, |y| <= kPlateHalf at z = kPlateZ) over the ground z = 0, with the plate
-// continued `fatten` metres past its edges, as PatchMatch does at occluding edges.
-FusionView MakeView(const ViewGeometry& g, double fatten, const std::vector<uint32_t>& neighbours) {
+// A view whose map holds, at each pixel, the world point `surface(centre, ray)` along the pixel's ray (normals up).
+FusionView MakeViewOf(const ViewGeometry& g,
+                      const std::function<Eigen::Vector3d(const Eigen::Vector3d&, const Eigen::Vector3d&)>& surface,
+                      const std::vector<uint32_t>& neighbours) {
   DepthMap map;
   map.depth.create(g.height, g.width, CV_32F);
   map.normal.create(g.height, g.width, CV_32FC3);
@@ -45,14 +47,25 @@ FusionView MakeView(const ViewGeometry& g, double fatten, const std::vector<uint
   for (int y = 0; y < g.height; ++y)
     for (int x = 0; x < g.width; ++x) {
       const Eigen::Vector3d ray = g.R.transpose() * g.K.inverse() * Eigen::Vector3d(x + 0.5, y + 0.5, 1);
-      const Eigen::Vector3d on_plate = c + ray * ((kPlateZ - c.z()) / ray.z());
-      const bool plate = std::abs(on_plate.x()) <= kPlateHalf + fatten && std::abs(on_plate.y()) <= kPlateHalf + fatten;
-      const Eigen::Vector3d X = plate ? on_plate : Eigen::Vector3d(c + ray * (-c.z() / ray.z()));
-      map.depth.at<float>(y, x) = static_cast<float>((g.R * X + g.t).z());
+      map.depth.at<float>(y, x) = static_cast<float>((g.R * surface(c, ray) + g.t).z());
       const Eigen::Vector3d n = g.R * Eigen::Vector3d::UnitZ();  // camera frame
       map.normal.at<cv::Vec3f>(y, x) = cv::Vec3f(n.x(), n.y(), n.z());
     }
   return MakeFusionView(g, map, cv::Mat::zeros(g.height, g.width, CV_8UC3), neighbours);
+}
+
+// Depth map of a square plate (|x|, |y| <= kPlateHalf at z = kPlateZ) over the ground z = 0, with the plate
+// continued `fatten` metres past its edges, as PatchMatch does at occluding edges.
+FusionView MakeView(const ViewGeometry& g, double fatten, const std::vector<uint32_t>& neighbours) {
+  return MakeViewOf(
+      g,
+      [fatten](const Eigen::Vector3d& c, const Eigen::Vector3d& ray) -> Eigen::Vector3d {
+        const Eigen::Vector3d on_plate = c + ray * ((kPlateZ - c.z()) / ray.z());
+        const bool plate =
+            std::abs(on_plate.x()) <= kPlateHalf + fatten && std::abs(on_plate.y()) <= kPlateHalf + fatten;
+        return plate ? on_plate : Eigen::Vector3d(c + ray * (-c.z() / ray.z()));
+      },
+      neighbours);
 }
 
 std::map<uint32_t, FusionView> FattenedPlate(double fatten) {
@@ -565,25 +578,16 @@ TEST(Fusion, SparsePointsDropAnAliasedPatchEveryViewAgreesOn) {
     for (double y = -3.9; y <= 3.9; y += 0.3) ground_points.push_back({Eigen::Vector3d(x, y, 0), 0.3});
   std::map<uint32_t, FusionView> views;
   for (uint32_t id = 1; id <= 5; ++id) {
-    const ViewGeometry g = NadirView(id, offsets[id - 1][0], offsets[id - 1][1]);
-    DepthMap map;
-    map.depth.create(g.height, g.width, CV_32F);
-    map.normal.create(g.height, g.width, CV_32FC3);
-    map.cost = cv::Mat::zeros(g.height, g.width, CV_32F);
-    const Eigen::Vector3d c = g.Centre();
-    for (int y = 0; y < g.height; ++y)
-      for (int x = 0; x < g.width; ++x) {
-        const Eigen::Vector3d ray = g.R.transpose() * g.K.inverse() * Eigen::Vector3d(x + 0.5, y + 0.5, 1);
-        const Eigen::Vector3d on_ground = c + ray * (-c.z() / ray.z());
-        const double z = aliased(on_ground) ? -5.0 : 0.0;
-        map.depth.at<float>(y, x) = static_cast<float>((g.R * (c + ray * ((z - c.z()) / ray.z())) + g.t).z());
-        const Eigen::Vector3d n = g.R * Eigen::Vector3d::UnitZ();
-        map.normal.at<cv::Vec3f>(y, x) = cv::Vec3f(n.x(), n.y(), n.z());
-      }
     std::vector<uint32_t> nbs;
     for (uint32_t j = 1; j <= 5; ++j)
       if (j != id) nbs.push_back(j);
-    FusionView v = MakeFusionView(g, map, cv::Mat::zeros(g.height, g.width, CV_8UC3), nbs);
+    FusionView v = MakeViewOf(
+        NadirView(id, offsets[id - 1][0], offsets[id - 1][1]),
+        [&aliased](const Eigen::Vector3d& c, const Eigen::Vector3d& ray) -> Eigen::Vector3d {
+          const double z = aliased(c + ray * (-c.z() / ray.z())) ? -5.0 : 0.0;
+          return c + ray * ((z - c.z()) / ray.z());
+        },
+        nbs);
     v.sparse = ground_points;
     views.emplace(id, std::move(v));
   }
