@@ -208,6 +208,7 @@ run_selfcal() {
 # Reliability: two uninterrupted runs of one flight compared byte for byte, then the crash-safety tests.
 run_reliability() {
   local d=$1
+  export SOURCE_DATE_EPOCH=1767225600 # the LAS header's creation day, as both runs must write the same bytes
   "$FMV3D" -q synth --scene building --path orbit --frames 90 --fps 10 --size 320x180 --klv --seed 5 -o "$d/S"
   timed "$FMV3D" -q reconstruct "$d/S/flight.ts" -o "$d/A" --fast --no-report
   timed "$FMV3D" -q reconstruct "$d/S/flight.ts" -o "$d/B" --fast --no-report

@@ -21,6 +21,7 @@
 #include <algorithm>
 #include <chrono>
 #include <csignal>
+#include <cstdlib>
 #include <fstream>
 #include <map>
 #include <nlohmann/json.hpp>
@@ -187,6 +188,9 @@ std::vector<StageTime> StagesRun(const std::string& log) {
 class CrashSafety : public ::testing::Test {
  protected:
   static void SetUpTestSuite() {
+    // The LAS header's creation day follows SOURCE_DATE_EPOCH, as every run here does: runs on either side of
+    // midnight (GMT) would otherwise differ in it.
+    setenv("SOURCE_DATE_EPOCH", "1767225600", 1);
     dir_ = new TempDir("fmv3d-crash safety ü");
     const fs::path synth = *dir_ / "synth";
     const auto r = RunCli(

@@ -12,6 +12,8 @@
 
 #include <Eigen/Geometry>
 #include <cmath>
+#include <cstdlib>
+#include <ctime>
 #include <fstream>
 #include <random>
 
@@ -846,6 +848,18 @@ TEST(Dsm, MeshRasterisedToHighestSurfaceInUtm) {
   EXPECT_NE(las.wkt.find("UTM zone 18N"), std::string::npos);
   const Eigen::Vector3d first = frame.EnuToUtm({-45, 10, 0});
   EXPECT_LT((las.points[0] - first).norm(), 0.002);
+  // The creation day: the clock's, or SOURCE_DATE_EPOCH's (2023-11-14 22:13:20 GMT: day 318).
+  std::tm today{};
+  const std::time_t now = std::time(nullptr);
+  gmtime_r(&now, &today);
+  EXPECT_GE(las.creation_year, 2025);
+  EXPECT_LE(las.creation_year, today.tm_year + 1900);
+  ASSERT_EQ(setenv("SOURCE_DATE_EPOCH", "1700000000", 1), 0);
+  WriteLas(dir / "dated.las", las.points, {}, las.wkt);
+  unsetenv("SOURCE_DATE_EPOCH");
+  const LasInfo dated = ReadLas(dir / "dated.las");
+  EXPECT_EQ(dated.creation_day, 318);
+  EXPECT_EQ(dated.creation_year, 2023);
   // Orthophoto: no textured mesh, so the coloured points; the grid is the DSM's.
   const auto oj = RunOrthoStage(dir.path());
   EXPECT_GT(oj["valid_cells"].get<int>(), 50);

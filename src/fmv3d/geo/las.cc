@@ -3,6 +3,7 @@
 #include <fmt/format.h>
 
 #include <cmath>
+#include <cstdlib>
 #include <cstring>
 #include <ctime>
 #include <fstream>
@@ -16,6 +17,17 @@ namespace fs = std::filesystem;
 namespace {
 
 constexpr uint16_t kHeaderSize = 375;
+
+// The header's creation day: the clock's, or SOURCE_DATE_EPOCH's (seconds since 1970, the reproducible-builds
+// convention) when it holds a valid one, so that two runs of one workspace can write the same bytes.
+std::time_t CreationTime() {
+  if (const char* e = std::getenv("SOURCE_DATE_EPOCH")) {
+    char* end = nullptr;
+    const long long t = std::strtoll(e, &end, 10);
+    if (end != e && *end == '\0' && t >= 0 && t < 253402300800LL) return static_cast<std::time_t>(t);  // < year 10000
+  }
+  return std::time(nullptr);
+}
 constexpr uint16_t kVlrHeaderSize = 54;
 constexpr uint8_t kFormat = 7;
 constexpr uint16_t kRecordLength = 36;
@@ -75,7 +87,7 @@ void WriteLas(const fs::path& path, const std::vector<Eigen::Vector3d>& pts, con
   h.Put<uint8_t>(4);
   h.PutString("fmv3d", 32);
   h.PutString("fmv3d " FMV3D_VERSION, 32);
-  const std::time_t now = std::time(nullptr);
+  const std::time_t now = CreationTime();
   std::tm tm{};
   gmtime_r(&now, &tm);
   h.Put<uint16_t>(static_cast<uint16_t>(tm.tm_yday + 1));
@@ -150,6 +162,8 @@ LasInfo ReadLas(const fs::path& path, bool read_points) {
   const uint16_t header_size = Get<uint16_t>(b, 94);
   const uint32_t offset_points = Get<uint32_t>(b, 96);
   const uint32_t nvlr = Get<uint32_t>(b, 100);
+  info.creation_day = Get<uint16_t>(b, 90);
+  info.creation_year = Get<uint16_t>(b, 92);
   info.point_format = b[104] & 0x3F;
   info.point_record_length = Get<uint16_t>(b, 105);
   for (int i = 0; i < 3; ++i) {

@@ -14,13 +14,16 @@
 
 namespace fmv3d::geo {
 
-// points: (E, N, h) in the CRS described by `wkt`; colors: empty or one per point.
+// points: (E, N, h) in the CRS described by `wkt`; colors: empty or one per point. The header's creation day is
+// today's (GMT), or that of SOURCE_DATE_EPOCH when it is set (the reproducible-builds convention: then two runs
+// write the same bytes).
 void WriteLas(const std::filesystem::path& path, const std::vector<Eigen::Vector3d>& points,
               const std::vector<io::Rgb8>& colors, const std::string& wkt);
 
 struct LasInfo {
   int version_major = 0, version_minor = 0;
   int point_format = 0, point_record_length = 0;
+  int creation_day = 0, creation_year = 0;  // GMT day of the year (1 = January 1st) and year
   uint64_t num_points = 0;
   Eigen::Vector3d scale, offset, min, max;
   std::string wkt;                      // from the LASF_Projection 2112 record, empty if none
