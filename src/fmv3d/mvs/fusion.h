@@ -10,25 +10,9 @@
 // A point is kept when at least min_views views (the reference included) are consistent and conflicts do not
 // outnumber the supporting views.
 //
-// Before that, every map loses the foreground side of its depth discontinuities (edge_erosion_px > 0): a pixel
-// with a pixel within edge_erosion_px whose depth is more than edge_depth_jump (relative) farther. PatchMatch's
-// window straddles an occluding edge there and gives background pixels the foreground's plane ("fattening"):
-// a roof or a facade continued up to a window radius past its real edge, and multi-view consistent, because
-// neighbouring views fatten the same way. The same edge is kept from the views where it is not an occluding
-// contour (both sides of a convex corner visible), so little true surface is lost.
-//
-// Then every map loses its pieces that the view's own sparse points contradict (sparse_tolerance > 0). A piece is
-// a connected region of the map whose neighbouring depths differ by at most edge_depth_jump (relative); a sparse
-// point the view observed (its SfM track: the view saw that feature, at that pixel, at that depth) votes for the
-// piece under its projection, agreeing when the map's depth there is within its tolerance of its own: the larger
-// of sparse_tolerance and three times its own relative depth uncertainty, 1 / (f · sin α) per pixel of the view
-// (α the widest angle between its track's rays), so that a far point triangulated from a short baseline does not
-// overrule the map. A piece with at least sparse_min_votes disagreeing points and more disagreeing than agreeing
-// ones is dropped. This is PatchMatch's failure on periodic texture (crop rows, tiles, facade grids): a region
-// locked one period off in every source, multi-view consistent because its neighbouring views alias the same
-// way — on a nadir flight, a patch of field tens of metres under the ground whose conflicts with the true ground
-// then reject the true points instead. The verified tracks decide there; the pieces they do not reach (far field,
-// untextured roofs) are untouched, and a true surface's piece holds its own agreeing points.
+// Before that, every map goes through the filters of map_filters.h: the pieces its own sparse points contradict
+// (sparse_tolerance > 0: periodic texture matched one period off) and the foreground side of its occluding edges
+// (edge_erosion_px > 0: PatchMatch's fattening).
 //
 // A fused point is the mean of the consistent views' points; the pixels it used are marked so that the same
 // surface is not emitted again from another view. Deterministic (views in id order).
@@ -75,6 +59,7 @@
 
 #include "fmv3d/io/point_cloud.h"
 #include "fmv3d/mvs/depth_map.h"
+#include "fmv3d/mvs/map_filters.h"
 #include "fmv3d/mvs/view.h"
 
 namespace fmv3d::mvs {
@@ -95,12 +80,6 @@ struct FusionOptions {
   double sparse_tolerance = 0.05;        // 0 = off; relative depth within which a sparse point agrees (above)
   int sparse_min_votes = 3;              // disagreeing sparse points that can drop a map's piece
   void Check() const;
-};
-
-// A sparse point a view observed: its position and the widest angle between its track's rays (radians).
-struct SparseObservation {
-  Eigen::Vector3d xyz = Eigen::Vector3d::Zero();
-  double parallax_rad = 0;
 };
 
 // One view's map in compact form (~13 bytes per pixel with the texture map and the used mask; fusion holds a
@@ -133,23 +112,6 @@ struct FusionStats {
   double texture_floor = 0;         // p's matching floor (above); 0 when none
   std::map<int, size_t> views_histogram;  // number of consistent views → points
 };
-
-// The mask (CV_8U, 255 = drop) of a depth map's pixels on the foreground side of its discontinuities (see
-// above). Pixels without depth (0) are neither foreground nor background.
-cv::Mat OccludingEdgeMask(const cv::Mat& depth, int radius_px, double depth_jump);
-
-// A sparse point in one map: its pixel, its camera-frame depth and the relative depth within which it agrees.
-struct SparseDepth {
-  double u = 0, v = 0, depth = 0, tolerance = 0;
-};
-// The same, for a view: the points that project into it in front of it, with the tolerance described above.
-std::vector<SparseDepth> SparseDepthsIn(const ViewGeometry& geom, const std::vector<SparseObservation>& sparse,
-                                        double min_tolerance);
-
-// The mask (CV_8U, 255 = drop) of the pieces of a depth map that the sparse points contradict (see above).
-// `pieces` (optional) receives how many pieces were dropped.
-cv::Mat SparseContradictionMask(const cv::Mat& depth, const std::vector<SparseDepth>& sparse, double depth_jump,
-                                int min_votes, size_t* pieces = nullptr);
 
 // σ_n of a point X with unit normal n seen by the given views (see above), with each view's pixel precision
 // p_i (empty: 1 pixel each); infinity when the views do not constrain it (fewer than two distinct directions).
