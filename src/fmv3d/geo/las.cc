@@ -194,7 +194,8 @@ LasInfo ReadLas(const fs::path& path, bool read_points) {
     for (uint64_t i = 0; i < info.num_points; ++i) {
       const size_t p = offset_points + i * info.point_record_length;
       Eigen::Vector3d x;
-      for (int k = 0; k < 3; ++k) x[k] = Get<int32_t>(b, p + 4 * k) * info.scale[k] + info.offset[k];
+      for (int k = 0; k < 3; ++k)
+        x[k] = Get<int32_t>(b, p + size_t{4} * static_cast<size_t>(k)) * info.scale[k] + info.offset[k];
       info.points.push_back(x);
     }
   }
