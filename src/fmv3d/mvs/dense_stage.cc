@@ -98,7 +98,6 @@ class DenseRunner {
         cache_(rec, plan.geoms, frames_dir,
                static_cast<size_t>(std::max(options.cache_views, options.max_sources + 2))) {
     for (const auto& [pid, p] : rec.points) {
-      for (const auto& te : p.track) seeds_[te.image_id].push_back(p.xyz);
       // The widest angle between the track's rays: how well the point's depth is known (fusion.h).
       std::vector<Eigen::Vector3d> rays;
       for (const auto& te : p.track)
@@ -130,7 +129,8 @@ class DenseRunner {
       for (const auto& h : holds) in.sources.push_back(h.get());
       in.depth_min = plan_.selection.at(id).depth_min;
       in.depth_max = plan_.selection.at(id).depth_max;
-      if (auto it = seeds_.find(id); it != seeds_.end()) in.seeds = it->second;
+      if (auto it = observed_.find(id); it != observed_.end())
+        for (const auto& o : it->second) in.seeds.push_back(o.xyz);
       PatchMatchStats st;
       const DepthMap map = RunPatchMatch(in, options_.patch_match, &st);
       pm_seconds += st.seconds;
@@ -254,8 +254,8 @@ class DenseRunner {
   const fs::path maps_dir_;
   const DenseStageOptions& options_;
   ViewCache cache_;
-  std::map<uint32_t, std::vector<Eigen::Vector3d>> seeds_;       // sparse points seen by each view
-  std::map<uint32_t, std::vector<SparseObservation>> observed_;  // the same with their parallax (fusion's check)
+  // The sparse points each view observed, with their parallax: PatchMatch's seeds and fusion's sparse check.
+  std::map<uint32_t, std::vector<SparseObservation>> observed_;
 };
 
 struct DenseTimings {
