@@ -88,6 +88,36 @@ TEST(IncrementalMapper, FocalFarFromItsStartMapsAgainFromTheRefinedFocal) {
   EXPECT_LE(twice.eval.centre_rmse_fraction, single.eval.centre_rmse_fraction);
 }
 
+// A longer orbit whose focal leaves the scan's start once the model has grown: the first mapping stops growing
+// there (what it would add under the wrong focal is mapped again anyway), and the second mapping ends as well as
+// it does after a full first mapping.
+TEST(IncrementalMapper, FocalThatLeavesItsStartStopsTheFirstMappingEarly) {
+  SyntheticSceneOptions so;
+  so.num_cameras = 24;
+  so.num_points = 800;
+  so.focal = 1300;  // between the dolly-zoom scan's steps (768, 1086, 1536 px): growth refines it by ~20%
+  const auto scene = MakeSyntheticScene(so);
+  MapperOptions at_end;
+  at_end.focal_restart_min_images = 1000;  // the move is checked on the finished first model only
+  const auto full = RunAndEvaluate(scene, at_end);
+  const auto early = RunAndEvaluate(scene);
+  ASSERT_FALSE(full.result.models.empty());
+  ASSERT_FALSE(early.result.models.empty());
+  ASSERT_TRUE(full.result.focal_decision[0].restart.has_value());
+  EXPECT_FALSE(full.result.focal_decision[0].restart->early);
+  const FocalDecision& d = early.result.focal_decision[0];
+  ASSERT_TRUE(d.restart.has_value());
+  EXPECT_TRUE(d.restart->early);
+  EXPECT_TRUE(d.restart->kept);
+  EXPECT_GE(d.restart->first_images, static_cast<size_t>(MapperOptions{}.focal_restart_min_images));
+  EXPECT_LT(d.restart->first_images, scene.input.images.size());
+  EXPECT_GT(d.restart->change, MapperOptions{}.focal_restart_min_change);
+  EXPECT_EQ(early.result.models[0].images.size(), scene.input.images.size());
+  EXPECT_LE(early.eval.focal_relative_error, 0.005);
+  EXPECT_LE(early.eval.centre_rmse_fraction, 1.25 * full.eval.centre_rmse_fraction);
+  EXPECT_LE(early.eval.median_rotation_error_deg, 1.25 * full.eval.median_rotation_error_deg);
+}
+
 TEST(IncrementalMapper, NadirGridOverNearPlanarTerrain) {
   SyntheticSceneOptions so;
   so.layout = SyntheticSceneOptions::Layout::kNadirGrid;

@@ -35,8 +35,11 @@ struct FocalRestart {
   double first_start_px = 0;  // where the first mapping's focal started (the scans' choice)
   double first_final_px = 0;  // where its adjustments took it: the second mapping's start
   double change = 0;          // |final / start − 1|
-  size_t first_images = 0;    // the first mapping's largest model
+  size_t first_images = 0;    // the first mapping's largest model (where it stopped, when early)
   double first_reprojection_px = 0;
+  // The first mapping stopped growing as soon as its focal had moved (ModelBuilder::StopWhenFocalMoves): what it
+  // would have added under the wrong focal is mapped again anyway. The second mapping is then kept.
+  bool early = false;
   bool kept = false;   // the second mapping was kept (it registers at least as many images)
   double seconds = 0;  // the second mapping
 };

@@ -6,6 +6,7 @@
 #include <cmath>
 #include <map>
 #include <numeric>
+#include <optional>
 #include <set>
 #include <string>
 #include <vector>
@@ -36,6 +37,7 @@ void MapperOptions::Check() const {
     throw Error("mapper: guided_completion_false_accept_rate must be in (0, 1)");
   if (!(self_calibration_min_delta_chi2 >= 0)) throw Error("mapper: self_calibration_min_delta_chi2 must be ≥ 0");
   if (!(focal_restart_min_change >= 0)) throw Error("mapper: focal_restart_min_change must be ≥ 0");
+  if (focal_restart_min_images < 2) throw Error("mapper: focal_restart_min_images must be ≥ 2");
   if (!(weak_intrinsic_corner_px > 0)) throw Error("mapper: weak_intrinsic_corner_px must be > 0");
 }
 
@@ -54,10 +56,18 @@ TrackSummary SummariseTracks(const MapperInput& input, const std::map<uint32_t, 
   return t;
 }
 
+// The first model's growth stopped by ModelBuilder::StopWhenFocalMoves: where its focal went.
+struct EarlyStop {
+  mapper::ModelBuilder::FocalStop focal;
+  size_t images = 0;
+  double reprojection_px = 0;
+};
+
 // One mapping of every image: models grown until the pool is used up. focal_start: cameras started at that focal
-// (ModelBuilder::StartFocalAt).
+// (ModelBuilder::StartFocalAt). With early set, the first model's growth stops once its guessed focal moved by more
+// than options.focal_restart_min_change; the mapping then ends there with *early set (no models returned).
 MapperResult MapOnce(const MapperInput& input, const MapperOptions& options,
-                     const std::map<uint32_t, double>& focal_start) {
+                     const std::map<uint32_t, double>& focal_start, std::optional<EarlyStop>* early) {
   using mapper::Clock;
   using mapper::Seconds;
   const auto start = Clock::now();
@@ -100,8 +110,16 @@ MapperResult MapOnce(const MapperInput& input, const MapperOptions& options,
          static_cast<int>(result.models.size()) < options.max_models) {
     mapper::ModelBuilder builder(input, images, graph, options, pool, &timings);
     builder.StartFocalAt(focal_start);
+    if (early && result.models.empty())
+      builder.StopWhenFocalMoves(options.focal_restart_min_change, options.focal_restart_min_images);
     if (!builder.Initialize()) break;
     builder.Grow();
+    if (const auto& stop = builder.focal_stop()) {
+      *early = EarlyStop{*stop, builder.rec().images.size(), builder.rec().MeanReprojectionError()};
+      result.stats.seconds = timings;
+      result.stats.seconds.total = Seconds(start);
+      return result;
+    }
     relocalised += builder.num_relocalised();
     auto& rec = builder.rec();
     auto calibration = builder.self_calibration();
@@ -196,24 +214,40 @@ std::map<uint32_t, double> FocalsToRestartFrom(const MapperInput& input, const M
 MapperResult RunIncrementalMapper(const MapperInput& input, const MapperOptions& options) {
   options.Check();
   const auto start = mapper::Clock::now();
-  MapperResult first = MapOnce(input, options, {});
-  if (!(options.focal_restart_min_change > 0)) return first;
+  const bool restarts = options.focal_restart_min_change > 0;
+  std::optional<EarlyStop> early;
+  MapperResult first = MapOnce(input, options, {}, restarts ? &early : nullptr);
+  if (!restarts) return first;
   FocalRestart restart;
-  const std::map<uint32_t, double> focal =
-      FocalsToRestartFrom(input, first, options.focal_restart_min_change, &restart);
-  if (focal.empty()) return first;
-  const core::Reconstruction& m = first.models[0];
-  restart.first_images = m.images.size();
-  restart.first_reprojection_px = m.MeanReprojectionError();
+  std::map<uint32_t, double> focal;
+  if (early) {
+    focal = early->focal.focal_px;
+    restart.first_start_px = early->focal.start_px;
+    restart.first_final_px = early->focal.final_px;
+    restart.change = early->focal.change;
+    restart.first_images = early->images;
+    restart.first_reprojection_px = early->reprojection_px;
+    restart.early = true;
+  } else {
+    focal = FocalsToRestartFrom(input, first, options.focal_restart_min_change, &restart);
+    if (focal.empty()) return first;
+    const core::Reconstruction& m = first.models[0];
+    restart.first_images = m.images.size();
+    restart.first_reprojection_px = m.MeanReprojectionError();
+  }
   spdlog::info(
-      "mapper: the focal moved {:.1f}% from its start ({:.1f} → {:.1f} px) while the model grew: mapping again "
-      "from {:.1f} px",
-      100 * restart.change, restart.first_start_px, restart.first_final_px, restart.first_final_px);
+      "mapper: the focal moved {:.1f}% from its start ({:.1f} → {:.1f} px) while the model grew to {} images: "
+      "mapping again from {:.1f} px",
+      100 * restart.change, restart.first_start_px, restart.first_final_px, restart.first_images,
+      restart.first_final_px);
   const auto second_start = mapper::Clock::now();
-  MapperResult second = MapOnce(input, options, focal);
+  MapperResult second = MapOnce(input, options, focal, nullptr);
   restart.seconds = mapper::Seconds(second_start);
   const size_t second_images = second.models.empty() ? 0 : second.models[0].images.size();
-  restart.kept = second_images >= restart.first_images;
+  // An early stop left no complete first model to compare with.
+  restart.kept = early || second_images >= restart.first_images;
+  // A guard (the same images and matches map again): a single full mapping then.
+  if (early && second.models.empty()) return MapOnce(input, options, {}, nullptr);
   MapperResult& kept = restart.kept ? second : first;
   spdlog::info("mapper: second mapping {} images (first {}), focal {:.1f} px: {} kept", second_images,
                restart.first_images, second.models.empty() ? 0.0 : second.models[0].cameras.begin()->second.f,

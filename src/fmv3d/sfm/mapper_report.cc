@@ -173,6 +173,7 @@ nlohmann::json ToJson(const FocalDecision& d) {
                     {"change", r->change},
                     {"first_images", r->first_images},
                     {"first_reprojection_px", r->first_reprojection_px},
+                    {"early", r->early},
                     {"kept", r->kept ? "second" : "first"},
                     {"seconds", r->seconds}};
   return j;

@@ -6,6 +6,7 @@
 
 #include <Eigen/Geometry>
 #include <algorithm>
+#include <cmath>
 #include <map>
 #include <set>
 #include <utility>
@@ -304,18 +305,80 @@ size_t ModelBuilder::PruneGuidedAdditions() {
   return removed;
 }
 
+void ModelBuilder::RecordGrowthFocal() {
+  growth_focal_.clear();
+  const FocalDecisionKind k = focal_decision_.kind;
+  // A stated focal is no guess; a wide lens's start is the scan's distortion as well; a restart is the second try.
+  if (k != FocalDecisionKind::kMinimum && k != FocalDecisionKind::kUndetermined && k != FocalDecisionKind::kPlateau)
+    return;
+  for (const auto& [cid, cam] : rec_.cameras)
+    if (!input_.cameras.at(cid).focal_known) growth_focal_[cid] = cam.f;
+}
+
+double ModelBuilder::FocalMove(FocalStop* stop) const {
+  *stop = FocalStop{};
+  for (const auto& [cid, start] : growth_focal_) {
+    const double f = rec_.cameras.at(cid).f;
+    stop->focal_px[cid] = f;
+    const double moved = std::abs(f / start - 1);
+    if (moved > stop->change) {
+      stop->change = moved;
+      stop->start_px = start;
+      stop->final_px = f;
+    }
+  }
+  return stop->change;
+}
+
+bool ModelBuilder::StopForFocal() {
+  if (!(stop_focal_change_ > 0) || focal_fixed_ || growth_focal_.empty() ||
+      static_cast<int>(rec_.images.size()) < stop_focal_min_images_)
+    return false;
+  FocalStop stop;
+  const bool first_check = !focal_stop_checked_;
+  if (FocalMove(&stop) <= stop_focal_change_ && !first_check) return false;
+  focal_stop_checked_ = true;
+  // An intermediate adjustment stops after a few iterations, part of the way. The first check, and any that sees
+  // the move, reads the focal from a converged adjustment of a copy (the model grows on unchanged when it stays).
+  const auto start = Clock::now();
+  core::Reconstruction converged = rec_;
+  BundleAdjustmentConfig cfg = NewBaConfig();
+  cfg.gauge_image1 = gauge1_;
+  cfg.gauge_image2 = gauge2_;
+  BundleAdjustmentOptions o = BaOptions();
+  o.function_tolerance = opt_.final_ba_function_tolerance;
+  o.max_iterations = opt_.final_ba_max_iterations;
+  BundleAdjust(&converged, cfg, o);
+  t_->global_ba += Seconds(start);
+  std::swap(converged, rec_);
+  FocalMove(&stop);
+  std::swap(converged, rec_);
+  spdlog::debug("mapper: focal {:.1f}% from its growth start ({:.1f} → {:.1f} px) at {} images, converged ({:.1f} s)",
+                100 * stop.change, stop.start_px, stop.final_px, rec_.images.size(), Seconds(start));
+  if (stop.change <= stop_focal_change_) return false;
+  spdlog::info("mapper: the focal moved {:.1f}% ({:.1f} → {:.1f} px) with {} images registered: growth stops here",
+               100 * stop.change, stop.start_px, stop.final_px, rec_.images.size());
+  rec_ = std::move(converged);
+  focal_stop_ = std::move(stop);
+  return true;
+}
+
 void ModelBuilder::Grow() {
   GlobalBundleAdjust(false);
+  RecordGrowthFocal();
   while (RegisterNextImage() == GrowthStep::kRegistered) {
     if (focal_from_plateau_ && !dolly_done_ && static_cast<int>(rec_.images.size()) >= opt_.focal_dolly_min_images) {
       DollyZoomFocalScan();
+      RecordGrowthFocal();
       GlobalBundleAdjust(false);
       Retriangulate();
+      if (StopForFocal()) return;
       continue;
     }
     if (GlobalBundleAdjustDue()) {
       GlobalBundleAdjust(false);
       Retriangulate();
+      if (StopForFocal()) return;
     }
   }
   // Final polish: retriangulate with the refined cameras, then a tight global BA.

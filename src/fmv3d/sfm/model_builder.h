@@ -79,6 +79,19 @@ class ModelBuilder {
   // Starts these cameras at the given focal (camera id → px) instead of scanning for one, the focal free from the
   // start: a second mapping from the focal an earlier one refined to (incremental_mapper.cc).
   void StartFocalAt(std::map<uint32_t, double> focal_px) { focal_start_ = std::move(focal_px); }
+  // Stops growth at an intermediate global adjustment once a guessed focal (the scans' start) has moved by more
+  // than min_change from where growth started it, with at least min_images registered: the images are then mapped
+  // again from the refined focal (incremental_mapper.cc), so growing on under the wrong one would be wasted.
+  void StopWhenFocalMoves(double min_change, int min_images) {
+    stop_focal_change_ = min_change;
+    stop_focal_min_images_ = min_images;
+  }
+  // Set when growth stopped that way: the moved cameras' focal (camera id → px) and the largest move.
+  struct FocalStop {
+    std::map<uint32_t, double> focal_px;
+    double start_px = 0, final_px = 0, change = 0;  // the camera that moved most
+  };
+  const std::optional<FocalStop>& focal_stop() const { return focal_stop_; }
   bool Initialize();
   void Grow();
   core::Reconstruction& rec() { return rec_; }
@@ -137,6 +150,12 @@ class ModelBuilder {
   KeypointScales Scales() const;  // the registered images' keypoint scales, where known
   void LocalBundleAdjust(uint32_t image_id);
   BundleAdjustmentSummary GlobalBundleAdjust(bool final_pass);
+  // The guessed cameras' focal where growth starts refining it (after the scans), for StopWhenFocalMoves.
+  void RecordGrowthFocal();
+  // The largest move of a guessed focal since RecordGrowthFocal; *stop describes it.
+  double FocalMove(FocalStop* stop) const;
+  // After an intermediate global adjustment: whether growth stops for StopWhenFocalMoves (sets focal_stop_).
+  bool StopForFocal();
   // After an image was registered: whether the model has grown enough for an intermediate global adjustment
   // (or the dolly-zoom scan, which ends with one, is about to run).
   bool GlobalBundleAdjustDue() const {
@@ -170,8 +189,13 @@ class ModelBuilder {
   double init_focal_scale_ = 1;
   std::optional<std::pair<double, double>> init_distortion_;  // k1, k2 of a wide lens found by the focal scan
   FocalDecision focal_decision_;
-  std::map<uint32_t, double> focal_start_;                             // StartFocalAt
-  std::vector<GuidedCompletionPass> guided_completion_;                // one entry per pass
+  std::map<uint32_t, double> focal_start_;  // StartFocalAt
+  double stop_focal_change_ = 0;            // StopWhenFocalMoves (0: off)
+  int stop_focal_min_images_ = 0;
+  std::map<uint32_t, double> growth_focal_;  // RecordGrowthFocal
+  std::optional<FocalStop> focal_stop_;
+  bool focal_stop_checked_ = false;                      // the first check (a converged adjustment) was made
+  std::vector<GuidedCompletionPass> guided_completion_;  // one entry per pass
   std::vector<std::pair<uint64_t, core::TrackElement>> guided_added_;  // the last completion's additions
   // Focal held through growth: a trusted prior the user wants kept, or a telephoto scan's lower bound (then
   // tested once at the end). Narrow field: distortion is unobservable and stays fixed.
