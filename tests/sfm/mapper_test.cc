@@ -94,7 +94,7 @@ TEST(IncrementalMapper, FocalFarFromItsStartMapsAgainFromTheRefinedFocal) {
 TEST(IncrementalMapper, FocalThatLeavesItsStartStopsTheFirstMappingEarly) {
   SyntheticSceneOptions so;
   so.num_cameras = 24;
-  so.num_points = 800;
+  so.num_points = 400;
   so.focal = 1300;  // between the dolly-zoom scan's steps (768, 1086, 1536 px): growth refines it by ~20%
   const auto scene = MakeSyntheticScene(so);
   MapperOptions at_end;
