@@ -26,7 +26,9 @@ if [[ ! -f "$db/compile_commands.json" ]] || grep -q '/unity_[0-9]*_cxx\.cxx' "$
   cmake -S . -B "$db" -G Ninja -DCMAKE_BUILD_TYPE=Release -DFMV3D_UNITY=OFF -DFMV3D_PCH=OFF >/dev/null
 fi
 
-mapfile -t changed < <(git diff --name-only --diff-filter=AMR "$base" -- '*.cc' '*.h' | grep -v '^tests/fuzz/' | sort -u)
+# bench/results/ holds one-off analysis tools beside the figures they produced: not built, no compile database entry.
+mapfile -t changed < <(git diff --name-only --diff-filter=AMR "$base" -- '*.cc' '*.h' |
+  grep -v -e '^tests/fuzz/' -e '^bench/results/' | sort -u)
 sources=()
 for f in "${changed[@]}"; do
   if [[ "$f" == *.h ]]; then
