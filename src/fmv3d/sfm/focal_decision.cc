@@ -22,4 +22,9 @@ const char* FocalDecisionName(FocalDecisionKind kind) {
   return "none";
 }
 
+bool FocalMayRestart(FocalDecisionKind kind) {
+  return kind == FocalDecisionKind::kMinimum || kind == FocalDecisionKind::kUndetermined ||
+         kind == FocalDecisionKind::kPlateau;
+}
+
 }  // namespace fmv3d::sfm

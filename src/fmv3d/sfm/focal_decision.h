@@ -19,6 +19,9 @@ enum class FocalDecisionKind {
 };
 // "known", "distorted", "undetermined", "plateau", "minimum", "restart" (kNone: "none").
 const char* FocalDecisionName(FocalDecisionKind kind);
+// A focal the scans chose from a guess alone (a minimum, plateau or flat curve): what a second mapping may start
+// from elsewhere. Not a stated focal, a wide lens's start (the scan's distortion as well) nor a restart itself.
+bool FocalMayRestart(FocalDecisionKind kind);
 
 struct DollyZoomDecision {
   size_t images = 0;           // images of the model when it ran

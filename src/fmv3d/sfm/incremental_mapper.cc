@@ -186,9 +186,7 @@ std::map<uint32_t, double> FocalsToRestartFrom(const MapperInput& input, const M
                                                FocalRestart* restart) {
   if (r.models.empty() || r.focal_decision.empty()) return {};
   const FocalDecision& d = r.focal_decision[0];
-  if (d.kind != FocalDecisionKind::kMinimum && d.kind != FocalDecisionKind::kUndetermined &&
-      d.kind != FocalDecisionKind::kPlateau)
-    return {};
+  if (!FocalMayRestart(d.kind)) return {};
   if (!(d.guess_px > 0)) return {};
   // The scans scale every guessed camera of the model alike (ModelBuilder::TryInitialPair).
   const double scale = (d.dolly_zoom ? d.dolly_zoom->focal_px : d.two_view_focal_px) / d.guess_px;

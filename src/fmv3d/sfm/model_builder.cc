@@ -184,19 +184,25 @@ void ModelBuilder::LocalBundleAdjust(uint32_t image_id) {
   FilterPoints(&pts);
 }
 
+void ModelBuilder::GlobalBaSetup(bool final_pass, BundleAdjustmentConfig* cfg, BundleAdjustmentOptions* o) const {
+  *cfg = NewBaConfig();
+  cfg->gauge_image1 = gauge1_;
+  cfg->gauge_image2 = gauge2_;
+  *o = BaOptions();
+  // Intermediate adjustments only need to be near the optimum (the next image and the final pass refine further).
+  o->max_iterations = opt_.global_ba_max_iterations;
+  o->function_tolerance = 1e-5;
+  if (final_pass) {
+    o->function_tolerance = opt_.final_ba_function_tolerance;
+    o->max_iterations = opt_.final_ba_max_iterations;
+  }
+}
+
 BundleAdjustmentSummary ModelBuilder::GlobalBundleAdjust(bool final_pass) {
   const auto start = Clock::now();
-  BundleAdjustmentConfig cfg = NewBaConfig();
-  cfg.gauge_image1 = gauge1_;
-  cfg.gauge_image2 = gauge2_;
-  BundleAdjustmentOptions o = BaOptions();
-  // Intermediate adjustments only need to be near the optimum (the next image and the final pass refine further).
-  o.max_iterations = opt_.global_ba_max_iterations;
-  o.function_tolerance = 1e-5;
-  if (final_pass) {
-    o.function_tolerance = opt_.final_ba_function_tolerance;
-    o.max_iterations = opt_.final_ba_max_iterations;
-  }
+  BundleAdjustmentConfig cfg;
+  BundleAdjustmentOptions o;
+  GlobalBaSetup(final_pass, &cfg, &o);
   BundleAdjustmentSummary s = BundleAdjust(&rec_, cfg, o);
   ++num_global_ba_;
   t_->global_ba += Seconds(start);
@@ -307,18 +313,15 @@ size_t ModelBuilder::PruneGuidedAdditions() {
 
 void ModelBuilder::RecordGrowthFocal() {
   growth_focal_.clear();
-  const FocalDecisionKind k = focal_decision_.kind;
-  // A stated focal is no guess; a wide lens's start is the scan's distortion as well; a restart is the second try.
-  if (k != FocalDecisionKind::kMinimum && k != FocalDecisionKind::kUndetermined && k != FocalDecisionKind::kPlateau)
-    return;
+  if (!FocalMayRestart(focal_decision_.kind)) return;
   for (const auto& [cid, cam] : rec_.cameras)
     if (!input_.cameras.at(cid).focal_known) growth_focal_[cid] = cam.f;
 }
 
-double ModelBuilder::FocalMove(FocalStop* stop) const {
+double ModelBuilder::FocalMove(const core::Reconstruction& rec, FocalStop* stop) const {
   *stop = FocalStop{};
   for (const auto& [cid, start] : growth_focal_) {
-    const double f = rec_.cameras.at(cid).f;
+    const double f = rec.cameras.at(cid).f;
     stop->focal_px[cid] = f;
     const double moved = std::abs(f / start - 1);
     if (moved > stop->change) {
@@ -336,23 +339,18 @@ bool ModelBuilder::StopForFocal() {
     return false;
   FocalStop stop;
   const bool first_check = !focal_stop_checked_;
-  if (FocalMove(&stop) <= stop_focal_change_ && !first_check) return false;
+  if (FocalMove(rec_, &stop) <= stop_focal_change_ && !first_check) return false;
   focal_stop_checked_ = true;
   // An intermediate adjustment stops after a few iterations, part of the way. The first check, and any that sees
   // the move, reads the focal from a converged adjustment of a copy (the model grows on unchanged when it stays).
   const auto start = Clock::now();
   core::Reconstruction converged = rec_;
-  BundleAdjustmentConfig cfg = NewBaConfig();
-  cfg.gauge_image1 = gauge1_;
-  cfg.gauge_image2 = gauge2_;
-  BundleAdjustmentOptions o = BaOptions();
-  o.function_tolerance = opt_.final_ba_function_tolerance;
-  o.max_iterations = opt_.final_ba_max_iterations;
+  BundleAdjustmentConfig cfg;
+  BundleAdjustmentOptions o;
+  GlobalBaSetup(/*final_pass=*/true, &cfg, &o);
   BundleAdjust(&converged, cfg, o);
   t_->global_ba += Seconds(start);
-  std::swap(converged, rec_);
-  FocalMove(&stop);
-  std::swap(converged, rec_);
+  FocalMove(converged, &stop);
   spdlog::debug("mapper: focal {:.1f}% from its growth start ({:.1f} → {:.1f} px) at {} images, converged ({:.1f} s)",
                 100 * stop.change, stop.start_px, stop.final_px, rec_.images.size(), Seconds(start));
   if (stop.change <= stop_focal_change_) return false;

@@ -150,10 +150,12 @@ class ModelBuilder {
   KeypointScales Scales() const;  // the registered images' keypoint scales, where known
   void LocalBundleAdjust(uint32_t image_id);
   BundleAdjustmentSummary GlobalBundleAdjust(bool final_pass);
+  // The configuration and options of a global adjustment (intermediate, or converged for the final pass).
+  void GlobalBaSetup(bool final_pass, BundleAdjustmentConfig* cfg, BundleAdjustmentOptions* o) const;
   // The guessed cameras' focal where growth starts refining it (after the scans), for StopWhenFocalMoves.
   void RecordGrowthFocal();
-  // The largest move of a guessed focal since RecordGrowthFocal; *stop describes it.
-  double FocalMove(FocalStop* stop) const;
+  // The largest move of a guessed focal in `rec` since RecordGrowthFocal; *stop describes it.
+  double FocalMove(const core::Reconstruction& rec, FocalStop* stop) const;
   // After an intermediate global adjustment: whether growth stops for StopWhenFocalMoves (sets focal_stop_).
   bool StopForFocal();
   // After an image was registered: whether the model has grown enough for an intermediate global adjustment
