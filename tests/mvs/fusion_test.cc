@@ -119,6 +119,45 @@ TEST(OccludingEdgeMask, MarksOnlyTheForegroundSideOfADepthStep) {
   EXPECT_EQ(cv::countNonZero(OccludingEdgeMask(slope, 3, 0.05)), 0);
 }
 
+// Ground z = 0 seen from 10 m up, looking 10° down with the horizon in the frame: near the horizon the depth
+// grows by far more than 5% within a few pixels, yet every pixel lies on its neighbours' plane.
+TEST(OccludingEdgeMask, GroundAtAGrazingAngleFollowsItsPlaneAndIsNoEdge) {
+  ViewGeometry g;
+  g.width = g.height = 160;
+  g.K << 200, 0, 80, 0, 200, 80, 0, 0, 1;
+  const double a = 10 * M_PI / 180;
+  g.R.row(0) = Eigen::Vector3d(1, 0, 0);
+  g.R.row(1) = Eigen::Vector3d(0, -std::sin(a), -std::cos(a));
+  g.R.row(2) = Eigen::Vector3d(0, std::cos(a), -std::sin(a));
+  g.t = -g.R * Eigen::Vector3d(0, 0, 10);
+  DepthMap map;
+  map.depth = cv::Mat::zeros(g.height, g.width, CV_32F);
+  map.normal.create(g.height, g.width, CV_32FC3);
+  map.cost = cv::Mat::zeros(g.height, g.width, CV_32F);
+  const Eigen::Vector3d up = g.R * Eigen::Vector3d::UnitZ();
+  int ground = 0;
+  for (int y = 0; y < g.height; ++y)
+    for (int x = 0; x < g.width; ++x) {
+      const Eigen::Vector3d ray = g.R.transpose() * g.K.inverse() * Eigen::Vector3d(x + 0.5, y + 0.5, 1);
+      map.normal.at<cv::Vec3f>(y, x) = cv::Vec3f(up.x(), up.y(), up.z());
+      if (ray.z() > -0.01) continue;  // sky, and ground beyond ~1 km
+      map.depth.at<float>(y, x) = static_cast<float>(10 / -ray.z());
+      ++ground;
+    }
+  const FusionView v = MakeFusionView(g, map, cv::Mat::zeros(g.height, g.width, CV_8UC3), {});
+  ASSERT_GT(ground, 10000);
+  EXPECT_GT(cv::countNonZero(OccludingEdgeMask(v.depth, 4, 0.05)), 1000);  // depth alone: a wide band
+  EXPECT_EQ(cv::countNonZero(OccludingEdgeMask(v.depth, v.normal, v.geom, 4, 0.05)), 0);
+
+  // A fattened plate's foreground side is an edge by either rule: the ground is far below the plate's plane.
+  const auto plate = FattenedPlate(/*fatten=*/0.3);
+  const FusionView& nadir = plate.at(1);
+  const cv::Mat by_depth = OccludingEdgeMask(nadir.depth, 4, 0.05);
+  const cv::Mat by_plane = OccludingEdgeMask(nadir.depth, nadir.normal, nadir.geom, 4, 0.05);
+  EXPECT_GT(cv::countNonZero(by_depth), 100);
+  EXPECT_EQ(cv::countNonZero(by_depth != by_plane), 0);
+}
+
 TEST(Fusion, EdgeErosionRemovesAFattenedOverhangAndKeepsThePlate) {
   const auto views = FattenedPlate(/*fatten=*/0.3);  // 3 pixels on the plate
   FusionOptions off;

@@ -41,7 +41,8 @@ std::shared_ptr<FusionWindow::Slot> FusionWindow::Load(uint32_t id, FusionStats*
     v.depth.setTo(0, mask);
   }
   if (options_.edge_erosion_px > 0) {
-    const cv::Mat mask = OccludingEdgeMask(v.depth, options_.edge_erosion_px, options_.edge_depth_jump);
+    const cv::Mat mask =
+        OccludingEdgeMask(v.depth, v.normal, v.geom, options_.edge_erosion_px, options_.edge_depth_jump);
     if (st) st->edge_pixels += static_cast<size_t>(cv::countNonZero(mask));
     v.depth.setTo(0, mask);
   }

@@ -25,6 +25,48 @@ cv::Mat OccludingEdgeMask(const cv::Mat& depth, int radius_px, double depth_jump
   return mask;
 }
 
+cv::Mat OccludingEdgeMask(const cv::Mat& depth, const cv::Mat& normal, const ViewGeometry& geom, int radius_px,
+                          double depth_jump) {
+  CV_Assert(normal.type() == CV_8SC3 && normal.size() == depth.size());
+  // Candidates by the depth-only rule: the plane rule only ever clears pixels it marks.
+  cv::Mat mask = OccludingEdgeMask(depth, radius_px, depth_jump);
+  if (radius_px <= 0) return mask;
+  std::vector<cv::Point> disc;
+  for (int dy = -radius_px; dy <= radius_px; ++dy)
+    for (int dx = -radius_px; dx <= radius_px; ++dx)
+      if (dx * dx + dy * dy <= radius_px * radius_px + radius_px / 2 && (dx != 0 || dy != 0)) disc.emplace_back(dx, dy);
+  const Eigen::Matrix3d Kinv = geom.K.inverse();
+  const Eigen::Matrix3d R = geom.R;
+  const double k = 1 + depth_jump;
+  auto ray = [&](int x, int y) { return Eigen::Vector3d(Kinv * Eigen::Vector3d(x + 0.5, y + 0.5, 1)); };
+  for (int y = 0; y < depth.rows; ++y) {
+    uint8_t* m = mask.ptr<uint8_t>(y);
+    for (int x = 0; x < depth.cols; ++x) {
+      if (!m[x]) continue;
+      const double d = depth.at<float>(y, x);
+      const cv::Vec<schar, 3> c = normal.at<cv::Vec<schar, 3>>(y, x);
+      const Eigen::Vector3d n = R * Eigen::Vector3d(c[0], c[1], c[2]);
+      if (n.squaredNorm() < 1) continue;           // no normal: the depth-only verdict stands
+      const double offset = n.dot(d * ray(x, y));  // the plane: n · X = offset (camera frame)
+      bool edge = false;
+      for (const cv::Point& o : disc) {
+        const int qx = x + o.x, qy = y + o.y;
+        if (qx < 0 || qy < 0 || qx >= depth.cols || qy >= depth.rows) continue;
+        const double dq = depth.at<float>(qy, qx);
+        if (!(dq > k * d)) continue;
+        const double along = n.dot(ray(qx, qy));
+        if (along * offset <= 0) continue;  // the plane does not meet this ray in front of the camera
+        if (dq > k * (offset / along)) {    // behind p's surface continued: p occludes it
+          edge = true;
+          break;
+        }
+      }
+      if (!edge) m[x] = 0;
+    }
+  }
+  return mask;
+}
+
 std::vector<SparseDepth> SparseDepthsIn(const ViewGeometry& geom, const std::vector<SparseObservation>& sparse,
                                         double min_tolerance) {
   std::vector<SparseDepth> out;

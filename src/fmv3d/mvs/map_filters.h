@@ -2,7 +2,8 @@
 // repeat, so that multi-view consistency alone does not remove it.
 //
 // Occluding edges: a map loses the foreground side of its depth discontinuities (edge_erosion_px > 0): a pixel
-// with a pixel within edge_erosion_px whose depth is more than edge_depth_jump (relative) farther. PatchMatch's
+// with a pixel within edge_erosion_px whose depth is more than edge_depth_jump (relative) farther than the pixel
+// and than the pixel's own plane puts the surface there (fusion uses the plane form below). PatchMatch's
 // window straddles an occluding edge there and gives background pixels the foreground's plane ("fattening"):
 // a roof or a facade continued up to a window radius past its real edge, and multi-view consistent, because
 // neighbouring views fatten the same way. The same edge is kept from the views where it is not an occluding
@@ -41,6 +42,15 @@ struct SparseObservation {
 // The mask (CV_8U, 255 = drop) of a depth map's pixels on the foreground side of its discontinuities (see
 // above). Pixels without depth (0) are neither foreground nor background.
 cv::Mat OccludingEdgeMask(const cv::Mat& depth, int radius_px, double depth_jump);
+
+// The same, with each pixel's own plane (its normal, `normal` CV_8SC3 world-frame × 127 as fusion holds it; `geom`
+// the view's camera) as the reference instead of its depth: a neighbour is beyond an occluding edge when it is
+// more than depth_jump farther than the pixel's plane puts the surface on its ray (and farther than the pixel
+// itself). Ground seen at a grazing angle recedes by more than depth_jump within a few pixels yet follows its
+// plane, so it is no edge; a fattened roof's plane does not reach the background behind it, so that is one.
+// A plane that never meets the neighbour's ray in front of the camera is no evidence of an edge there.
+cv::Mat OccludingEdgeMask(const cv::Mat& depth, const cv::Mat& normal, const ViewGeometry& geom, int radius_px,
+                          double depth_jump);
 
 // A sparse point in one map: its pixel, its camera-frame depth and the relative depth within which it agrees.
 struct SparseDepth {
