@@ -92,6 +92,10 @@ void Add(CLI::App& app) {
     std::printf("%-34s %14.5f  (%.3f%%)\n", "accuracy p90", ev.p90_error, 100 * ev.p90_fraction());
     std::printf("%-34s %14.5f\n", "accuracy mean", ev.mean_error);
     std::printf("%-34s %14.5f  (%.3f%%)\n", "accuracy RMS", ev.rms_error, 100 * ev.rms_error / length);
+    if (!a->opt.region.isEmpty())
+      std::printf("%-34s %14s  median %.3f%%, p90 %.3f%%, RMS %.3f%% (%zu points)\n", "accuracy in the region", "",
+                  100 * ev.region_median_error / length, 100 * ev.region_p90_error / length,
+                  100 * ev.region_rms_error / length, ev.region_points);
     std::printf("%-34s %13.2f%%\n", "points within 1% of length", 100 * ev.within_1_percent);
     std::printf("%-34s %13.2f%%  (%zu of %zu samples seen by >=%d cameras)\n", "completeness (1% of length)",
                 100 * ev.completeness, ev.complete_samples, ev.seen_samples, a->opt.min_cameras);

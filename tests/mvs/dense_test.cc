@@ -278,6 +278,11 @@ TEST(DenseStage, FusedPointsLieOnTheTrueSurface) {
     EXPECT_TRUE(eo.region.contains(ev.missed_samples[k]));
     for (size_t i = 0; i < cloud.size(); i += 7) ASSERT_GT((cloud.positions[i] - ev.missed_samples[k]).norm(), radius);
   }
+  // Accuracy in the region: the points of the two "inside" parts of the breakdown.
+  EXPECT_EQ(ev.region_points, ev.breakdown[0].points + ev.breakdown[1].points);
+  EXPECT_GT(ev.region_points, 0u);
+  EXPECT_GT(ev.region_rms_error, 0);
+  EXPECT_GE(ev.region_p90_error, ev.region_median_error);
   EXPECT_GT(report.at("fusion").at("texture_floor").get<double>(), 0);
   std::printf("fused: %zu points, median %.5f, p90 %.5f of the height, completeness %.4f\n", cloud.size(),
               ev.median_fraction(), ev.p90_fraction(), ev.completeness);
@@ -334,6 +339,10 @@ TEST(DenseStage, ReferenceCoverMapsASubsetOfTheViews) {
   const io::TexturedMesh scene = io::ReadObj(flight.dir / "scene.obj", false);
   const auto ev =
       EvaluateDense(cloud, flight.result.truth, flight.result.truth, scene, flight.result.characteristic_length, {});
+  // Without a region every point is in it.
+  EXPECT_EQ(ev.region_median_error, ev.median_error);
+  EXPECT_EQ(ev.region_p90_error, ev.p90_error);
+  EXPECT_NEAR(ev.region_rms_error, ev.rms_error, 1e-12 * ev.rms_error);
   std::printf("cover of 2: %d of 10 views mapped, %zu points, median %.5f, p90 %.5f of the height\n", refs,
               cloud.size(), ev.median_fraction(), ev.p90_fraction());
   EXPECT_LT(ev.median_fraction(), 0.004) << ev.ToJson().dump();

@@ -166,6 +166,13 @@ nlohmann::json DenseEvaluation::ToJson() const {
         {"median_percent_of_length", 100 * median_fraction()},
         {"p90_percent_of_length", 100 * p90_fraction()},
         {"within_1_percent_of_length", within_1_percent}}},
+      {"accuracy_in_region",
+       {{"points", region_points},
+        {"median", region_median_error},
+        {"p90", region_p90_error},
+        {"rms", region_rms_error},
+        {"rms_percent_of_length", 100 * region_rms_error / characteristic_length},
+        {"median_percent_of_length", 100 * region_median_error / characteristic_length}}},
       {"sigma",
        {{"exceeded", sigma_exceeded < 0 ? nlohmann::json() : nlohmann::json(sigma_exceeded)},
         {"exceeded_outside_region",
@@ -235,6 +242,16 @@ DenseEvaluation EvaluateDense(const io::OrientedPointCloud& cloud, const core::R
     ev.breakdown[part].points = d.size() * stride;
     ev.breakdown[part].median_error = Quantile(d, 0.5);
     ev.breakdown[part].p90_error = Quantile(d, 0.9);
+  }
+  {
+    std::vector<double> d;
+    double s2 = 0;
+    for (size_t k = 0; k < dist.size(); ++k)
+      if (part_of[k] < 2) d.push_back(dist[k]), s2 += dist[k] * dist[k];
+    ev.region_points = d.size() * stride;
+    ev.region_median_error = Quantile(d, 0.5);
+    ev.region_p90_error = Quantile(d, 0.9);
+    ev.region_rms_error = d.empty() ? 0 : std::sqrt(s2 / static_cast<double>(d.size()));
   }
   double sum = 0, sum2 = 0;
   size_t within = 0;

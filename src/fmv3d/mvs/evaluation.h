@@ -50,6 +50,10 @@ struct DenseEvaluation {
   double characteristic_length = 0;
   double median_error = 0, p90_error = 0, mean_error = 0, rms_error = 0;  // truth units
   double within_1_percent = 0;                                            // share of points within 1% of the length
+  // The same for the points nearest the modelled region's surface (synth's backdrop ring left out: a coarse,
+  // blurred horizon filler); the figures above when there is no region.
+  double region_median_error = 0, region_p90_error = 0, region_rms_error = 0;
+  size_t region_points = 0;
   size_t surface_samples = 0, seen_samples = 0, complete_samples = 0;
   double completeness = 0;             // in the region
   double completeness_everywhere = 0;  // all the seen surface (the region's when it is everywhere)
