@@ -44,7 +44,7 @@ cv::Mat OccludingEdgeMask(const cv::Mat& depth, const cv::Mat& normal, const Vie
     for (int x = 0; x < depth.cols; ++x) {
       if (!m[x]) continue;
       const double d = depth.at<float>(y, x);
-      const cv::Vec<schar, 3> c = normal.at<cv::Vec<schar, 3>>(y, x);
+      const cv::Vec<schar, 3>& c = normal.at<cv::Vec<schar, 3>>(y, x);
       const Eigen::Vector3d n = R * Eigen::Vector3d(c[0], c[1], c[2]);
       if (n.squaredNorm() < 1) continue;           // no normal: the depth-only verdict stands
       const double offset = n.dot(d * ray(x, y));  // the plane: n · X = offset (camera frame)
