@@ -203,6 +203,49 @@ TEST(Synth, FlightsLookWhereTheyShould) {
   EXPECT_NE(j1[3].q.coeffs(), j3[3].q.coeffs());
 }
 
+// Height of the far-ground ring at (x, y): the triangle of material "far_ground" whose plan contains it (NaN: none).
+double FarGroundHeight(const io::TexturedMesh& mesh, double x, double y) {
+  for (const auto& f : mesh.faces) {
+    if (f.material < 0 || mesh.materials[f.material].name != "far_ground") continue;
+    const Eigen::Vector3d &a = mesh.vertices[f.v[0]], &b = mesh.vertices[f.v[1]], &c = mesh.vertices[f.v[2]];
+    const double det = (b.x() - a.x()) * (c.y() - a.y()) - (c.x() - a.x()) * (b.y() - a.y());
+    if (std::abs(det) < 1e-12) continue;
+    const double u = ((x - a.x()) * (c.y() - a.y()) - (c.x() - a.x()) * (y - a.y())) / det;
+    const double v = ((b.x() - a.x()) * (y - a.y()) - (x - a.x()) * (b.y() - a.y())) / det;
+    if (u >= -1e-9 && v >= -1e-9 && u + v <= 1 + 1e-9) return a.z() + u * (b.z() - a.z()) + v * (c.z() - a.z());
+  }
+  return std::nan("");
+}
+
+// The far-ground ring meets the terrain tile without a step: just outside every side of the tile it stands where
+// the tile's own edge does (a coarse ring cell alone stood metres off it: a cliff in every oblique view).
+TEST(Synth, FarGroundMeetsTheTileWithoutAStep) {
+  for (SceneKind kind : {SceneKind::kTerrain, SceneKind::kSand}) {
+    SceneOptions o;
+    o.detail = 0.1;  // small textures: the geometry is what is checked
+    const Scene scene = MakeScene(kind, o);
+    const Eigen::AlignedBox2d& t = scene.ground_extent;
+    double worst = 0;
+    int measured = 0;
+    for (int k = 1; k < 100; ++k) {
+      const double s = k / 100.0;
+      const Eigen::Vector2d outside[4] = {{t.min().x() - 0.01, t.min().y() + s * t.sizes().y()},
+                                          {t.max().x() + 0.01, t.min().y() + s * t.sizes().y()},
+                                          {t.min().x() + s * t.sizes().x(), t.min().y() - 0.01},
+                                          {t.min().x() + s * t.sizes().x(), t.max().y() + 0.01}};
+      for (const auto& p : outside) {
+        const double z = FarGroundHeight(scene.mesh, p.x(), p.y());
+        ASSERT_TRUE(std::isfinite(z)) << SceneName(kind) << ": no far ground at " << p.transpose();
+        worst = std::max(worst, std::abs(z - scene.ground_height(p.x(), p.y())));
+        ++measured;
+      }
+    }
+    std::printf("%s: far ground 1 cm outside the tile within %.3f m of the terrain (%d points)\n", SceneName(kind),
+                worst, measured);
+    EXPECT_LT(worst, 0.05) << SceneName(kind);  // the coarse ring alone: >= 0.3 m, up to metres
+  }
+}
+
 TEST(Synth, BadOptionsAreErrors) {
   TempDir dir;
   SynthOptions o = Small(dir.path());

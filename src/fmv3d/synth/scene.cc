@@ -85,10 +85,13 @@ io::TexturedMesh MakeTerrain(const Eigen::AlignedBox2d& extent, double step,
   return std::move(b.m);
 }
 
-// A coarse ring of ground from the terrain tile out to 3.5 tile widths, with a hole where the tile is,
-// 0.3 m lower so the tile always wins where they meet.
-io::TexturedMesh MakeFarGround(const Eigen::AlignedBox2d& tile, const std::function<double(double, double)>& h,
-                               double detail) {
+// A coarse ring of ground from the terrain tile out to 3.5 tile widths, with a hole where the tile is. The ring
+// is 0.3 m below the height function except on the tile's border, where the cells next to the tile meet it
+// through the tile's own border vertices (`tile_step` apart, as MakeTerrain places them): a coarse cell's edge
+// would otherwise stand up to metres off the tile's edge — a cliff no real terrain has, which every oblique
+// view of the far field saw and no reconstruction could follow.
+io::TexturedMesh MakeFarGround(const Eigen::AlignedBox2d& tile, double tile_step,
+                               const std::function<double(double, double)>& h, double detail) {
   const double e = tile.sizes().x(), step = e / 4;
   const Eigen::Vector2d c = tile.center();
   const int n = 28;  // cells per side: 7 tile widths
@@ -100,22 +103,71 @@ io::TexturedMesh MakeFarGround(const Eigen::AlignedBox2d& tile, const std::funct
   cv::addWeighted(texture, 0.75, cv::Mat(texture.size(), texture.type(), cv::Scalar(150, 160, 150)), 0.25, 0, texture);
   Builder b;
   const int mat = b.Material("far_ground", {0.4f, 0.6f, 0.5f}, texture);
+  const double tol = 1e-6 * e;
+  auto on_border = [&](double x, double y) {
+    const bool in_x = x > tile.min().x() - tol && x < tile.max().x() + tol;
+    const bool in_y = y > tile.min().y() - tol && y < tile.max().y() + tol;
+    return (in_y && (std::abs(x - tile.min().x()) < tol || std::abs(x - tile.max().x()) < tol)) ||
+           (in_x && (std::abs(y - tile.min().y()) < tol || std::abs(y - tile.max().y()) < tol));
+  };
+  // One vertex with its texture coordinate (same index) and normal.
+  auto vertex = [&](double x, double y, double z, double g) {
+    const int v = b.V({x, y, z});
+    b.T((x - far.min().x()) / far.sizes().x(), (y - far.min().y()) / far.sizes().y());
+    const Eigen::Vector3d nn(-(h(x + g, y) - h(x - g, y)) / (2 * g), -(h(x, y + g) - h(x, y - g)) / (2 * g), 1);
+    b.m.normals.push_back(nn.normalized().cast<float>());
+    return v;
+  };
   for (int j = 0; j <= n; ++j)
     for (int i = 0; i <= n; ++i) {
       const double x = far.min().x() + i * step, y = far.min().y() + j * step;
-      b.V({x, y, h(x, y) - 0.3});
-      b.T(static_cast<double>(i) / n, static_cast<double>(j) / n);
-      const double g = 0.5 * step;
-      const Eigen::Vector3d nn(-(h(x + g, y) - h(x - g, y)) / (2 * g), -(h(x, y + g) - h(x, y - g)) / (2 * g), 1);
-      b.m.normals.push_back(nn.normalized().cast<float>());
+      vertex(x, y, h(x, y) - (on_border(x, y) ? 0.0 : 0.3), 0.5 * step);
     }
+  const int nx_tile = static_cast<int>(std::lround(tile.sizes().x() / tile_step)) + 1;
+  const int ny_tile = static_cast<int>(std::lround(tile.sizes().y() / tile_step)) + 1;
+  const double sx_tile = tile.sizes().x() / (nx_tile - 1), sy_tile = tile.sizes().y() / (ny_tile - 1);
   for (int j = 0; j < n; ++j)
     for (int i = 0; i < n; ++i) {
       const Eigen::Vector2d mid = far.min() + Eigen::Vector2d((i + 0.5) * step, (j + 0.5) * step);
       if (tile.contains(mid)) continue;
-      const int a = j * (n + 1) + i, bb = a + 1, d = a + n + 1, ee = d + 1;
-      b.Tri(a, bb, ee, a, bb, ee, mat, Eigen::Vector3d::UnitZ());
-      b.Tri(a, ee, d, a, ee, d, mat, Eigen::Vector3d::UnitZ());
+      const int a = j * (n + 1) + i, bb = a + 1, d = a + n + 1, ee = d + 1;  // (x0,y0) (x1,y0) (x0,y1) (x1,y1)
+      // The cell's edge on the tile's border, if any: its two corners (p from q0's side), and the far edge.
+      int p0 = -1, p1 = -1, q0 = -1, q1 = -1;
+      const double x0 = far.min().x() + i * step, y0 = far.min().y() + j * step;
+      if (on_border(x0 + step, y0 + 0.5 * step) && mid.x() < tile.min().x()) p0 = bb, p1 = ee, q0 = a, q1 = d;
+      if (on_border(x0, y0 + 0.5 * step) && mid.x() > tile.max().x()) p0 = a, p1 = d, q0 = bb, q1 = ee;
+      if (on_border(x0 + 0.5 * step, y0 + step) && mid.y() < tile.min().y()) p0 = d, p1 = ee, q0 = a, q1 = bb;
+      if (on_border(x0 + 0.5 * step, y0) && mid.y() > tile.max().y()) p0 = a, p1 = bb, q0 = d, q1 = ee;
+      if (p0 < 0) {
+        b.Tri(a, bb, ee, a, bb, ee, mat, Eigen::Vector3d::UnitZ());
+        b.Tri(a, ee, d, a, ee, d, mat, Eigen::Vector3d::UnitZ());
+        continue;
+      }
+      // The tile's border vertices along the shared edge, then a fan to the far edge's two corners.
+      const Eigen::Vector3d from = b.m.vertices[p0], to = b.m.vertices[p1];
+      const bool along_x = std::abs(to.x() - from.x()) > std::abs(to.y() - from.y());
+      const double lo = along_x ? std::min(from.x(), to.x()) : std::min(from.y(), to.y());
+      const double hi = along_x ? std::max(from.x(), to.x()) : std::max(from.y(), to.y());
+      const bool forward = along_x ? to.x() > from.x() : to.y() > from.y();
+      std::vector<int> p{p0};
+      std::vector<double> at;  // the tile's vertex coordinates strictly inside the edge
+      const int count = along_x ? nx_tile : ny_tile;
+      for (int m = 0; m < count; ++m) {
+        const double u = along_x ? tile.min().x() + m * sx_tile : tile.min().y() + m * sy_tile;
+        if (u > lo + tol && u < hi - tol) at.push_back(u);
+      }
+      if (!forward) std::reverse(at.begin(), at.end());
+      for (double u : at) {
+        const double x = along_x ? u : from.x(), y = along_x ? from.y() : u;
+        p.push_back(vertex(x, y, h(x, y), 0.5 * step));  // the ring's smooth shading, no fan streaks
+      }
+      p.push_back(p1);
+      const size_t half = (p.size() - 1) / 2;
+      for (size_t m = 0; m + 1 < p.size(); ++m) {
+        const int q = m < half ? q0 : q1;
+        b.Tri(p[m], p[m + 1], q, p[m], p[m + 1], q, mat, Eigen::Vector3d::UnitZ());
+      }
+      b.Tri(p[half], q1, q0, p[half], q1, q0, mat, Eigen::Vector3d::UnitZ());
     }
   for (auto& f : b.m.faces)
     for (int k = 0; k < 3; ++k) f.vn[k] = f.v[k];
@@ -369,7 +421,7 @@ Scene MakeScene(SceneKind kind, const SceneOptions& o) {
   scene.bounds = scene.mesh.Bounds();
   if (scene.buildings.empty()) tallest = scene.bounds.max().z() - scene.bounds.min().z();
   scene.characteristic_length = tallest;
-  scene.mesh.Append(MakeFarGround(scene.ground_extent, scene.ground_height, o.detail));
+  scene.mesh.Append(MakeFarGround(scene.ground_extent, step, scene.ground_height, o.detail));
   return scene;
 }
 

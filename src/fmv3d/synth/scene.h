@@ -56,7 +56,8 @@ struct Scene {
   double interest_radius = 30;                          // horizontal radius of the interesting part
   double characteristic_length = 0;
   // The modelled area (terrain tile and buildings). The mesh also holds a coarse far-ground ring around
-  // it (material "far_ground", 0.3 m lower) so oblique views see land, not the edge of the world.
+  // it (material "far_ground", 0.3 m lower, meeting the tile's border without a step) so oblique views see land,
+  // not the edge of the world.
   Eigen::AlignedBox3d bounds;
 
   Eigen::AlignedBox3d Bounds() const { return bounds; }
