@@ -221,6 +221,18 @@ TEST(FocalScanDecision, SteepKneeStaysAPlateauAtItsSupportedLevel) {
   EXPECT_DOUBLE_EQ(r.focal, r.focals[6]);  // not the lucky 0.80 at index 10, nor 1.31 above the level
 }
 
+// One lucky sample far along the curve is no minimum (an oblique sideways pass over terrain, 960x540, truth 831 px,
+// recorded): the valley the neighbouring candidates share decides, near the true focal.
+TEST(FocalScanDecision, LuckyDipFarFromTheValleyIsNotTheMinimum) {
+  FocalScanResult r = CurveOf({0.888, 0.785, 0.812, 1.068, 1.084, 0.943, 0.899, 0.919, 1.222, 1.060, 1.062, 0.733,
+                               0.994, 0.992, 0.991, 0.990, 1.065, 0.990, 0.990, 0.990, 0.989, 0.989, 0.989, 0.989},
+                              1152);
+  DecidePinhole(FocalScanOptions(), &r);
+  EXPECT_FALSE(r.plateau);
+  EXPECT_FALSE(r.undetermined);
+  EXPECT_DOUBLE_EQ(r.focal, r.focals[1]);  // 726 px, not the 0.733 at 7,320 px
+}
+
 // A clear minimum (an ordinary lens) is a start for bundle adjustment, neither a bound nor undetermined.
 TEST(FocalScanDecision, ClearMinimumIsAStart) {
   FocalScanResult r = CurveOf({3.0, 2.1, 1.2, 0.6, 0.45, 0.7, 1.3, 1.9, 2.4, 2.8}, 768);

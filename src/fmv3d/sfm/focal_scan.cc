@@ -182,8 +182,14 @@ void DecidePinhole(const FocalScanOptions& o, FocalScanResult* out) {
     r.plateau = true;
     return;
   }
-  // A minimum: a start for bundle adjustment, which refines it.
-  const double best = *std::min_element(r.scores.begin(), r.scores.end());
+  // A minimum: a start for bundle adjustment, which refines it. Its valley is where the smoothed curve is lowest:
+  // one candidate's lucky sample far from it is no minimum (an oblique sideways pass, recorded: 0.733 px² at 6.35x
+  // the guess between neighbours of 1.06 and 0.99, against a valley of 0.785–0.812 around the true focal; started
+  // there, bundle adjustment ran off to 35x the true focal). The best raw score of the valley sets the limit.
+  const size_t valley = static_cast<size_t>(lo - smooth.begin());
+  const size_t v0 = valley == 0 ? 0 : valley - 1, v1 = std::min(valley + 1, r.scores.size() - 1);
+  const double best = *std::min_element(r.scores.begin() + static_cast<std::ptrdiff_t>(v0),
+                                        r.scores.begin() + static_cast<std::ptrdiff_t>(v1) + 1);
   const double limit = (1 + o.tolerance) * best + 1e-12;
   size_t chosen = 0;
   while (chosen + 1 < r.scores.size() && r.scores[chosen] > limit) ++chosen;
