@@ -240,7 +240,10 @@ try {
     const panel = await page.textContent('#frame-panel');
     const cam = cams[k - 1];
     assert(panel.includes(cam.name), `the panel shows "${panel.slice(0, 80)}", not camera ${cam.name}`);
-    assert(panel.includes(cam.reprojection_rms_px.toFixed(2)), `the panel does not show ${cam.name}'s error ${cam.reprojection_rms_px}`);
+    // The panel rounds to three significant digits below 1 px, to two decimals above: read its number back.
+    const shown = /reprojection RMS ([0-9.,]+) px/.exec(panel);
+    assert(shown && Math.abs(Number(shown[1].replace(/,/g, '')) - cam.reprojection_rms_px) <= 0.005,
+      `the panel shows "${shown?.[0]}", not ${cam.name}'s error ${cam.reprojection_rms_px} px`);
     await shot(page, '3d-camera-frame');
   });
 
