@@ -42,10 +42,26 @@ TEST(PoissonBudget, OccupiedCellsOfAPlane) {
 }
 
 TEST(PoissonBudget, EstimateIsLinear) {
-  const PoissonMemoryModel m{100, 1000};
+  const PoissonMemoryModel m{100, 1000, 50, 20};
   EXPECT_DOUBLE_EQ(EstimatePoissonBytes(0, 0, m), 0);
   EXPECT_DOUBLE_EQ(EstimatePoissonBytes(10, 3, m), 4000);
   EXPECT_DOUBLE_EQ(EstimatePoissonBytes(20, 6, m), 2 * EstimatePoissonBytes(10, 3, m));
+  // Averaged: the cloud's own bytes, then the larger of the spacing's tree and the solver's points and cells.
+  EXPECT_DOUBLE_EQ(EstimateAveragedPoissonBytes(1000, 5000, 100, 3, m), 5000 + 20000);
+  EXPECT_DOUBLE_EQ(EstimateAveragedPoissonBytes(1000, 5000, 100, 30, m), 5000 + 5000 + 30000);
+}
+
+TEST(PoissonBudget, ResidentBytesCountTheVisibilityLists) {
+  io::OrientedPointCloud c;
+  c.positions.assign(10, Eigen::Vector3d::Zero());
+  c.normals.assign(10, Eigen::Vector3f::UnitZ());
+  c.positions.shrink_to_fit();
+  c.normals.shrink_to_fit();
+  const double bare = ResidentBytes(c);
+  EXPECT_DOUBLE_EQ(bare, 10 * (24 + 12));
+  c.visibility.assign(10, std::vector<uint32_t>(20, 1));  // 80 B each: a 96 B heap chunk
+  c.visibility.shrink_to_fit();
+  EXPECT_DOUBLE_EQ(ResidentBytes(c), bare + 10 * (sizeof(std::vector<uint32_t>) + 96));
 }
 
 // The default constants are a bound: at or above every mesh-stage peak measured (above the process's base) on the
@@ -65,7 +81,7 @@ TEST(PoissonBudget, DefaultModelCoversTheMeasuredRuns) {
 }
 
 TEST(PoissonBudget, LowersTheDepthUntilTheEstimateFits) {
-  const PoissonMemoryModel m{100, 1000};
+  const PoissonMemoryModel m{100, 1000, 50, 20};
   std::vector<int> asked;
   auto cells = [&](int d) {  // a surface: 4x the cells per level
     asked.push_back(d);
@@ -73,24 +89,82 @@ TEST(PoissonBudget, LowersTheDepthUntilTheEstimateFits) {
   };
   const size_t points = 10000;  // 0.95 MB
   // 100 MB: 4^8 = 65,536 cells (63.5 MB) fit, 4^9 (251 MB) do not.
-  PoissonDepthChoice c = ChoosePoissonDepth(10, 6, points, 100, cells, m);
+  PoissonDepthChoice c = ChoosePoissonDepth(10, 6, points, 1e5, 100, cells, m);
   EXPECT_EQ(c.depth, 8);
   EXPECT_TRUE(c.lowered);
   EXPECT_FALSE(c.over_budget);
   EXPECT_EQ(c.occupied_cells, 65536u);
   EXPECT_NEAR(c.estimated_mb, (1e6 + 65536e3) / 1048576.0, 1e-9);
-  EXPECT_EQ(asked, (std::vector<int>{10, 9, 8}));
+  // Every depth's half cells (depth + 1) hold more cells than there are points: averaging would not thin them.
+  EXPECT_EQ(asked, (std::vector<int>{10, 11, 9, 8}));
+  EXPECT_EQ(c.average_depth, 0);
   // A budget the wanted depth fits, and no budget: the wanted depth, not lowered.
   for (double budget : {2048.0, 0.0}) {
-    c = ChoosePoissonDepth(10, 6, points, budget, cells, m);
+    c = ChoosePoissonDepth(10, 6, points, 1e5, budget, cells, m);
     EXPECT_EQ(c.depth, 10) << budget;
     EXPECT_FALSE(c.lowered) << budget;
   }
   // Below even the point term: min_depth, flagged.
-  c = ChoosePoissonDepth(10, 6, points, 0.5, cells, m);
+  c = ChoosePoissonDepth(10, 6, points, 1e5, 0.5, cells, m);
   EXPECT_EQ(c.depth, 6);
   EXPECT_TRUE(c.lowered);
   EXPECT_TRUE(c.over_budget);
+}
+
+// A cloud far denser than the cells: averaging in half cells fits the wanted depth, which the points alone do not.
+TEST(PoissonBudget, AveragesThePointsBeforeLoweringTheDepth) {
+  const PoissonMemoryModel m{300, 1000, 200, 60};
+  auto cells = [](int d) { return static_cast<size_t>(std::pow(4.0, d)); };
+  const size_t points = 1000000;  // 286 MB at 300 B: over 200 MB at any depth
+  // Depth 8: 65,536 cells (62.5 MB), half cells 262,144 points (50 MB); the cloud 40 MB; the spacing tree 57 MB.
+  PoissonDepthChoice c = ChoosePoissonDepth(8, 5, points, 40 * 1048576.0, 200, cells, m);
+  EXPECT_EQ(c.depth, 8);
+  EXPECT_FALSE(c.lowered);
+  EXPECT_EQ(c.average_depth, 9);
+  EXPECT_EQ(c.averaged_points, 262144u);
+  EXPECT_NEAR(c.estimated_mb, 40 + (262144 * 200.0 + 65536 * 1000.0) / 1048576.0, 1e-9);
+  // A budget neither fits at depth 8: depth 7, averaged in depth 8's cells (65,536 points).
+  c = ChoosePoissonDepth(8, 5, points, 40 * 1048576.0, 110, cells, m);
+  EXPECT_EQ(c.depth, 7);
+  EXPECT_TRUE(c.lowered);
+  EXPECT_EQ(c.average_depth, 8);
+  EXPECT_LE(c.estimated_mb, 110);
+  // Below the cloud and its spacing tree: nothing fits; min_depth, averaged (the smaller estimate), flagged.
+  c = ChoosePoissonDepth(8, 5, points, 40 * 1048576.0, 50, cells, m);
+  EXPECT_EQ(c.depth, 5);
+  EXPECT_TRUE(c.over_budget);
+  EXPECT_EQ(c.average_depth, 6);
+  EXPECT_NEAR(c.estimated_mb, 40 + 60e6 / 1048576.0, 1e-9);
+}
+
+TEST(PoissonBudget, AverageInCellsMergesEachCellsPoints) {
+  io::OrientedPointCloud c;
+  // Box 0..10 (cube 11, centred: origin -0.5); depth 1 → cells of 5.5 split at x = 5.
+  auto add = [&](Eigen::Vector3d p, Eigen::Vector3f n, io::Rgb8 rgb) {
+    c.positions.push_back(p);
+    c.normals.push_back(n);
+    c.colors.push_back(rgb);
+  };
+  add({0, 0, 0}, {0, 0, 1}, {0, 0, 0});
+  add({2, 0, 0}, {0, 1, 0}, {255, 0, 0});
+  add({8, 0, 0}, {0, 0, 1}, {0, 255, 0});  // a sheet seen from both sides: its normals cancel
+  add({9, 0, 0}, {0, 0, -1}, {0, 255, 0});
+  add({10, 10, 10}, {1, 0, 0}, {0, 0, 255});
+  add({5, 5, 5}, {1, 0, 0}, {0, 0, 255});  // left out by the index list
+  const Eigen::AlignedBox3d box(Eigen::Vector3d(0, 0, 0), Eigen::Vector3d(10, 10, 10));
+  const CellAverages a = AverageInCells(c, {0, 1, 2, 3, 4}, box, 1);
+  ASSERT_EQ(a.points.size(), 3u);
+  ASSERT_EQ(a.normals.size(), 3u);
+  ASSERT_EQ(a.colors.size(), 3u);
+  // Sorted by cell key (x major): the cell at the origin, the one at x ≥ 5, the far corner.
+  EXPECT_TRUE(a.points[0].isApprox(Eigen::Vector3d(1, 0, 0)));
+  EXPECT_TRUE(a.normals[0].isApprox(Eigen::Vector3d(0, 1, 1).normalized()));
+  EXPECT_TRUE(a.colors[0].isApprox(Eigen::Vector3d(0.5, 0, 0)));
+  EXPECT_TRUE(a.points[1].isApprox(Eigen::Vector3d(8.5, 0, 0)));
+  EXPECT_TRUE(a.normals[1].isApprox(Eigen::Vector3d(0, 0, 1)));  // the first point's
+  EXPECT_TRUE(a.points[2].isApprox(Eigen::Vector3d(10, 10, 10)));
+  EXPECT_EQ(a.points.size(), OccupiedCells({{0, 0, 0}, {2, 0, 0}, {8, 0, 0}, {9, 0, 0}, {10, 10, 10}}, box, 1));
+  EXPECT_TRUE(AverageInCells(c, {}, box, 1).points.empty());
 }
 
 io::OrientedPointCloud Sphere(int n) {
@@ -105,32 +179,56 @@ io::OrientedPointCloud Sphere(int n) {
   return c;
 }
 
+// Radius error of the worst vertex of a unit sphere's mesh.
+double WorstRadiusError(const ColoredMesh& mesh) {
+  double worst = 0;
+  for (const auto& v : mesh.vertices) worst = std::max(worst, std::abs(v.norm() - 1.0));
+  return worst;
+}
+
 // The default budget leaves a small cloud's surface exactly as without a budget; a budget just below the
-// wanted depth's estimate gives the next coarser depth, reported.
+// wanted depth's estimate averages the points instead (same depth, as accurate); one below that gives a coarser
+// depth, reported.
 TEST(PoissonBudget, ReconstructionRespectsTheBudget) {
-  const auto cloud = Sphere(20000);
+  const auto cloud = Sphere(200000);
   PoissonOptions opt;
   opt.kind = SurfaceKind::kWatertight;
-  opt.min_depth = 4;  // room below the automatic depth (6 here)
+  opt.min_depth = 4;
+  opt.depth = 6;  // cells ~4x the point spacing: ~10 points per half cell
   nlohmann::json free_stats, default_stats, tight_stats;
   opt.max_memory_mb = 0;
   const ColoredMesh free_mesh = ReconstructPoisson(cloud, opt, &free_stats);
+  EXPECT_EQ(free_stats["solver_points"], cloud.size());
   opt.max_memory_mb = PoissonOptions{}.max_memory_mb;
   const ColoredMesh default_mesh = ReconstructPoisson(cloud, opt, &default_stats);
   EXPECT_EQ(default_stats["memory"]["lowered_by_budget"], false);
+  EXPECT_EQ(default_stats["memory"]["averaged_in_depth"], 0);
   EXPECT_EQ(default_mesh.vertices, free_mesh.vertices);
   EXPECT_EQ(default_mesh.triangles, free_mesh.triangles);
 
-  const int wanted = free_stats["depth"];
-  opt.max_memory_mb = 0.99 * free_stats["memory"]["estimated_mb"].get<double>();
-  const ColoredMesh tight_mesh = ReconstructPoisson(cloud, opt, &tight_stats);
-  EXPECT_EQ(tight_stats["depth"], wanted - 1);
-  EXPECT_EQ(tight_stats["memory"]["depth_wanted"], wanted);
+  const double every_point_mb = free_stats["memory"]["estimated_mb"].get<double>();
+  opt.max_memory_mb = 0.99 * every_point_mb;
+  const ColoredMesh averaged_mesh = ReconstructPoisson(cloud, opt, &tight_stats);
+  EXPECT_EQ(tight_stats["depth"], 6);
+  EXPECT_EQ(tight_stats["memory"]["lowered_by_budget"], false);
+  EXPECT_EQ(tight_stats["memory"]["averaged_in_depth"], 7);
+  const size_t averaged = tight_stats["solver_points"].get<size_t>();
+  EXPECT_EQ(averaged, tight_stats["memory"]["averaged_points"].get<size_t>());
+  EXPECT_LT(averaged, cloud.size() / 2);
+  EXPECT_LE(tight_stats["memory"]["estimated_mb"].get<double>(), opt.max_memory_mb);
+  ASSERT_FALSE(averaged_mesh.empty());
+  EXPECT_LT(WorstRadiusError(averaged_mesh), 1.2 * WorstRadiusError(free_mesh) + 1e-3);
+
+  opt.max_memory_mb = 0.99 * tight_stats["memory"]["estimated_mb"].get<double>();
+  const ColoredMesh coarse_mesh = ReconstructPoisson(cloud, opt, &tight_stats);
+  EXPECT_EQ(tight_stats["depth"], 5);
+  EXPECT_EQ(tight_stats["memory"]["depth_wanted"], 6);
   EXPECT_EQ(tight_stats["memory"]["lowered_by_budget"], true);
   EXPECT_LE(tight_stats["memory"]["estimated_mb"].get<double>(), opt.max_memory_mb);
-  EXPECT_NEAR(tight_stats["cell_width"].get<double>(), 2 * free_stats["cell_width"].get<double>(), 1e-12);
-  EXPECT_FALSE(tight_mesh.empty());
-  // A budget below the point term: min_depth, flagged over budget.
+  EXPECT_NEAR(tight_stats["cell_width"].get<double>(), 2 * free_stats["cell_width"].get<double>(),
+              0.02 * free_stats["cell_width"].get<double>());
+  EXPECT_FALSE(coarse_mesh.empty());
+  // A budget below the cloud itself: min_depth, flagged over budget.
   opt.max_memory_mb = 0.5;
   ReconstructPoisson(cloud, opt, &tight_stats);
   EXPECT_EQ(tight_stats["depth"], opt.min_depth);

@@ -13,6 +13,7 @@
 #include <cmath>
 #include <cstdlib>
 #include <limits>
+#include <memory>
 #include <string>
 
 #include "fmv3d/core/error.h"
@@ -61,7 +62,8 @@ void PoissonOptions::Check() const {
   if (!(crop_margin >= 0)) throw Error("poisson: crop margin must be >= 0");
   if (target_faces < 0) throw Error("poisson: target face count must be >= 0");
   if (threads < 0) throw Error("poisson: threads must be >= 0");
-  if (!(memory.bytes_per_point >= 0 && memory.bytes_per_cell >= 0))
+  if (!(memory.bytes_per_point >= 0 && memory.bytes_per_cell >= 0 && memory.bytes_per_working_point >= 0 &&
+        memory.bytes_per_point_spacing >= 0))
     throw Error("poisson: memory model bytes must be >= 0");
 }
 
@@ -141,9 +143,10 @@ int AutomaticDepth(const Eigen::AlignedBox3d& bounds, double spacing, const Pois
 namespace {
 
 // Stray points far from the scene would blow up Poisson's cube (and so coarsen every cell): the working box is
-// the 0.1–99.9% quantile box of the points, enlarged by the crop margin; points outside are dropped.
-open3d::geometry::PointCloud WorkingCloud(const io::OrientedPointCloud& cloud, const PoissonOptions& options,
-                                          Eigen::AlignedBox3d* working_box, nlohmann::json* st) {
+// the 0.1–99.9% quantile box of the points, enlarged by the crop margin; points outside are dropped. The indices
+// of the points kept.
+std::vector<size_t> PointsInWorkingBox(const io::OrientedPointCloud& cloud, const PoissonOptions& options,
+                                       Eigen::AlignedBox3d* working_box, nlohmann::json* st) {
   Eigen::AlignedBox3d& bounds = *working_box;
   bounds = RobustBounds(cloud.positions, 0.001);
   {
@@ -151,24 +154,34 @@ open3d::geometry::PointCloud WorkingCloud(const io::OrientedPointCloud& cloud, c
     bounds.min().array() -= margin;
     bounds.max().array() += margin;
   }
-  open3d::geometry::PointCloud pc;
-  pc.points_.reserve(cloud.size());
-  pc.normals_.reserve(cloud.size());
   std::vector<size_t> kept;
   kept.reserve(cloud.size());
   for (size_t i = 0; i < cloud.size(); ++i)
-    if (bounds.contains(cloud.positions[i])) {
-      kept.push_back(i);
-      pc.points_.push_back(cloud.positions[i]);
-      pc.normals_.push_back(cloud.normals[i].cast<double>());
-    }
-  if (cloud.has_colors()) {
-    pc.colors_.reserve(kept.size());
-    for (size_t i : kept) pc.colors_.push_back(cloud.colors[i].cast<double>() / 255.0);
-  }
+    if (bounds.contains(cloud.positions[i])) kept.push_back(i);
   (*st)["points_outside_bounds"] = cloud.size() - kept.size();
-  if (pc.points_.size() < 16)
-    throw Error("poisson: too few points (" + std::to_string(pc.points_.size()) + ") for a surface");
+  if (kept.size() < 16) throw Error("poisson: too few points (" + std::to_string(kept.size()) + ") for a surface");
+  return kept;
+}
+
+// The solver's cloud: the kept points as they are (`pc` already holds their positions) ...
+void AddNormalsAndColours(const io::OrientedPointCloud& cloud, const std::vector<size_t>& kept,
+                          open3d::geometry::PointCloud* pc) {
+  pc->normals_.reserve(kept.size());
+  for (size_t i : kept) pc->normals_.push_back(cloud.normals[i].cast<double>());
+  if (cloud.has_colors()) {
+    pc->colors_.reserve(kept.size());
+    for (size_t i : kept) pc->colors_.push_back(cloud.colors[i].cast<double>() / 255.0);
+  }
+}
+
+// ... or averaged in the cells of `average_depth` (poisson_budget.h) when every point does not fit the budget.
+open3d::geometry::PointCloud AveragedCloud(const io::OrientedPointCloud& cloud, const std::vector<size_t>& kept,
+                                           const Eigen::AlignedBox3d& box, int average_depth) {
+  CellAverages a = AverageInCells(cloud, kept, box, average_depth);
+  open3d::geometry::PointCloud pc;
+  pc.points_ = std::move(a.points);
+  pc.normals_ = std::move(a.normals);
+  pc.colors_ = std::move(a.colors);
   return pc;
 }
 
@@ -253,10 +266,16 @@ void KeepSupportedPieces(const open3d::geometry::PointCloud& pc, double spacing,
                100 * kept_area / std::max(kept_area + dropped_area, 1e-300));
 }
 
+io::Rgb8 ToRgb8(const Eigen::Vector3d& c) {
+  io::Rgb8 rgb;
+  for (int k = 0; k < 3; ++k) rgb[k] = static_cast<uint8_t>(std::clamp(std::lround(c[k] * 255.0), 0L, 255L));
+  return rgb;
+}
+
 // Open3D's mesh as ours, its triangles wound the way the input normals face (renderer back-face culling and the
 // signed distances of the comparison rely on it), with the points' colours.
 ColoredMesh ToColoredMesh(const O3dMesh& mesh, const open3d::geometry::KDTreeFlann& tree,
-                          const open3d::geometry::PointCloud& pc, const io::OrientedPointCloud& cloud) {
+                          const open3d::geometry::PointCloud& pc) {
   ColoredMesh out;
   out.vertices = mesh.vertices_;
   out.triangles = mesh.triangles_;
@@ -277,28 +296,27 @@ ColoredMesh ToColoredMesh(const O3dMesh& mesh, const open3d::geometry::KDTreeFla
     for (auto& f : out.triangles) std::swap(f[1], f[2]);
   out.ComputeVertexNormals();
 
-  if (cloud.has_colors()) {
+  if (pc.HasColors()) {
     if (mesh.vertex_colors_.size() == mesh.vertices_.size()) {
       out.colors.reserve(mesh.vertices_.size());
-      for (const auto& c : mesh.vertex_colors_) {
-        io::Rgb8 rgb;
-        for (int k = 0; k < 3; ++k) rgb[k] = static_cast<uint8_t>(std::clamp(std::lround(c[k] * 255.0), 0L, 255L));
-        out.colors.push_back(rgb);
-      }
+      for (const auto& c : mesh.vertex_colors_) out.colors.push_back(ToRgb8(c));
     } else {  // decimation may drop the interpolated colours: take the nearest point's
       const std::vector<int> nearest = NearestPoints(tree, out.vertices, nullptr);
       out.colors.reserve(out.vertices.size());
-      for (int p : nearest) out.colors.push_back(p >= 0 ? cloud.colors[p] : io::Rgb8(128, 128, 128));
+      for (int p : nearest) out.colors.push_back(p >= 0 ? ToRgb8(pc.colors_[p]) : io::Rgb8(128, 128, 128));
     }
   }
   return out;
 }
 
-// The wanted depth, lowered while the memory model exceeds the budget (poisson_budget.h); st["memory"] says so.
-int DepthWithinBudget(int wanted, size_t points, const open3d::geometry::PointCloud& pc, const Eigen::AlignedBox3d& box,
-                      const PoissonOptions& options, nlohmann::json* st) {
+// The wanted depth, lowered (and the points averaged first) while the memory model exceeds the budget
+// (poisson_budget.h); st["memory"] says so.
+PoissonDepthChoice DepthWithinBudget(int wanted, const io::OrientedPointCloud& cloud, size_t points,
+                                     const open3d::geometry::PointCloud& pc, const Eigen::AlignedBox3d& box,
+                                     const PoissonOptions& options, nlohmann::json* st) {
+  const double cloud_bytes = ResidentBytes(cloud);
   const PoissonDepthChoice c = ChoosePoissonDepth(
-      wanted, std::min(wanted, options.min_depth), points, options.max_memory_mb,
+      wanted, std::min(wanted, options.min_depth), points, cloud_bytes, options.max_memory_mb,
       [&](int d) { return OccupiedCells(pc.points_, box, d); }, options.memory);
   (*st)["memory"] = {{"max_memory_mb", options.max_memory_mb},
                      {"depth_wanted", wanted},
@@ -307,15 +325,29 @@ int DepthWithinBudget(int wanted, size_t points, const open3d::geometry::PointCl
                      {"over_budget", c.over_budget},
                      {"estimated_mb", c.estimated_mb},
                      {"occupied_cells", c.occupied_cells},
+                     {"cloud_mb", cloud_bytes / 1048576.0},
+                     {"averaged_in_depth", c.average_depth},
+                     {"averaged_points", c.averaged_points},
                      {"bytes_per_point", options.memory.bytes_per_point},
-                     {"bytes_per_cell", options.memory.bytes_per_cell}};
+                     {"bytes_per_cell", options.memory.bytes_per_cell},
+                     {"bytes_per_working_point", options.memory.bytes_per_working_point},
+                     {"bytes_per_point_spacing", options.memory.bytes_per_point_spacing}};
+  if (c.average_depth > 0)
+    spdlog::info("poisson: {} points averaged to {} in the cells of depth {} to fit --max-memory {} MB", points,
+                 c.averaged_points, c.average_depth, options.max_memory_mb);
   if (c.lowered)
     spdlog::warn("poisson: octree depth {} → {} to fit --max-memory {} MB (estimate {:.0f} MB)", wanted, c.depth,
                  options.max_memory_mb, c.estimated_mb);
   if (c.over_budget)
     spdlog::warn("poisson: {} points at depth {} need an estimated {:.0f} MB, over --max-memory {} MB", points, c.depth,
                  c.estimated_mb, options.max_memory_mb);
-  return c.depth;
+  return c;
+}
+
+Eigen::AlignedBox3d BoxOf(const std::vector<Eigen::Vector3d>& points) {
+  Eigen::AlignedBox3d box;
+  for (const auto& p : points) box.extend(p);
+  return box;
 }
 
 }  // namespace
@@ -331,19 +363,34 @@ ColoredMesh ReconstructPoisson(const io::OrientedPointCloud& cloud, const Poisso
   const auto start = Clock::now();
 
   Eigen::AlignedBox3d bounds;
-  const open3d::geometry::PointCloud pc = WorkingCloud(cloud, options, &bounds, &st);
-  const open3d::geometry::KDTreeFlann tree(pc);
-  const double spacing = SpacingFromTree(tree, pc.points_, 20000);
-  Eigen::AlignedBox3d kept_box;  // Open3D's cube is 1.1 × the largest extent of the points it is given
-  for (const auto& p : pc.points_) kept_box.extend(p);
+  const std::vector<size_t> kept = PointsInWorkingBox(cloud, options, &bounds, &st);
+  open3d::geometry::PointCloud pc;
+  pc.points_.reserve(kept.size());
+  for (size_t i : kept) pc.points_.push_back(cloud.positions[i]);
+  auto tree = std::make_unique<open3d::geometry::KDTreeFlann>(pc);
+  const double spacing = SpacingFromTree(*tree, pc.points_, 20000);
+  Eigen::AlignedBox3d kept_box = BoxOf(pc.points_);  // Open3D's cube is 1.1 × the largest extent of its points
   const int wanted = options.depth > 0 ? options.depth : AutomaticDepth(kept_box, spacing, options);
-  const int depth = DepthWithinBudget(wanted, cloud.size(), pc, kept_box, options, &st);
+  const PoissonDepthChoice choice = DepthWithinBudget(wanted, cloud, kept.size(), pc, kept_box, options, &st);
+  const int depth = choice.depth;
+  double working_spacing = spacing;  // of the points the solver gets, which trimming measures against
+  if (choice.average_depth > 0) {
+    tree.reset();
+    pc = AveragedCloud(cloud, kept, kept_box, choice.average_depth);
+    tree = std::make_unique<open3d::geometry::KDTreeFlann>(pc);
+    working_spacing = SpacingFromTree(*tree, pc.points_, 20000);
+    kept_box = BoxOf(pc.points_);
+  } else {
+    AddNormalsAndColours(cloud, kept, &pc);
+  }
   st["points"] = cloud.size();
+  st["solver_points"] = pc.points_.size();
   st["point_spacing"] = spacing;
+  st["solver_point_spacing"] = working_spacing;
   st["depth"] = depth;
   st["cell_width"] = 1.1 * kept_box.sizes().maxCoeff() / std::ldexp(1.0, depth);
-  spdlog::info("poisson: {} points, spacing {:.4g}, octree depth {} (cell {:.4g})", cloud.size(), spacing, depth,
-               st["cell_width"].get<double>());
+  spdlog::info("poisson: {} points ({} to the solver), spacing {:.4g}, octree depth {} (cell {:.4g})", cloud.size(),
+               pc.points_.size(), spacing, depth, st["cell_width"].get<double>());
 
   auto t = Clock::now();
   int threads = options.threads;
@@ -364,9 +411,10 @@ ColoredMesh ReconstructPoisson(const io::OrientedPointCloud& cloud, const Poisso
   // 2 + 3: trim by density and by distance to the samples, in one vertex mask (open surfaces only).
   const double cell = st["cell_width"].get<double>();
   st["kind"] = ToString(options.kind);
-  if (options.kind == SurfaceKind::kOpen) TrimOpenSurface(tree, pc, densities, spacing, cell, options, &mesh, &st);
+  if (options.kind == SurfaceKind::kOpen)
+    TrimOpenSurface(*tree, pc, densities, working_spacing, cell, options, &mesh, &st);
 
-  KeepSupportedPieces(pc, spacing, cell, options, &mesh, &st);
+  KeepSupportedPieces(pc, working_spacing, cell, options, &mesh, &st);
 
   // 5. Crop to the working box (the points' robust bounds, enlarged); a watertight surface stays closed.
   if (options.kind == SurfaceKind::kOpen) {
@@ -391,7 +439,7 @@ ColoredMesh ReconstructPoisson(const io::OrientedPointCloud& cloud, const Poisso
   }
   st["seconds_cleanup"] = Seconds(t);
 
-  ColoredMesh out = ToColoredMesh(mesh, tree, pc, cloud);
+  ColoredMesh out = ToColoredMesh(mesh, *tree, pc);
   st["vertices"] = out.vertices.size();
   st["faces"] = out.triangles.size();
   st["area"] = out.SurfaceArea();

@@ -14,8 +14,8 @@
 //      quantiles per axis: stray far points are dropped before reconstruction, as they would otherwise
 //      inflate Poisson's cube and coarsen every cell);
 //   6. optional quadric decimation to `target_faces`.
-// The depth of step 1 (or the one asked for) is then lowered while the memory model of poisson_budget.h exceeds
-// `max_memory_mb`.
+// When the memory model of poisson_budget.h exceeds `max_memory_mb` at the depth of step 1 (or the one asked for),
+// the points are averaged in half cells, and the depth is lowered only while that does not fit either.
 // Vertex colours are interpolated from the points' colours; triangles are wound so that their normals agree
 // with the input normals (towards the cameras).
 #pragma once
@@ -44,8 +44,8 @@ struct PoissonOptions {
   // Open3D's solver runs on OpenMP, whose waiting threads spin: on a loaded machine two threads ran 10–15×
   // slower than one (a 20k-point sphere: 5 s vs 50–77 s); with passive waiting they help.
   int threads = 0;
-  // Memory budget of the reconstruction (poisson_budget.h): the depth is lowered until the model's estimate fits
-  // (report: "memory"); <= 0 = no limit.
+  // Memory budget of the reconstruction (poisson_budget.h): points averaged, then the depth lowered, until the
+  // model's estimate fits (report: "memory"); <= 0 = no limit.
   double max_memory_mb = 2048;
   PoissonMemoryModel memory;
   // Throws fmv3d::Error naming the bad field.

@@ -6,14 +6,23 @@
 // around each add a constant factor. So the model is linear in the points and in the occupied cells at the
 // depth:   bytes ≈ bytes_per_point × points + bytes_per_cell × occupied_cells(depth)
 // (constants measured in bench/results/scale11.md; the ~105 MiB every fmv3d process has is not counted). Going one
-// depth coarser divides the occupied cells of a surface by ~4, so lowering the depth is the stage's lever; the
-// point term is not reduced (the cloud is the dense stage's output, bounded there).
+// depth coarser divides the occupied cells of a surface by ~4.
+//
+// A cloud far denser than the wanted depth's cells (millions of fused points) can exhaust the budget with its point
+// term alone, which no depth lowers. Before giving up depth, the points are averaged in the cells of the next finer
+// grid (half a Poisson cell: the solver's own samples-per-node splatting keeps no more detail than that), so only
+// the cloud as read and a k-d tree for the spacing are paid per input point:
+//   bytes ≈ cloud_bytes + max(bytes_per_point_spacing × points,
+//                             bytes_per_working_point × averaged points + bytes_per_cell × occupied_cells(depth))
 #pragma once
 
 #include <Eigen/Geometry>
 #include <cstddef>
+#include <cstdint>
 #include <functional>
 #include <vector>
+
+#include "fmv3d/io/point_cloud.h"
 
 namespace fmv3d::surface {
 
@@ -25,14 +34,34 @@ namespace fmv3d::surface {
 struct PoissonMemoryModel {
   double bytes_per_point = 300;  // cloud + Open3D copy + k-d tree + solver samples
   double bytes_per_cell = 1350;  // octree nodes and their solver data per occupied finest cell
+  // Averaged clouds (bench/results/edge22.md): the cloud as read is counted by its own bytes; what remains of the
+  // 300 per point is Open3D's copy, the tree and the solver's samples, and the spacing's tree over every input
+  // point (positions and a nanoflann index) comes and goes before them.
+  double bytes_per_working_point = 200;
+  double bytes_per_point_spacing = 90;
 };
 
-// Cells of the depth-`depth` grid over Open3D's reconstruction cube (1.1 × the largest extent of `bounds`,
-// centred on it) that hold at least one point.
+// Cell index of `p` in the depth-`depth` grid over Open3D's reconstruction cube (1.1 × the largest extent of
+// `bounds`, centred on it), packed as 21 bits per axis; points outside are clamped to the border cells.
+struct CellGrid {
+  CellGrid(const Eigen::AlignedBox3d& bounds, int depth);
+  uint64_t Key(const Eigen::Vector3d& p) const;
+  Eigen::Vector3d origin;
+  double cell = 1;
+  int64_t cells_per_axis = 1;
+};
+
+// Cells of the depth-`depth` grid (CellGrid) that hold at least one point.
 size_t OccupiedCells(const std::vector<Eigen::Vector3d>& points, const Eigen::AlignedBox3d& bounds, int depth);
+
+// Heap and array bytes the cloud holds (its attribute arrays and every visibility list).
+double ResidentBytes(const io::OrientedPointCloud& cloud);
 
 // The model's bytes for `points` points and `cells` occupied cells.
 double EstimatePoissonBytes(size_t points, size_t cells, const PoissonMemoryModel& model);
+// The same for `points` input points (holding `cloud_bytes`) averaged to `averaged` points.
+double EstimateAveragedPoissonBytes(size_t points, double cloud_bytes, size_t averaged, size_t cells,
+                                    const PoissonMemoryModel& model);
 
 struct PoissonDepthChoice {
   int depth = 0;
@@ -40,11 +69,25 @@ struct PoissonDepthChoice {
   bool over_budget = false;  // even min_depth's estimate exceeds the budget (the point term alone may)
   double estimated_mb = 0;   // at the chosen depth
   size_t occupied_cells = 0;
+  // > 0: the points are averaged in the cells of this depth (depth + 1) first, leaving `averaged_points`.
+  int average_depth = 0;
+  size_t averaged_points = 0;
 };
 
-// The finest depth from `wanted` down to `min_depth` whose estimate fits `budget_mb`; `cells_at(depth)` counts the
-// occupied cells (OccupiedCells). At min_depth when none fits (over_budget). budget_mb <= 0: `wanted`, unchecked.
-PoissonDepthChoice ChoosePoissonDepth(int wanted, int min_depth, size_t points, double budget_mb,
+// The finest depth from `wanted` down to `min_depth` whose estimate fits `budget_mb`, with every point or, when
+// that does not fit, with the points averaged in half cells; `cells_at(depth)` counts the occupied cells
+// (OccupiedCells). At min_depth, averaged when that helps, when none fits (over_budget). budget_mb <= 0:
+// `wanted`, unchecked.
+PoissonDepthChoice ChoosePoissonDepth(int wanted, int min_depth, size_t points, double cloud_bytes, double budget_mb,
                                       const std::function<size_t(int)>& cells_at, const PoissonMemoryModel& model);
+
+// One point per occupied cell of the depth-`depth` grid over `bounds` (CellGrid), from the points `indices` of
+// `cloud`: the mean position, the mean normal normalised (the first point's where they cancel), the mean colour
+// (0..1, empty when the cloud has none).
+struct CellAverages {
+  std::vector<Eigen::Vector3d> points, normals, colors;
+};
+CellAverages AverageInCells(const io::OrientedPointCloud& cloud, const std::vector<size_t>& indices,
+                            const Eigen::AlignedBox3d& bounds, int depth);
 
 }  // namespace fmv3d::surface
