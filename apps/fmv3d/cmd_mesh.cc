@@ -42,7 +42,7 @@ void Add(CLI::App& app) {
   cmd->add_option("--crop-margin", p.crop_margin, "Crop box enlargement, fraction of the points' diagonal")
       ->capture_default_str();
   cmd->add_option("--max-memory", p.max_memory_mb,
-                  "MB for Poisson's octree and the point arrays: the points are averaged in half cells, then the "
+                  "MB for Poisson's octree and the point arrays: the points are averaged in finer cells, then the "
                   "depth lowered, until the estimate fits "
                   "(report/mesh.json \"memory\"; 0: no limit)")
       ->capture_default_str();

@@ -3,6 +3,7 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <random>
 
@@ -95,8 +96,8 @@ TEST(PoissonBudget, LowersTheDepthUntilTheEstimateFits) {
   EXPECT_FALSE(c.over_budget);
   EXPECT_EQ(c.occupied_cells, 65536u);
   EXPECT_NEAR(c.estimated_mb, (1e6 + 65536e3) / 1048576.0, 1e-9);
-  // Every depth's half cells (depth + 1) hold more cells than there are points: averaging would not thin them.
-  EXPECT_EQ(asked, (std::vector<int>{10, 11, 9, 8}));
+  // Every depth's quarter and half cells hold more cells than there are points: averaging would not thin them.
+  EXPECT_EQ(asked, (std::vector<int>{10, 12, 11, 9, 8}));
   EXPECT_EQ(c.average_depth, 0);
   // A budget the wanted depth fits, and no budget: the wanted depth, not lowered.
   for (double budget : {2048.0, 0.0}) {
@@ -116,24 +117,30 @@ TEST(PoissonBudget, AveragesThePointsBeforeLoweringTheDepth) {
   const PoissonMemoryModel m{300, 1000, 200, 60};
   auto cells = [](int d) { return static_cast<size_t>(std::pow(4.0, d)); };
   const size_t points = 1000000;  // 286 MB at 300 B: over 200 MB at any depth
-  // Depth 8: 65,536 cells (62.5 MB), half cells 262,144 points (50 MB); the cloud 40 MB; the spacing tree 57 MB.
+  // Depth 8: 65,536 cells (62.5 MB); quarter cells (depth 10) 1.05 M, more than the points; half cells 262,144
+  // points (50 MB); the cloud 40 MB; the spacing tree 57 MB.
   PoissonDepthChoice c = ChoosePoissonDepth(8, 5, points, 40 * 1048576.0, 200, cells, m);
   EXPECT_EQ(c.depth, 8);
   EXPECT_FALSE(c.lowered);
   EXPECT_EQ(c.average_depth, 9);
   EXPECT_EQ(c.averaged_points, 262144u);
   EXPECT_NEAR(c.estimated_mb, 40 + (262144 * 200.0 + 65536 * 1000.0) / 1048576.0, 1e-9);
-  // A budget neither fits at depth 8: depth 7, averaged in depth 8's cells (65,536 points).
+  // A budget that depth 8 does not fit: depth 7, averaged in its quarter cells (depth 9: 262,144 points, 105.6 MB).
   c = ChoosePoissonDepth(8, 5, points, 40 * 1048576.0, 110, cells, m);
   EXPECT_EQ(c.depth, 7);
   EXPECT_TRUE(c.lowered);
+  EXPECT_EQ(c.average_depth, 9);
+  EXPECT_NEAR(c.estimated_mb, 40 + (262144 * 200.0 + 16384 * 1000.0) / 1048576.0, 1e-9);
+  // ... and one only its half cells fit (depth 8: 65,536 points, the spacing tree's 97.2 MB).
+  c = ChoosePoissonDepth(8, 5, points, 40 * 1048576.0, 100, cells, m);
+  EXPECT_EQ(c.depth, 7);
   EXPECT_EQ(c.average_depth, 8);
-  EXPECT_LE(c.estimated_mb, 110);
+  EXPECT_NEAR(c.estimated_mb, 40 + 60e6 / 1048576.0, 1e-9);
   // Below the cloud and its spacing tree: nothing fits; min_depth, averaged (the smaller estimate), flagged.
   c = ChoosePoissonDepth(8, 5, points, 40 * 1048576.0, 50, cells, m);
   EXPECT_EQ(c.depth, 5);
   EXPECT_TRUE(c.over_budget);
-  EXPECT_EQ(c.average_depth, 6);
+  EXPECT_EQ(c.average_depth, 7);
   EXPECT_NEAR(c.estimated_mb, 40 + 60e6 / 1048576.0, 1e-9);
 }
 
@@ -206,28 +213,36 @@ TEST(PoissonBudget, ReconstructionRespectsTheBudget) {
   EXPECT_EQ(default_mesh.vertices, free_mesh.vertices);
   EXPECT_EQ(default_mesh.triangles, free_mesh.triangles);
 
-  const double every_point_mb = free_stats["memory"]["estimated_mb"].get<double>();
-  opt.max_memory_mb = 0.99 * every_point_mb;
-  const ColoredMesh averaged_mesh = ReconstructPoisson(cloud, opt, &tight_stats);
-  EXPECT_EQ(tight_stats["depth"], 6);
-  EXPECT_EQ(tight_stats["memory"]["lowered_by_budget"], false);
-  EXPECT_EQ(tight_stats["memory"]["averaged_in_depth"], 7);
-  const size_t averaged = tight_stats["solver_points"].get<size_t>();
-  EXPECT_EQ(averaged, tight_stats["memory"]["averaged_points"].get<size_t>());
-  EXPECT_LT(averaged, cloud.size() / 2);
-  EXPECT_LE(tight_stats["memory"]["estimated_mb"].get<double>(), opt.max_memory_mb);
-  ASSERT_FALSE(averaged_mesh.empty());
-  EXPECT_LT(WorstRadiusError(averaged_mesh), 1.2 * WorstRadiusError(free_mesh) + 1e-3);
-
-  opt.max_memory_mb = 0.99 * tight_stats["memory"]["estimated_mb"].get<double>();
-  const ColoredMesh coarse_mesh = ReconstructPoisson(cloud, opt, &tight_stats);
+  // Tighter and tighter budgets: the points are averaged in coarser and coarser cells at the wanted depth before
+  // the depth is lowered; every surface within its budget, the averaged ones as accurate as every point's.
+  Eigen::AlignedBox3d box;
+  for (const auto& p : cloud.positions) box.extend(p);
+  double budget = free_stats["memory"]["estimated_mb"].get<double>();
+  std::vector<int> averaged_in;
+  for (int step = 0; step < 10; ++step) {
+    budget *= 0.99;
+    opt.max_memory_mb = budget;
+    const ColoredMesh mesh = ReconstructPoisson(cloud, opt, &tight_stats);
+    ASSERT_FALSE(mesh.empty());
+    EXPECT_LE(tight_stats["memory"]["estimated_mb"].get<double>(), budget);
+    if (tight_stats["depth"] != 6) break;
+    const int average = tight_stats["memory"]["averaged_in_depth"];
+    ASSERT_GT(average, 6);
+    averaged_in.push_back(average);
+    const size_t solver_points = tight_stats["solver_points"];
+    EXPECT_EQ(solver_points, OccupiedCells(cloud.positions, box, average));
+    EXPECT_LT(solver_points, cloud.size());
+    EXPECT_LT(WorstRadiusError(mesh), 1.2 * WorstRadiusError(free_mesh) + 1e-3);
+    budget = tight_stats["memory"]["estimated_mb"].get<double>();
+  }
+  ASSERT_FALSE(averaged_in.empty());
+  EXPECT_TRUE(std::is_sorted(averaged_in.rbegin(), averaged_in.rend()));
+  EXPECT_EQ(averaged_in.back(), 7);
   EXPECT_EQ(tight_stats["depth"], 5);
   EXPECT_EQ(tight_stats["memory"]["depth_wanted"], 6);
   EXPECT_EQ(tight_stats["memory"]["lowered_by_budget"], true);
-  EXPECT_LE(tight_stats["memory"]["estimated_mb"].get<double>(), opt.max_memory_mb);
   EXPECT_NEAR(tight_stats["cell_width"].get<double>(), 2 * free_stats["cell_width"].get<double>(),
               0.02 * free_stats["cell_width"].get<double>());
-  EXPECT_FALSE(coarse_mesh.empty());
   // A budget below the cloud itself: min_depth, flagged over budget.
   opt.max_memory_mb = 0.5;
   ReconstructPoisson(cloud, opt, &tight_stats);

@@ -333,7 +333,7 @@ PoissonDepthChoice DepthWithinBudget(int wanted, const io::OrientedPointCloud& c
                      {"bytes_per_working_point", options.memory.bytes_per_working_point},
                      {"bytes_per_point_spacing", options.memory.bytes_per_point_spacing}};
   if (c.average_depth > 0)
-    spdlog::info("poisson: {} points averaged to {} in the cells of depth {} to fit --max-memory {} MB", points,
+    spdlog::info("poisson: {} points averaged to {} in the cells of depth {} for --max-memory {} MB", points,
                  c.averaged_points, c.average_depth, options.max_memory_mb);
   if (c.lowered)
     spdlog::warn("poisson: octree depth {} → {} to fit --max-memory {} MB (estimate {:.0f} MB)", wanted, c.depth,

@@ -15,7 +15,7 @@
 //      inflate Poisson's cube and coarsen every cell);
 //   6. optional quadric decimation to `target_faces`.
 // When the memory model of poisson_budget.h exceeds `max_memory_mb` at the depth of step 1 (or the one asked for),
-// the points are averaged in half cells, and the depth is lowered only while that does not fit either.
+// the points are averaged in quarter or half cells, and the depth is lowered only while that does not fit either.
 // Vertex colours are interpolated from the points' colours; triangles are wound so that their normals agree
 // with the input normals (towards the cameras).
 #pragma once

@@ -58,6 +58,7 @@ double EstimateAveragedPoissonBytes(size_t points, double cloud_bytes, size_t av
 
 PoissonDepthChoice ChoosePoissonDepth(int wanted, int min_depth, size_t points, double cloud_bytes, double budget_mb,
                                       const std::function<size_t(int)>& cells_at, const PoissonMemoryModel& model) {
+  constexpr int kFinestAveraging = 2;  // quarter cells: up to 16 samples per cell across a surface
   std::map<int, size_t> counted;
   auto cells = [&](int depth) {
     auto it = counted.find(depth);
@@ -72,17 +73,22 @@ PoissonDepthChoice ChoosePoissonDepth(int wanted, int min_depth, size_t points, 
     choice.occupied_cells = cells(depth);
     choice.estimated_mb = EstimatePoissonBytes(points, choice.occupied_cells, model) / kMiB;
     if (budget_mb <= 0 || choice.estimated_mb <= budget_mb) break;
-    const size_t averaged = cells(depth + 1);
-    if (averaged < points) {
+    // The finest averaging grid that fits: the solver weighs every sample alike, so an averaged point stands for
+    // as much surface as a lone stray one; finer grids keep more of the cloud's density.
+    bool fits = false;
+    for (int average = depth + kFinestAveraging; average > depth && !fits; --average) {
+      const size_t averaged = cells(average);
+      if (averaged >= points) continue;
       const double averaged_mb =
           EstimateAveragedPoissonBytes(points, cloud_bytes, averaged, choice.occupied_cells, model) / kMiB;
-      if (averaged_mb < choice.estimated_mb) {
+      fits = averaged_mb <= budget_mb;
+      if (fits || averaged_mb < choice.estimated_mb) {
         choice.estimated_mb = averaged_mb;
-        choice.average_depth = depth + 1;
+        choice.average_depth = average;
         choice.averaged_points = averaged;
-        if (averaged_mb <= budget_mb) break;
       }
     }
+    if (fits) break;
     if (depth <= min_depth) {
       choice.over_budget = true;
       break;

@@ -9,9 +9,9 @@
 // depth coarser divides the occupied cells of a surface by ~4.
 //
 // A cloud far denser than the wanted depth's cells (millions of fused points) can exhaust the budget with its point
-// term alone, which no depth lowers. Before giving up depth, the points are averaged in the cells of the next finer
-// grid (half a Poisson cell: the solver's own samples-per-node splatting keeps no more detail than that), so only
-// the cloud as read and a k-d tree for the spacing are paid per input point:
+// term alone, which no depth lowers. Before giving up depth, the points are averaged in the cells of a finer grid
+// (a quarter or half of a Poisson cell, the finest that fits), so only the cloud as read and a k-d tree for the
+// spacing are paid per input point:
 //   bytes ≈ cloud_bytes + max(bytes_per_point_spacing × points,
 //                             bytes_per_working_point × averaged points + bytes_per_cell × occupied_cells(depth))
 #pragma once
@@ -69,13 +69,13 @@ struct PoissonDepthChoice {
   bool over_budget = false;  // even min_depth's estimate exceeds the budget (the point term alone may)
   double estimated_mb = 0;   // at the chosen depth
   size_t occupied_cells = 0;
-  // > 0: the points are averaged in the cells of this depth (depth + 1) first, leaving `averaged_points`.
+  // > 0: the points are averaged in the cells of this depth (depth + 2 or + 1) first, leaving `averaged_points`.
   int average_depth = 0;
   size_t averaged_points = 0;
 };
 
 // The finest depth from `wanted` down to `min_depth` whose estimate fits `budget_mb`, with every point or, when
-// that does not fit, with the points averaged in half cells; `cells_at(depth)` counts the occupied cells
+// that does not fit, with the points averaged in quarter or half cells; `cells_at(depth)` counts the occupied cells
 // (OccupiedCells). At min_depth, averaged when that helps, when none fits (over_budget). budget_mb <= 0:
 // `wanted`, unchecked.
 PoissonDepthChoice ChoosePoissonDepth(int wanted, int min_depth, size_t points, double cloud_bytes, double budget_mb,
