@@ -197,11 +197,11 @@ double WorstRadiusError(const ColoredMesh& mesh) {
 // wanted depth's estimate averages the points instead (same depth, as accurate); one below that gives a coarser
 // depth, reported.
 TEST(PoissonBudget, ReconstructionRespectsTheBudget) {
-  const auto cloud = Sphere(200000);
+  const auto cloud = Sphere(50000);
   PoissonOptions opt;
   opt.kind = SurfaceKind::kWatertight;
-  opt.min_depth = 4;
-  opt.depth = 6;  // cells ~4x the point spacing: ~10 points per half cell
+  opt.min_depth = 3;
+  opt.depth = 5;  // cells ~4x the point spacing: ~4 points per half cell
   nlohmann::json free_stats, default_stats, tight_stats;
   opt.max_memory_mb = 0;
   const ColoredMesh free_mesh = ReconstructPoisson(cloud, opt, &free_stats);
@@ -225,9 +225,9 @@ TEST(PoissonBudget, ReconstructionRespectsTheBudget) {
     const ColoredMesh mesh = ReconstructPoisson(cloud, opt, &tight_stats);
     ASSERT_FALSE(mesh.empty());
     EXPECT_LE(tight_stats["memory"]["estimated_mb"].get<double>(), budget);
-    if (tight_stats["depth"] != 6) break;
+    if (tight_stats["depth"] != 5) break;
     const int average = tight_stats["memory"]["averaged_in_depth"];
-    ASSERT_GT(average, 6);
+    ASSERT_GT(average, 5);
     averaged_in.push_back(average);
     const size_t solver_points = tight_stats["solver_points"];
     EXPECT_EQ(solver_points, OccupiedCells(cloud.positions, box, average));
@@ -237,9 +237,9 @@ TEST(PoissonBudget, ReconstructionRespectsTheBudget) {
   }
   ASSERT_FALSE(averaged_in.empty());
   EXPECT_TRUE(std::is_sorted(averaged_in.rbegin(), averaged_in.rend()));
-  EXPECT_EQ(averaged_in.back(), 7);
-  EXPECT_EQ(tight_stats["depth"], 5);
-  EXPECT_EQ(tight_stats["memory"]["depth_wanted"], 6);
+  EXPECT_EQ(averaged_in.back(), 6);
+  EXPECT_EQ(tight_stats["depth"], 4);
+  EXPECT_EQ(tight_stats["memory"]["depth_wanted"], 5);
   EXPECT_EQ(tight_stats["memory"]["lowered_by_budget"], true);
   EXPECT_NEAR(tight_stats["cell_width"].get<double>(), 2 * free_stats["cell_width"].get<double>(),
               0.02 * free_stats["cell_width"].get<double>());
