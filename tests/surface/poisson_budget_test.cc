@@ -147,7 +147,7 @@ TEST(PoissonBudget, AveragesThePointsBeforeLoweringTheDepth) {
 TEST(PoissonBudget, AverageInCellsMergesEachCellsPoints) {
   io::OrientedPointCloud c;
   // Box 0..10 (cube 11, centred: origin -0.5); depth 1 → cells of 5.5 split at x = 5.
-  auto add = [&](Eigen::Vector3d p, Eigen::Vector3f n, io::Rgb8 rgb) {
+  auto add = [&](const Eigen::Vector3d& p, const Eigen::Vector3f& n, const io::Rgb8& rgb) {
     c.positions.push_back(p);
     c.normals.push_back(n);
     c.colors.push_back(rgb);
