@@ -10,6 +10,7 @@
 #include "fmv3d/core/error.h"
 #include "fmv3d/core/logging.h"
 #include "fmv3d/core/threading.h"
+#include "fmv3d/io/huge_pages.h"
 
 namespace fmv3d::app {
 
@@ -30,6 +31,7 @@ int main(int argc, char** argv) {
   // A file-size limit (RLIMIT_FSIZE) then fails the write with EFBIG, which the writers report, instead of
   // killing the process without a word.
   std::signal(SIGXFSZ, SIG_IGN);
+  io::UseHugePagesForLargeMatrices();
   CLI::App app{"fmv3d: 3D terrain and target models from UAV full-motion video and photos", "fmv3d"};
   app.set_version_flag("--version", std::string("fmv3d ") + FMV3D_VERSION);
   app.require_subcommand(0, 1);

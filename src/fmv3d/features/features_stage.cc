@@ -150,11 +150,14 @@ FeaturesStageStats RunFeaturesStage(const core::Workspace& ws, const SiftOptions
   PlanStats(plans, budget, &stats);
   MemoryGate gate(budget);
 
-  // Parallelism is over images; OpenCV's own parallel_for inside SIFT would oversubscribe the cores.
+  // Parallelism is over images; OpenCV's own parallel_for inside SIFT would oversubscribe the cores. When the
+  // budget lets one image in at a time (large photos), the images run in turn and OpenCV's threads work inside
+  // each (its parallel parts: the difference of Gaussians, the extrema search, the descriptors).
   const int cv_threads = cv::getNumThreads();
-  cv::setNumThreads(1);
+  const bool one_at_a_time = stats.workers <= 1;
+  cv::setNumThreads(one_at_a_time ? cv_threads : 1);
   core::Progress progress("features", n);
-  tbb::parallel_for(size_t{0}, n, [&](size_t i) {
+  auto extract = [&](size_t i) {
     const auto& frame = index.frames[i];
     const fs::path image_path = frames_dir / frame.name, out_path = FeaturePath(features_dir, frame.name);
     ImageResult& r = results[i];
@@ -173,7 +176,12 @@ FeaturesStageStats RunFeaturesStage(const core::Workspace& ws, const SiftOptions
       r.error = e.what();
     }
     progress.Add();
-  });
+  };
+  if (one_at_a_time) {
+    for (size_t i = 0; i < n; ++i) extract(i);
+  } else {
+    tbb::parallel_for(size_t{0}, n, extract);
+  }
   progress.Finish();
   cv::setNumThreads(cv_threads);
   for (const auto& r : results)
