@@ -28,6 +28,9 @@ void Add(CLI::App& app) {
       ->capture_default_str();
   cmd->add_option("--iterations", o.patch_match.iterations, "PatchMatch rounds (photometric pass)")
       ->capture_default_str();
+  cmd->add_option("--fine-iterations", o.patch_match.fine_iterations,
+                  "PatchMatch rounds at full resolution after the half-resolution pass")
+      ->capture_default_str();
   cmd->add_option("--geom-iterations", o.patch_match.geom_iterations, "PatchMatch rounds of the geometric pass")
       ->capture_default_str();
   cmd->add_option("--window-radius", o.patch_match.window_radius, "NCC patch half-size, pixels")->capture_default_str();

@@ -12,6 +12,10 @@
 #ifdef __SSE2__
 #include <emmintrin.h>
 #endif
+#if defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__))
+#include <immintrin.h>
+#define FMV3D_PM_AVX2 1
+#endif
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 
@@ -42,6 +46,12 @@ inline V4f Load4(const float* p) {
 }
 inline V4f Splat(float f) { return V4f{f, f, f, f}; }
 inline float Sum4(V4f v) { return (v[0] + v[1]) + (v[2] + v[3]); }
+#ifdef FMV3D_PM_AVX2
+// All ones in lanes 4..7.
+__attribute__((target("avx2,fma"))) inline __m256 kHighHalf() {
+  return _mm256_castsi256_ps(_mm256_set_epi32(-1, -1, -1, -1, 0, 0, 0, 0));
+}
+#endif
 
 // The 3 × 3 algebra of the cost, written out on the coefficients: clang's sanitizer build leaves Eigen's
 // expression templates there as out-of-line calls (a quarter of the dense tests' time under ASan). Each sum keeps
@@ -103,8 +113,8 @@ struct Level {
 // The reference side of the NCC, once per pixel update: bilateral weights w (normalised to sum 1) and
 // wr = w·(v − mean)/σ, so that NCC = Σ wr·s / σ_s for source samples s. Padding lanes have w = wr = 0.
 struct RefPatch {
-  alignas(16) float w[kMaxSamples];
-  alignas(16) float wr[kMaxSamples];
+  alignas(32) float w[kMaxSamples];
+  alignas(32) float wr[kMaxSamples];
 };
 
 class Solver {
@@ -125,6 +135,7 @@ class Solver {
     inv_2sc2_ = static_cast<float>(1.0 / (2 * opt.sigma_color * opt.sigma_color));
     // Sample offsets from the patch's top-left sample, padded to whole groups of kLanes with copies of the
     // first sample (weight 0).
+    use_avx2_ = opt.use_avx2 && Avx2KernelAvailable();
     n_padded_ = (n_samples_ + kLanes - 1) / kLanes * kLanes;
     for (int k = 0; k < kMaxSamples; ++k) {
       const int kk = k < n_samples_ ? k : 0;
@@ -273,6 +284,108 @@ class Solver {
     return std::clamp(1.f - ncc, 0.f, kMaxCost);
   }
 
+#ifdef FMV3D_PM_AVX2
+  // Ncc on 8 lanes: the same samples, positions and bilinear interpolation, with a 4-lane group for the rest (25
+  // samples: 3 × 8 + 4, as Ncc's 7 × 4). Compiled for AVX2 and FMA whatever the build's target and used only on
+  // CPUs that have them. The sums are grouped differently, so costs differ from Ncc's in the last bits.
+  __attribute__((target("avx2,fma"), noinline)) float NccAvx2(const RefPatch& rp, int x, int y,
+                                                              const Eigen::Matrix3f& H, const Source& s) const {
+    const float u0 = static_cast<float>(x - radius_) + 0.5f, v0 = static_cast<float>(y - radius_) + 0.5f;
+    const float* h = H.data();  // column-major
+    const float oz = h[2] * u0 + (h[5] * v0 + h[8]);
+    const float ox = h[0] * u0 + (h[3] * v0 + h[6]) - 0.5f * oz, oy = h[1] * u0 + (h[4] * v0 + h[7]) - 0.5f * oz;
+    // Pixel centres at +0.5: fx = u/z − 0.5 = (u − 0.5 z)/z, folded into the rows.
+    const float hx0 = h[0] - 0.5f * h[2], hy0 = h[1] - 0.5f * h[2], hx1 = h[3] - 0.5f * h[5], hy1 = h[4] - 0.5f * h[5];
+    const int n8 = n_padded_ / 8 * 8;
+    alignas(32) float fx[kMaxSamples], fy[kMaxSamples];
+    {
+      const __m256 Ox = _mm256_set1_ps(ox), Oy = _mm256_set1_ps(oy), Oz = _mm256_set1_ps(oz);
+      const __m256 Hx0 = _mm256_set1_ps(hx0), Hy0 = _mm256_set1_ps(hy0), Hz0 = _mm256_set1_ps(h[2]);
+      const __m256 Hx1 = _mm256_set1_ps(hx1), Hy1 = _mm256_set1_ps(hy1), Hz1 = _mm256_set1_ps(h[5]);
+      const __m256 wmax = _mm256_set1_ps(static_cast<float>(s.w - 1)),
+                   hmax = _mm256_set1_ps(static_cast<float>(s.h - 1)), zero = _mm256_setzero_ps();
+      __m256 ok = _mm256_castsi256_ps(_mm256_set1_epi32(-1));
+      for (int k = 0; k < n_padded_; k += 8) {  // reads past n_padded_ stay inside off_x_ (kMaxSamples)
+        const __m256 dx = _mm256_load_ps(&off_x_[k]), dy = _mm256_load_ps(&off_y_[k]);
+        const __m256 z = _mm256_fmadd_ps(dy, Hz1, _mm256_fmadd_ps(dx, Hz0, Oz));
+        const __m256 px = _mm256_div_ps(_mm256_fmadd_ps(dy, Hx1, _mm256_fmadd_ps(dx, Hx0, Ox)), z);
+        const __m256 py = _mm256_div_ps(_mm256_fmadd_ps(dy, Hy1, _mm256_fmadd_ps(dx, Hy0, Oy)), z);
+        // Ordered comparisons: false for NaN.
+        const __m256 in = _mm256_and_ps(
+            _mm256_and_ps(_mm256_cmp_ps(z, zero, _CMP_GT_OQ),
+                          _mm256_and_ps(_mm256_cmp_ps(px, zero, _CMP_GE_OQ), _mm256_cmp_ps(py, zero, _CMP_GE_OQ))),
+            _mm256_and_ps(_mm256_cmp_ps(px, wmax, _CMP_LT_OQ), _mm256_cmp_ps(py, hmax, _CMP_LT_OQ)));
+        // The last group may hold 4 lanes beyond n_padded_: they do not count.
+        ok = _mm256_and_ps(ok, k + 8 <= n_padded_ ? in : _mm256_or_ps(in, kHighHalf()));
+        _mm256_store_ps(&fx[k], px);
+        _mm256_store_ps(&fy[k], py);
+      }
+      if (_mm256_movemask_ps(ok) != 0xff) return kMaxCost;
+    }
+    const float* row0 = s.img;
+    const float* row1 = s.img + s.stride;
+    const int stride = static_cast<int>(s.stride);
+    // Each lane's two horizontal neighbours are adjacent floats: one 64-bit load per row and lane (faster than
+    // AVX2's gathers on the CPUs measured), then a transpose.
+    auto pair = [](const float* row, int a, int b) {
+      return _mm_loadh_pi(_mm_loadl_pi(_mm_setzero_ps(), reinterpret_cast<const __m64*>(row + a)),
+                          reinterpret_cast<const __m64*>(row + b));
+    };
+    __m256 acc_s = _mm256_setzero_ps(), acc_ss = acc_s, acc_rs = acc_s;
+    for (int k = 0; k < n8; k += 8) {
+      const __m256 px = _mm256_load_ps(&fx[k]), py = _mm256_load_ps(&fy[k]);
+      const __m256i ix = _mm256_cvttps_epi32(px), iy = _mm256_cvttps_epi32(py);  // >= 0: floor
+      const __m256 ax = _mm256_sub_ps(px, _mm256_cvtepi32_ps(ix)), ay = _mm256_sub_ps(py, _mm256_cvtepi32_ps(iy));
+      alignas(32) int at[8];
+      _mm256_store_si256(reinterpret_cast<__m256i*>(at),
+                         _mm256_add_epi32(_mm256_mullo_epi32(iy, _mm256_set1_epi32(stride)), ix));
+      const __m256 top01 = _mm256_set_m128(pair(row0, at[4], at[5]), pair(row0, at[0], at[1]));
+      const __m256 top23 = _mm256_set_m128(pair(row0, at[6], at[7]), pair(row0, at[2], at[3]));
+      const __m256 bot01 = _mm256_set_m128(pair(row1, at[4], at[5]), pair(row1, at[0], at[1]));
+      const __m256 bot23 = _mm256_set_m128(pair(row1, at[6], at[7]), pair(row1, at[2], at[3]));
+      const __m256 t0 = _mm256_shuffle_ps(top01, top23, _MM_SHUFFLE(2, 0, 2, 0));
+      const __m256 t1 = _mm256_shuffle_ps(top01, top23, _MM_SHUFFLE(3, 1, 3, 1));
+      const __m256 b0 = _mm256_shuffle_ps(bot01, bot23, _MM_SHUFFLE(2, 0, 2, 0));
+      const __m256 b1 = _mm256_shuffle_ps(bot01, bot23, _MM_SHUFFLE(3, 1, 3, 1));
+      const __m256 top = _mm256_fmadd_ps(ax, _mm256_sub_ps(t1, t0), t0);
+      const __m256 bot = _mm256_fmadd_ps(ax, _mm256_sub_ps(b1, b0), b0);
+      const __m256 v = _mm256_fmadd_ps(ay, _mm256_sub_ps(bot, top), top);
+      const __m256 wv = _mm256_mul_ps(_mm256_load_ps(&rp.w[k]), v);
+      acc_s = _mm256_add_ps(acc_s, wv);
+      acc_ss = _mm256_fmadd_ps(wv, v, acc_ss);
+      acc_rs = _mm256_fmadd_ps(_mm256_load_ps(&rp.wr[k]), v, acc_rs);
+    }
+    __m128 s4 = _mm_add_ps(_mm256_castps256_ps128(acc_s), _mm256_extractf128_ps(acc_s, 1));
+    __m128 ss4 = _mm_add_ps(_mm256_castps256_ps128(acc_ss), _mm256_extractf128_ps(acc_ss, 1));
+    __m128 rs4 = _mm_add_ps(_mm256_castps256_ps128(acc_rs), _mm256_extractf128_ps(acc_rs, 1));
+    if (n8 < n_padded_) {  // one group of 4
+      const __m128 px = _mm_load_ps(&fx[n8]), py = _mm_load_ps(&fy[n8]);
+      const __m128i ix = _mm_cvttps_epi32(px), iy = _mm_cvttps_epi32(py);
+      const __m128 ax = _mm_sub_ps(px, _mm_cvtepi32_ps(ix)), ay = _mm_sub_ps(py, _mm_cvtepi32_ps(iy));
+      alignas(16) int at[4];
+      _mm_store_si128(reinterpret_cast<__m128i*>(at), _mm_add_epi32(_mm_mullo_epi32(iy, _mm_set1_epi32(stride)), ix));
+      const __m128 top01 = pair(row0, at[0], at[1]), top23 = pair(row0, at[2], at[3]);
+      const __m128 bot01 = pair(row1, at[0], at[1]), bot23 = pair(row1, at[2], at[3]);
+      const __m128 t0 = _mm_shuffle_ps(top01, top23, _MM_SHUFFLE(2, 0, 2, 0));
+      const __m128 t1 = _mm_shuffle_ps(top01, top23, _MM_SHUFFLE(3, 1, 3, 1));
+      const __m128 b0 = _mm_shuffle_ps(bot01, bot23, _MM_SHUFFLE(2, 0, 2, 0));
+      const __m128 b1 = _mm_shuffle_ps(bot01, bot23, _MM_SHUFFLE(3, 1, 3, 1));
+      const __m128 top = _mm_fmadd_ps(ax, _mm_sub_ps(t1, t0), t0);
+      const __m128 bot = _mm_fmadd_ps(ax, _mm_sub_ps(b1, b0), b0);
+      const __m128 v = _mm_fmadd_ps(ay, _mm_sub_ps(bot, top), top);
+      const __m128 wv = _mm_mul_ps(_mm_load_ps(&rp.w[n8]), v);
+      s4 = _mm_add_ps(s4, wv);
+      ss4 = _mm_fmadd_ps(wv, v, ss4);
+      rs4 = _mm_fmadd_ps(_mm_load_ps(&rp.wr[n8]), v, rs4);
+    }
+    const float sw_s = Sum4(s4);
+    const float var_s = std::max(Sum4(ss4) - sw_s * sw_s, 0.f);
+    constexpr float kEps = 1e-6f;
+    const float ncc = Sum4(rs4) / std::sqrt(std::max(var_s, kEps));
+    return std::clamp(1.f - ncc, 0.f, kMaxCost);
+  }
+#endif
+
   // Forward–backward reprojection error (pixels) of the reference point X through source s's depth map.
   float ReprojectionError(int x, int y, const Eigen::Vector3f& X, const Source& s) const {
     const float maxe = static_cast<float>(opt_.geom_max_error_px);
@@ -313,9 +426,11 @@ class Solver {
     const int ns = static_cast<int>(std::min<size_t>(L_.sources.size(), 16));
     const int k = std::max(1, std::min(opt_.top_k, ns));
     // totals[] holds each source's lower bound until it is scored.
+    bool zero_bounds = true;
     for (int i = 0; i < ns; ++i) {
       const Source& s = L_.sources[i];
       totals[i] = s.map ? static_cast<float>(opt_.geom_weight) * ReprojectionError(x, y, X, s) : 0.f;
+      zero_bounds = zero_bounds && totals[i] == 0.f;
     }
     // Sum of the k smallest totals, in ascending order (order[] gets their indices); insertion sort, ns <= 16.
     auto k_smallest_sum = [&](int* order) {
@@ -334,10 +449,16 @@ class Solver {
       Eigen::Matrix3f H;  // A + b nKinvᵀ
       for (int col = 0; col < 3; ++col)
         for (int row = 0; row < 3; ++row) H.data()[3 * col + row] = s.A.data()[3 * col + row] + s.b[row] * nKinv[col];
+#ifdef FMV3D_PM_AVX2
+      costs[i] = use_avx2_ ? NccAvx2(rp, x, y, H, s) : Ncc(rp, x, y, H, s);
+#else
       costs[i] = Ncc(rp, x, y, H, s);
+#endif
       PMC(g_ncc_calls);
       totals[i] += costs[i];
-      if (i + 1 < ns && k_smallest_sum(order) / static_cast<float>(k) >= bound) {
+      // With k or more sources still at a lower bound of 0, the k smallest sum to 0: no sort needed.
+      const bool zeros_fill_k = zero_bounds && ns - (i + 1) >= k;
+      if (i + 1 < ns && (zeros_fill_k ? 0.f >= bound : k_smallest_sum(order) / static_cast<float>(k) >= bound)) {
         PMC(g_pruned);
         return bound;
       }
@@ -484,7 +605,8 @@ class Solver {
   float dmin_, dmax_;
   uint64_t seed_;
   int side_ = 0, n_samples_ = 0, n_padded_ = 0, radius_ = 0;
-  alignas(16) float off_x_[kMaxSamples], off_y_[kMaxSamples];
+  bool use_avx2_ = false;  // 8-lane NCC (NccAvx2) on CPUs that have AVX2 and FMA
+  alignas(32) float off_x_[kMaxSamples], off_y_[kMaxSamples];
   // Change tracking for propagation: colour passes are numbered from 1; changed_[i] is the pass in which
   // pixel i's plane last changed (0: initial plane), updated_[i] the pass of its last update (0: none yet).
   int pass_ = 0;
@@ -546,6 +668,15 @@ Level MakeLevel(const PatchMatchInput& in, double factor) {
 }
 
 }  // namespace
+
+bool Avx2KernelAvailable() {
+#ifdef FMV3D_PM_AVX2
+  static const bool available = __builtin_cpu_supports("avx2") && __builtin_cpu_supports("fma");
+  return available;
+#else
+  return false;
+#endif
+}
 
 void PatchMatchOptions::Check() const {
   if (window_radius < 1 || window_step < 1 || window_step > window_radius)

@@ -40,6 +40,9 @@ struct PatchMatchOptions {
   bool coarse_to_fine = true;  // first solve at half resolution and upsample (faster convergence)
   int coarse_min_size = 320;   // no coarse level when the view's longer side is below this
   uint64_t seed = 0;
+  // The NCC on 8 lanes where the CPU has AVX2 and FMA: the same cost as the 4-lane kernel up to float rounding
+  // (the sums are grouped differently), so maps differ from it only where rounding flips a choice.
+  bool use_avx2 = true;
   void Check() const;
 };
 
@@ -58,6 +61,9 @@ struct PatchMatchStats {
   double seconds = 0;
   int valid_pixels = 0;
 };
+
+// Whether this build and CPU run the 8-lane NCC (PatchMatchOptions::use_avx2).
+bool Avx2KernelAvailable();
 
 // Throws fmv3d::Error when the input is inconsistent (no sources, empty depth range).
 DepthMap RunPatchMatch(const PatchMatchInput& input, const PatchMatchOptions& options,
