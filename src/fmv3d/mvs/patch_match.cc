@@ -407,6 +407,16 @@ class Solver {
     return std::min(std::sqrt(ex * ex + ey * ey), maxe);
   }
 
+  // False when the k smallest of totals[0..ns) cannot average `bound` or more: k totals of the sources from
+  // `scored` on (still at their lower bounds) sum, with a margin for rounding, below k · bound. Saves the sort in
+  // most tests; when it returns true the exact test decides.
+  static bool MayReach(const float* totals, int scored, int ns, int k, float bound) {
+    if (ns - scored < k) return true;
+    float sum = 0;
+    for (int j = scored; j < scored + k; ++j) sum += totals[j];
+    return !(sum < 0.9999f * static_cast<float>(k) * bound);
+  }
+
   // Aggregated cost of plane (depth d, normal n) at pixel (x, y); *photo gets the photometric part.
   // Early termination: the result only matters when it is below `bound` (the pixel's best so far). After each
   // source, the mean of the k smallest of {totals so far} ∪ {lower bounds of the sources not yet scored} is a
@@ -426,11 +436,9 @@ class Solver {
     const int ns = static_cast<int>(std::min<size_t>(L_.sources.size(), 16));
     const int k = std::max(1, std::min(opt_.top_k, ns));
     // totals[] holds each source's lower bound until it is scored.
-    bool zero_bounds = true;
     for (int i = 0; i < ns; ++i) {
       const Source& s = L_.sources[i];
       totals[i] = s.map ? static_cast<float>(opt_.geom_weight) * ReprojectionError(x, y, X, s) : 0.f;
-      zero_bounds = zero_bounds && totals[i] == 0.f;
     }
     // Sum of the k smallest totals, in ascending order (order[] gets their indices); insertion sort, ns <= 16.
     auto k_smallest_sum = [&](int* order) {
@@ -456,9 +464,8 @@ class Solver {
 #endif
       PMC(g_ncc_calls);
       totals[i] += costs[i];
-      // With k or more sources still at a lower bound of 0, the k smallest sum to 0: no sort needed.
-      const bool zeros_fill_k = zero_bounds && ns - (i + 1) >= k;
-      if (i + 1 < ns && (zeros_fill_k ? 0.f >= bound : k_smallest_sum(order) / static_cast<float>(k) >= bound)) {
+      if (i + 1 < ns && MayReach(totals, i + 1, ns, k, bound) &&
+          k_smallest_sum(order) / static_cast<float>(k) >= bound) {
         PMC(g_pruned);
         return bound;
       }

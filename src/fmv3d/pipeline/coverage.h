@@ -23,6 +23,10 @@
 #include "fmv3d/io/mesh.h"
 #include "fmv3d/io/point_cloud.h"
 
+namespace fmv3d::render {
+class Renderer;
+}
+
 namespace fmv3d::pipeline {
 
 // Sky: pixels connected to the top border through smooth (grey gradient below `max_gradient`, 0..1 grey per
@@ -54,6 +58,11 @@ struct CoverageMaps {
 ViewCoverage ComputeViewCoverage(const cv::Mat& frame, const core::Camera& camera, const core::Pose& pose,
                                  const io::TexturedMesh* mesh, const io::OrientedPointCloud* cloud,
                                  double point_spacing, CoverageMaps* maps = nullptr);
+// The same through a renderer of the mesh that the caller builds once for many views (null: no mesh). Only depth
+// is rendered, so a renderer of the mesh without its textures is enough.
+ViewCoverage ComputeViewCoverageWith(const cv::Mat& frame, const core::Camera& camera, const core::Pose& pose,
+                                     const render::Renderer* mesh, const io::OrientedPointCloud* cloud,
+                                     double point_spacing, CoverageMaps* maps = nullptr);
 
 struct CoverageReport {
   std::vector<ViewCoverage> views;  // by image id
