@@ -47,10 +47,6 @@ inline V4f Load4(const float* p) {
 inline V4f Splat(float f) { return V4f{f, f, f, f}; }
 inline float Sum4(V4f v) { return (v[0] + v[1]) + (v[2] + v[3]); }
 #ifdef FMV3D_PM_AVX2
-// All ones in lanes 4..7.
-__attribute__((target("avx2,fma"))) inline __m256 kHighHalf() {
-  return _mm256_castsi256_ps(_mm256_set_epi32(-1, -1, -1, -1, 0, 0, 0, 0));
-}
 #endif
 
 // The 3 × 3 algebra of the cost, written out on the coefficients: clang's sanitizer build leaves Eigen's
@@ -133,10 +129,11 @@ class Solver {
         spatial_[j * side_ + i] = -(dx * dx + dy * dy) / static_cast<float>(2 * opt.sigma_spatial * opt.sigma_spatial);
       }
     inv_2sc2_ = static_cast<float>(1.0 / (2 * opt.sigma_color * opt.sigma_color));
-    // Sample offsets from the patch's top-left sample, padded to whole groups of kLanes with copies of the
-    // first sample (weight 0).
+    // Sample offsets from the patch's top-left sample, padded to whole groups of the kernel's lanes with copies of
+    // the first sample (weight 0).
     use_avx2_ = opt.use_avx2 && Avx2KernelAvailable();
-    n_padded_ = (n_samples_ + kLanes - 1) / kLanes * kLanes;
+    const int group = use_avx2_ ? 2 * kLanes : kLanes;
+    n_padded_ = (n_samples_ + group - 1) / group * group;
     for (int k = 0; k < kMaxSamples; ++k) {
       const int kk = k < n_samples_ ? k : 0;
       const int row = kk / side_, col = kk % side_;  // the window's sample grid, row-major
@@ -285,9 +282,10 @@ class Solver {
   }
 
 #ifdef FMV3D_PM_AVX2
-  // Ncc on 8 lanes: the same samples, positions and bilinear interpolation, with a 4-lane group for the rest (25
-  // samples: 3 × 8 + 4, as Ncc's 7 × 4). Compiled for AVX2 and FMA whatever the build's target and used only on
-  // CPUs that have them. The sums are grouped differently, so costs differ from Ncc's in the last bits.
+  // Ncc on 8 lanes: the same samples, positions and bilinear interpolation (25 samples padded to 32 with weight 0;
+  // a 4-lane tail for the last group measured no faster). Compiled for AVX2 and FMA whatever the build's target
+  // and used only on CPUs that have them. The sums are grouped differently, so costs differ from Ncc's in the last
+  // bits.
   __attribute__((target("avx2,fma"), noinline)) float NccAvx2(const RefPatch& rp, int x, int y,
                                                               const Eigen::Matrix3f& H, const Source& s) const {
     const float u0 = static_cast<float>(x - radius_) + 0.5f, v0 = static_cast<float>(y - radius_) + 0.5f;
@@ -296,7 +294,6 @@ class Solver {
     const float ox = h[0] * u0 + (h[3] * v0 + h[6]) - 0.5f * oz, oy = h[1] * u0 + (h[4] * v0 + h[7]) - 0.5f * oz;
     // Pixel centres at +0.5: fx = u/z − 0.5 = (u − 0.5 z)/z, folded into the rows.
     const float hx0 = h[0] - 0.5f * h[2], hy0 = h[1] - 0.5f * h[2], hx1 = h[3] - 0.5f * h[5], hy1 = h[4] - 0.5f * h[5];
-    const int n8 = n_padded_ / 8 * 8;
     alignas(32) float fx[kMaxSamples], fy[kMaxSamples];
     {
       const __m256 Ox = _mm256_set1_ps(ox), Oy = _mm256_set1_ps(oy), Oz = _mm256_set1_ps(oz);
@@ -305,7 +302,7 @@ class Solver {
       const __m256 wmax = _mm256_set1_ps(static_cast<float>(s.w - 1)),
                    hmax = _mm256_set1_ps(static_cast<float>(s.h - 1)), zero = _mm256_setzero_ps();
       __m256 ok = _mm256_castsi256_ps(_mm256_set1_epi32(-1));
-      for (int k = 0; k < n_padded_; k += 8) {  // reads past n_padded_ stay inside off_x_ (kMaxSamples)
+      for (int k = 0; k < n_padded_; k += 8) {
         const __m256 dx = _mm256_load_ps(&off_x_[k]), dy = _mm256_load_ps(&off_y_[k]);
         const __m256 z = _mm256_fmadd_ps(dy, Hz1, _mm256_fmadd_ps(dx, Hz0, Oz));
         const __m256 px = _mm256_div_ps(_mm256_fmadd_ps(dy, Hx1, _mm256_fmadd_ps(dx, Hx0, Ox)), z);
@@ -315,8 +312,7 @@ class Solver {
             _mm256_and_ps(_mm256_cmp_ps(z, zero, _CMP_GT_OQ),
                           _mm256_and_ps(_mm256_cmp_ps(px, zero, _CMP_GE_OQ), _mm256_cmp_ps(py, zero, _CMP_GE_OQ))),
             _mm256_and_ps(_mm256_cmp_ps(px, wmax, _CMP_LT_OQ), _mm256_cmp_ps(py, hmax, _CMP_LT_OQ)));
-        // The last group may hold 4 lanes beyond n_padded_: they do not count.
-        ok = _mm256_and_ps(ok, k + 8 <= n_padded_ ? in : _mm256_or_ps(in, kHighHalf()));
+        ok = _mm256_and_ps(ok, in);
         _mm256_store_ps(&fx[k], px);
         _mm256_store_ps(&fy[k], py);
       }
@@ -332,7 +328,7 @@ class Solver {
                           reinterpret_cast<const __m64*>(row + b));
     };
     __m256 acc_s = _mm256_setzero_ps(), acc_ss = acc_s, acc_rs = acc_s;
-    for (int k = 0; k < n8; k += 8) {
+    for (int k = 0; k < n_padded_; k += 8) {
       const __m256 px = _mm256_load_ps(&fx[k]), py = _mm256_load_ps(&fy[k]);
       const __m256i ix = _mm256_cvttps_epi32(px), iy = _mm256_cvttps_epi32(py);  // >= 0: floor
       const __m256 ax = _mm256_sub_ps(px, _mm256_cvtepi32_ps(ix)), ay = _mm256_sub_ps(py, _mm256_cvtepi32_ps(iy));
@@ -355,29 +351,9 @@ class Solver {
       acc_ss = _mm256_fmadd_ps(wv, v, acc_ss);
       acc_rs = _mm256_fmadd_ps(_mm256_load_ps(&rp.wr[k]), v, acc_rs);
     }
-    __m128 s4 = _mm_add_ps(_mm256_castps256_ps128(acc_s), _mm256_extractf128_ps(acc_s, 1));
-    __m128 ss4 = _mm_add_ps(_mm256_castps256_ps128(acc_ss), _mm256_extractf128_ps(acc_ss, 1));
-    __m128 rs4 = _mm_add_ps(_mm256_castps256_ps128(acc_rs), _mm256_extractf128_ps(acc_rs, 1));
-    if (n8 < n_padded_) {  // one group of 4
-      const __m128 px = _mm_load_ps(&fx[n8]), py = _mm_load_ps(&fy[n8]);
-      const __m128i ix = _mm_cvttps_epi32(px), iy = _mm_cvttps_epi32(py);
-      const __m128 ax = _mm_sub_ps(px, _mm_cvtepi32_ps(ix)), ay = _mm_sub_ps(py, _mm_cvtepi32_ps(iy));
-      alignas(16) int at[4];
-      _mm_store_si128(reinterpret_cast<__m128i*>(at), _mm_add_epi32(_mm_mullo_epi32(iy, _mm_set1_epi32(stride)), ix));
-      const __m128 top01 = pair(row0, at[0], at[1]), top23 = pair(row0, at[2], at[3]);
-      const __m128 bot01 = pair(row1, at[0], at[1]), bot23 = pair(row1, at[2], at[3]);
-      const __m128 t0 = _mm_shuffle_ps(top01, top23, _MM_SHUFFLE(2, 0, 2, 0));
-      const __m128 t1 = _mm_shuffle_ps(top01, top23, _MM_SHUFFLE(3, 1, 3, 1));
-      const __m128 b0 = _mm_shuffle_ps(bot01, bot23, _MM_SHUFFLE(2, 0, 2, 0));
-      const __m128 b1 = _mm_shuffle_ps(bot01, bot23, _MM_SHUFFLE(3, 1, 3, 1));
-      const __m128 top = _mm_fmadd_ps(ax, _mm_sub_ps(t1, t0), t0);
-      const __m128 bot = _mm_fmadd_ps(ax, _mm_sub_ps(b1, b0), b0);
-      const __m128 v = _mm_fmadd_ps(ay, _mm_sub_ps(bot, top), top);
-      const __m128 wv = _mm_mul_ps(_mm_load_ps(&rp.w[n8]), v);
-      s4 = _mm_add_ps(s4, wv);
-      ss4 = _mm_fmadd_ps(wv, v, ss4);
-      rs4 = _mm_fmadd_ps(_mm_load_ps(&rp.wr[n8]), v, rs4);
-    }
+    const __m128 s4 = _mm_add_ps(_mm256_castps256_ps128(acc_s), _mm256_extractf128_ps(acc_s, 1));
+    const __m128 ss4 = _mm_add_ps(_mm256_castps256_ps128(acc_ss), _mm256_extractf128_ps(acc_ss, 1));
+    const __m128 rs4 = _mm_add_ps(_mm256_castps256_ps128(acc_rs), _mm256_extractf128_ps(acc_rs, 1));
     const float sw_s = Sum4(s4);
     const float var_s = std::max(Sum4(ss4) - sw_s * sw_s, 0.f);
     constexpr float kEps = 1e-6f;
