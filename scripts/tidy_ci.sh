@@ -66,7 +66,9 @@ if [[ $update -eq 1 ]]; then
     # Entries of files not checked now stay; the checked files get what they have now; deleted files go.
     awk '!/^#/ && $1 != "base"' "$baseline" | awk -F'\t' 'NR == FNR { drop[$0] = 1; next } !($2 in drop)' \
       <(printf '%s\n' "${changed[@]}") - | while IFS=$'\t' read -r n f c; do [[ -f "$f" ]] && printf '%s\t%s\t%s\n' "$n" "$f" "$c"; done
-    [[ -n "$found" ]] && echo "$found" | cut -f1,2 | sort | uniq -c | awk '{ printf "%s\t%s\t%s\n", $1, $2, $3 }'
+    if [[ -n "$found" ]]; then
+      echo "$found" | cut -f1,2 | sort | uniq -c | awk '{ printf "%s\t%s\t%s\n", $1, $2, $3 }'
+    fi
   } | awk '/^#/ || /^base / { print; next } { print | "sort -t\"\t\" -k2,2 -k3,3" }' >"$tmp"
   mv "$tmp" "$baseline"
   echo "tidy: baseline moved to $(git rev-parse --short HEAD), $(awk -F'\t' '!/^#/ && !/^base / { s += $1 } END { print s + 0 }' "$baseline") finding(s) allowed"
