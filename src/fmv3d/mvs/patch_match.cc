@@ -46,8 +46,6 @@ inline V4f Load4(const float* p) {
 }
 inline V4f Splat(float f) { return V4f{f, f, f, f}; }
 inline float Sum4(V4f v) { return (v[0] + v[1]) + (v[2] + v[3]); }
-#ifdef FMV3D_PM_AVX2
-#endif
 
 // The 3 × 3 algebra of the cost, written out on the coefficients: clang's sanitizer build leaves Eigen's
 // expression templates there as out-of-line calls (a quarter of the dense tests' time under ASan). Each sum keeps

@@ -214,6 +214,8 @@ CoverageReport ComputeWorkspaceCoverage(const fs::path& root, const CoverageOpti
   }
   const std::optional<render::Renderer> depth_renderer =
       has_mesh ? std::optional<render::Renderer>(std::in_place, geometry) : std::nullopt;
+  const render::Renderer* depth = depth_renderer ? &*depth_renderer : nullptr;
+  const io::OrientedPointCloud* points = cloud.empty() ? nullptr : &cloud;
   CoverageReport out;
   std::vector<double> mesh_shares, dense_shares;
   for (const auto& [id, im] : rec.images) {
@@ -224,8 +226,7 @@ CoverageReport ComputeWorkspaceCoverage(const fs::path& root, const CoverageOpti
     }
     const cv::Mat frame = io::ReadImage(frame_path);
     const core::Camera cam = rec.cameras.at(im.camera_id).FitWithin(options.max_size);
-    ViewCoverage vc = ComputeViewCoverageWith(frame, cam, im.pose, depth_renderer ? &*depth_renderer : nullptr,
-                                              cloud.empty() ? nullptr : &cloud, spacing);
+    ViewCoverage vc = ComputeViewCoverageWith(frame, cam, im.pose, depth, points, spacing);
     vc.image_id = id;
     vc.name = im.name;
     if (vc.mesh >= 0) mesh_shares.push_back(vc.mesh);
@@ -256,8 +257,7 @@ CoverageReport ComputeWorkspaceCoverage(const fs::path& root, const CoverageOpti
       if (frame.type() == CV_8UC1) cv::cvtColor(frame, frame, cv::COLOR_GRAY2BGR);
       cv::resize(frame, frame, cv::Size(cam.width, cam.height), 0, 0, cv::INTER_AREA);
       CoverageMaps maps;
-      ComputeViewCoverageWith(frame, cam, im.pose, depth_renderer ? &*depth_renderer : nullptr,
-                              cloud.empty() ? nullptr : &cloud, spacing, &maps);
+      ComputeViewCoverageWith(frame, cam, im.pose, depth, points, spacing, &maps);
       cv::Mat model(frame.size(), CV_8UC3, cv::Scalar(40, 32, 28));
       if (textured_renderer) {
         const render::Renderer& renderer = *textured_renderer;
