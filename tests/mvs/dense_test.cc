@@ -70,8 +70,9 @@ fs::path MakeWorkspace(const test::TempDir& dir, const Flight& flight) {
 // Relative depth error of a photometric map of the first view against the rendered truth, over the pixels that
 // at least two sources see. `relight` (if given) changes the source views' images before matching.
 struct DepthCheck {
-  int seen = 0, valid = 0, good = 0;  // good: within 1% of the true depth
-  double median = 1, p90 = 1;         // relative error of the valid pixels
+  int seen = 0, valid = 0, good = 0;     // good: within 1% of the true depth
+  int seen2 = 0, valid2 = 0, good2 = 0;  // the same over the pixels that exactly two sources see
+  double median = 1, p90 = 1;            // relative error of the valid pixels
 };
 
 // The small flight's first view and its (up to) 4 best sources by view selection, loaded; `relight` (if given)
@@ -150,9 +151,12 @@ DepthCheck CheckFirstViewDepth(const Relight& relight, const PatchMatchOptions& 
       }
       if (in_sources < 2) continue;
       ++c.seen;
+      c.seen2 += in_sources == 2;
       if (!(d > 0)) continue;
       ++c.valid;
       c.good += std::abs(d - t) <= 0.01f * t;
+      c.valid2 += in_sources == 2;
+      c.good2 += in_sources == 2 && std::abs(d - t) <= 0.01f * t;
       rel.push_back(std::abs(d - t) / t);
     }
   std::sort(rel.begin(), rel.end());
@@ -171,6 +175,18 @@ TEST(PatchMatch, DepthMatchesRenderedTruth) {
   EXPECT_GT(static_cast<double>(c.good) / c.valid, 0.53)
       << c.good << " of " << c.valid << " within 1% of the true depth; relative error median " << c.median << ", p90 "
       << c.p90;
+}
+
+// PatchMatch averages the best top_k (3) source costs per pixel. A pixel that only two of the four sources see
+// must still get its depth from those two: a source that cannot see the patch counts as uncorrelated, not as
+// the worst match (which failed every such pixel: most of a photo survey's surface, seen by 2-3 views).
+TEST(PatchMatch, PixelsThatOnlyTwoSourcesSeeGetTheirDepth) {
+  const DepthCheck c = CheckFirstViewDepth([](int, View*) {});
+  ASSERT_GT(c.seen2, 500);
+  // Measured: 99.5% of 31,591 such pixels valid, 86.9% of them within 1% of the true depth; with the worst
+  // cost for an unseeing source, 79% valid and 5.7% within 1%.
+  EXPECT_GT(static_cast<double>(c.valid2) / c.seen2, 0.9) << c.valid2 << " of " << c.seen2;
+  EXPECT_GT(static_cast<double>(c.good2) / c.valid2, 0.75) << c.good2 << " of " << c.valid2 << " within 1%";
 }
 
 // The 8-lane kernel scores planes as the 4-lane one does: the two maps are equally good.

@@ -35,6 +35,10 @@ std::atomic<long> g_cost_calls{0}, g_ncc_calls{0}, g_pruned{0}, g_trials{0}, g_d
 namespace {
 
 constexpr float kMaxCost = 2.0f;
+// A source that cannot see the whole patch (outside its image or behind it) says nothing about the plane: it
+// costs what uncorrelated patches cost (NCC 0). The worst cost instead made every pixel that fewer than top_k
+// sources see fail, whatever its match in the sources that do: most of a grid survey's surface.
+constexpr float kNoViewCost = 1.0f;
 constexpr int kMaxSamples = 64;  // (2·radius/step + 1)² for the allowed options, rounded up to kLanes
 constexpr int kLanes = 4;        // the NCC works on groups of 4 samples (SSE2 width; GCC/Clang vector types)
 using V4f = float __attribute__((vector_size(16)));
@@ -204,7 +208,7 @@ class Solver {
     for (int k = n_samples_; k < n_padded_; ++k) p->w[k] = p->wr[k] = 0;
   }
 
-  // 1 − weighted NCC of the reference patch against source s through homography H; kMaxCost when a sample
+  // 1 − weighted NCC of the reference patch against source s through homography H; kNoViewCost when a sample
   // falls outside the source image (or behind it). All sample positions are computed first, 4 at a time,
   // directly from H (no incremental drift), and bounds-tested together; then the bilinear samples are gathered
   // and accumulated 4 lanes at a time.
@@ -228,7 +232,7 @@ class Solver {
       __builtin_memcpy(&fx[k], &px, sizeof px);
       __builtin_memcpy(&fy[k], &py, sizeof py);
     }
-    if (!(ok[0] & ok[1] & ok[2] & ok[3])) return kMaxCost;
+    if (!(ok[0] & ok[1] & ok[2] & ok[3])) return kNoViewCost;
     V4f acc_s = zero, acc_ss = zero, acc_rs = zero;
     const size_t st = s.stride;
     for (int k = 0; k < n_padded_; k += kLanes) {
@@ -314,7 +318,7 @@ class Solver {
         _mm256_store_ps(&fx[k], px);
         _mm256_store_ps(&fy[k], py);
       }
-      if (_mm256_movemask_ps(ok) != 0xff) return kMaxCost;
+      if (_mm256_movemask_ps(ok) != 0xff) return kNoViewCost;
     }
     const float* row0 = s.img;
     const float* row1 = s.img + s.stride;

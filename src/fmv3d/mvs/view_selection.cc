@@ -47,6 +47,8 @@ void ViewSelectionOptions::Check() const {
   if (!(good_angle_deg > 0)) throw Error("view selection: good_angle_deg must be positive");
   if (!(far_parallax_px >= 0)) throw Error("view selection: far_parallax_px must be >= 0");
   if (!(max_far_factor >= 1)) throw Error("view selection: max_far_factor must be at least 1");
+  if (coverage_sources < 1) throw Error("view selection: coverage_sources must be at least 1");
+  if (!(coverage_score_weight >= 0)) throw Error("view selection: coverage_score_weight must be >= 0");
 }
 
 std::vector<uint32_t> SelectReferenceViews(const core::Reconstruction& rec,
@@ -189,7 +191,8 @@ bool SharesViewSelectionPoint(const ViewGeometry& ref, uint32_t src_id, const Vi
 // Source view src (nb->image_id) scored against the reference's points: each shared point within the angle
 // bounds adds its angle weight times its scale weight. False when src does not qualify as a neighbour.
 bool ScoreViewSelectionSource(const ViewGeometry& ref, const ViewGeometry& src, const ViewSelectionPoints& pts,
-                              const ViewSelectionOptions& options, Neighbour* nb) {
+                              const ViewSelectionOptions& options, Neighbour* nb,
+                              std::vector<std::pair<uint32_t, float>>* weights) {
   const Eigen::Vector3d cr = ref.Centre(), cj = src.Centre();
   const double fr = ref.K(1, 1), fj = src.K(1, 1);
   std::vector<double> angles;
@@ -204,11 +207,66 @@ bool ScoreViewSelectionSource(const ViewGeometry& ref, const ViewGeometry& src, 
     const double s = (a.norm() / fr) / (b.norm() / fj);
     const double w_scale = s < 1 ? s : (s > 2 ? 2 / s : 1.0);
     nb->score += w_angle * w_scale;
+    weights->emplace_back(static_cast<uint32_t>(k), static_cast<float>(w_angle * w_scale));
   }
   nb->shared_points = static_cast<int>(angles.size());
   if (nb->shared_points < options.min_shared_points || nb->score <= 0) return false;
   nb->median_angle_deg = Percentile(angles, 0.5) / kDeg;
   return nb->median_angle_deg >= options.min_angle_deg && nb->median_angle_deg <= options.max_angle_deg;
+}
+
+// The candidates ordered greedily: each next one maximises the part of the reference it covers, each point
+// weighted by its share of its image cell (the area counts, not the feature density) and by 1/(c + 1) while
+// c < coverage_sources chosen views cover it already (a first source where there is none counts most), plus
+// coverage_score_weight × its score relative to the best. Ranking
+// by score alone let a grid survey's best sources all overlap one corner of the reference: PatchMatch, which
+// averages the best few sources' costs per pixel, then matched the rest of the image against nothing.
+std::vector<Neighbour> OrderForCoverage(const ViewGeometry& ref, const ViewSelectionPoints& pts,
+                                        std::vector<Neighbour> cands,
+                                        const std::vector<std::vector<std::pair<uint32_t, float>>>& weights,
+                                        const ViewSelectionOptions& options) {
+  const size_t n = cands.size();
+  if (n < 2) return cands;
+  constexpr int kCells = 8;  // per image side
+  std::vector<int> cell(pts.xyz.size(), -1);
+  std::vector<int> per_cell(kCells * kCells, 0);
+  for (size_t k = 0; k < pts.xyz.size(); ++k) {
+    Eigen::Vector2d uv;
+    if (!ref.Project(pts.xyz[k], &uv)) continue;
+    const int cx = std::clamp(static_cast<int>(uv.x() * kCells / ref.width), 0, kCells - 1);
+    const int cy = std::clamp(static_cast<int>(uv.y() * kCells / ref.height), 0, kCells - 1);
+    cell[k] = cy * kCells + cx;
+    ++per_cell[cell[k]];
+  }
+  std::vector<double> area(pts.xyz.size(), 0);
+  double total_area = 0;
+  for (size_t k = 0; k < pts.xyz.size(); ++k)
+    if (cell[k] >= 0) total_area += area[k] = 1.0 / per_cell[cell[k]];
+  double best_score = 0;
+  for (const auto& c : cands) best_score = std::max(best_score, c.score);
+  if (!(total_area > 0) || !(best_score > 0)) return cands;
+  std::vector<int> cover(pts.xyz.size(), 0);
+  std::vector<bool> taken(n, false);
+  std::vector<Neighbour> out;
+  out.reserve(n);
+  while (out.size() < n) {
+    size_t best = n;
+    double best_gain = -1;
+    for (size_t j = 0; j < n; ++j) {
+      if (taken[j]) continue;
+      double gained = 0;
+      for (const auto& [k, w] : weights[j])
+        if (cover[k] < options.coverage_sources) gained += area[k] * w / (cover[k] + 1);
+      const double gain = gained / total_area + options.coverage_score_weight * cands[j].score / best_score;
+      if (gain > best_gain || (gain == best_gain && cands[j].image_id < cands[best].image_id))
+        best_gain = gain, best = j;
+    }
+    taken[best] = true;
+    for (const auto& [k, w] : weights[best])
+      if (w > 0) ++cover[k];
+    out.push_back(cands[best]);
+  }
+  return out;
 }
 
 // The neighbours and depth range of one reference view.
@@ -219,15 +277,18 @@ ReferenceSelection SelectForReference(const ViewGeometry& ref, const std::map<ui
   ViewSelectionPoints pts;
   if (!GatherViewSelectionPoints(ref, observed, convergence, options, &sel, &pts)) return sel;
   std::vector<Neighbour> cands;
+  std::vector<std::vector<std::pair<uint32_t, float>>> weights;
   for (const auto& [jd, src] : geoms) {
     if (jd == ref.image_id) continue;
     Neighbour nb;
     nb.image_id = jd;
-    if (ScoreViewSelectionSource(ref, src, pts, options, &nb)) cands.push_back(nb);
+    std::vector<std::pair<uint32_t, float>> w;
+    if (ScoreViewSelectionSource(ref, src, pts, options, &nb, &w)) {
+      cands.push_back(nb);
+      weights.push_back(std::move(w));
+    }
   }
-  std::sort(cands.begin(), cands.end(), [](const Neighbour& a, const Neighbour& b) {
-    return a.score != b.score ? a.score > b.score : a.image_id < b.image_id;
-  });
+  cands = OrderForCoverage(ref, pts, std::move(cands), weights, options);
   if (cands.size() > static_cast<size_t>(options.max_neighbours)) cands.resize(options.max_neighbours);
   // Far surfaces: the sparse points rarely reach them (their short tracks triangulate too flatly), so the
   // range extends to where the widest chosen baseline still gives far_parallax_px of parallax — farther,

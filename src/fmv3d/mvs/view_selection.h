@@ -5,9 +5,9 @@
 //   score_j = Σ_X  w_angle(α) · w_scale(X)
 //   w_angle = min(1, (α / α_good)²) for α in [min_angle, max_angle], else 0   (α: triangulation angle at X)
 //   w_scale = s if s < 1, 1 if 1 ≤ s ≤ 2, 2/s if s > 2                        (s: pixel footprint r / j)
-// so wide-enough baselines and equal or finer resolution win. A model without sparse points (e.g. ground-truth
-// cameras only) is handled with stand-in points: a grid of the reference's rays at the depth where the
-// cameras' optical axes converge.
+// so wide-enough baselines and equal or finer resolution win; the order then favours covering the whole
+// reference (coverage_sources below). A model without sparse points (e.g. ground-truth cameras only) is handled
+// with stand-in points: a grid of the reference's rays at the depth where the cameras' optical axes converge.
 // Candidates share a point by track or by sight (sources_by_projection), so sources can come from anywhere in
 // the clip; the depth range reaches as far as the widest chosen baseline resolves (far_parallax_px).
 #pragma once
@@ -35,6 +35,12 @@ struct ViewSelectionOptions {
   // only), at most max_far_factor × the 99th percentile of the sparse depths.
   double far_parallax_px = 2.0;
   double max_far_factor = 10.0;
+  // Order of the kept candidates (stereo takes the first few): greedy coverage of the reference's image by
+  // coverage_sources views (PatchMatch's top_k), with each candidate's score weighted by
+  // coverage_score_weight against the share of the image it newly covers; coverage_score_weight alone decides
+  // once the image is covered.
+  int coverage_sources = 3;
+  double coverage_score_weight = 0.25;
   void Check() const;
 };
 
