@@ -229,7 +229,7 @@ std::vector<Neighbour> OrderForCoverage(const ViewGeometry& ref, const ViewSelec
   if (n < 2) return cands;
   constexpr int kCells = 8;  // per image side
   std::vector<int> cell(pts.xyz.size(), -1);
-  std::vector<int> per_cell(kCells * kCells, 0);
+  std::vector<int> per_cell(static_cast<size_t>(kCells) * kCells, 0);
   for (size_t k = 0; k < pts.xyz.size(); ++k) {
     Eigen::Vector2d uv;
     if (!ref.Project(pts.xyz[k], &uv)) continue;
