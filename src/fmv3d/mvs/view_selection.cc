@@ -215,17 +215,19 @@ bool ScoreViewSelectionSource(const ViewGeometry& ref, const ViewGeometry& src, 
   return nb->median_angle_deg >= options.min_angle_deg && nb->median_angle_deg <= options.max_angle_deg;
 }
 
-// The candidates ordered greedily: each next one maximises the part of the reference it covers, each point
-// weighted by its share of its image cell (the area counts, not the feature density) and by 1/(c + 1) while
-// c < coverage_sources chosen views cover it already (a first source where there is none counts most), plus
-// coverage_score_weight × its score relative to the best. Ranking
-// by score alone let a grid survey's best sources all overlap one corner of the reference: PatchMatch, which
-// averages the best few sources' costs per pixel, then matched the rest of the image against nothing.
+// The best max_neighbours candidates, ordered greedily: each next one maximises the part of the reference it
+// covers, each point weighted by its share of its image cell (the area counts, not the feature density) and by
+// 1/(c + 1) while c < coverage_sources chosen views cover it already (a first source where there is none counts
+// most), plus coverage_score_weight × its score relative to the best. By score alone, a grid survey's best
+// sources can all overlap one side of the reference, and PatchMatch, which averages the best few sources'
+// costs per pixel, then matches the rest of the image against nothing. `weights[j]`: candidate j's positive
+// weight on each point it shares.
 std::vector<Neighbour> OrderForCoverage(const ViewGeometry& ref, const ViewSelectionPoints& pts,
                                         std::vector<Neighbour> cands,
                                         const std::vector<std::vector<std::pair<uint32_t, float>>>& weights,
                                         const ViewSelectionOptions& options) {
   const size_t n = cands.size();
+  const size_t keep = std::min(n, static_cast<size_t>(options.max_neighbours));
   if (n < 2) return cands;
   constexpr int kCells = 8;  // per image side
   std::vector<int> cell(pts.xyz.size(), -1);
@@ -244,12 +246,18 @@ std::vector<Neighbour> OrderForCoverage(const ViewGeometry& ref, const ViewSelec
     if (cell[k] >= 0) total_area += area[k] = 1.0 / per_cell[cell[k]];
   double best_score = 0;
   for (const auto& c : cands) best_score = std::max(best_score, c.score);
-  if (!(total_area > 0) || !(best_score > 0)) return cands;
+  if (!(total_area > 0) || !(best_score > 0)) {  // nothing to cover: by score
+    std::sort(cands.begin(), cands.end(), [](const Neighbour& a, const Neighbour& b) {
+      return a.score != b.score ? a.score > b.score : a.image_id < b.image_id;
+    });
+    cands.resize(keep);
+    return cands;
+  }
   std::vector<int> cover(pts.xyz.size(), 0);
   std::vector<bool> taken(n, false);
   std::vector<Neighbour> out;
   out.reserve(n);
-  while (out.size() < n) {
+  while (out.size() < keep) {
     size_t best = n;
     double best_gain = -1;
     for (size_t j = 0; j < n; ++j) {
@@ -262,8 +270,7 @@ std::vector<Neighbour> OrderForCoverage(const ViewGeometry& ref, const ViewSelec
         best_gain = gain, best = j;
     }
     taken[best] = true;
-    for (const auto& [k, w] : weights[best])
-      if (w > 0) ++cover[k];
+    for (const auto& [k, w] : weights[best]) ++cover[k];
     out.push_back(cands[best]);
   }
   return out;
@@ -289,7 +296,6 @@ ReferenceSelection SelectForReference(const ViewGeometry& ref, const std::map<ui
     }
   }
   cands = OrderForCoverage(ref, pts, std::move(cands), weights, options);
-  if (cands.size() > static_cast<size_t>(options.max_neighbours)) cands.resize(options.max_neighbours);
   // Far surfaces: the sparse points rarely reach them (their short tracks triangulate too flatly), so the
   // range extends to where the widest chosen baseline still gives far_parallax_px of parallax — farther,
   // nothing can be resolved; nearer, a cut-off range would hide surface the clip's baseline can resolve.
