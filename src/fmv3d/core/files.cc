@@ -59,10 +59,10 @@ void WriteAtomically(const fs::path& path, const std::function<void(const fs::pa
   }
 }
 
-void WriteTextFile(const fs::path& path, const std::string& text) {
+void WriteTextFile(const fs::path& path, std::string_view text) {
   WriteAtomically(path, [&](const fs::path& tmp) {
     std::ofstream out(tmp, std::ios::binary);
-    out << text;
+    out.write(text.data(), static_cast<std::streamsize>(text.size()));
     out.close();
     if (!out) throw Error(path.string() + ": write failed");
   });

@@ -7,6 +7,7 @@
 #include <functional>
 #include <nlohmann/json.hpp>
 #include <string>
+#include <string_view>
 
 namespace fmv3d::core {
 
@@ -17,7 +18,7 @@ namespace fs = std::filesystem;
 // exception the temporary is removed and it rethrows; a write, sync or rename failure (disk full, file size
 // limit, permissions) throws fmv3d::Error naming `path` and the system's reason.
 void WriteAtomically(const fs::path& path, const std::function<void(const fs::path& tmp)>& write);
-void WriteTextFile(const fs::path& path, const std::string& text);
+void WriteTextFile(const fs::path& path, std::string_view text);  // bytes as they are (binary mode)
 std::string ReadTextFile(const fs::path& path);
 void WriteJson(const fs::path& path, const nlohmann::json& j);
 nlohmann::json ReadJson(const fs::path& path);

@@ -1,6 +1,8 @@
 #include "fmv3d/io/obj_io.h"
 
+#include <fmt/compile.h>
 #include <fmt/format.h>
+#include <tbb/parallel_for.h>
 
 #include <fstream>
 #include <opencv2/imgcodecs.hpp>
@@ -148,62 +150,77 @@ TexturedMesh ReadObj(const fs::path& path, bool load_textures) {
   return mesh;
 }
 
+EncodedTextures EncodeTextures(const TexturedMesh& mesh, int png_compression) {
+  EncodedTextures pngs(mesh.materials.size());
+  tbb::parallel_for(size_t{0}, mesh.materials.size(), [&](size_t m) {
+    const Material& mat = mesh.materials[m];
+    if (!mat.texture.empty() &&
+        !cv::imencode(".png", mat.texture, pngs[m], {cv::IMWRITE_PNG_COMPRESSION, png_compression}))
+      throw Error("cannot encode the texture of material '" + mat.name + "'");
+  });
+  return pngs;
+}
+
 void WriteObj(const TexturedMesh& mesh, const fs::path& path, int png_compression) {
+  WriteObj(mesh, path, EncodeTextures(mesh, png_compression));
+}
+
+void WriteObj(const TexturedMesh& mesh, const fs::path& path, const EncodedTextures& textures) {
   mesh.Validate();
+  if (textures.size() != mesh.materials.size())
+    throw Error(path.string() + ": " + std::to_string(textures.size()) + " encoded textures for " +
+                std::to_string(mesh.materials.size()) + " materials");
   const std::string stem = path.stem().string();
   const fs::path dir = path.parent_path();
   if (!dir.empty()) core::EnsureDirectory(dir);
   std::string mtl = "# fmv3d material library\n";
-  std::vector<std::string> tex_names(mesh.materials.size());
   for (size_t m = 0; m < mesh.materials.size(); ++m) {
     const Material& mat = mesh.materials[m];
     const std::string name = mat.name.empty() ? fmt::format("material_{}", m) : mat.name;
     mtl += fmt::format("newmtl {}\nKa 0 0 0\nKd {:.6g} {:.6g} {:.6g}\nKs 0 0 0\nd 1\nillum 1\n", name,
                        mat.diffuse_bgr.z(), mat.diffuse_bgr.y(), mat.diffuse_bgr.x());
     if (!mat.texture.empty()) {
-      tex_names[m] = mat.texture_file.empty() ? stem + "_" + name + ".png" : mat.texture_file;
-      mtl += "map_Kd " + tex_names[m] + "\n";
-      const fs::path tex = dir / tex_names[m];
-      core::WriteAtomically(tex, [&](const fs::path& tmp) {
-        if (!cv::imwrite(tmp.string(), mat.texture, {cv::IMWRITE_PNG_COMPRESSION, png_compression}))
-          throw Error(tex.string() + ": cannot write texture");
-      });
+      const std::string tex_name = mat.texture_file.empty() ? stem + "_" + name + ".png" : mat.texture_file;
+      mtl += "map_Kd " + tex_name + "\n";
+      const fs::path tex = dir / tex_name;
+      if (textures[m].empty()) throw Error(tex.string() + ": the texture was not encoded");
+      core::WriteTextFile(tex, std::string_view(reinterpret_cast<const char*>(textures[m].data()), textures[m].size()));
     } else if (!mat.texture_file.empty()) {
       mtl += "map_Kd " + mat.texture_file + "\n";
     }
     mtl += "\n";
   }
-  fmt::memory_buffer out;
-  fmt::format_to(std::back_inserter(out), "# fmv3d mesh: {} vertices, {} faces, metres\nmtllib {}.mtl\n",
-                 mesh.vertices.size(), mesh.faces.size(), stem);
+  // Format strings compiled and written straight into the buffer: a textured survey mesh is millions of lines.
+  fmt::memory_buffer buffer;
+  auto out = fmt::appender(buffer);
+  fmt::format_to(out, "# fmv3d mesh: {} vertices, {} faces, metres\nmtllib {}.mtl\n", mesh.vertices.size(),
+                 mesh.faces.size(), stem);
   for (const auto& v : mesh.vertices)
-    fmt::format_to(std::back_inserter(out), "v {:.17g} {:.17g} {:.17g}\n", v.x(), v.y(), v.z());
-  for (const auto& t : mesh.uvs) fmt::format_to(std::back_inserter(out), "vt {:.9g} {:.9g}\n", t.x(), t.y());
-  for (const auto& n : mesh.normals)
-    fmt::format_to(std::back_inserter(out), "vn {:.9g} {:.9g} {:.9g}\n", n.x(), n.y(), n.z());
+    fmt::format_to(out, FMT_COMPILE("v {:.17g} {:.17g} {:.17g}\n"), v.x(), v.y(), v.z());
+  for (const auto& t : mesh.uvs) fmt::format_to(out, FMT_COMPILE("vt {:.9g} {:.9g}\n"), t.x(), t.y());
+  for (const auto& n : mesh.normals) fmt::format_to(out, FMT_COMPILE("vn {:.9g} {:.9g} {:.9g}\n"), n.x(), n.y(), n.z());
   int cur_material = -2;
   for (const Face& f : mesh.faces) {
     if (f.material != cur_material) {
       cur_material = f.material;
       if (f.material >= 0) {
         const auto& name = mesh.materials[f.material].name;
-        fmt::format_to(std::back_inserter(out), "usemtl {}\n",
-                       name.empty() ? fmt::format("material_{}", f.material) : name);
+        fmt::format_to(out, "usemtl {}\n", name.empty() ? fmt::format("material_{}", f.material) : name);
       }
     }
-    out.push_back('f');
+    buffer.push_back('f');
     for (int k = 0; k < 3; ++k) {
-      fmt::format_to(std::back_inserter(out), " {}", f.v[k] + 1);
+      fmt::format_to(out, FMT_COMPILE(" {}"), f.v[k] + 1);
       if (f.vt[k] >= 0 || f.vn[k] >= 0) {
-        out.push_back('/');
-        if (f.vt[k] >= 0) fmt::format_to(std::back_inserter(out), "{}", f.vt[k] + 1);
-        if (f.vn[k] >= 0) fmt::format_to(std::back_inserter(out), "/{}", f.vn[k] + 1);
+        buffer.push_back('/');
+        if (f.vt[k] >= 0) fmt::format_to(out, FMT_COMPILE("{}"), f.vt[k] + 1);
+        if (f.vn[k] >= 0) fmt::format_to(out, FMT_COMPILE("/{}"), f.vn[k] + 1);
       }
     }
-    out.push_back('\n');
+    buffer.push_back('\n');
   }
   core::WriteTextFile(dir / (stem + ".mtl"), mtl);
-  core::WriteTextFile(path, fmt::to_string(out));
+  core::WriteTextFile(path, std::string_view(buffer.data(), buffer.size()));
 }
 
 }  // namespace fmv3d::io

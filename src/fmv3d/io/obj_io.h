@@ -6,7 +6,9 @@
 // significant digits, so write → read reproduces vertices exactly.
 #pragma once
 
+#include <cstdint>
 #include <filesystem>
+#include <vector>
 
 #include "fmv3d/io/mesh.h"
 
@@ -16,5 +18,12 @@ TexturedMesh ReadObj(const std::filesystem::path& path, bool load_textures = tru
 // png_compression: 0..9 (OpenCV IMWRITE_PNG_COMPRESSION); large noise textures compress poorly, so the
 // default favours speed.
 void WriteObj(const TexturedMesh& mesh, const std::filesystem::path& path, int png_compression = 1);
+
+// Every material's in-memory texture as PNG bytes (empty for a material without one), the pages encoded in
+// parallel: a model written in several formats (OBJ, glTF) encodes its atlas once.
+using EncodedTextures = std::vector<std::vector<uint8_t>>;
+EncodedTextures EncodeTextures(const TexturedMesh& mesh, int png_compression = 1);
+// The same with the textures already encoded (one entry per material, as EncodeTextures gives).
+void WriteObj(const TexturedMesh& mesh, const std::filesystem::path& path, const EncodedTextures& textures);
 
 }  // namespace fmv3d::io

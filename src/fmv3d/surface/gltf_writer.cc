@@ -10,8 +10,8 @@
 #include <array>
 #include <cstring>
 #include <limits>
-#include <map>
 #include <opencv2/imgcodecs.hpp>
+#include <unordered_map>
 
 #include "fmv3d/core/error.h"
 #include "fmv3d/core/files.h"
@@ -21,6 +21,15 @@ namespace fmv3d::surface {
 namespace fs = std::filesystem;
 
 namespace {
+
+struct IndexTripleHash {
+  size_t operator()(const std::array<int, 3>& k) const {
+    uint64_t h = static_cast<uint32_t>(k[0]);
+    h = h * 0x9E3779B97F4A7C15ULL ^ static_cast<uint32_t>(k[1]);
+    h = h * 0x9E3779B97F4A7C15ULL ^ static_cast<uint32_t>(k[2]);
+    return static_cast<size_t>(h ^ (h >> 29));
+  }
+};
 
 // Appends bytes to the single buffer (4-byte aligned, as accessors require) and returns a buffer view.
 int AddView(tinygltf::Model* model, const void* data, size_t bytes, int target) {
@@ -52,8 +61,13 @@ int AddAccessor(tinygltf::Model* model, int view, int component, int type, size_
 
 }  // namespace
 
-void WriteGlb(const io::TexturedMesh& mesh, const fs::path& path) {
+void WriteGlb(const io::TexturedMesh& mesh, const fs::path& path, const io::EncodedTextures* textures) {
   mesh.Validate();
+  const io::EncodedTextures own = textures ? io::EncodedTextures{} : io::EncodeTextures(mesh);
+  const io::EncodedTextures& pngs = textures ? *textures : own;
+  if (pngs.size() != mesh.materials.size())
+    throw Error(path.string() + ": " + std::to_string(pngs.size()) + " encoded textures for " +
+                std::to_string(mesh.materials.size()) + " materials");
   bool all_normals = !mesh.normals.empty();
   for (const auto& f : mesh.faces) {
     for (int k = 0; k < 3; ++k) {
@@ -69,13 +83,18 @@ void WriteGlb(const io::TexturedMesh& mesh, const fs::path& path) {
   gmesh.name = path.stem().string();
 
   const int num_materials = std::max<int>(1, static_cast<int>(mesh.materials.size()));
+  std::vector<std::vector<uint32_t>> faces_of(num_materials);
+  for (size_t i = 0; i < mesh.faces.size(); ++i)
+    if (const int m = std::max(mesh.faces[i].material, 0); m < num_materials)
+      faces_of[m].push_back(static_cast<uint32_t>(i));
   for (int m = 0; m < num_materials; ++m) {
-    // Vertices of this material: one per distinct (position, uv, normal) index triple.
-    std::map<std::array<int, 3>, uint32_t> index;
+    // Vertices of this material: one per distinct (position, uv, normal) index triple, numbered in face order.
+    std::unordered_map<std::array<int, 3>, uint32_t, IndexTripleHash> index;
+    index.reserve(faces_of[m].size() * 2);
     std::vector<float> pos, nrm, tex;
     std::vector<uint32_t> indices;
-    for (const auto& f : mesh.faces) {
-      if (std::max(f.material, 0) != m) continue;
+    for (const uint32_t fi : faces_of[m]) {
+      const io::Face& f = mesh.faces[fi];
       for (int k = 0; k < 3; ++k) {
         const std::array<int, 3> key{f.v[k], f.vt[k], all_normals ? f.vn[k] : -1};
         auto [it, fresh] = index.emplace(key, static_cast<uint32_t>(index.size()));
@@ -120,9 +139,8 @@ void WriteGlb(const io::TexturedMesh& mesh, const fs::path& path) {
     mat.pbrMetallicRoughness.roughnessFactor = 1;
     mat.doubleSided = false;
     if (m < static_cast<int>(mesh.materials.size()) && !mesh.materials[m].texture.empty()) {
-      std::vector<uchar> png;
-      if (!cv::imencode(".png", mesh.materials[m].texture, png, {cv::IMWRITE_PNG_COMPRESSION, 1}))
-        throw Error(path.string() + ": cannot encode texture " + mat.name);
+      const std::vector<uint8_t>& png = pngs[m];
+      if (png.empty()) throw Error(path.string() + ": the texture of " + mat.name + " was not encoded");
       tinygltf::Image image;
       image.name = mat.name;
       image.mimeType = "image/png";

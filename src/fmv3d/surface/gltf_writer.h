@@ -8,10 +8,13 @@
 #include <filesystem>
 
 #include "fmv3d/io/mesh.h"
+#include "fmv3d/io/obj_io.h"
 
 namespace fmv3d::surface {
 
-// Every face needs texture coordinates; normals are written when every face has them.
-void WriteGlb(const io::TexturedMesh& mesh, const std::filesystem::path& path);
+// Every face needs texture coordinates; normals are written when every face has them. `textures`: the
+// materials' PNG bytes when already encoded (io::EncodeTextures), else they are encoded here.
+void WriteGlb(const io::TexturedMesh& mesh, const std::filesystem::path& path,
+              const io::EncodedTextures* textures = nullptr);
 
 }  // namespace fmv3d::surface

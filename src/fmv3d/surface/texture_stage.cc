@@ -1,6 +1,7 @@
 #include "fmv3d/surface/texture_stage.h"
 
 #include <spdlog/spdlog.h>
+#include <tbb/task_group.h>
 
 #include <algorithm>
 #include <chrono>
@@ -145,15 +146,21 @@ nlohmann::json RunTextureStage(const core::Workspace& workspace, const TextureSt
     if (!fs::exists(old)) break;
     fs::remove(old);
   }
-  io::WriteObj(textured.mesh, dir / "textured.obj");
-  WriteGlb(textured.mesh, dir / "model.glb");
-  ColoredMesh colored;
-  colored.vertices = textured.mesh.vertices;
-  colored.normals = textured.mesh.normals;
-  colored.colors = textured.vertex_colors;
-  colored.triangles.reserve(textured.mesh.faces.size());
-  for (const auto& f : textured.mesh.faces) colored.triangles.emplace_back(f.v[0], f.v[1], f.v[2]);
-  WriteMeshPly(colored, dir / "textured.ply");
+  // The atlas pages are encoded once for the OBJ and the glTF; the three files are written side by side.
+  const io::EncodedTextures pages = io::EncodeTextures(textured.mesh);
+  tbb::task_group writers;
+  writers.run([&] { io::WriteObj(textured.mesh, dir / "textured.obj", pages); });
+  writers.run([&] { WriteGlb(textured.mesh, dir / "model.glb", &pages); });
+  writers.run([&] {
+    ColoredMesh colored;
+    colored.vertices = textured.mesh.vertices;
+    colored.normals = textured.mesh.normals;
+    colored.colors = textured.vertex_colors;
+    colored.triangles.reserve(textured.mesh.faces.size());
+    for (const auto& f : textured.mesh.faces) colored.triangles.emplace_back(f.v[0], f.v[1], f.v[2]);
+    WriteMeshPly(colored, dir / "textured.ply");
+  });
+  writers.wait();
 
   nlohmann::json report = {
       {"selection", ToJson(textured.selection)}, {"atlas", ToJson(textured.atlas)}, {"seconds", textured.seconds}};
