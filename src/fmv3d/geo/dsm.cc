@@ -4,6 +4,7 @@
 #include <open3d/geometry/TriangleMesh.h>
 #include <open3d/io/TriangleMeshIO.h>
 #include <spdlog/spdlog.h>
+#include <tbb/parallel_for.h>
 
 #include <algorithm>
 #include <cmath>
@@ -390,8 +391,10 @@ nlohmann::json RunOrthoStage(const core::Workspace& ws) {
     const LocalFrame frame(g.origin, g.utm);
     frame.EnuToUtm(&mesh.vertices);
     std::vector<render::MipTexture> textures(mesh.materials.size());
-    for (size_t m = 0; m < mesh.materials.size(); ++m)
-      if (!mesh.materials[m].texture.empty()) textures[m] = render::MipTexture(mesh.materials[m].texture);
+    tbb::parallel_for(size_t{0}, mesh.materials.size(), [&](size_t m) {
+      if (!mesh.materials[m].texture.empty())
+        textures[m] = render::MipTexture(mesh.materials[m].texture, 1);  // sampled at lod 0
+    });
     core::Progress progress("ortho", mesh.faces.size());
     for (const auto& f : mesh.faces) {
       const auto& a = mesh.vertices[f.v[0]];

@@ -4,9 +4,14 @@
 #include <fmt/format.h>
 #include <tbb/parallel_for.h>
 
+#include <charconv>
+#include <cmath>
 #include <fstream>
+#include <functional>
 #include <opencv2/imgcodecs.hpp>
 #include <sstream>
+#include <string_view>
+#include <type_traits>
 
 #include "fmv3d/core/error.h"
 #include "fmv3d/core/files.h"
@@ -15,17 +20,44 @@ namespace fmv3d::io {
 namespace fs = std::filesystem;
 namespace {
 
+bool IsBlank(char c) { return c == ' ' || c == '\t' || c == '\r' || c == '\f' || c == '\v'; }
+
+// The next blank-separated token of `line` from *pos (empty at the end of the line).
+std::string_view NextToken(std::string_view line, size_t* pos) {
+  size_t i = *pos;
+  while (i < line.size() && IsBlank(line[i])) ++i;
+  size_t j = i;
+  while (j < line.size() && !IsBlank(line[j])) ++j;
+  *pos = j;
+  return line.substr(i, j - i);
+}
+
+// The whole token as a finite number (a leading '+' allowed, as a stream reads it).
+template <typename T>
+bool ParseNumber(std::string_view token, T* value) {
+  if (!token.empty() && token[0] == '+') token.remove_prefix(1);
+  if (token.empty()) return false;
+  const auto [end, ec] = std::from_chars(token.data(), token.data() + token.size(), *value);
+  if (ec != std::errc() || end != token.data() + token.size()) return false;
+  if constexpr (std::is_floating_point_v<T>) return std::isfinite(*value);
+  return true;
+}
+
+template <typename T, int N>
+bool ParseNumbers(std::string_view line, size_t* pos, T* values) {
+  for (int k = 0; k < N; ++k)
+    if (!ParseNumber(NextToken(line, pos), &values[k])) return false;
+  return true;
+}
+
 // Resolves a 1-based (or negative, relative) OBJ index; returns -1 for an empty field.
-int ResolveIndex(const std::string& s, size_t count, const std::string& where) {
+int ResolveIndex(std::string_view s, size_t count, const std::function<std::string()>& where) {
   if (s.empty()) return -1;
   long i = 0;
-  try {
-    i = std::stol(s);
-  } catch (const std::exception&) {
-    throw Error(where + ": bad index '" + s + "'");
-  }
+  if (!ParseNumber(s, &i)) throw Error(where() + ": bad index '" + std::string(s) + "'");
   const long r = i > 0 ? i - 1 : static_cast<long>(count) + i;
-  if (i == 0 || r < 0 || r >= static_cast<long>(count)) throw Error(where + ": index " + s + " out of range");
+  if (i == 0 || r < 0 || r >= static_cast<long>(count))
+    throw Error(where() + ": index " + std::string(s) + " out of range");
   return static_cast<int>(r);
 }
 
@@ -34,6 +66,7 @@ void ReadMtl(const fs::path& path, bool load_textures, TexturedMesh* mesh) {
   if (!in) throw Error(path.string() + ": cannot open material library");
   std::string line;
   Material* cur = nullptr;
+  const size_t first = mesh->materials.size();  // this library's materials
   while (std::getline(in, line)) {
     std::istringstream ss(line);
     std::string key;
@@ -50,15 +83,18 @@ void ReadMtl(const fs::path& path, bool load_textures, TexturedMesh* mesh) {
       std::string rest, last;
       while (ss >> rest) last = rest;  // options like -s come first; the file name is last
       cur->texture_file = last;
-      if (load_textures && !last.empty()) {
-        const fs::path tex = path.parent_path() / last;
-        if (fs::exists(tex)) {
-          cur->texture = cv::imread(tex.string(), cv::IMREAD_COLOR);
-          if (cur->texture.empty()) throw Error(tex.string() + ": cannot read texture");
-        }
-      }
     }
   }
+  if (!load_textures) return;
+  // Atlas pages decoded side by side: a survey's model has several 4096² pages.
+  tbb::parallel_for(first, mesh->materials.size(), [&](size_t m) {
+    Material& mat = mesh->materials[m];
+    if (mat.texture_file.empty()) return;
+    const fs::path tex = path.parent_path() / mat.texture_file;
+    if (!fs::exists(tex)) return;
+    mat.texture = cv::imread(tex.string(), cv::IMREAD_COLOR);
+    if (mat.texture.empty()) throw Error(tex.string() + ": cannot read texture");
+  });
 }
 
 }  // namespace
@@ -67,48 +103,49 @@ TexturedMesh ReadObj(const fs::path& path, bool load_textures) {
   std::ifstream in(path);
   if (!in) throw Error(path.string() + ": cannot open");
   TexturedMesh mesh;
-  std::string line;
+  std::string buffer;
   int material = -1;
   size_t line_no = 0;
+  // Built only for a message: textured survey meshes are millions of lines.
+  const std::function<std::string()> where = [&] { return path.string() + ":" + std::to_string(line_no); };
   std::vector<std::string> mtllibs;
   std::vector<std::pair<std::string, size_t>> pending_usemtl;  // (name, first face) resolved after MTL load
-  while (std::getline(in, line)) {
+  std::vector<std::array<int, 3>> corners;
+  while (std::getline(in, buffer)) {
     ++line_no;
-    std::istringstream ss(line);
-    std::string key;
-    if (!(ss >> key) || key[0] == '#') continue;
-    const std::string where = path.string() + ":" + std::to_string(line_no);
+    const std::string_view line = buffer;
+    size_t pos = 0;
+    const std::string_view key = NextToken(line, &pos);
+    if (key.empty() || key[0] == '#') continue;
     if (key == "v") {
       Eigen::Vector3d v;
-      if (!(ss >> v.x() >> v.y() >> v.z())) throw Error(where + ": bad vertex");
+      if (!ParseNumbers<double, 3>(line, &pos, v.data())) throw Error(where() + ": bad vertex");
       mesh.vertices.push_back(v);
     } else if (key == "vt") {
       Eigen::Vector2f t;
-      if (!(ss >> t.x() >> t.y())) throw Error(where + ": bad texture coordinate");
+      if (!ParseNumbers<float, 2>(line, &pos, t.data())) throw Error(where() + ": bad texture coordinate");
       mesh.uvs.push_back(t);
     } else if (key == "vn") {
       Eigen::Vector3f n;
-      if (!(ss >> n.x() >> n.y() >> n.z())) throw Error(where + ": bad normal");
+      if (!ParseNumbers<float, 3>(line, &pos, n.data())) throw Error(where() + ": bad normal");
       mesh.normals.push_back(n);
     } else if (key == "f") {
-      std::vector<std::array<int, 3>> corners;
-      std::string tok;
-      while (ss >> tok) {
-        std::array<std::string, 3> parts;
-        size_t p = 0;
-        for (char c : tok) {
-          if (c == '/') {
-            if (++p > 2) throw Error(where + ": bad face corner '" + tok + "'");
-          } else {
-            parts[p] += c;
-          }
+      corners.clear();
+      for (std::string_view tok = NextToken(line, &pos); !tok.empty(); tok = NextToken(line, &pos)) {
+        std::array<std::string_view, 3> parts;
+        size_t p = 0, begin = 0;
+        for (size_t i = 0; i <= tok.size(); ++i) {
+          if (i < tok.size() && tok[i] != '/') continue;
+          if (p > 2) throw Error(where() + ": bad face corner '" + std::string(tok) + "'");
+          parts[p++] = tok.substr(begin, i - begin);
+          begin = i + 1;
         }
         corners.push_back({ResolveIndex(parts[0], mesh.vertices.size(), where),
                            ResolveIndex(parts[1], mesh.uvs.size(), where),
                            ResolveIndex(parts[2], mesh.normals.size(), where)});
-        if (corners.back()[0] < 0) throw Error(where + ": face corner without a vertex");
+        if (corners.back()[0] < 0) throw Error(where() + ": face corner without a vertex");
       }
-      if (corners.size() < 3) throw Error(where + ": face with fewer than 3 corners");
+      if (corners.size() < 3) throw Error(where() + ": face with fewer than 3 corners");
       for (size_t k = 1; k + 1 < corners.size(); ++k) {
         Face f;
         const std::array<int, 3>* c[3] = {&corners[0], &corners[k], &corners[k + 1]};
@@ -121,13 +158,9 @@ TexturedMesh ReadObj(const fs::path& path, bool load_textures) {
         mesh.faces.push_back(f);
       }
     } else if (key == "mtllib") {
-      std::string name;
-      ss >> name;
-      mtllibs.push_back(name);
+      mtllibs.emplace_back(NextToken(line, &pos));
     } else if (key == "usemtl") {
-      std::string name;
-      ss >> name;
-      pending_usemtl.emplace_back(name, mesh.faces.size());
+      pending_usemtl.emplace_back(std::string(NextToken(line, &pos)), mesh.faces.size());
       material = static_cast<int>(pending_usemtl.size()) - 1;  // placeholder, remapped below
     }
   }

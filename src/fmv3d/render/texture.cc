@@ -7,7 +7,8 @@
 
 namespace fmv3d::render {
 
-MipTexture::MipTexture(const cv::Mat& bgr) {
+MipTexture::MipTexture(const cv::Mat& bgr, int max_levels) {
+  if (max_levels < 1) throw Error("texture: at least one mip level");
   if (bgr.empty()) return;
   if (bgr.type() != CV_8UC3) throw Error("texture: expected an 8-bit 3-channel image");
   cv::Mat level = bgr;
@@ -23,18 +24,19 @@ MipTexture::MipTexture(const cv::Mat& bgr) {
     l.fw = static_cast<float>(span_w);
     l.fh = static_cast<float>(span_h);
     l.tiles_x = (l.w + 31) / 32;
-    l.bgr.assign(size_t(l.tiles_x) * ((l.h + 31) / 32) * 4096, 0);
+    l.bgr = cv::Mat::zeros((l.h + 31) / 32, l.tiles_x * 4096, CV_8U);  // one row of tiles per row, continuous
+    uint8_t* const data = l.bgr.data;
     for (int y = 0; y < l.h; ++y) {
       const uint8_t* src = level.ptr<uint8_t>(y);
       for (int x = 0; x < l.w; ++x) {
-        uint8_t* dst = &l.bgr[l.Offset(x, y)];
+        uint8_t* dst = data + l.Offset(x, y);
         dst[0] = src[3 * x];
         dst[1] = src[3 * x + 1];
         dst[2] = src[3 * x + 2];
       }
     }
     levels_.push_back(std::move(l));
-    if (level.cols == 1 && level.rows == 1) break;
+    if ((level.cols == 1 && level.rows == 1) || static_cast<int>(levels_.size()) == max_levels) break;
     // 2×2 box filter; odd sizes round up and repeat the last row/column.
     const int w = std::max(1, (level.cols + 1) / 2), h = std::max(1, (level.rows + 1) / 2);
     cv::Mat next(h, w, CV_8UC3);

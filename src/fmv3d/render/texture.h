@@ -13,8 +13,9 @@ namespace fmv3d::render {
 class MipTexture {
  public:
   MipTexture() = default;
-  // bgr: CV_8UC3. Builds the pyramid by 2x2 box filtering (odd sizes round up, the last row/column repeat).
-  explicit MipTexture(const cv::Mat& bgr);
+  // bgr: CV_8UC3. Builds the pyramid by 2x2 box filtering (odd sizes round up, the last row/column repeat),
+  // at most `max_levels` levels (1: the texture alone, for sampling at lod 0 only).
+  explicit MipTexture(const cv::Mat& bgr, int max_levels = 64);
 
   bool empty() const { return levels_.empty(); }
   int width() const { return levels_.empty() ? 0 : levels_[0].w; }
@@ -32,8 +33,10 @@ class MipTexture {
     int tiles_x = 0;
     // 4 bytes per texel (B, G, R, unused), stored in 32x32-texel tiles (4 KiB, one page): a bilinear
     // footprint walking across a large texture in any direction then stays within few pages and cache
-    // lines (row-major storage made the shading pass TLB-bound).
-    std::vector<uint8_t> bgr;
+    // lines (row-major storage made the shading pass TLB-bound). A cv::Mat (a row of tiles per row) for OpenCV's
+    // allocator, which puts large blocks on huge pages (io/huge_pages.h): faulting in an atlas's levels page by
+    // page took most of an orthophoto's time.
+    cv::Mat bgr;
     size_t Offset(int x, int y) const {
       return ((size_t(y >> 5) * tiles_x + (x >> 5)) << 12) + ((y & 31) << 7) + ((x & 31) << 2);
     }
@@ -54,10 +57,11 @@ inline Eigen::Vector3f MipTexture::Bilinear(const Level& l, float u, float v) co
   if (x0 < 0 || x0 >= l.w) x0 = ((x0 % l.w) + l.w) % l.w;
   if (y0 < 0 || y0 >= l.h) y0 = ((y0 % l.h) + l.h) % l.h;
   const int x1 = x0 + 1 < l.w ? x0 + 1 : 0, y1 = y0 + 1 < l.h ? y0 + 1 : 0;
-  const uint8_t* p00 = &l.bgr[l.Offset(x0, y0)];
-  const uint8_t* p01 = &l.bgr[l.Offset(x1, y0)];
-  const uint8_t* p10 = &l.bgr[l.Offset(x0, y1)];
-  const uint8_t* p11 = &l.bgr[l.Offset(x1, y1)];
+  const uint8_t* data = l.bgr.data;
+  const uint8_t* p00 = data + l.Offset(x0, y0);
+  const uint8_t* p01 = data + l.Offset(x1, y0);
+  const uint8_t* p10 = data + l.Offset(x0, y1);
+  const uint8_t* p11 = data + l.Offset(x1, y1);
   const float w00 = (1 - ax) * (1 - ay), w01 = ax * (1 - ay), w10 = (1 - ax) * ay, w11 = ax * ay;
   return {w00 * p00[0] + w01 * p01[0] + w10 * p10[0] + w11 * p11[0],
           w00 * p00[1] + w01 * p01[1] + w10 * p10[1] + w11 * p11[1],
