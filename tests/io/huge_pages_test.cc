@@ -56,5 +56,41 @@ TEST(HugePages, LargeMatricesGetTheirOwnMappingSmallOnesDoNot) {
   EXPECT_EQ(cv::sum(cube)[0], 2.0 * 64 * 256 * 256);
 }
 
+TEST(HugePages, MatricesFreedInAReuseScopeServeTheNextOfTheSameSize) {
+  UseHugePagesForLargeMatrices(size_t{4} << 20);
+  constexpr size_t kMiB = size_t{1} << 20;
+  EXPECT_EQ(ScopedMatrixReuse::KeptBytes(), 0U);
+  {
+    const ScopedMatrixReuse reuse;
+    cv::Mat a(1536, 2048, CV_32F, cv::Scalar(1.0f));  // 12 MiB: six huge pages
+    const uchar* where = a.data;
+    a.release();
+    EXPECT_EQ(ScopedMatrixReuse::KeptBytes(), 12 * kMiB);
+
+    cv::Mat b(2048, 1536, CV_32F);  // the same bytes in another shape: the kept mapping
+    EXPECT_EQ(b.data, where);
+    EXPECT_EQ(ScopedMatrixReuse::KeptBytes(), 0U);
+    b.setTo(3.0f);
+    EXPECT_EQ(cv::sum(b)[0], 3.0 * 2048 * 1536);
+    b.release();
+
+    // 23.4 MiB rounds up to 24: no kept mapping of that size, so the kept 12 MiB go before a new one is mapped.
+    cv::Mat c(3000, 2048, CV_32F);
+    EXPECT_EQ(ScopedMatrixReuse::KeptBytes(), 0U);
+    c.release();
+    EXPECT_EQ(ScopedMatrixReuse::KeptBytes(), 24 * kMiB);
+
+    { const ScopedMatrixReuse inner; }  // an inner scope's end keeps them for the outer one
+    EXPECT_EQ(ScopedMatrixReuse::KeptBytes(), 24 * kMiB);
+    cv::Mat small(100, 100, CV_8UC3);
+    small.release();  // OpenCV's own allocation: never kept
+    EXPECT_EQ(ScopedMatrixReuse::KeptBytes(), 24 * kMiB);
+  }
+  EXPECT_EQ(ScopedMatrixReuse::KeptBytes(), 0U);  // the last scope returned them
+  cv::Mat d(1536, 2048, CV_32F);
+  d.release();
+  EXPECT_EQ(ScopedMatrixReuse::KeptBytes(), 0U);  // outside a scope nothing is kept
+}
+
 }  // namespace
 }  // namespace fmv3d::io

@@ -20,6 +20,7 @@
 #include "fmv3d/features/feature_io.h"
 #include "fmv3d/features/sift.h"
 #include "fmv3d/io/frames_index.h"
+#include "fmv3d/io/huge_pages.h"
 
 namespace fmv3d::features {
 namespace fs = std::filesystem;
@@ -157,6 +158,8 @@ FeaturesStageStats RunFeaturesStage(const core::Workspace& ws, const SiftOptions
   const bool one_at_a_time = stats.workers <= 1;
   cv::setNumThreads(one_at_a_time ? cv_threads : 1);
   core::Progress progress("features", n);
+  // Every image and threshold rebuilds a scale space of the same sizes: its matrices are kept for the next.
+  const io::ScopedMatrixReuse reuse;
   auto extract = [&](size_t i) {
     const auto& frame = index.frames[i];
     const fs::path image_path = frames_dir / frame.name, out_path = FeaturePath(features_dir, frame.name);

@@ -18,4 +18,24 @@ namespace fmv3d::io {
 // advice is ignored and the mappings behave as glibc's own. Never throws: without it only speed is lost.
 void UseHugePagesForLargeMatrices(size_t min_bytes = size_t{8} << 20) noexcept;
 
+// While one of these lives, the large matrices freed keep their mappings for later matrices of the same size
+// (rounded up to whole huge pages) instead of returning them to the kernel, which zeroes every page of a fresh
+// mapping again: SIFT's scale space, rebuilt for every image and contrast threshold, spent a third of the
+// features stage there. A fresh mapping first unmaps kept ones of at least its size, so the memory mapped never
+// exceeds the most ever in use. The last scope to end unmaps what is kept. Nothing changes without
+// UseHugePagesForLargeMatrices.
+class ScopedMatrixReuse {
+ public:
+  // Bytes of the mappings kept for reuse now (0 outside any scope).
+  static size_t KeptBytes() noexcept;
+
+  ScopedMatrixReuse();
+  ~ScopedMatrixReuse();
+  ScopedMatrixReuse(const ScopedMatrixReuse&) = delete;
+  ScopedMatrixReuse& operator=(const ScopedMatrixReuse&) = delete;
+
+ private:
+  void* allocator_;
+};
+
 }  // namespace fmv3d::io
