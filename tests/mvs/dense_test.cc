@@ -31,29 +31,34 @@ namespace {
 
 namespace fs = std::filesystem;
 
-// Renders a small orbit around the single building once per test binary; the workspace is frames/ +
-// sparse/ (= the exact truth/ model with its sample tracks).
+// Renders a small orbit around the single building once for all the test processes of the binary
+// (test::SharedFixture); the workspace is frames/ + sparse/ (= the exact truth/ model with its sample tracks).
 struct Flight {
   fs::path dir;
-  synth::SynthResult result;
+  synth::SynthResult result;  // the truth model and the characteristic length, as synth wrote them
 };
 
 const Flight& SmallFlight() {
-  static test::TempDir* tmp = new test::TempDir("mvs_flight");  // lives for the whole binary
-  static Flight flight = [] {
-    synth::SynthOptions so;
-    so.scene = synth::SceneKind::kBuilding;
-    so.width = 320;
-    so.height = 240;
-    so.flight.frames = 10;
-    so.flight.jitter_deg = 0.2;
-    so.detail = 0.5;
-    so.truth_points = 1500;
-    so.write_depth = true;
-    so.output = tmp->path() / "synth";
+  static const Flight flight = [] {
     Flight f;
-    f.dir = so.output;
-    f.result = synth::RunSynth(so);
+    f.dir = test::SharedFixture("mvs-small-flight",
+                                [](const fs::path& dir) {
+                                  synth::SynthOptions so;
+                                  so.scene = synth::SceneKind::kBuilding;
+                                  so.width = 320;
+                                  so.height = 240;
+                                  so.flight.frames = 10;
+                                  so.flight.jitter_deg = 0.2;
+                                  so.detail = 0.5;
+                                  so.truth_points = 1500;
+                                  so.write_depth = true;
+                                  so.output = dir / "synth";
+                                  synth::RunSynth(so);
+                                }) /
+            "synth";
+    f.result.truth = io::ReadColmapText(f.dir / "truth");
+    f.result.characteristic_length = core::ReadJson(f.dir / "truth.json").at("characteristic_length").get<double>();
+    f.result.frames = static_cast<int>(f.result.truth.images.size());
     return f;
   }();
   return flight;

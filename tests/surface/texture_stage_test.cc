@@ -32,19 +32,17 @@ namespace {
 namespace fs = std::filesystem;
 
 // A workspace with a Poisson mesh from a slightly noisy cloud (frame 6 is not in its sparse model), made
-// once and copied for each test, since tests may spoil its frames.
+// once for the binary's processes and copied for each test, since tests may spoil its frames.
 void PrepareMeshed(const fs::path& ws) {
-  static const std::unique_ptr<test::TempDir> meshed = [] {
-    auto dir = std::make_unique<test::TempDir>("fmv3d-texture-base");
+  static const fs::path meshed = test::SharedFixture("texture-meshed-workspace", [](const fs::path& dir) {
     SyntheticCloudOptions o;
     o.spacing = 0.15;
     o.position_noise = 0.02;
     o.region = Eigen::AlignedBox3d(Eigen::Vector3d(-18, -18, -3), Eigen::Vector3d(18, 18, 35));
-    PrepareSyntheticWorkspace(testing::Flight().synth_dir, dir->path(), o, {testing::kHeldOut});
-    RunMeshStage(dir->path(), MeshStageOptions{});
-    return dir;
-  }();
-  fs::copy(meshed->path(), ws, fs::copy_options::recursive | fs::copy_options::overwrite_existing);
+    PrepareSyntheticWorkspace(testing::Flight().synth_dir, dir, o, {testing::kHeldOut});
+    RunMeshStage(dir, MeshStageOptions{});
+  });
+  fs::copy(meshed, ws, fs::copy_options::recursive | fs::copy_options::overwrite_existing);
 }
 
 struct Comparison {
