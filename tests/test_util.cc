@@ -57,7 +57,7 @@ fs::path SharedFixture(const std::string& name, const std::function<void(const f
                             std::to_string(st.st_mtim.tv_sec) + "." + std::to_string(st.st_mtim.tv_nsec);
   const fs::path root = fs::temp_directory_path() / "fmv3d-test-fixtures";
   fs::create_directories(root);
-  const fs::path dir = root / (prefix + build);
+  fs::path dir = root / (prefix + build);
   const FileLock lock(root / (prefix + "lock"));
   if (fs::is_directory(dir)) return dir;
   std::error_code ec;

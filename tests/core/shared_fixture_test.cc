@@ -32,10 +32,11 @@ TEST(SharedFixture, MadeOnceThenFoundAndAFailedMakeLeavesNothing) {
   EXPECT_EQ(Slurp(first / "value.txt"), "made 1");
 
   const std::string broken = name + "-broken";
-  EXPECT_THROW(SharedFixture(broken, [](const fs::path& dir) {
-                 std::ofstream(dir / "half.txt") << "half";
-                 throw std::runtime_error("render failed");
-               }),
+  EXPECT_THROW(SharedFixture(broken,
+                             [](const fs::path& dir) {
+                               std::ofstream(dir / "half.txt") << "half";
+                               throw std::runtime_error("render failed");
+                             }),
                std::runtime_error);
   // Nothing of the failed attempt is left, so the next call makes it afresh.
   for (const auto& entry : fs::directory_iterator(first.parent_path()))

@@ -213,8 +213,10 @@ void WriteObj(const TexturedMesh& mesh, const fs::path& path, const EncodedTextu
     mtl += fmt::format("newmtl {}\nKa 0 0 0\nKd {:.6g} {:.6g} {:.6g}\nKs 0 0 0\nd 1\nillum 1\n", name,
                        mat.diffuse_bgr.z(), mat.diffuse_bgr.y(), mat.diffuse_bgr.x());
     if (!mat.texture.empty()) {
-      const std::string tex_name = mat.texture_file.empty() ? stem + "_" + name + ".png" : mat.texture_file;
-      mtl += "map_Kd " + tex_name + "\n";
+      const std::string tex_name = mat.texture_file.empty() ? fmt::format("{}_{}.png", stem, name) : mat.texture_file;
+      mtl += "map_Kd ";
+      mtl += tex_name;
+      mtl += "\n";
       const fs::path tex = dir / tex_name;
       if (textures[m].empty()) throw Error(tex.string() + ": the texture was not encoded");
       core::WriteTextFile(tex, std::string_view(reinterpret_cast<const char*>(textures[m].data()), textures[m].size()));

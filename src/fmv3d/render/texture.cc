@@ -24,15 +24,15 @@ MipTexture::MipTexture(const cv::Mat& bgr, int max_levels) {
     l.fw = static_cast<float>(span_w);
     l.fh = static_cast<float>(span_h);
     l.tiles_x = (l.w + 31) / 32;
-    l.bgr = cv::Mat::zeros((l.h + 31) / 32, l.tiles_x * 4096, CV_8U);  // one row of tiles per row, continuous
+    l.bgr = cv::Mat::zeros((l.h + 31) / 32, l.tiles_x * 4096, CV_8U);  // a matrix row per row of tiles
     uint8_t* const data = l.bgr.data;
     for (int y = 0; y < l.h; ++y) {
       const uint8_t* src = level.ptr<uint8_t>(y);
-      for (int x = 0; x < l.w; ++x) {
+      for (int x = 0; x < l.w; ++x, src += 3) {
         uint8_t* dst = data + l.Offset(x, y);
-        dst[0] = src[3 * x];
-        dst[1] = src[3 * x + 1];
-        dst[2] = src[3 * x + 2];
+        dst[0] = src[0];
+        dst[1] = src[1];
+        dst[2] = src[2];
       }
     }
     levels_.push_back(std::move(l));
