@@ -18,7 +18,7 @@ namespace {
 namespace fs = std::filesystem;
 
 fs::path WriteText(const test::TempDir& dir, const std::string& name, const std::string& text) {
-  const fs::path p = dir / name;
+  fs::path p = dir / name;
   std::ofstream(p) << text;
   return p;
 }
