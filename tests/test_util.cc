@@ -55,7 +55,8 @@ fs::path SharedFixture(const std::string& name, const std::function<void(const f
       exe.filename().string() + "-" + std::to_string(std::hash<std::string>{}(exe.string())) + "-" + name + "@";
   const std::string build = std::to_string(st.st_ino) + "-" + std::to_string(st.st_size) + "-" +
                             std::to_string(st.st_mtim.tv_sec) + "." + std::to_string(st.st_mtim.tv_nsec);
-  const fs::path root = fs::temp_directory_path() / "fmv3d-test-fixtures";
+  // Per user: another user's folder under a shared /tmp would not be writable.
+  const fs::path root = fs::temp_directory_path() / ("fmv3d-test-fixtures-" + std::to_string(getuid()));
   fs::create_directories(root);
   fs::path dir = root / (prefix + build);
   const FileLock lock(root / (prefix + "lock"));

@@ -27,9 +27,9 @@ class TempDir {
 // A folder that `make` fills once for every process of this test binary: ctest runs each test in a process of
 // its own, so a fixture held in a static was made again for every test (the surface tests' synthetic flight and
 // mesh: most of their time, several minutes under the sanitizers). The first call makes it under the system
-// temp dir; later calls, in this or another process of the same binary file, find it there. Keyed by `name`, the
-// binary's path and its identity (inode, size, modification time): a rebuilt binary makes it again and removes
-// its own older copies; processes asking at once wait for the one making it (a file lock). Read-only for the
+// temp dir (a folder per user); later calls, in this or another process of the same binary file, find it there. Keyed
+// by `name`, the binary's path and its identity (inode, size, modification time): a rebuilt binary makes it again and
+// removes its own older copies; processes asking at once wait for the one making it (a file lock). Read-only for the
 // tests: copy what a test changes. Throws what `make` throws (nothing is left behind).
 fs::path SharedFixture(const std::string& name, const std::function<void(const fs::path& dir)>& make);
 
