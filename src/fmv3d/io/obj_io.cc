@@ -194,15 +194,19 @@ EncodedTextures EncodeTextures(const TexturedMesh& mesh, int png_compression) {
   return pngs;
 }
 
+void CheckEncodedTextures(const TexturedMesh& mesh, const EncodedTextures& textures, const fs::path& path) {
+  if (textures.size() != mesh.materials.size())
+    throw Error(path.string() + ": " + std::to_string(textures.size()) + " encoded textures for " +
+                std::to_string(mesh.materials.size()) + " materials");
+}
+
 void WriteObj(const TexturedMesh& mesh, const fs::path& path, int png_compression) {
   WriteObj(mesh, path, EncodeTextures(mesh, png_compression));
 }
 
 void WriteObj(const TexturedMesh& mesh, const fs::path& path, const EncodedTextures& textures) {
   mesh.Validate();
-  if (textures.size() != mesh.materials.size())
-    throw Error(path.string() + ": " + std::to_string(textures.size()) + " encoded textures for " +
-                std::to_string(mesh.materials.size()) + " materials");
+  CheckEncodedTextures(mesh, textures, path);
   const std::string stem = path.stem().string();
   const fs::path dir = path.parent_path();
   if (!dir.empty()) core::EnsureDirectory(dir);

@@ -23,6 +23,8 @@ void WriteObj(const TexturedMesh& mesh, const std::filesystem::path& path, int p
 // parallel: a model written in several formats (OBJ, glTF) encodes its atlas once.
 using EncodedTextures = std::vector<std::vector<uint8_t>>;
 EncodedTextures EncodeTextures(const TexturedMesh& mesh, int png_compression = 1);
+// Throws fmv3d::Error naming `path` unless `textures` has one entry per material of `mesh`.
+void CheckEncodedTextures(const TexturedMesh& mesh, const EncodedTextures& textures, const std::filesystem::path& path);
 // The same with the textures already encoded (one entry per material, as EncodeTextures gives).
 void WriteObj(const TexturedMesh& mesh, const std::filesystem::path& path, const EncodedTextures& textures);
 

@@ -10,7 +10,6 @@
 #include <array>
 #include <cstring>
 #include <limits>
-#include <opencv2/imgcodecs.hpp>
 #include <unordered_map>
 
 #include "fmv3d/core/error.h"
@@ -65,9 +64,7 @@ void WriteGlb(const io::TexturedMesh& mesh, const fs::path& path, const io::Enco
   mesh.Validate();
   const io::EncodedTextures own = textures ? io::EncodedTextures{} : io::EncodeTextures(mesh);
   const io::EncodedTextures& pngs = textures ? *textures : own;
-  if (pngs.size() != mesh.materials.size())
-    throw Error(path.string() + ": " + std::to_string(pngs.size()) + " encoded textures for " +
-                std::to_string(mesh.materials.size()) + " materials");
+  io::CheckEncodedTextures(mesh, pngs, path);
   bool all_normals = !mesh.normals.empty();
   for (const auto& f : mesh.faces) {
     for (int k = 0; k < 3; ++k) {
